@@ -1,0 +1,1 @@
+//! Batch jobs over a part family: the job manifest, scheduling over parts, sharding and the summary.

@@ -1,0 +1,292 @@
+//! File plumbing shared by every module: atomic writes and a CSV table reader that keeps line numbers for error messages.
+
+use crate::error::{Error, Location, Result};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Write a file atomically: the content goes to a temporary file beside `path`, which is
+/// flushed and then renamed over the target, so an interrupted run never leaves a
+/// half-written file that looks complete.
+pub fn write_atomic(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).map_err(|e| Error::write(&dir, e))?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".errmap-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(|e| Error::write(path, e))?;
+    {
+        let mut buffered = std::io::BufWriter::new(tmp.as_file_mut());
+        fill(&mut buffered).map_err(|e| Error::write(path, e))?;
+        buffered.flush().map_err(|e| Error::write(path, e))?;
+    }
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| Error::write(path, e))?;
+    tmp.persist(path).map_err(|e| Error::write(path, e.error))?;
+    Ok(())
+}
+
+/// [`write_atomic`] for content already in memory.
+pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |w| w.write_all(bytes))
+}
+
+/// Serialise a value as pretty JSON (with a final newline) and write it atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    let mut text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::Internal(format!("JSON for {}: {e}", path.display())))?;
+    text.push('\n');
+    write_atomic_bytes(path, text.as_bytes())
+}
+
+/// Read a whole file as UTF-8 text, with the error naming the file.
+pub fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| Error::read(path, e))
+}
+
+/// A CSV file read whole: its header and its records, each with its 1-based line number.
+/// Columns are looked up by name; every error names file, line and column.
+#[derive(Debug, Clone)]
+pub struct CsvTable {
+    pub path: PathBuf,
+    pub headers: Vec<String>,
+    pub rows: Vec<CsvRow>,
+    index: HashMap<String, usize>,
+}
+
+/// One record of a [`CsvTable`].
+#[derive(Debug, Clone)]
+pub struct CsvRow {
+    pub line: u64,
+    pub fields: Vec<String>,
+}
+
+impl CsvTable {
+    /// Read a CSV file with a header line. Blank lines and lines starting with `#` are skipped;
+    /// headers and fields are trimmed. A record with a different number of fields from the
+    /// header is an error naming its line.
+    pub fn read(path: &Path) -> Result<CsvTable> {
+        let text = read_text(path)?;
+        Self::parse(path, &text)
+    }
+
+    /// Parse CSV text; `path` is only used in messages.
+    pub fn parse(path: &Path, text: &str) -> Result<CsvTable> {
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .comment(Some(b'#'))
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .from_reader(text.as_bytes());
+        let headers: Vec<String> = reader
+            .headers()
+            .map_err(|e| csv_error(path, e))?
+            .iter()
+            .map(|h| h.trim_start_matches('\u{feff}').to_string())
+            .collect();
+        if headers.iter().all(|h| h.is_empty()) {
+            return Err(Error::input(
+                Location::line(path, 1),
+                "the file has no header line",
+                "the first line must name the columns, e.g. x_mm,y_mm,z_mm",
+            ));
+        }
+        let mut index = HashMap::new();
+        for (i, h) in headers.iter().enumerate() {
+            if index.insert(h.clone(), i).is_some() {
+                return Err(Error::input(
+                    Location::cell(path, 1, h.clone()),
+                    format!("column '{h}' appears twice in the header"),
+                    "keep one column of each name",
+                ));
+            }
+        }
+        let mut rows = Vec::new();
+        for record in reader.records() {
+            let record = record.map_err(|e| csv_error(path, e))?;
+            let line = record.position().map(|p| p.line()).unwrap_or(0);
+            if record.iter().all(|f| f.is_empty()) {
+                continue;
+            }
+            if record.len() != headers.len() {
+                return Err(Error::input(
+                    Location::line(path, line),
+                    format!(
+                        "{} fields, but the header names {} columns",
+                        record.len(),
+                        headers.len()
+                    ),
+                    "give every row one value per header column",
+                ));
+            }
+            rows.push(CsvRow {
+                line,
+                fields: record.iter().map(str::to_string).collect(),
+            });
+        }
+        Ok(CsvTable {
+            path: path.to_path_buf(),
+            headers,
+            rows,
+            index,
+        })
+    }
+
+    /// Index of a column, if the header has it.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.index.get(name).copied()
+    }
+
+    /// Index of a column the file must have.
+    pub fn require(&self, name: &str) -> Result<usize> {
+        self.column(name).ok_or_else(|| {
+            Error::input(
+                Location::line(&self.path, 1),
+                format!(
+                    "missing column '{name}' (header has: {})",
+                    self.headers.join(",")
+                ),
+                format!("add a '{name}' column to the header"),
+            )
+        })
+    }
+
+    /// Reject any header column not in `allowed` (catches typos such as `x_um`).
+    pub fn reject_unknown(&self, allowed: &[&str]) -> Result<()> {
+        for h in &self.headers {
+            if !allowed.contains(&h.as_str()) {
+                return Err(Error::input(
+                    Location::cell(&self.path, 1, h.clone()),
+                    format!("unknown column '{h}'"),
+                    format!("allowed columns are: {}", allowed.join(",")),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The text of a cell.
+    pub fn text<'a>(&'a self, row: &'a CsvRow, col: usize) -> &'a str {
+        &row.fields[col]
+    }
+
+    /// A finite number from a cell; non-numbers, NaN and infinities are errors naming the cell.
+    pub fn f64(&self, row: &CsvRow, col: usize) -> Result<f64> {
+        let text = &row.fields[col];
+        let at = || Location::cell(&self.path, row.line, self.headers[col].clone());
+        let value: f64 = text.parse().map_err(|_| {
+            Error::input(
+                at(),
+                format!("'{text}' is not a number"),
+                "write a decimal number such as 12.5",
+            )
+        })?;
+        if !value.is_finite() {
+            return Err(Error::input(
+                at(),
+                format!("'{text}' is not a finite number"),
+                "NaN and infinity are not measurements; remove the row or fix the value",
+            ));
+        }
+        Ok(value)
+    }
+
+    /// An optional number: an empty cell gives `None`.
+    pub fn f64_opt(&self, row: &CsvRow, col: usize) -> Result<Option<f64>> {
+        if row.fields[col].is_empty() {
+            Ok(None)
+        } else {
+            self.f64(row, col).map(Some)
+        }
+    }
+
+    /// An error located at a cell of this table.
+    pub fn error_at(
+        &self,
+        row: &CsvRow,
+        col: Option<usize>,
+        message: impl Into<String>,
+        hint: impl Into<String>,
+    ) -> Error {
+        let location = match col {
+            Some(c) => Location::cell(&self.path, row.line, self.headers[c].clone()),
+            None => Location::line(&self.path, row.line),
+        };
+        Error::input(location, message, hint)
+    }
+}
+
+fn csv_error(path: &Path, e: csv::Error) -> Error {
+    let line = e.position().map(|p| p.line());
+    let location = Location {
+        file: path.to_path_buf(),
+        line,
+        column: None,
+    };
+    Error::input(
+        location,
+        format!("unreadable CSV: {e}"),
+        "save the file as plain comma-separated UTF-8 text",
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_and_errors_name_line_and_column() {
+        let t = CsvTable::parse(Path::new("p.csv"), "x_mm,y_mm\n1,2\n\n3,abc\n").unwrap();
+        assert_eq!(t.rows.len(), 2);
+        assert_eq!(t.rows[1].line, 4);
+        let x = t.require("x_mm").unwrap();
+        let y = t.require("y_mm").unwrap();
+        assert_eq!(t.f64(&t.rows[0], x).unwrap(), 1.0);
+        let err = t.f64(&t.rows[1], y).unwrap_err().to_string();
+        assert!(
+            err.contains("p.csv:4, column y_mm") && err.contains("'abc' is not a number"),
+            "{err}"
+        );
+        let err = t.require("z_mm").unwrap_err().to_string();
+        assert!(err.contains("missing column 'z_mm'"), "{err}");
+        let err = CsvTable::parse(Path::new("p.csv"), "a,b\n1,2,3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("p.csv:2") && err.contains("3 fields"), "{err}");
+        let t = CsvTable::parse(Path::new("p.csv"), "a\nNaN\n").unwrap();
+        assert!(t
+            .f64(&t.rows[0], 0)
+            .unwrap_err()
+            .to_string()
+            .contains("not a finite number"));
+    }
+
+    #[test]
+    fn atomic_write_replaces_whole_file_and_leaves_no_temp() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub/out.txt");
+        write_atomic_bytes(&path, b"first").unwrap();
+        write_atomic_bytes(&path, b"second").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
+        let names: Vec<_> = std::fs::read_dir(path.parent().unwrap())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        // A failing writer leaves the old content in place.
+        let failed = write_atomic(&path, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("interrupted"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
+    }
+}

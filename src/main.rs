@@ -1,0 +1,28 @@
+//! errmap command line: parse the arguments, call the library, print, and turn the result into an exit code.
+
+mod cli;
+
+use clap::Parser;
+
+fn main() {
+    let args = cli::Cli::parse();
+    let code = match cli::run(args) {
+        Ok(code) => code,
+        Err(err) => {
+            // A closed pipe (`errmap … | head`) is not an error worth reporting.
+            if let errmap::Error::Io { source, .. } = &err {
+                if source.kind() == std::io::ErrorKind::BrokenPipe {
+                    std::process::exit(0);
+                }
+            }
+            eprintln!("errmap: {err}");
+            let mut cause = std::error::Error::source(&err);
+            while let Some(c) = cause {
+                eprintln!("  caused by: {c}");
+                cause = c.source();
+            }
+            err.exit_code()
+        }
+    };
+    std::process::exit(code);
+}

@@ -1,0 +1,1 @@
+//! Synthetic sphere probing around a rotary axis with planted angular errors, tilt and offset.
