@@ -112,7 +112,11 @@ impl CsvTable {
         let mut rows = Vec::new();
         for record in reader.records() {
             let record = record.map_err(|e| csv_error(path, e))?;
-            let line = record.position().map(|p| p.line()).unwrap_or(0);
+            // Count lines from the byte offset: the csv crate's own line count skips blank lines.
+            let line = record
+                .position()
+                .map(|p| line_of_byte(text, p.byte()))
+                .unwrap_or(0);
             if record.iter().all(|f| f.is_empty()) {
                 continue;
             }
@@ -222,6 +226,15 @@ impl CsvTable {
         };
         Error::input(location, message, hint)
     }
+}
+
+/// 1-based line number of a byte offset in `text`.
+fn line_of_byte(text: &str, byte: u64) -> u64 {
+    let end = (byte as usize).min(text.len());
+    1 + text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count() as u64
 }
 
 fn csv_error(path: &Path, e: csv::Error) -> Error {
