@@ -230,7 +230,11 @@ impl CsvTable {
 
 /// 1-based line number of a byte offset in `text`.
 fn line_of_byte(text: &str, byte: u64) -> u64 {
-    let end = (byte as usize).min(text.len());
+    let mut end = (byte as usize).min(text.len());
+    // A record's position can point at blank lines before it; step over them.
+    while end < text.len() && matches!(text.as_bytes()[end], b'\n' | b'\r') {
+        end += 1;
+    }
     1 + text.as_bytes()[..end]
         .iter()
         .filter(|&&b| b == b'\n')
