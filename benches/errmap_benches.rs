@@ -1,1 +1,21 @@
-fn main() {}
+//! errmap's criterion benchmarks, one harness: each area adds a module beside this file and a group to `criterion_main!`.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+
+fn csv_table_parse(c: &mut Criterion) {
+    let mut text = String::from("x_mm,y_mm,z_mm\n");
+    for i in 0..10_000 {
+        text.push_str(&format!(
+            "{},{},{}\n",
+            i as f64 * 0.5,
+            i as f64 * 0.25,
+            0.001 * i as f64
+        ));
+    }
+    c.bench_function("io/csv_table_parse_10k_rows", |b| {
+        b.iter(|| errmap::io::CsvTable::parse(std::path::Path::new("bench.csv"), &text).unwrap())
+    });
+}
+
+criterion_group!(io_benches, csv_table_parse);
+criterion_main!(io_benches);

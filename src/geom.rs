@@ -75,6 +75,14 @@ impl Domain {
     }
 }
 
+/// A machining-error field over a map plane: what toolpath compensation asks of a fitted map.
+pub trait ErrorField: Sync {
+    /// The error direction; the field is a function of the two plane axes ([`Axis::plane_axes`]).
+    fn normal(&self) -> Axis;
+    /// Error E in mm along the normal at plane point (u, v) in mm; `None` outside the map's domain.
+    fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64>;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
