@@ -2,6 +2,7 @@
 
 mod air;
 mod budget;
+mod chart;
 mod correct;
 mod eval;
 mod pitch;
@@ -16,6 +17,7 @@ pub use budget::{
     compute_budget, read_budget_setup, AbbeSetup, AirSetup, AlignmentSetup, Budget, BudgetSetup,
     BudgetTerm, ThermalSetup,
 };
+pub use chart::{save_chart, ChartInput};
 pub use correct::{correct_air, normalise_material, AirCorrection, REFERENCE_TEMP_C};
 pub use eval::{evaluate, AxisFigures, Evaluation, Standard, TargetFigures};
 pub use pitch::{fit_pitch, PitchFit};
