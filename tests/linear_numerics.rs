@@ -62,6 +62,29 @@ fn saturation_pressure_matches_iapws_if97_table_35() {
     assert!((ice - 103.26).abs() < 0.05, "{ice}");
 }
 
+/// Cross-check against an independent implementation of the same NIST documentation:
+/// the `ref-index` Python package (https://pypi.org/project/ref-index/, README examples),
+/// 633 nm, 101 325 Pa, 450 µmol/mol CO2. Agreement to 1e-12 shows the same constants and
+/// the same saturation-pressure and enhancement-factor formulas.
+#[test]
+fn agrees_with_ref_index_package_examples() {
+    let cases = [
+        (20.0, 20.0, AirFormula::Ciddor, 1.000_271_628_534_057_8),
+        (20.0, 20.0, AirFormula::Edlen, 1.000_271_629_169_165),
+        (20.0, 80.0, AirFormula::Edlen, 1.000_271_119_763_522_6),
+        (20.0, 80.0, AirFormula::Ciddor, 1.000_271_118_347_262_6),
+        (60.0, 80.0, AirFormula::Edlen, 1.000_233_974_854_282_3),
+        (60.0, 80.0, AirFormula::Ciddor, 1.000_234_024_175_405_5),
+    ];
+    for (t, rh, formula, expected) in cases {
+        let n = refractive_index(&AirConditions::new(t, 101.325, rh, 633.0), formula).unwrap();
+        assert!(
+            (n - expected).abs() < 1e-12,
+            "{formula:?} {t} °C {rh} %: {n:.16} vs {expected}"
+        );
+    }
+}
+
 #[test]
 fn index_trends_and_range_checks() {
     let base = AirConditions::new(20.0, 101.325, 50.0, 632.991);
