@@ -521,6 +521,8 @@ fn synthetic_runs_recover_their_ground_truth() {
             "10",
             "--chart",
             "c.png",
+            "--material-expansion",
+            "11.5",
         ],
     ));
     let fit = &doc["pitch_fit"];
@@ -538,6 +540,23 @@ fn synthetic_runs_recover_their_ground_truth() {
             "{key}: fitted {got}, planted {want}"
         );
     }
+    // Without the normalisation the slope carries the expansion: α·(T − 20) ≈ 11.5 × 0.5…0.8
+    // ≈ 6…9 µm/m on top of the planted 12 µm/m.
+    let warm = json(&ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "s/runs.csv",
+            "--standard",
+            "iso230-2:2014",
+            "--json",
+            "--fit-pitch",
+            "10",
+        ],
+    ));
+    let k_warm = warm["pitch_fit"]["k_um_per_m"].as_f64().unwrap();
+    assert!((k_warm - 12.0 - 11.5 * 0.65).abs() < 1.5, "{k_warm}");
     // Mean reversal ≈ planted 4 µm.
     assert!(
         (doc["axis"]["B_mean"].as_f64().unwrap() - truth["reversal_um"].as_f64().unwrap()).abs()
@@ -546,6 +565,17 @@ fn synthetic_runs_recover_their_ground_truth() {
     let img = image::open(dir.path().join("c.png")).unwrap();
     assert_eq!((img.width(), img.height()), (1280, 720));
     // The raw (vacuum-scale) readings, air-corrected, give back the compensated file's figures.
+    let doc = json(&ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "s/runs.csv",
+            "--standard",
+            "iso230-2:2014",
+            "--json",
+        ],
+    ));
     let raw = json(&ok(
         dir.path(),
         &[

@@ -2,7 +2,9 @@
 //!
 //! Ground truth (seed 002's curve model plus a reversal): the forward approach deviates by
 //! e↑(x) = a + k·x + d·sin(2πx/P + φ) + B/2 and the reverse by e↓(x) = e↑(x) − B, each reading
-//! adds Gaussian noise σ. Targets follow ISO 230-2's advice: nominally equal steps with an
+//! adds Gaussian noise σ; these are the errors at 20 °C. The axis is read at its logged
+//! material temperature T, so each reading also carries the expansion α·(T − 20 °C)·x
+//! (α = `expansion_ppm_per_k`, laser zeroed at 0 mm) that `--material-expansion` removes. Targets follow ISO 230-2's advice: nominally equal steps with an
 //! irregular offset so that periodic errors are sampled at different phases.
 //! Files written: `runs.csv` (deviation_um, already on the air-corrected scale, with the
 //! environment logged per row), `runs_raw.csv` (the same readings as `actual_mm` on the vacuum
@@ -29,6 +31,8 @@ pub struct LinearTruth {
     pub phi_rad: f64,
     pub reversal_um: f64,
     pub noise_um: f64,
+    /// Expansion coefficient of the axis, µm/(m·K); readings are taken at material_temp_c.
+    pub expansion_ppm_per_k: f64,
     pub seed: u64,
     /// Laser datum (zeroed here), mm.
     pub datum_mm: f64,
@@ -92,6 +96,7 @@ pub fn generate(seed: u64) -> Result<(LinearTruth, Vec<SynthRow>)> {
         phi_rad: 0.7,
         reversal_um: 4.0,
         noise_um: 0.4,
+        expansion_ppm_per_k: 11.5,
         seed,
         datum_mm: 0.0,
         air_formula: "ciddor",
@@ -112,15 +117,21 @@ pub fn generate(seed: u64) -> Result<(LinearTruth, Vec<SynthRow>)> {
                 time_s += 8.0;
                 // Slow drifts of the room over the campaign (about 20 min).
                 let phase = time_s / 1200.0;
+                let material_temp_c = 20.5 + 0.3 * phase;
+                // Error at 20 °C, then the axis' expansion at T: L_T = L_20·(1 + α(T − 20)).
+                let e20_um = truth.error_um(forward, x) + noise.sample(&mut rng);
+                let l20_mm = x + e20_um * 1e-3 - truth.datum_mm;
+                let lt_mm =
+                    l20_mm * (1.0 + truth.expansion_ppm_per_k * 1e-6 * (material_temp_c - 20.0));
                 rows.push(SynthRow {
                     run,
                     forward,
                     target_mm: x,
-                    deviation_um: truth.error_um(forward, x) + noise.sample(&mut rng),
+                    deviation_um: (truth.datum_mm + lt_mm - x) * 1e3,
                     air_temp_c: 20.3 + 0.2 * phase,
                     pressure_kpa: 101.2 - 0.05 * phase,
                     humidity_pct: 45.0 + 2.0 * phase,
-                    material_temp_c: 20.5 + 0.3 * phase,
+                    material_temp_c,
                     time_s,
                 });
             }
