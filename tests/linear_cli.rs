@@ -80,6 +80,12 @@ fn analyze_json_has_the_issue_shape_and_hand_values() {
         ],
     );
     let doc = json(&out);
+    // Keys in the issue's order.
+    let at = |k: &str| out.stdout.find(&format!("\"{k}\"")).unwrap();
+    assert!(
+        at("standard") < at("unit") && at("unit") < at("targets") && at("targets") < at("axis")
+    );
+    assert!(at("target_mm") < at("mean_up") && at("s_down") < at("reversal"));
     assert_eq!(doc["standard"], "iso230-2:2014");
     assert_eq!(doc["unit"], "um");
     let keys: Vec<&str> = doc

@@ -4,11 +4,10 @@ use super::Globals;
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
     read_runs, read_table, refractive_index, render_table, save_chart, AirConditions,
-    AirCorrection, AirFormula, ChartInput, CompTable, Evaluation, PitchFit, RunFile, Sample,
-    Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+    AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation, PitchFit, RunFile,
+    Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
-use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Subcommand)]
@@ -220,44 +219,63 @@ fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> T
     }
 }
 
-fn opt_json(v: Option<f64>) -> Value {
-    v.map(Value::from).unwrap_or(Value::Null)
+/// One target of the analyze JSON (issue 4's shape, in its order).
+#[derive(serde::Serialize)]
+struct TargetJson {
+    target_mm: f64,
+    mean_up: f64,
+    mean_down: f64,
+    s_up: Option<f64>,
+    s_down: Option<f64>,
+    reversal: f64,
+    repeatability_up: Option<f64>,
+    repeatability_down: Option<f64>,
+    repeatability: Option<f64>,
 }
 
-/// The issue's JSON shape of one evaluation: targets and axis.
-fn evaluation_json(ev: &Evaluation) -> (Value, Value) {
-    let targets: Vec<Value> = ev
-        .targets
+fn targets_json(ev: &Evaluation) -> Vec<TargetJson> {
+    ev.targets
         .iter()
-        .map(|t| {
-            json!({
-                "target_mm": t.target,
-                "mean_up": t.mean_up,
-                "mean_down": t.mean_down,
-                "s_up": opt_json(t.s_up),
-                "s_down": opt_json(t.s_down),
-                "reversal": t.reversal,
-                "repeatability_up": opt_json(t.repeatability_up),
-                "repeatability_down": opt_json(t.repeatability_down),
-                "repeatability": opt_json(t.repeatability),
-            })
+        .map(|t| TargetJson {
+            target_mm: t.target,
+            mean_up: t.mean_up,
+            mean_down: t.mean_down,
+            s_up: t.s_up,
+            s_down: t.s_down,
+            reversal: t.reversal,
+            repeatability_up: t.repeatability_up,
+            repeatability_down: t.repeatability_down,
+            repeatability: t.repeatability,
         })
-        .collect();
-    let a = &ev.axis;
-    let axis = json!({
-        "B": a.B, "B_mean": a.B_mean,
-        "R_up": opt_json(a.R_up), "R_down": opt_json(a.R_down), "R": opt_json(a.R),
-        "E_up": a.E_up, "E_down": a.E_down, "E": a.E, "M": a.M,
-        "A_up": opt_json(a.A_up), "A_down": opt_json(a.A_down), "A": opt_json(a.A),
-    });
-    (Value::Array(targets), axis)
+        .collect()
 }
 
-fn fit_json(f: &PitchFit) -> Value {
-    json!({
-        "lead_mm": f.lead_mm, "a_um": f.a_um, "k_um_per_m": f.k_um_per_m, "d_um": f.d_um,
-        "phi_rad": f.phi_rad, "residual_rms_um": f.residual_rms_um, "points": f.points,
-    })
+#[derive(serde::Serialize)]
+struct AfterJson<'a> {
+    table: String,
+    targets: Vec<TargetJson>,
+    axis: &'a AxisFigures,
+}
+
+/// The analyze document: `standard`, `unit`, `targets`, `axis`, then the optional parts.
+#[derive(serde::Serialize)]
+struct AnalyzeJson<'a> {
+    standard: &'static str,
+    unit: &'static str,
+    targets: Vec<TargetJson>,
+    axis: &'a AxisFigures,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pitch_fit: Option<&'a PitchFit>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    after: Option<AfterJson<'a>>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    corrections: Vec<String>,
+}
+
+fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
+    println!("{text}");
+    Ok(())
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
@@ -352,27 +370,19 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
         )?;
     }
     if args.json {
-        let (targets, axis) = evaluation_json(&ev);
-        let mut doc = json!({
-            "standard": ev.standard.name(),
-            "unit": "um",
-            "targets": targets,
-            "axis": axis,
-        });
-        if let Some(f) = &fit {
-            doc["pitch_fit"] = fit_json(f);
-        }
-        if let Some((path, after_ev)) = &after {
-            let (t, a) = evaluation_json(after_ev);
-            doc["after"] = json!({ "table": path.display().to_string(), "targets": t, "axis": a });
-        }
-        if !notes.is_empty() {
-            doc["corrections"] = json!(notes);
-        }
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&doc).map_err(|e| Error::Internal(e.to_string()))?
-        );
+        print_json(&AnalyzeJson {
+            standard: ev.standard.name(),
+            unit: "um",
+            targets: targets_json(&ev),
+            axis: &ev.axis,
+            pitch_fit: fit.as_ref(),
+            after: after.as_ref().map(|(path, a)| AfterJson {
+                table: path.display().to_string(),
+                targets: targets_json(a),
+                axis: &a.axis,
+            }),
+            corrections: notes.clone(),
+        })?;
     } else {
         for n in &notes {
             println!("{n}");
@@ -415,18 +425,20 @@ fn air_index(args: AirIndexArgs) -> Result<i32> {
     };
     let n = refractive_index(&cond, args.formula)?;
     if args.json {
-        let doc = json!({
-            "formula": args.formula.name(),
-            "temp_c": cond.temp_c, "pressure_kpa": cond.pressure_kpa,
-            "humidity_pct": cond.humidity_pct, "wavelength_nm": cond.wavelength_nm,
-            "co2_ppm": cond.co2_ppm,
-            "n": n,
-            "air_wavelength_nm": cond.wavelength_nm / n,
-        });
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&doc).map_err(|e| Error::Internal(e.to_string()))?
-        );
+        #[derive(serde::Serialize)]
+        struct AirJson {
+            formula: &'static str,
+            n: f64,
+            air_wavelength_nm: f64,
+            #[serde(flatten)]
+            conditions: AirConditions,
+        }
+        print_json(&AirJson {
+            formula: args.formula.name(),
+            n,
+            air_wavelength_nm: cond.wavelength_nm / n,
+            conditions: cond,
+        })?;
     } else {
         println!("n = {n:.9} ({})", args.formula.name());
         println!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
@@ -438,10 +450,7 @@ fn budget(args: BudgetArgs) -> Result<i32> {
     let setup = read_budget_setup(&args.setup)?;
     let b = compute_budget(&setup)?;
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&b).map_err(|e| Error::Internal(e.to_string()))?
-        );
+        print_json(&b)?;
     } else {
         println!("error budget over {} mm (µm):", b.length_mm);
         for t in &b.terms {
