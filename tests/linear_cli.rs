@@ -193,8 +193,11 @@ fn single_run_reports_null_not_zero() {
             "--standard",
             "iso230-2:2014",
             "--json",
+            "--chart",
+            "one.png",
         ],
     ));
+    assert!(dir.path().join("one.png").exists());
     for key in ["R_up", "R_down", "R", "A_up", "A_down", "A"] {
         assert!(doc["axis"][key].is_null(), "{key} = {}", doc["axis"][key]);
     }

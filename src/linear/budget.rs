@@ -123,7 +123,8 @@ pub fn read_budget_setup(path: &Path) -> Result<BudgetSetup> {
     toml::from_str(&text).map_err(|e| {
         let line = e
             .span()
-            .map(|s| 1 + text[..s.start.min(text.len())].matches('\n').count() as u64);
+            .and_then(|s| text.get(..s.start))
+            .map(|before| 1 + before.matches('\n').count() as u64);
         let location = match line {
             Some(l) => Location::line(path, l),
             None => Location::file(path),

@@ -714,6 +714,13 @@ fn read_fanuc(path: &Path, text: &str, opts: &TableOptions) -> Result<CompTable>
         ));
     }
     let n = (last - first + 1) as usize;
+    if n > FANUC_MAX_POINTS {
+        return Err(Error::input(
+            Location::file(path),
+            format!("parameters 3621/3622 span {n} points, more than Fanuc's {FANUC_MAX_POINTS}"),
+            "check parameters 3621 and 3622",
+        ));
+    }
     let unit = opts.fanuc_unit_um * mag as f64;
     let r = (reference - first) as usize;
     let cumulative = |base: i64| -> Result<Vec<f64>> {
