@@ -10,7 +10,7 @@
 //! | `sinumerik` LEC | `$AA_ENC_COMP[0,i,AXIS]` (mm), `_N_AX_EEC_INI` | ē = (e↑ + e↓)/2 | +e: "a positive compensation value moves the axis in the negative direction" (Siemens LEC) |
 //! | `sinumerik` CEC | `$AN_CEC[t,i]` (mm), `_N_NC_CEC_INI`, second file | −(e↑ − ē), −(e↓ − ē) with `$AN_CEC_DIRECTION` 1 / −1 | CEC is added to the setpoint: −e |
 //! | `fanuc` | `N1xxxx P…` per point (detection units), parameters 3620–3624, 3626, 3627 | incremental −Δe per interval | compensation pulses: −e |
-//! | `heidenhain` | `.COM` table, columns NR, AXISPOS, axis, BACKLASH (mm) | e↑ in the axis column, e↓ in BACKLASH | the measured error, which the control subtracts |
+//! | `heidenhain` | `.COM` table, columns NR, AXISPOS, axis, BACKLASH (mm) | e↑ in the axis column, e↓ in BACKLASH | the measured error, positive when the travel is too long (TNC 407 manual, MP720), which the control compensates |
 //! | `csv` | `position_mm,forward_um,reverse_um` | e↑, e↓ (µm) | the error itself |
 
 use super::eval::Evaluation;
