@@ -628,3 +628,71 @@ fn synthetic_runs_recover_their_ground_truth() {
         .unwrap();
     assert!((last - last_c - 271.0).abs() < 3.0, "{last} vs {last_c}");
 }
+
+#[test]
+fn fanuc_reference_point_elsewhere_than_the_first_target() {
+    // Reference at 100 mm = point 2: 3620 = 2; 3627 = C↓(100) − C↑(100) = round(−3) − round(−6) = 3.
+    // The table compensates relative to the reference, so e↑(100) = 6 µm remains everywhere.
+    let dir = tempfile::tempdir().unwrap();
+    let runs = golden("runs_small.csv");
+    let runs = runs.to_str().unwrap();
+    ok(
+        dir.path(),
+        &[
+            "linear",
+            "table",
+            runs,
+            "--format",
+            "fanuc",
+            "--spacing",
+            "50",
+            "--reference-mm",
+            "100",
+            "-o",
+            "f.txt",
+            "-q",
+        ],
+    );
+    let text = std::fs::read_to_string(dir.path().join("f.txt")).unwrap();
+    assert!(
+        text.contains("N3620A1P2\n") && text.contains("N3627A1P3\n"),
+        "{text}"
+    );
+    let doc = json(&ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            runs,
+            "--standard",
+            "iso230-2:2014",
+            "--json",
+            "--apply-table",
+            "f.txt",
+            "--reference-mm",
+            "100",
+        ],
+    ));
+    for t in doc["after"]["targets"].as_array().unwrap() {
+        close(&t["mean_up"], 6.0, "after ↑");
+        close(&t["mean_down"], 6.0, "after ↓");
+    }
+    // A reference that is not a table point is refused.
+    let out = errmap(
+        dir.path(),
+        &[
+            "linear",
+            "table",
+            runs,
+            "--format",
+            "fanuc",
+            "--spacing",
+            "50",
+            "--reference-mm",
+            "75",
+            "-o",
+            "g.txt",
+        ],
+    );
+    assert_eq!(out.code, 2, "{}", out.stderr);
+}
