@@ -5,6 +5,7 @@ use super::axis_fit::{fit_axis, AxisFit, CircleFit};
 use super::input::{Direction, Measurement, RotaryAxis};
 use super::sphere::{fit_sphere, SphereFit};
 use crate::error::{Error, Location, Result};
+use crate::linear::{self, Evaluation, Sample, Standard};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -154,6 +155,11 @@ pub struct Analysis {
     pub axis_fit: AxisReport,
     /// Present for touch-point files.
     pub spheres: Option<SphereSummary>,
+    /// Positioning figures by ISO 230-2:2014 in arcsec (from [`crate::linear::evaluate`]),
+    /// with ISO's sign x = actual − target = β − α = −err; `null` when not applicable.
+    pub iso230_2: Option<Evaluation>,
+    /// Why `iso230_2` is `null`, if it is.
+    pub iso230_2_note: Option<String>,
     /// Every position of every repeat (not in the JSON summary).
     #[serde(skip)]
     pub observations: Vec<Observation>,
@@ -382,6 +388,8 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
         })
         .collect();
 
+    let (iso230_2, iso230_2_note) = iso_figures(&observations);
+
     let spheres = if sphere_fits.is_empty() {
         None
     } else {
@@ -412,9 +420,39 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
         table,
         axis_fit: axis_report,
         spheres,
+        iso230_2,
+        iso230_2_note,
         observations,
         sphere_fits,
     })
+}
+
+/// ISO 230-2:2014 figures of the observations (targets = commanded angles, runs = repeats).
+fn iso_figures(observations: &[Observation]) -> (Option<Evaluation>, Option<String>) {
+    let has = |d: Direction| observations.iter().any(|o| o.direction == d);
+    if !(has(Direction::Forward) && has(Direction::Reverse)) {
+        return (
+            None,
+            Some("ISO 230-2 figures need every angle approached in both directions".into()),
+        );
+    }
+    let samples: Vec<Sample> = observations
+        .iter()
+        .map(|o| Sample {
+            run: o.repeat,
+            direction: match o.direction {
+                Direction::Forward => linear::Direction::Forward,
+                Direction::Reverse => linear::Direction::Reverse,
+            },
+            target: o.angle_deg,
+            // ISO 230-2 deviation x = actual − target = β − α = −err.
+            deviation: -o.error_arcsec,
+        })
+        .collect();
+    match linear::evaluate(&samples, Standard::Iso230_2_2014) {
+        Ok(e) => (Some(e), None),
+        Err(e) => (None, Some(e.to_string())),
+    }
 }
 
 /// Mean and sample standard deviation (n − 1; `None` for one value).

@@ -54,7 +54,9 @@ pub fn save_error_chart(path: &Path, analysis: &Analysis) -> Result<()> {
                     colour.stroke_width(2),
                 ))?
                 .label(name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
             chart.draw_series(pts.iter().map(|r| {
                 ErrorBar::new_vertical(
                     r.angle_deg,

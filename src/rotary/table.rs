@@ -75,7 +75,10 @@ pub fn build_table(analysis: &Analysis, step_deg: Option<f64>) -> Result<CompTab
     let n = (360.0 / step).round() as usize;
     let angles_deg: Vec<f64> = (0..=n).map(|i| i as f64 * step).collect();
     let sample = |c: &[(f64, f64)]| -> Vec<f64> {
-        let mut v: Vec<f64> = angles_deg[..n].iter().map(|&g| periodic_interp(c, g)).collect();
+        let mut v: Vec<f64> = angles_deg[..n]
+            .iter()
+            .map(|&g| periodic_interp(c, g))
+            .collect();
         v.push(v[0]);
         v
     };

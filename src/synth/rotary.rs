@@ -201,7 +201,8 @@ pub fn generate(config: &RotarySynthConfig) -> RotarySynth {
         }
         for repeat in 0..config.repeats {
             for &alpha in &run {
-                let theta = (alpha - config.planted_error_arcsec(alpha, direction) / 3600.0).to_radians();
+                let theta =
+                    (alpha - config.planted_error_arcsec(alpha, direction) / 3600.0).to_radians();
                 let rot = Rotation3::from_axis_angle(&Unit::new_normalize(dir), theta);
                 for (k, p0) in start.iter().enumerate() {
                     let c = origin + rot * (p0 - origin);
@@ -301,7 +302,9 @@ mod tests {
     fn planted_error_is_zero_at_the_reference_and_periodic() {
         let c = RotarySynthConfig::default();
         assert_eq!(c.planted_error_arcsec(0.0, Direction::Forward), 0.0);
-        assert!((c.planted_error_arcsec(0.0, Direction::Reverse) - c.reversal_arcsec).abs() < 1e-12);
+        assert!(
+            (c.planted_error_arcsec(0.0, Direction::Reverse) - c.reversal_arcsec).abs() < 1e-12
+        );
         for a in [10.0, 123.0, 271.0] {
             let d = c.planted_error_arcsec(a, Direction::Forward)
                 - c.planted_error_arcsec(a + 360.0, Direction::Forward);
@@ -328,9 +331,11 @@ mod tests {
             .unwrap()
             .xyz_mm;
         let r = c.sphere_diameter_mm / 2.0 + c.stylus_radius_mm;
-        for p in s.touch_points.iter().filter(|p| {
-            p.direction == Direction::Reverse && p.angle_deg == 270.0 && p.sphere == 2
-        }) {
+        for p in s
+            .touch_points
+            .iter()
+            .filter(|p| p.direction == Direction::Reverse && p.angle_deg == 270.0 && p.sphere == 2)
+        {
             let d = ((p.xyz_mm[0] - centre[0]).powi(2)
                 + (p.xyz_mm[1] - centre[1]).powi(2)
                 + (p.xyz_mm[2] - centre[2]).powi(2))
