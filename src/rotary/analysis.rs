@@ -265,6 +265,23 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
     // 2. Axis direction.
     let nominal = m.axis.nominal_direction();
     let axis_report = if opts.fit_axis {
+        let mut distinct: Vec<i64> = m
+            .positions
+            .iter()
+            .map(|p| key(modulo_deg(p.angle_deg)))
+            .collect();
+        distinct.sort_unstable();
+        distinct.dedup();
+        if distinct.len() < 3 {
+            return Err(Error::input(
+                Location::file(&m.path),
+                format!(
+                    "--fit-axis: {} distinct angles; the circles of the sphere centres need at least 3",
+                    distinct.len()
+                ),
+                "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+            ));
+        }
         let t1: Vec<[f64; 3]> = centres.iter().map(|c| c[0]).collect();
         let t2: Vec<[f64; 3]> = centres.iter().map(|c| c[1]).collect();
         let fit = fit_axis([&t1, &t2], nominal).map_err(|e| {

@@ -157,6 +157,20 @@ fn deg(arcsec: f64) -> f64 {
     arcsec / 3600.0
 }
 
+/// Fixed-point text with `digits` decimals and no "-0.000".
+fn fixed(v: f64, digits: usize) -> String {
+    let text = format!("{v:.digits$}");
+    if text
+        .trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        text.trim_start_matches('-').to_string()
+    } else {
+        text
+    }
+}
+
 /// Render the table in `format`. `machine_axis` names the Sinumerik machine axis (e.g. `C1`).
 pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Result<String> {
     let mut s = String::new();
@@ -171,8 +185,10 @@ pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Res
             for i in 0..table.angles_deg.len() {
                 let _ = writeln!(
                     s,
-                    "{},{:.3},{:.3}",
-                    table.angles_deg[i], table.forward_arcsec[i], table.reverse_arcsec[i]
+                    "{},{},{}",
+                    table.angles_deg[i],
+                    fixed(table.forward_arcsec[i], 3),
+                    fixed(table.reverse_arcsec[i], 3)
                 );
             }
         }
@@ -192,10 +208,10 @@ pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Res
                 let a = table.angles_deg[i];
                 let _ = writeln!(
                     s,
-                    "{:.6} {:.7} {:.7}",
-                    a,
-                    a - deg(table.forward_arcsec[i]),
-                    a - deg(table.reverse_arcsec[i])
+                    "{} {} {}",
+                    fixed(a, 6),
+                    fixed(a - deg(table.forward_arcsec[i]), 7),
+                    fixed(a - deg(table.reverse_arcsec[i]), 7)
                 );
             }
         }
@@ -228,7 +244,7 @@ pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Res
             }
             for i in 0..table.angles_deg.len() {
                 let mean = 0.5 * (table.forward_arcsec[i] + table.reverse_arcsec[i]);
-                let _ = writeln!(s, "$AA_ENC_COMP[0,{i},{ax}]={:.7}", -deg(mean));
+                let _ = writeln!(s, "$AA_ENC_COMP[0,{i},{ax}]={}", fixed(-deg(mean), 7));
             }
             let _ = writeln!(s, "$AA_ENC_COMP_STEP[0,{ax}]={}", table.step_deg);
             let _ = writeln!(s, "$AA_ENC_COMP_MIN[0,{ax}]=0.0");
@@ -253,5 +269,13 @@ mod tests {
         assert!((periodic_interp(&c, 150.0) - 15.0).abs() < 1e-12);
         assert!((periodic_interp(&c, 330.0) - (-3.0)).abs() < 1e-12);
         assert!((periodic_interp(&c, 15.0) - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn fixed_point_has_no_negative_zero() {
+        assert_eq!(fixed(-0.0000001, 3), "0.000");
+        assert_eq!(fixed(-0.0004, 3), "0.000");
+        assert_eq!(fixed(-0.0006, 3), "-0.001");
+        assert_eq!(fixed(12.5, 1), "12.5");
     }
 }
