@@ -269,7 +269,8 @@ fn human_report(a: &Analysis) -> String {
 }
 
 pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
-    if !(args.step_deg > 0.0)
+    if args.step_deg.is_nan()
+        || args.step_deg <= 0.0
         || ((360.0 / args.step_deg) - (360.0 / args.step_deg).round()).abs() > 1e-9
     {
         return Err(Error::usage(
@@ -277,7 +278,7 @@ pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
             "choose a step that divides 360, e.g. 10, 15, 30",
         ));
     }
-    if args.repeats == 0 || args.points < 4 || !(args.noise_um >= 0.0) {
+    if args.repeats == 0 || args.points < 4 || args.noise_um.is_nan() || args.noise_um < 0.0 {
         return Err(Error::usage(
             "synth rotary needs --repeats ≥ 1, --points ≥ 4 and --noise-um ≥ 0",
             "e.g. --repeats 3 --points 25 --noise-um 0.5",

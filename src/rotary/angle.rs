@@ -13,7 +13,7 @@ pub const ARCSEC_PER_DEG: f64 = 3600.0;
 pub fn signed_angle_about(a: [f64; 3], b: [f64; 3], axis: [f64; 3]) -> Option<f64> {
     let n = Vector3::from(axis);
     let n_len = n.norm();
-    if !(n_len > 0.0) {
+    if n_len.is_nan() || n_len <= 0.0 {
         return None;
     }
     let n = n / n_len;

@@ -97,7 +97,7 @@ pub fn fit_axis(
         let eig = SymmetricEigen::new(s);
         let mut ev: Vec<f64> = eig.eigenvalues.iter().copied().collect();
         ev.sort_by(f64::total_cmp);
-        if !(ev[1] > 1e-12 * ev[2]) {
+        if ev[1].is_nan() || ev[1] <= 1e-12 * ev[2] {
             return Err(AxisFitError::Degenerate { sphere });
         }
         scatter += s;
@@ -146,7 +146,7 @@ pub fn fit_axis(
             .map_err(|_| AxisFitError::Degenerate { sphere })?;
         let (cu, cv) = (-sol[0] / 2.0, -sol[1] / 2.0);
         let r2 = cu * cu + cv * cv - sol[2];
-        if !(r2 > 0.0) {
+        if r2.is_nan() || r2 <= 0.0 {
             return Err(AxisFitError::Degenerate { sphere });
         }
         let radius = r2.sqrt();

@@ -19,7 +19,7 @@ pub fn save_error_chart(path: &Path, analysis: &Analysis) -> Result<()> {
         y0 = y0.min(r.min_arcsec);
         y1 = y1.max(r.max_arcsec);
     }
-    if !(x1 > x0) {
+    if x1 <= x0 {
         x0 -= 1.0;
         x1 += 1.0;
     }

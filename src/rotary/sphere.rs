@@ -76,7 +76,10 @@ pub fn fit_sphere(
     let eig = SymmetricEigen::new(scatter / n as f64);
     let largest = eig.eigenvalues.max();
     let smallest = eig.eigenvalues.min();
-    if !(largest > 0.0) || smallest.max(0.0).sqrt() <= COPLANAR_RATIO * largest.sqrt() {
+    if largest.is_nan()
+        || largest <= 0.0
+        || smallest.max(0.0).sqrt() <= COPLANAR_RATIO * largest.sqrt()
+    {
         return Err(SphereFitError::Degenerate);
     }
     let scale = largest.sqrt();
@@ -98,7 +101,7 @@ pub fn fit_sphere(
         .map_err(|_| SphereFitError::Degenerate)?;
     let cq = Vector3::new(-sol[0] / 2.0, -sol[1] / 2.0, -sol[2] / 2.0);
     let r2 = cq.norm_squared() - sol[3];
-    if !(r2 > 0.0) || !cq.iter().all(|v| v.is_finite()) {
+    if r2.is_nan() || r2 <= 0.0 || !cq.iter().all(|v| v.is_finite()) {
         return Err(SphereFitError::Degenerate);
     }
     let mut centre = mean + cq * scale;
@@ -144,7 +147,7 @@ pub fn fit_sphere(
             break;
         }
     }
-    if !converged || !(radius > 0.0) {
+    if !converged || radius.is_nan() || radius <= 0.0 {
         return Err(SphereFitError::NoConvergence);
     }
     let residuals: Vec<f64> = pts.iter().map(|p| (p - centre).norm() - radius).collect();
@@ -212,8 +215,8 @@ mod tests {
         let r = 12.7;
         let pts = on_sphere(centre, r, &cap_directions(30, 180.0, [0.3, 0.2, 1.0]));
         let fit = fit_sphere(&pts, None).unwrap();
-        for k in 0..3 {
-            assert!((fit.centre_mm[k] - centre[k]).abs() < 1e-9, "{fit:?}");
+        for (got, want) in fit.centre_mm.iter().zip(centre) {
+            assert!((got - want).abs() < 1e-9, "{fit:?}");
         }
         assert!((fit.radius_mm - r).abs() < 1e-9, "{fit:?}");
         assert!(fit.form_rms_mm < 1e-9 && fit.form_pv_mm < 1e-9);
@@ -227,15 +230,15 @@ mod tests {
         let pts = on_sphere(centre, r, &cap_directions(17, 90.0, [0.0, 0.0, 1.0]));
         assert!(pts.iter().all(|p| p[2] >= centre[2] - 1e-9));
         let fit = fit_sphere(&pts, None).unwrap();
-        for k in 0..3 {
-            assert!((fit.centre_mm[k] - centre[k]).abs() < 1e-9, "{fit:?}");
+        for (got, want) in fit.centre_mm.iter().zip(centre) {
+            assert!((got - want).abs() < 1e-9, "{fit:?}");
         }
         assert!((fit.radius_mm - r).abs() < 1e-9);
         // A 30° cap, fixed radius: the centre is still found exactly.
         let pts = on_sphere(centre, r, &cap_directions(9, 30.0, [1.0, 0.0, 0.0]));
         let fit = fit_sphere(&pts, Some(r)).unwrap();
-        for k in 0..3 {
-            assert!((fit.centre_mm[k] - centre[k]).abs() < 1e-9, "{fit:?}");
+        for (got, want) in fit.centre_mm.iter().zip(centre) {
+            assert!((got - want).abs() < 1e-9, "{fit:?}");
         }
         assert_eq!(fit.radius_mm, r);
     }

@@ -62,7 +62,7 @@ pub fn build_table(analysis: &Analysis, step_deg: Option<f64>) -> Result<CompTab
     let step = match step_deg {
         Some(s) => {
             let n = 360.0 / s;
-            if !(s > 0.0) || (n - n.round()).abs() > 1e-9 {
+            if s.is_nan() || s <= 0.0 || (n - n.round()).abs() > 1e-9 {
                 return Err(Error::usage(
                     format!("step {s}° does not divide the turn"),
                     "choose a step that divides 360, e.g. 1, 5, 7.5, 10, 15, 30",
@@ -230,13 +230,16 @@ pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Res
                 table.axis
             );
             if table.bidirectional {
+                // Over one turn: the 360° entry repeats 0° and is left out.
+                let turn = table.angles_deg.len().saturating_sub(1).max(1);
                 let reversal: f64 = table
                     .forward_arcsec
                     .iter()
                     .zip(&table.reverse_arcsec)
+                    .take(turn)
                     .map(|(f, r)| r - f)
                     .sum::<f64>()
-                    / table.angles_deg.len() as f64;
+                    / turn as f64;
                 let _ = writeln!(
                     s,
                     "; LEC acts in both directions: values are the mean of + and -; mean reversal (err- minus err+) {reversal:.2} arcsec belongs in the backlash compensation"
