@@ -165,7 +165,21 @@ fn print_stdout(text: &str) -> Result<()> {
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
-    v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
+    v.map_or_else(|| "-".to_string(), |v| fixed(v, digits))
+}
+
+/// Fixed-point text without "-0.00".
+fn fixed(v: f64, digits: usize) -> String {
+    let text = format!("{v:.digits$}");
+    if text
+        .trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        text.trim_start_matches('-').to_string()
+    } else {
+        text
+    }
 }
 
 /// The text report of `rotary analyze`.
@@ -233,10 +247,10 @@ fn human_report(a: &Analysis) -> String {
     for row in &a.table {
         let _ = writeln!(
             s,
-            "{:>10}  {:>3}  {:>12.2}  {:>8}  {:>3}",
+            "{:>10}  {:>3}  {:>12}  {:>8}  {:>3}",
             row.angle_deg,
             row.direction.symbol(),
-            row.error_arcsec,
+            fixed(row.error_arcsec, 2),
             opt(row.s_arcsec, 2),
             row.n
         );
