@@ -558,6 +558,68 @@ mod tests {
         );
     }
 
+    /// Centres of a C-axis bar for commanded angles `alphas`, one direction, turned by α − err.
+    fn file_for(alphas: &[f64], sym: &str, err: impl Fn(f64) -> f64) -> Measurement {
+        let mut s = String::from("axis,direction,repeat,angle_deg,sphere,x_mm,y_mm,z_mm\n");
+        for &alpha in alphas {
+            let theta = (alpha - err(alpha) / 3600.0).to_radians();
+            for (k, r) in [(1, 40.0), (2, 240.0)] {
+                writeln!(
+                    s,
+                    "C,{sym},0,{alpha},{k},{},{},10",
+                    r * theta.cos(),
+                    r * theta.sin()
+                )
+                .unwrap();
+            }
+        }
+        parse_measurement(CsvTable::parse(Path::new("n.csv"), &s).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn negative_angles_reverse_only_and_a_chosen_reference() {
+        // A turn commanded −180 … +180 in the − direction only, err = 3″·cos α − 3″.
+        let alphas: Vec<f64> = (-6..=6).map(|i| i as f64 * 30.0).collect();
+        let err = |a: f64| 3.0 * a.to_radians().cos() - 3.0;
+        let m = file_for(&alphas, "-", err);
+        let an = analyze(&m, &AnalyzeOptions::default()).unwrap();
+        assert_eq!(an.reference.direction, Direction::Reverse);
+        assert_eq!(an.reference.angle_deg, 0.0);
+        for row in &an.table {
+            assert!(
+                (row.error_arcsec - err(row.angle_deg)).abs() < 1e-6,
+                "{row:?}"
+            );
+        }
+        assert!(an.iso230_2.is_none() && an.iso230_2_note.is_some());
+        // Reference at −90°: errors are relative to err(−90°) = −3″.
+        let opts = AnalyzeOptions {
+            reference_angle_deg: Some(-90.0),
+            ..Default::default()
+        };
+        let an = analyze(&m, &opts).unwrap();
+        for row in &an.table {
+            let want = err(row.angle_deg) - err(-90.0);
+            assert!((row.error_arcsec - want).abs() < 1e-6, "{row:?}");
+        }
+        // A reference angle that was not measured is a usage error.
+        let opts = AnalyzeOptions {
+            reference_angle_deg: Some(45.0),
+            ..Default::default()
+        };
+        let e = analyze(&m, &opts).unwrap_err().to_string();
+        assert!(e.contains("45°"), "{e}");
+        // Without 0° the smallest angle is the reference.
+        let m = file_for(&[10.0, 100.0, 200.0, 300.0], "+", |_| 0.0);
+        assert_eq!(
+            analyze(&m, &AnalyzeOptions::default())
+                .unwrap()
+                .reference
+                .angle_deg,
+            10.0
+        );
+    }
+
     #[test]
     fn mean_and_s_by_hand() {
         let (m, s) = mean_and_s(&[1.0, 2.0, 6.0]);
