@@ -188,6 +188,20 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
             ));
         }
     }
+    if let Some(a) = opts.reference_angle_deg {
+        if !a.is_finite() {
+            return Err(Error::usage(
+                format!("reference angle {a}"),
+                "give the reference angle in degrees, e.g. 0",
+            ));
+        }
+    }
+    if opts.radius_tolerance_mm.is_nan() || opts.radius_tolerance_mm < 0.0 {
+        return Err(Error::usage(
+            format!("radius tolerance {} mm", opts.radius_tolerance_mm),
+            "give the tolerance as a positive number of mm, e.g. 0.01",
+        ));
+    }
     if opts.fix_radius && opts.sphere_diameter_mm.is_none() {
         return Err(Error::usage(
             "a fixed radius needs the sphere diameter",

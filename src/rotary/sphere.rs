@@ -47,8 +47,10 @@ impl fmt::Display for SphereFitError {
     }
 }
 
-/// Smallest/largest principal spread of the points below which they count as coplanar.
-const COPLANAR_RATIO: f64 = 1e-6;
+/// Smallest/largest principal spread (standard deviation) of the points below which they
+/// count as coplanar. A hemisphere has ≈ 0.4, a 10° cap ≈ 0.05; a ring of points with probe
+/// noise has noise/radius ≈ 10⁻⁵, whose "sphere" would be noise — so 10⁻³ is the line.
+const COPLANAR_RATIO: f64 = 1e-3;
 const MAX_ITERATIONS: u32 = 100;
 
 /// Fit a sphere to `points_mm`. With `known_radius_mm` only the centre is fitted.
@@ -265,6 +267,13 @@ mod tests {
             .map(|p| [p[0], p[1], 0.5 * p[0] - 0.25 * p[1]])
             .collect();
         assert_eq!(fit_sphere(&tilted, None), Err(SphereFitError::Degenerate));
+        // A ring with 0.5 µm of noise off its plane is still a plane, not a sphere.
+        let noisy: Vec<[f64; 3]> = ring
+            .iter()
+            .enumerate()
+            .map(|(i, p)| [p[0], p[1], p[2] + if i % 2 == 0 { 5e-4 } else { -5e-4 }])
+            .collect();
+        assert_eq!(fit_sphere(&noisy, None), Err(SphereFitError::Degenerate));
     }
 
     #[test]

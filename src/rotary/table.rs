@@ -19,6 +19,8 @@ pub enum TableFormat {
 
 /// LinuxCNC reads at most 256 triplets per joint (ini-config, `COMP_FILE`).
 pub const LINUXCNC_MAX_ENTRIES: usize = 256;
+/// Most entries per turn a table may have (0.01° steps).
+pub const MAX_ENTRIES: usize = 36_000;
 /// Largest gap between measured angles the table will interpolate across.
 pub const MAX_GAP_DEG: f64 = 90.0;
 
@@ -73,6 +75,12 @@ pub fn build_table(analysis: &Analysis, step_deg: Option<f64>) -> Result<CompTab
         None => 360.0 / (360.0 / min_gap - 1e-9).ceil(),
     };
     let n = (360.0 / step).round() as usize;
+    if n > MAX_ENTRIES {
+        return Err(Error::usage(
+            format!("a {step}° step makes {n} entries per turn (at most {MAX_ENTRIES})"),
+            "give a coarser --step-deg, e.g. 1 or 5",
+        ));
+    }
     let angles_deg: Vec<f64> = (0..=n).map(|i| i as f64 * step).collect();
     let sample = |c: &[(f64, f64)]| -> Vec<f64> {
         let mut v: Vec<f64> = angles_deg[..n]
