@@ -163,8 +163,7 @@ pub struct Analysis {
     /// Every position of every repeat (not in the JSON summary).
     #[serde(skip)]
     pub observations: Vec<Observation>,
-    /// Every sphere fit (not in the JSON summary).
-    #[serde(skip)]
+    /// Every sphere fit of a touch-point file: centre, radius, form residual (empty for centres).
     pub sphere_fits: Vec<SphereReport>,
 }
 
