@@ -274,19 +274,19 @@ fn touch_points_are_fitted_with_stylus_radius() {
     // Each fit reports its centre, radius and form; sphere 2 at 90° sits at (0, 250, 60).
     let fits = a["sphere_fits"].as_array().unwrap();
     assert_eq!(fits.len(), 4);
-    let f = &fits[3];
+    let fit = &fits[3];
     assert_eq!(
-        (f["angle_deg"].as_f64(), f["sphere"].as_u64()),
+        (fit["angle_deg"].as_f64(), fit["sphere"].as_u64()),
         (Some(90.0), Some(2))
     );
     for (k, want) in [0.0, 250.0, 60.0].iter().enumerate() {
         assert!(
-            (f["centre_mm"][k].as_f64().unwrap() - want).abs() < 1e-9,
-            "{f}"
+            (fit["centre_mm"][k].as_f64().unwrap() - want).abs() < 1e-9,
+            "{fit}"
         );
     }
-    assert!(f["form_rms_mm"].as_f64().unwrap() < 1e-9);
-    assert!(f["radius_deviation_mm"].as_f64().unwrap().abs() < 1e-9);
+    assert!(fit["form_rms_mm"].as_f64().unwrap() < 1e-9);
+    assert!(fit["radius_deviation_mm"].as_f64().unwrap().abs() < 1e-9);
     assert!(a["table"][1]["error_arcsec"].as_f64().unwrap().abs() < 1e-5);
 
     // Without the stylus radius the fitted radius (14) is 1.5 mm off the sphere's 12.5.
