@@ -149,22 +149,22 @@ pub struct SphereSummary {
 pub struct Analysis {
     pub axis: RotaryAxis,
     pub unit: &'static str,
-    pub reference: Reference,
     /// Mean error per direction and target angle, direction `+` first, angles ascending.
     pub table: Vec<TableRow>,
     pub axis_fit: AxisReport,
-    /// Present for touch-point files.
-    pub spheres: Option<SphereSummary>,
     /// Positioning figures by ISO 230-2:2014 in arcsec (from [`crate::linear::evaluate`]),
     /// with ISO's sign x = actual − target = β − α = −err; `null` when not applicable.
     pub iso230_2: Option<Evaluation>,
     /// Why `iso230_2` is `null`, if it is.
     pub iso230_2_note: Option<String>,
-    /// Every position of every repeat (not in the JSON summary).
-    #[serde(skip)]
-    pub observations: Vec<Observation>,
+    pub reference: Reference,
+    /// Present for touch-point files.
+    pub spheres: Option<SphereSummary>,
     /// Every sphere fit of a touch-point file: centre, radius, form residual (empty for centres).
     pub sphere_fits: Vec<SphereReport>,
+    /// Every position of every repeat (not in the JSON).
+    #[serde(skip)]
+    pub observations: Vec<Observation>,
 }
 
 fn key(angle_deg: f64) -> i64 {
