@@ -479,4 +479,50 @@ fn golden_tables_in_every_format() {
     }
     assert_eq!(v(0), v(8));
     assert!(sin.contains("$AA_ENC_COMP_IS_MODULO[0,C1]=1") && sin.starts_with("%_N_AX_EEC_INI"));
+
+    // Default step: the measured 90° spacing → 0, 90, 180, 270, 360; a step that does not
+    // divide the turn is refused.
+    let run = errmap(
+        d,
+        &["rotary", "table", meas, "--format", "csv", "-o", "auto.csv"],
+    );
+    run.expect_code(0);
+    assert!(run.stdout().starts_with("5 entries"), "{}", run.stdout());
+    let run = errmap(
+        d,
+        &[
+            "rotary",
+            "table",
+            meas,
+            "--format",
+            "csv",
+            "-o",
+            "x.csv",
+            "--step-deg",
+            "7",
+        ],
+    );
+    run.expect_code(2);
+    assert!(run.stderr().contains("does not divide"), "{}", run.stderr());
+    // --machine-axis names the Sinumerik axis.
+    errmap(
+        d,
+        &[
+            "rotary",
+            "table",
+            meas,
+            "--format",
+            "sinumerik",
+            "-o",
+            "ax.spf",
+            "--machine-axis",
+            "AX6",
+        ],
+    )
+    .expect_code(0);
+    let ax = std::fs::read_to_string(d.join("ax.spf")).unwrap();
+    assert!(
+        ax.contains("$AA_ENC_COMP[0,4,AX6]=") && !ax.contains("C1"),
+        "{ax}"
+    );
 }
