@@ -4,6 +4,8 @@ mod linear_bench;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
+mod rotary_bench;
+
 fn csv_table_parse(c: &mut Criterion) {
     let mut text = String::from("x_mm,y_mm,z_mm\n");
     for i in 0..10_000 {
@@ -20,4 +22,9 @@ fn csv_table_parse(c: &mut Criterion) {
 }
 
 criterion_group!(io_benches, csv_table_parse);
-criterion_main!(io_benches, linear_bench::linear_benches);
+criterion_group!(
+    rotary_benches,
+    rotary_bench::sphere_fit,
+    rotary_bench::analyze_campaign
+);
+criterion_main!(io_benches, linear_bench::linear_benches, rotary_benches);

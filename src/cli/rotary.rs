@@ -1,25 +1,317 @@
-//! CLI of `errmap rotary …`.
+//! CLI of `errmap rotary …` and `errmap synth rotary`: arguments, printing, exit codes.
 
 use super::Globals;
+use errmap::error::Error;
+use errmap::rotary::{
+    analyze, build_table, chart::save_error_chart, read_measurement, render, Analysis,
+    AnalyzeOptions, RotaryAxis, TableFormat,
+};
+use errmap::synth::rotary::{write_set, RotarySynthConfig};
 use errmap::Result;
+use std::fmt::Write as _;
+use std::path::PathBuf;
 
 #[derive(Debug, clap::Subcommand)]
 pub enum RotaryCommand {
-    /// Analyse measurements.
-    Analyze { file: std::path::PathBuf },
+    /// Angular error err = α − β of a rotary axis from two spheres on a bar (centres or touch points).
+    Analyze(AnalyzeArgs),
+    /// Compensation table over the full turn for a controller (LinuxCNC, Sinumerik) or as CSV.
+    Table(TableArgs),
+}
+
+/// Options shared by `analyze` and `table`: how to read the measurement.
+#[derive(Debug, clap::Args)]
+pub struct MeasurementArgs {
+    /// Measurement CSV: axis,direction,repeat,angle_deg,sphere,x_mm,y_mm,z_mm[,point].
+    pub file: PathBuf,
+    /// Fit the axis direction and location from the sphere trajectories (else nominal X/Y/Z).
+    #[arg(long)]
+    pub fit_axis: bool,
+    /// Nominal (calibrated) sphere diameter; touch-point fits whose radius disagrees are errors.
+    #[arg(long, value_name = "MM")]
+    pub sphere_diameter: Option<f64>,
+    /// Stylus tip radius: touch points lie on a sphere of radius sphere + stylus.
+    #[arg(long, value_name = "MM", default_value_t = 0.0)]
+    pub stylus_radius: f64,
+    /// Largest accepted |fitted − nominal| radius of a touch-point fit.
+    #[arg(long, value_name = "MM", default_value_t = 0.010)]
+    pub radius_tolerance: f64,
+    /// Fit only the centres, with the radius fixed at diameter / 2 + stylus radius.
+    #[arg(long)]
+    pub fix_radius: bool,
+    /// Commanded angle of vector a (default 0° if measured, else the smallest angle).
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+    pub reference_angle: Option<f64>,
+}
+
+impl MeasurementArgs {
+    fn analyze(&self) -> Result<Analysis> {
+        let m = read_measurement(&self.file)?;
+        let opts = AnalyzeOptions {
+            fit_axis: self.fit_axis,
+            sphere_diameter_mm: self.sphere_diameter,
+            stylus_radius_mm: self.stylus_radius,
+            radius_tolerance_mm: self.radius_tolerance,
+            fix_radius: self.fix_radius,
+            reference_angle_deg: self.reference_angle,
+        };
+        analyze(&m, &opts)
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub struct AnalyzeArgs {
+    #[command(flatten)]
+    pub measurement: MeasurementArgs,
+    /// Print one JSON document on stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a chart of error vs angle per direction with the repeat spread.
+    #[arg(long, value_name = "PNG")]
+    pub chart: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TableArgs {
+    #[command(flatten)]
+    pub measurement: MeasurementArgs,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: TableFormat,
+    /// Output file.
+    #[arg(long, short = 'o', value_name = "FILE")]
+    pub output: PathBuf,
+    /// Spacing of the table entries; must divide 360 (default: the measured spacing).
+    #[arg(long, value_name = "DEG")]
+    pub step_deg: Option<f64>,
+    /// Sinumerik machine axis name used in $AA_ENC_COMP[0,N,<name>] (default: axis letter + 1, e.g. C1).
+    #[arg(long, value_name = "NAME")]
+    pub machine_axis: Option<String>,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct SynthRotaryArgs {
-    /// Output folder.
+    /// Output folder (touch_points.csv, centres.csv, truth.json).
     #[arg(long)]
-    pub out: std::path::PathBuf,
+    pub out: PathBuf,
+    /// Seed of the probe noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Rotary axis: A, B or C.
+    #[arg(long, default_value = "C", value_parser = parse_axis)]
+    pub axis: RotaryAxis,
+    /// Angle step of the runs (divides 360).
+    #[arg(long, value_name = "DEG", default_value_t = 15.0)]
+    pub step_deg: f64,
+    /// Runs in each direction.
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+    /// Touch points per sphere and position.
+    #[arg(long, default_value_t = 25)]
+    pub points: usize,
+    /// Probe noise (standard deviation along the surface normal).
+    #[arg(long, value_name = "UM", default_value_t = 0.5)]
+    pub noise_um: f64,
 }
 
-pub fn run(_cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
-    super::not_built("rotary")
+fn parse_axis(s: &str) -> std::result::Result<RotaryAxis, String> {
+    RotaryAxis::parse(s).ok_or_else(|| format!("'{s}' is not A, B or C"))
 }
 
-pub fn run_synth(_args: SynthRotaryArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("synth rotary")
+pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
+    match cmd {
+        RotaryCommand::Analyze(args) => {
+            let analysis = args.measurement.analyze()?;
+            if let Some(png) = &args.chart {
+                save_error_chart(png, &analysis)?;
+            }
+            if args.json {
+                let text = serde_json::to_string_pretty(&analysis)
+                    .map_err(|e| Error::Internal(format!("JSON of the analysis: {e}")))?;
+                print_stdout(&format!("{text}\n"))?;
+            } else {
+                print_stdout(&human_report(&analysis))?;
+            }
+            Ok(0)
+        }
+        RotaryCommand::Table(args) => {
+            let analysis = args.measurement.analyze()?;
+            let table = build_table(&analysis, args.step_deg)?;
+            let axis_name = args
+                .machine_axis
+                .clone()
+                .unwrap_or_else(|| format!("{}1", analysis.axis));
+            let text = render(&table, args.format, &axis_name)?;
+            errmap::io::write_atomic_bytes(&args.output, text.as_bytes())?;
+            print_stdout(&format!(
+                "{} entries, 0° … 360° every {}°, written to {}\n",
+                table.angles_deg.len(),
+                table.step_deg,
+                args.output.display()
+            ))?;
+            Ok(0)
+        }
+    }
+}
+
+/// Write to stdout; a closed pipe (`| head`) is not an error.
+fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(Error::write("stdout", e)),
+        _ => Ok(()),
+    }
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".to_string(), |v| fixed(v, digits))
+}
+
+/// Fixed-point text without "-0.00".
+fn fixed(v: f64, digits: usize) -> String {
+    let text = format!("{v:.digits$}");
+    if text
+        .trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        text.trim_start_matches('-').to_string()
+    } else {
+        text
+    }
+}
+
+/// The text report of `rotary analyze`.
+fn human_report(a: &Analysis) -> String {
+    let mut s = String::new();
+    let r = &a.reference;
+    let _ = writeln!(
+        s,
+        "{} axis: {} observations, reference {}° ({}, {} repeat(s)), lever {:.3} mm",
+        a.axis,
+        a.observations.len(),
+        r.angle_deg,
+        r.direction,
+        r.n,
+        r.lever_mm
+    );
+    if let Some(sp) = &a.spheres {
+        let _ = writeln!(
+            s,
+            "sphere fits: {}, form ≤ {:.2} µm rms ({:.2} µm p-v), mean radius {:.4} mm{}",
+            sp.fits,
+            sp.max_form_rms_mm * 1e3,
+            sp.max_form_pv_mm * 1e3,
+            sp.mean_radius_mm,
+            sp.max_abs_radius_deviation_mm
+                .map(|d| format!(", |radius − nominal| ≤ {:.2} µm", d * 1e3))
+                .unwrap_or_default()
+        );
+    }
+    let ax = &a.axis_fit;
+    let d = ax.direction;
+    match (ax.tilt_arcsec, &ax.tilt_toward_arcsec, ax.location_mm) {
+        (Some(tilt), Some(toward), Some(loc)) => {
+            let parts: Vec<String> = toward
+                .iter()
+                .map(|(k, v)| format!("toward {k} {v:+.2}″"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "axis (fitted): direction ({:.8}, {:.8}, {:.8}), tilt {:.2}″ ({}), location ({:.4}, {:.4}, {:.4}) mm",
+                d[0],
+                d[1],
+                d[2],
+                tilt,
+                parts.join(", "),
+                loc[0],
+                loc[1],
+                loc[2]
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                s,
+                "axis (nominal): direction ({}, {}, {})",
+                d[0], d[1], d[2]
+            );
+        }
+    }
+    let _ = writeln!(s, "\nerr = α − β (arcsec), mean over repeats");
+    let _ = writeln!(
+        s,
+        "{:>10}  dir  {:>12}  {:>8}  {:>3}",
+        "angle_deg", "error_arcsec", "s_arcsec", "n"
+    );
+    for row in &a.table {
+        let _ = writeln!(
+            s,
+            "{:>10}  {:>3}  {:>12}  {:>8}  {:>3}",
+            row.angle_deg,
+            row.direction.symbol(),
+            fixed(row.error_arcsec, 2),
+            opt(row.s_arcsec, 2),
+            row.n
+        );
+    }
+    match &a.iso230_2 {
+        Some(e) => {
+            let f = &e.axis;
+            let _ = writeln!(
+                s,
+                "\nISO 230-2:2014 (arcsec, x = actual − target = −err): A {}  A↑ {}  A↓ {}  R {}  R↑ {}  R↓ {}  E {:.2}  M {:.2}  B {:.2}  B̄ {:+.2}",
+                opt(f.A, 2),
+                opt(f.A_up, 2),
+                opt(f.A_down, 2),
+                opt(f.R, 2),
+                opt(f.R_up, 2),
+                opt(f.R_down, 2),
+                f.E,
+                f.M,
+                f.B,
+                f.B_mean
+            );
+        }
+        None => {
+            if let Some(note) = &a.iso230_2_note {
+                let _ = writeln!(s, "\nISO 230-2: not evaluated ({note})");
+            }
+        }
+    }
+    s
+}
+
+pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
+    if args.step_deg.is_nan()
+        || args.step_deg <= 0.0
+        || ((360.0 / args.step_deg) - (360.0 / args.step_deg).round()).abs() > 1e-9
+    {
+        return Err(Error::usage(
+            format!("step {}° does not divide the turn", args.step_deg),
+            "choose a step that divides 360, e.g. 10, 15, 30",
+        ));
+    }
+    if args.repeats == 0 || args.points < 4 || args.noise_um.is_nan() || args.noise_um < 0.0 {
+        return Err(Error::usage(
+            "synth rotary needs --repeats ≥ 1, --points ≥ 4 and --noise-um ≥ 0",
+            "e.g. --repeats 3 --points 25 --noise-um 0.5",
+        ));
+    }
+    let config = RotarySynthConfig {
+        axis: args.axis,
+        seed: args.seed,
+        step_deg: args.step_deg,
+        repeats: args.repeats,
+        points_per_sphere: args.points,
+        probe_noise_um: args.noise_um,
+        ..Default::default()
+    };
+    let written = write_set(&args.out, &config)?;
+    if !globals.quiet {
+        for p in written {
+            eprintln!("wrote {}", p.display());
+        }
+    }
+    Ok(0)
 }

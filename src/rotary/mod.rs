@@ -1,1 +1,21 @@
 //! Rotary axes: sphere fits, double-vector angular error (seed 003), axis location and compensation tables.
+//!
+//! Data flow: [`read_measurement`] (centres or touch points) → [`fit_sphere`] per sphere and
+//! position → vector a = c2 − c1 at the reference angle and b at each α → β by
+//! [`signed_angle_about`] → err = α − β per position, averaged over repeats ([`analyze`]) →
+//! tables for controllers ([`build_table`], [`render`]) and a chart ([`chart::save_error_chart`]).
+
+pub mod analysis;
+pub mod angle;
+pub mod axis_fit;
+pub mod chart;
+pub mod input;
+pub mod sphere;
+pub mod table;
+
+pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, TableRow};
+pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
+pub use axis_fit::{fit_axis, AxisFit, CircleFit};
+pub use input::{read_measurement, Direction, Measurement, Position, RotaryAxis};
+pub use sphere::{fit_sphere, SphereFit, SphereFitError};
+pub use table::{build_table, render, CompTable, TableFormat};
