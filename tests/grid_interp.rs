@@ -40,9 +40,9 @@ fn every_method_reproduces_a_plane_inside_the_hull() {
     for _ in 0..2000 {
         let (u, v) = (rng.random_range(0.0..600.0), rng.random_range(0.0..300.0));
         for method in METHODS {
-            let e = surface.sample(method, u, v).unwrap_or_else(|| {
-                panic!("{method} gave None at ({u}, {v}) inside the hull")
-            });
+            let e = surface
+                .sample(method, u, v)
+                .unwrap_or_else(|| panic!("{method} gave None at ({u}, {v}) inside the hull"));
             assert!(
                 (e - plane(u, v)).abs() < 1e-9,
                 "{method} at ({u}, {v}): {e} vs {}",
@@ -77,7 +77,10 @@ fn resampled_grid_of_a_plane_matches_the_plane_at_every_node() {
                 let (u, v) = grid.node(i, j);
                 let e = values[j * grid.nu + i]
                     .unwrap_or_else(|| panic!("{method}: node ({u}, {v}) is inside the plate"));
-                assert!((e - plane(u, v)).abs() < 1e-9, "{method} at ({u}, {v}): {e}");
+                assert!(
+                    (e - plane(u, v)).abs() < 1e-9,
+                    "{method} at ({u}, {v}): {e}"
+                );
             }
         }
     }
@@ -90,7 +93,10 @@ fn a_quadratic_is_reproduced_exactly_at_the_sites() {
     for &(u, v) in &sites {
         for method in METHODS {
             let e = surface.sample(method, u, v).unwrap();
-            assert!((e - quadratic(u, v)).abs() < 1e-9, "{method} at ({u}, {v}): {e}");
+            assert!(
+                (e - quadratic(u, v)).abs() < 1e-9,
+                "{method} at ({u}, {v}): {e}"
+            );
         }
     }
 }
@@ -118,13 +124,18 @@ fn sibson_c1_follows_a_quadratic_better_than_natural_neighbour() {
     // Natural neighbour misses the curvature between sites (~h²·f''/8 ≈ 0.1 µm here);
     // Sibson C1 with exact quadratic gradients leaves only its non-spherical part.
     assert!(rms_nn > 0.05, "natural neighbour rms {rms_nn}");
-    assert!(rms_c1 < 0.25 * rms_nn, "C1 rms {rms_c1} vs natural neighbour {rms_nn}");
+    assert!(
+        rms_c1 < 0.25 * rms_nn,
+        "C1 rms {rms_c1} vs natural neighbour {rms_nn}"
+    );
 }
 
 #[test]
 fn sibson_c1_reproduces_a_spherical_quadratic() {
     // Sibson's C1 interpolant with exact gradients is exact for a + b·u + c·v + d·(u² + v²).
-    let f = |u: f64, v: f64| 2.0 + 0.01 * u - 0.03 * v + 1e-4 * ((u - 300.0).powi(2) + (v - 150.0).powi(2));
+    let f = |u: f64, v: f64| {
+        2.0 + 0.01 * u - 0.03 * v + 1e-4 * ((u - 300.0).powi(2) + (v - 150.0).powi(2))
+    };
     let sites = scattered_sites(150, 6);
     let uve: Vec<[f64; 3]> = sites.iter().map(|&(u, v)| [u, v, f(u, v)]).collect();
     let surface = Surface::new(&uve).unwrap();
@@ -133,7 +144,11 @@ fn sibson_c1_reproduces_a_spherical_quadratic() {
     for _ in 0..500 {
         let (u, v) = (rng.random_range(50.0..550.0), rng.random_range(50.0..250.0));
         let e = surface.sample(Method::SibsonC1, u, v).unwrap();
-        assert!((e - f(u, v)).abs() < 1e-6, "at ({u}, {v}): {e} vs {}", f(u, v));
+        assert!(
+            (e - f(u, v)).abs() < 1e-6,
+            "at ({u}, {v}): {e} vs {}",
+            f(u, v)
+        );
     }
 }
 
@@ -173,18 +188,31 @@ fn outside_the_hull_is_none() {
 
 #[test]
 fn surface_rejects_degenerate_sites() {
-    let err = Surface::new(&[[0.0, 0.0, 1.0], [1.0, 1.0, 2.0]]).unwrap_err().to_string();
-    assert!(err.contains("at least 3"), "{err}");
-    let err = Surface::new(&[[0.0, 0.0, 1.0], [1.0, 1.0, 2.0], [2.0, 2.0, 3.0], [3.0, 3.0, 1.0]])
+    let err = Surface::new(&[[0.0, 0.0, 1.0], [1.0, 1.0, 2.0]])
         .unwrap_err()
         .to_string();
+    assert!(err.contains("at least 3"), "{err}");
+    let err = Surface::new(&[
+        [0.0, 0.0, 1.0],
+        [1.0, 1.0, 2.0],
+        [2.0, 2.0, 3.0],
+        [3.0, 3.0, 1.0],
+    ])
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("one line"), "{err}");
     let err = Surface::new(&[[0.0, 0.0, f64::NAN], [1.0, 0.0, 2.0], [0.0, 1.0, 3.0]])
         .unwrap_err()
         .to_string();
     assert!(err.contains("not a finite number"), "{err}");
     // Duplicates are merged by averaging: the site value is the mean.
-    let s = Surface::new(&[[0.0, 0.0, 1.0], [0.0, 0.0, 3.0], [1.0, 0.0, 2.0], [0.0, 1.0, 2.0]]).unwrap();
+    let s = Surface::new(&[
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, 3.0],
+        [1.0, 0.0, 2.0],
+        [0.0, 1.0, 2.0],
+    ])
+    .unwrap();
     assert_eq!(s.num_sites(), 3);
     assert!((s.sample(Method::Linear, 0.0, 0.0).unwrap() - 2.0).abs() < 1e-12);
 }
@@ -210,9 +238,18 @@ fn grid_covering_counts_nodes_and_refuses_bad_steps() {
         assert!(err.contains("not a positive number"), "{step}: {err}");
     }
     let err = Grid::covering(&plate, 0.01).unwrap_err().to_string();
-    assert!(err.contains("more than the limit") && err.contains("larger step"), "{err}");
-    let flipped = Domain { u_min_mm: 10.0, ..plate };
-    let flipped = Domain { u_max_mm: 5.0, ..flipped };
+    assert!(
+        err.contains("more than the limit") && err.contains("larger step"),
+        "{err}"
+    );
+    let flipped = Domain {
+        u_min_mm: 10.0,
+        ..plate
+    };
+    let flipped = Domain {
+        u_max_mm: 5.0,
+        ..flipped
+    };
     assert!(Grid::covering(&flipped, 1.0).is_err());
 }
 

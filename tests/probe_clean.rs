@@ -10,7 +10,10 @@ use std::path::PathBuf;
 const N: usize = 12;
 
 fn node(i: usize, j: usize) -> (f64, f64) {
-    (600.0 * i as f64 / (N - 1) as f64, 300.0 * j as f64 / (N - 1) as f64)
+    (
+        600.0 * i as f64 / (N - 1) as f64,
+        300.0 * j as f64 / (N - 1) as f64,
+    )
 }
 
 /// Smooth field of ±40 µm amplitude over the 600 × 300 mm plate.
@@ -40,7 +43,12 @@ fn point(index: usize, u: f64, v: f64, e_um: f64) -> ProbePoint {
 }
 
 /// The plate with 1 µm noise; `spikes` get +40 µm chips. Returns the set and the truth per point.
-fn plate(field: fn(f64, f64) -> f64, noise_um: f64, spikes: &[(usize, usize)], seed: u64) -> ProbeSet {
+fn plate(
+    field: fn(f64, f64) -> f64,
+    noise_um: f64,
+    spikes: &[(usize, usize)],
+    seed: u64,
+) -> ProbeSet {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noise = Normal::new(0.0, 1.0).unwrap();
     let mut points = Vec::new();
@@ -62,7 +70,10 @@ fn plate(field: fn(f64, f64) -> f64, noise_um: f64, spikes: &[(usize, usize)], s
 }
 
 fn spike_ids(spikes: &[(usize, usize)]) -> Vec<String> {
-    spikes.iter().map(|&(i, j)| format!("P{}", j * N + i)).collect()
+    spikes
+        .iter()
+        .map(|&(i, j)| format!("P{}", j * N + i))
+        .collect()
 }
 
 /// Spikes: an isolated one, two neighbours (masking), one on an edge, one at a corner.
@@ -80,7 +91,11 @@ fn chips_are_rejected_and_good_points_kept() {
             .collect();
         let spikes = spike_ids(&SPIKES);
         for s in &spikes {
-            assert!(rejected.contains(s), "seed {seed}: spike {s} kept; rejected {rejected:?}, σ {}", cleaned.sigma_um);
+            assert!(
+                rejected.contains(s),
+                "seed {seed}: spike {s} kept; rejected {rejected:?}, σ {}",
+                cleaned.sigma_um
+            );
         }
         let good_rejected = rejected.iter().filter(|r| !spikes.contains(r)).count();
         let good = N * N - spikes.len();
@@ -91,7 +106,11 @@ fn chips_are_rejected_and_good_points_kept() {
         );
         assert_eq!(cleaned.clean.len() + cleaned.rejected.len(), N * N);
         // The robust σ is of the order of the noise, not inflated by the chips.
-        assert!(cleaned.sigma_um < 3.0, "seed {seed}: σ {}", cleaned.sigma_um);
+        assert!(
+            cleaned.sigma_um < 3.0,
+            "seed {seed}: σ {}",
+            cleaned.sigma_um
+        );
         // A chip's residual is about +40 µm: the chip shows, not its neighbours' pull.
         for r in &cleaned.rejected {
             if spikes.contains(r.point.id.as_ref().unwrap()) {
@@ -126,7 +145,10 @@ fn a_sharp_real_bump_survives() {
             );
         }
         for s in spike_ids(&BUMP_SPIKES) {
-            assert!(cleaned.rejected.iter().any(|r| r.point.id.as_deref() == Some(s.as_str())));
+            assert!(cleaned
+                .rejected
+                .iter()
+                .any(|r| r.point.id.as_deref() == Some(s.as_str())));
         }
     }
 }
@@ -146,7 +168,11 @@ fn noise_free_smooth_data_loses_nothing() {
     let cleaned = reject_gross_errors(&set, 3.0).unwrap();
     assert_eq!(cleaned.rejected.len(), 1);
     assert_eq!(cleaned.rejected[0].point.id.as_deref(), Some("P65"));
-    assert!((cleaned.rejected[0].residual_um - 40.0).abs() < 1e-6, "{:?}", cleaned.rejected[0]);
+    assert!(
+        (cleaned.rejected[0].residual_um - 40.0).abs() < 1e-6,
+        "{:?}",
+        cleaned.rejected[0]
+    );
 }
 
 #[test]

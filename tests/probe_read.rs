@@ -106,21 +106,29 @@ fn repeats_are_averaged_with_their_spread() {
     assert!((p.spread_um - 2.0).abs() < 1e-9, "{p:?}");
     let q = &set.points[1];
     assert_eq!(q.repeats, 2);
-    assert!((q.e_um - 2.0).abs() < 1e-9 && (q.spread_um - 8f64.sqrt()).abs() < 1e-9, "{q:?}");
+    assert!(
+        (q.e_um - 2.0).abs() < 1e-9 && (q.spread_um - 8f64.sqrt()).abs() < 1e-9,
+        "{q:?}"
+    );
     assert_eq!(set.points[2].repeats, 1);
 }
 
 #[test]
 fn missing_column_is_named() {
     let err = err_of("x_mm,y_mm\n1,2\n", &plane_spec(0.0));
-    assert!(err.contains("p.csv:1") && err.contains("missing column 'z_mm'"), "{err}");
+    assert!(
+        err.contains("p.csv:1") && err.contains("missing column 'z_mm'"),
+        "{err}"
+    );
 }
 
 #[test]
 fn unknown_column_is_named() {
     let err = err_of("x_mm,y_mm,z_mm,z_um\n1,2,3,4\n", &plane_spec(0.0));
     assert!(
-        err.contains("p.csv:1, column z_um") && err.contains("unknown column 'z_um'") && err.contains("hint"),
+        err.contains("p.csv:1, column z_um")
+            && err.contains("unknown column 'z_um'")
+            && err.contains("hint"),
         "{err}"
     );
 }
@@ -128,7 +136,10 @@ fn unknown_column_is_named() {
 #[test]
 fn incomplete_nominal_columns_are_named() {
     let err = err_of("x_mm,y_mm,z_mm,nx_mm,ny_mm\n1,2,3,1,2\n", &plane_spec(0.0));
-    assert!(err.contains("p.csv:1") && err.contains("nz_mm missing"), "{err}");
+    assert!(
+        err.contains("p.csv:1") && err.contains("nz_mm missing"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -143,7 +154,10 @@ fn non_number_names_line_and_column() {
 #[test]
 fn nan_and_infinity_are_refused() {
     for bad in ["NaN", "inf", "-inf"] {
-        let err = err_of(&format!("x_mm,y_mm,z_mm\n1,2,3\n\n4,5,{bad}\n"), &plane_spec(0.0));
+        let err = err_of(
+            &format!("x_mm,y_mm,z_mm\n1,2,3\n\n4,5,{bad}\n"),
+            &plane_spec(0.0),
+        );
         assert!(
             err.contains("p.csv:4, column z_mm") && err.contains("not a finite number"),
             "{bad}: {err}"
@@ -190,7 +204,10 @@ fn collinear_points_are_refused() {
     let ok = "x_mm,y_mm,z_mm\n0,0,1\n1000,0,1\n500,0.5,1\n";
     let (_d, path) = file("ok.csv", ok);
     assert!(read_probes(&path, &plane_spec(1.0)).is_ok());
-    let err = err_of("x_mm,y_mm,z_mm\n0,0,1\n1000,0,1\n500,0.0001,1\n", &plane_spec(1.0));
+    let err = err_of(
+        "x_mm,y_mm,z_mm\n0,0,1\n1000,0,1\n500,0.0001,1\n",
+        &plane_spec(1.0),
+    );
     assert!(err.contains("lie on one line"), "{err}");
 }
 

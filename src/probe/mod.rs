@@ -377,7 +377,8 @@ fn merge_repeats(rows: &[Row], normal: Axis) -> Vec<ProbePoint> {
 fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -> Result<()> {
     // The two points furthest apart (O(n²) is fine for probe files; use the first point's
     // furthest, then that one's furthest: a 2-approximation that suffices for a tolerance test).
-    let dist2 = |a: &ProbePoint, b: &ProbePoint| (a.u_mm - b.u_mm).powi(2) + (a.v_mm - b.v_mm).powi(2);
+    let dist2 =
+        |a: &ProbePoint, b: &ProbePoint| (a.u_mm - b.u_mm).powi(2) + (a.v_mm - b.v_mm).powi(2);
     if points.is_empty() {
         return Ok(());
     }
@@ -395,7 +396,8 @@ fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -
         points
             .iter()
             .map(|p| {
-                ((b.u_mm - a.u_mm) * (p.v_mm - a.v_mm) - (b.v_mm - a.v_mm) * (p.u_mm - a.u_mm)).abs()
+                ((b.u_mm - a.u_mm) * (p.v_mm - a.v_mm) - (b.v_mm - a.v_mm) * (p.u_mm - a.u_mm))
+                    .abs()
                     / length
             })
             .fold(0.0, f64::max)
@@ -441,5 +443,35 @@ pub fn write_rejected_csv(path: &Path, rejected: &[Rejected]) -> Result<()> {
             writeln!(w, "{x},{y},{z},{}", r.residual_um)?;
         }
         Ok(())
+    })
+}
+
+/// Parse a domain written `UMIN,VMIN,UMAX,VMAX` in mm (the two plane axes of the normal, e.g.
+/// `XMIN,YMIN,XMAX,YMAX` for normal z), as given on the command line.
+pub fn parse_domain(text: &str) -> Result<Domain> {
+    let hint =
+        "write the domain as UMIN,VMIN,UMAX,VMAX in mm along the two plane axes, e.g. 0,0,600,300";
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| Error::usage(format!("domain '{text}' is not four numbers"), hint))?;
+    let [u_min_mm, v_min_mm, u_max_mm, v_max_mm] = values[..] else {
+        return Err(Error::usage(
+            format!("domain '{text}' has {} values, not 4", values.len()),
+            hint,
+        ));
+    };
+    if !values.iter().all(|v| v.is_finite()) || u_max_mm <= u_min_mm || v_max_mm <= v_min_mm {
+        return Err(Error::usage(
+            format!("domain '{text}' is not a rectangle: each minimum must be below its maximum"),
+            hint,
+        ));
+    }
+    Ok(Domain {
+        u_min_mm,
+        v_min_mm,
+        u_max_mm,
+        v_max_mm,
     })
 }
