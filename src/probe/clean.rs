@@ -19,7 +19,7 @@
 
 use super::{ProbePoint, ProbeSet};
 use crate::error::{Error, Result};
-use crate::interp::{quadratic_gradient, Site, Tri};
+use crate::interp::{quadratic_gradient, sibson_c1, Site, Tri};
 use rayon::prelude::*;
 use spade::handles::FixedVertexHandle;
 use spade::{Point2, Triangulation};
@@ -178,29 +178,12 @@ fn predict_sibson_c1(tri: &Tri, p: Point2<f64>) -> Option<f64> {
     if weights.is_empty() {
         return None;
     }
-    let (mut sum_c0, mut sum_c1, mut sum_c1_weights, mut alpha, mut beta) =
-        (0.0, 0.0, 0.0, 0.0, 0.0);
-    for &(h, w) in &weights {
+    let items = weights.iter().map(|&(h, w)| {
         let v = tri.vertex(h);
         let q = v.position();
-        let (du, dv) = (p.x - q.x, p.y - q.y);
-        let r2 = du * du + dv * dv;
-        if r2 == 0.0 {
-            return Some(v.data().e);
-        }
-        let g = quadratic_gradient(tri, h);
-        let c1_weight = w / r2.sqrt();
-        let zeta = v.data().e + du * g[0] + dv * g[1];
-        alpha += c1_weight * r2;
-        beta += w * r2;
-        sum_c1_weights += c1_weight;
-        sum_c1 += zeta * c1_weight;
-        sum_c0 += v.data().e * w;
-    }
-    alpha /= sum_c1_weights;
-    sum_c1 /= sum_c1_weights;
-    let value = (alpha * sum_c0 + beta * sum_c1) / (alpha + beta);
-    value.is_finite().then_some(value)
+        ([q.x, q.y], v.data().e, quadratic_gradient(tri, h), w)
+    });
+    sibson_c1([p.x, p.y], items)
 }
 
 /// Prediction at a point outside the hull of the others: the mean of its Delaunay neighbours'
