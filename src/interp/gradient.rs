@@ -81,7 +81,8 @@ fn fit(rows: &[(f64, f64, f64, f64)], unknowns: usize) -> Option<Vec<f64>> {
     let svd = a.svd(true, true);
     let max = svd.singular_values.max();
     let min = svd.singular_values.min();
-    if !(max > 0.0) || min < RCOND_MIN * max {
+    // `max` is NaN or zero for a fit with no information.
+    if max.is_nan() || max <= 0.0 || min < RCOND_MIN * max {
         return None;
     }
     let x = svd.solve(&b, 0.0).ok()?;
