@@ -1,5 +1,6 @@
 //! errmap's criterion benchmarks, one harness: each area adds a module beside this file and a group to `criterion_main!`.
 
+mod interp_bench;
 mod linear_bench;
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -27,4 +28,15 @@ criterion_group!(
     rotary_bench::sphere_fit,
     rotary_bench::analyze_campaign
 );
-criterion_main!(io_benches, linear_bench::linear_benches, rotary_benches);
+criterion_group! {
+    name = interp_benches;
+    // No plots: criterion's plotters backend looks for system fonts, which CI machines lack.
+    config = Criterion::default().without_plots();
+    targets = interp_bench::interp_benches
+}
+criterion_main!(
+    io_benches,
+    interp_benches,
+    linear_bench::linear_benches,
+    rotary_benches
+);
