@@ -198,8 +198,10 @@ impl<'a> Rewriter<'a> {
                 return false;
             }
         }
+        // The domain only needs the two plane coordinates; unknown ones may be anywhere.
+        let (ui, vi) = self.plane_uv;
         let known: Option<Vec<[f64; 3]>> =
-            points.iter().map(|p| Some([p[0]?, p[1]?, p[2]?])).collect();
+            points.iter().map(|p| Some([p[ui]?, p[vi]?, 0.0])).collect();
         let Some(known) = known else {
             return true;
         };
@@ -208,8 +210,7 @@ impl<'a> Rewriter<'a> {
         }
         let s = self.scale_mm();
         let step = self.settings.max_segment_in(self.inches);
-        let (ui, vi) = self.plane_uv;
-        let inside = |p: &[f64; 3]| self.field.error_mm(p[ui] * s, p[vi] * s).is_some();
+        let inside = |p: &[f64; 3]| self.field.error_mm(p[0] * s, p[1] * s).is_some();
         if inside(&known[0]) {
             return true;
         }
