@@ -583,13 +583,21 @@ impl<'a> Rewriter<'a> {
             if is_canned(motion) || matches!(motion, 50 | 51 | 52 | 330 | 331) {
                 let mut pts = vec![start, end];
                 if is_canned(motion) {
+                    // The drill axis runs from the start through the R level to the bottom Z;
+                    // under G91, R is relative to the start and Z to the R level.
                     let (_, _, ax) = self.plane.axes();
-                    for l in [b'R', AXES[ax]] {
-                        let mut p = end;
-                        p[ax] = match (find(l).and_then(|w| w.value), self.absolute) {
-                            (Some(v), true) => Some(v),
-                            _ => None,
-                        };
+                    let r = find(b'R').and_then(|w| w.value);
+                    let z = find(AXES[ax]).and_then(|w| w.value);
+                    let (r_abs, z_abs) = if self.absolute {
+                        (r, z)
+                    } else {
+                        let ra = start[ax].zip(r).map(|(s, r)| s + r);
+                        (ra, ra.zip(z).map(|(ra, z)| ra + z))
+                    };
+                    pts[1][ax] = start[ax];
+                    for level in [r_abs, z_abs] {
+                        let mut p = pts[1];
+                        p[ax] = level;
                         pts.push(p);
                     }
                 }
@@ -694,6 +702,11 @@ impl<'a> Rewriter<'a> {
             && start.iter().all(|c| c.is_some());
         if !plain {
             // Not compensable, but shown above not to touch the zone: copy as is.
+            let mut end = end;
+            if is_canned(motion) {
+                // The cycle retracts to the R level or the start (G98/G99): not tracked.
+                end[self.plane.axes().2] = None;
+            }
             return self.finish_unchanged(line, words, end);
         }
         let s = [
