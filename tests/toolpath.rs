@@ -20,7 +20,7 @@ impl ErrorField for Lin {
     fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
         self.dom
             .contains(u_mm, v_mm)
-            .then(|| self.e0 + self.g * u_mm)
+            .then_some(self.e0 + self.g * u_mm)
     }
 }
 

@@ -26,7 +26,7 @@ impl ErrorField for Field {
             u_max_mm: self.x_max_mm,
             v_max_mm: 1e6,
         };
-        d.contains(u_mm, v_mm).then(|| 0.02 + 1e-4 * u_mm)
+        d.contains(u_mm, v_mm).then_some(0.02 + 1e-4 * u_mm)
     }
 }
 

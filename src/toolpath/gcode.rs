@@ -912,12 +912,12 @@ impl<'a> Rewriter<'a> {
                 }
             }
         }
-        for i in 0..3 {
-            if end[i] != self.pos[i] {
+        for (i, e) in end.iter().enumerate() {
+            if *e != self.pos[i] {
                 if let Some(b) = self.blocks.last_mut() {
                     b.written[i] = true;
                 }
-                if end[i].is_none() {
+                if e.is_none() {
                     self.unknown_since = Some(line.number);
                 }
             }
