@@ -1029,11 +1029,36 @@ impl<'a> Rewriter<'a> {
             self.out_motion = Some(if code == "G1" { 10 } else { motion });
             lines_text.push(words_text);
         }
+        // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
+        // segment, so the program does not stop after the first one.
+        let stops: Vec<&W> = if nseg > 1 {
+            words
+                .iter()
+                .filter(|w| {
+                    w.letter == b'M'
+                        && w.value
+                            .is_some_and(|v| [0.0, 1.0, 2.0, 30.0, 60.0].contains(&v))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if let Some(last) = lines_text.last_mut() {
+            for w in &stops {
+                last.push(' ');
+                last.push_str(&w.text);
+            }
+        }
+        let stop_tokens: HashSet<usize> = stops.iter().map(|w| w.token).collect();
         // First line: the original line with its motion words replaced by the first segment.
         let mut first = String::new();
         let mut inserted = false;
         let mut skip_space = false;
         for (ti, tok) in line.tokens.iter().enumerate() {
+            if stop_tokens.contains(&ti) {
+                skip_space = true;
+                continue;
+            }
             if removed_tokens.contains(&ti) {
                 if !inserted {
                     first.push_str(&lines_text[0]);
