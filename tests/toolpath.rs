@@ -535,3 +535,59 @@ fn corpus_programs_with_parameters_or_o_words_are_refused_in_the_zone() {
         }
     }
 }
+
+#[test]
+fn mutated_programs_never_panic() {
+    use rand::{Rng, SeedableRng};
+    // A program touching most features; random edits from G-code's own alphabet must give
+    // Ok or an error, never a panic or an endless output.
+    let base = "%\nG21 G90 G17 (start)\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X10 Y0 I5 J0\nG3 X0 Y0 R5\n\
+                G18 G2 X5 Z-1 I2.5 K0\nG19 G3 Y5 Z-1 J2.5 K0 P2\nG17 G91 G1 X5 Y5\nG90 G20 G1 X1\n\
+                #1=2\nG1 X#1 ; c\no100 repeat [2]\nG1 X1\no100 endrepeat\nG81 X1 Y1 Z-1 R1\nG80\nG41 D1\nG1 X2\nG40\nM2\n%\n";
+    let alphabet: Vec<char> = "GXYZIJKRFPMNO#[]()%;@^.-+0123456789 \n\r\tabc"
+        .chars()
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let fields = [
+        z_field(0.01, 0.001),
+        Lin {
+            normal: Axis::X,
+            dom: dom(-50.0, -50.0, 50.0, 50.0),
+            e0: 0.02,
+            g: 0.0,
+        },
+    ];
+    for i in 0..1500 {
+        let mut chars: Vec<char> = base.chars().collect();
+        for _ in 0..rng.random_range(1..6) {
+            let at = rng.random_range(0..chars.len());
+            let c = alphabet[rng.random_range(0..alphabet.len())];
+            match rng.random_range(0..3) {
+                0 => chars[at] = c,
+                1 => chars.insert(at, c),
+                _ => {
+                    chars.remove(at);
+                }
+            }
+        }
+        let text: String = chars.into_iter().collect();
+        let zone = if i % 2 == 0 { None } else { Some((-2.0, 0.5)) };
+        let field = &fields[i % 2];
+        if let Ok((out, _)) =
+            compensate_gcode(&text, Path::new("m.ngc"), field, &settings(zone, 5.0))
+        {
+            assert!(
+                out.len() < 200 * text.len() + 100_000,
+                "output exploded for:\n{text}"
+            );
+        }
+    }
+    // CSV with bad cells and huge numbers.
+    for text in [
+        "x_mm,y_mm,z_mm\n1e308,0,0\n-1e308,0,0\n",
+        "x_mm,y_mm,z_mm\n\"1,2\",3\n",
+        "x_mm,y_mm,z_mm\n",
+    ] {
+        let _ = compensate_csv(text, Path::new("m.csv"), &fields[0], &settings(None, 5.0));
+    }
+}

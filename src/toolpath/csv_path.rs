@@ -86,6 +86,16 @@ pub fn compensate(
                 "keep each toolpath point on one line",
             ));
         }
+        if let Some(q) = prev {
+            let len = super::gcode::dist(&q, &p);
+            if len / settings.max_segment > 1e6 {
+                return Err(Error::input(
+                    Location::line(source, row.line),
+                    format!("the move to this row ({len:.6e} mm) would need more than a million segments"),
+                    "check the coordinates and units, or raise --max-segment",
+                ));
+            }
+        }
         let path: Vec<[f64; 3]> = match prev {
             Some(q) => vec![q, p],
             None => vec![p],

@@ -764,15 +764,30 @@ impl<'a> Rewriter<'a> {
         } else {
             Some(self.arc(line, words, s, e, motion == 20)?)
         };
+        // Keep the output finite: a move needing over a million segments is a typo or a unit
+        // mistake, not a toolpath.
+        let step = self.settings.max_segment_in(self.inches);
+        let (length, chords) = match &arc {
+            None => (dist(&s, &e), 1),
+            Some(a) => {
+                let (_, _, ax) = a.plane.axes();
+                let len = (a.sweep.abs() * a.r_start.max(a.r_end)).hypot(a.end[ax] - a.start[ax]);
+                (len, a.chords(self.settings.chord_tol_in(self.inches), step))
+            }
+        };
+        if !length.is_finite() || length / step > 1e6 || chords >= 1_000_000 {
+            return Err(self.err(
+                line,
+                "X",
+                format!("this move ({length:.6e} program units) would need more than a million segments"),
+                "check the coordinates and units, or raise --max-segment / --chord-tol",
+            ));
+        }
         let path: Vec<[f64; 3]> = match &arc {
             None => vec![s, e],
-            Some(a) => {
-                let n = a.chords(
-                    self.settings.chord_tol_in(self.inches),
-                    self.settings.max_segment_in(self.inches),
-                );
-                (0..=n).map(|i| a.point(i as f64 / n as f64)).collect()
-            }
+            Some(a) => (0..=chords)
+                .map(|i| a.point(i as f64 / chords as f64))
+                .collect(),
         };
         let emitted = self.emit_points(&path);
         if !emitted.iter().any(|(_, e)| e.is_some()) {
