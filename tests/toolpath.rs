@@ -327,7 +327,7 @@ fn full_helical_circle_in_g18_and_r_form() {
 fn refusals_name_the_line_and_what_to_do() {
     let f = z_field(0.01, 0.0);
     let s = settings(Some((-5.0, 0.0)), 5.0);
-    let cases: [(&str, u64, &str); 8] = [
+    let cases: [(&str, u64, &str); 9] = [
         (
             "G0 X0 Y0 Z1\nG41 D1\nG1 Z-1 F10\n",
             3,
@@ -360,6 +360,7 @@ fn refusals_name_the_line_and_what_to_do() {
             "start point of this move is unknown",
         ),
         ("G0 X0 Y0 Z0\nG1 X1 A10 F10\n", 2, "axis A moves"),
+        ("G0 X0 Y0 Z-1\n/G1 X1 F10\n", 2, "block delete"),
     ];
     for (text, line, what) in cases {
         let msg = refuse(text, &f, &s);

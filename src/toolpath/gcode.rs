@@ -616,6 +616,14 @@ impl<'a> Rewriter<'a> {
             .find(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'));
         let expr_word = words.iter().find(|w| w.is_expr);
         let cutting = matches!(motion, 10 | 20 | 30);
+        // `/` at the start of a line: block delete, the controller may skip the line.
+        let block_delete = line
+            .tokens
+            .iter()
+            .find(|t| t.kind != TokenKind::Space)
+            .is_some_and(|t| {
+                t.kind == TokenKind::Other && self.text.get(t.span.clone()) == Some("/")
+            });
 
         // Refusals: things errmap cannot compensate safely, if the move may touch the zone.
         let refusal: Option<(String, String, &str)> = if !cutting {
@@ -677,6 +685,14 @@ impl<'a> Rewriter<'a> {
                     "post the program as the tool-centre path (G40) for the zone, or move the zone away",
                 )
             })
+        } else if block_delete {
+            self.may_touch(&[start, end]).then(|| {
+                (
+                    "/".into(),
+                    "block delete `/` on a move in the compensation zone (the controller may skip the line)".into(),
+                    "remove the `/` or move the zone away",
+                )
+            })
         } else if let Some(w) = polar {
             self.may_touch(&[start, end]).then(|| {
                 (
@@ -732,6 +748,7 @@ impl<'a> Rewriter<'a> {
         }
 
         let plain = cutting
+            && !block_delete
             && self.blocks.is_empty()
             && self.cutter_comp.is_none()
             && polar.is_none()
@@ -742,6 +759,14 @@ impl<'a> Rewriter<'a> {
         if !plain {
             // Not compensable, but shown above not to touch the zone: copy as is.
             let mut end = end;
+            if block_delete {
+                // Executed or not: the axes it writes are unknown afterwards.
+                for i in 0..3 {
+                    if end[i] != start[i] {
+                        end[i] = None;
+                    }
+                }
+            }
             if is_canned(motion) {
                 // The cycle retracts to the R level or the start (G98/G99): not tracked.
                 end[self.plane.axes().2] = None;
