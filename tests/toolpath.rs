@@ -411,6 +411,31 @@ fn unit_switch_mid_program_converts_the_position() {
 }
 
 #[test]
+fn a_return_step_keeps_later_modal_arcs_arcs() {
+    // The arc ends compensated; G92 needs the original position, so a G1 return is inserted;
+    // the next line relies on modal G2 and gets `G2` after its N-word.
+    let f = Lin {
+        normal: Axis::Z,
+        dom: dom(1.0, -50.0, 10.0, 50.0),
+        e0: 0.01,
+        g: 0.0,
+    };
+    let text = "G0 X1 Y0 Z0\nG2 X9 Y0 R4 F100\nG92 X0 Y0\nN9 X-20 Y0 R10\nM2\n";
+    let (out, rep) = run(text, &f, &settings(None, 1000.0));
+    let lines: Vec<&str> = out.lines().collect();
+    let n = lines.len();
+    assert!(
+        lines[n - 5].starts_with("G2 X9.0000 Y0.0000 Z-0.0100 R4.0000"),
+        "{out}"
+    );
+    assert_eq!(
+        &lines[n - 4..],
+        ["G1 Z0.0000", "G92 X0 Y0", "N9 G2 X-20 Y0 R10", "M2"]
+    );
+    assert_eq!((rep.returns_inserted, rep.lines_prefixed), (1, 1));
+}
+
+#[test]
 fn csv_rows_are_split_and_compensated() {
     // Domain x ∈ [0, 10], E = 0.01 + 0.001·x, zone z ∈ [-1, 0]; extra column passed through.
     let f = Lin {

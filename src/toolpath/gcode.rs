@@ -933,15 +933,56 @@ impl<'a> Rewriter<'a> {
         let has_motion_g = words
             .iter()
             .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1));
-        if !has_motion_g && self.out_motion != self.motion {
-            // The output's modal motion differs (after a return step): say it on this line.
-            if let Some(m) = self.motion {
+        let moves = words.iter().any(|w| {
+            matches!(
+                w.letter,
+                b'X' | b'Y'
+                    | b'Z'
+                    | b'A'
+                    | b'B'
+                    | b'C'
+                    | b'U'
+                    | b'V'
+                    | b'W'
+                    | b'I'
+                    | b'J'
+                    | b'K'
+                    | b'R'
+                    | b'@'
+                    | b'^'
+            )
+        });
+        match self.motion {
+            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => {
+                // The output's modal motion differs (after a return step): say it on this
+                // line, after its block delete and N-word, which must come first.
+                let mut at = line.span.start;
+                for t in &line.tokens {
+                    let lead = match &t.kind {
+                        TokenKind::Space => true,
+                        TokenKind::Word { letter: b'N', .. } => true,
+                        TokenKind::Other => self.text.get(t.span.clone()) == Some("/"),
+                        _ => false,
+                    };
+                    if !lead {
+                        break;
+                    }
+                    at = t.span.end;
+                }
+                let text = self.text;
+                self.out.push_str(&text[line.span.start..at]);
+                if at > line.span.start && !text[..at].ends_with([' ', '\t']) {
+                    self.out.push(' ');
+                }
                 self.out.push_str(&format!("G{} ", m as f64 / 10.0));
+                self.out.push_str(&text[at..line.end]);
                 self.report.lines_prefixed += 1;
             }
+            _ => self.copy_line(line),
         }
-        self.out_motion = self.motion;
-        self.copy_line(line);
+        if has_motion_g || moves {
+            self.out_motion = self.motion;
+        }
         // Position bookkeeping.
         let mut end = end;
         if !self.blocks.is_empty() && !self.absolute {
