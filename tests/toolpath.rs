@@ -459,6 +459,21 @@ fn csv_rows_are_split_and_compensated() {
     assert_eq!(out, expected);
     assert_eq!(rep.moves_changed, 2);
     assert!((rep.max_abs_error_mm - 0.02).abs() < 1e-12);
+    // A plunge through the zone z ∈ [-1, 0] (E = 0.01 everywhere): split at both edges, each
+    // boundary point written once uncompensated and once compensated, no repeated rows.
+    let flat = z_field(0.01, 0.0);
+    let (out, _) = compensate_csv(
+        "x_mm,y_mm,z_mm\n0,0,5\n0,0,-5\n",
+        Path::new("p.csv"),
+        &flat,
+        &settings(Some((-1.0, 0.0)), 5.0),
+    )
+    .unwrap();
+    assert_eq!(
+        out,
+        "x_mm,y_mm,z_mm\n0,0,5\n0.0000,0.0000,0.0000\n0.0000,0.0000,-0.0100\n\
+         0.0000,0.0000,-1.0100\n0.0000,0.0000,-1.0000\n0,0,-5\n"
+    );
     // Bad input names the cell.
     let err = compensate_csv(
         "x_mm,y_mm,z_mm\n1,2,abc\n",
