@@ -767,6 +767,14 @@ impl<'a> Rewriter<'a> {
                     }
                 }
             }
+            if (380..=385).contains(&motion) {
+                // A probing move stops where it touches.
+                for i in 0..3 {
+                    if end[i] != start[i] {
+                        end[i] = None;
+                    }
+                }
+            }
             if is_canned(motion) {
                 // The cycle retracts to the R level or the start (G98/G99): not tracked.
                 end[self.plane.axes().2] = None;
