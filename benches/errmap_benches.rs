@@ -6,6 +6,7 @@ mod linear_bench;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 mod rotary_bench;
+mod toolpath_bench;
 
 fn csv_table_parse(c: &mut Criterion) {
     let mut text = String::from("x_mm,y_mm,z_mm\n");
@@ -28,15 +29,12 @@ criterion_group!(
     rotary_bench::sphere_fit,
     rotary_bench::analyze_campaign
 );
-criterion_group! {
-    name = interp_benches;
-    // No plots: criterion's plotters backend looks for system fonts, which CI machines lack.
-    config = Criterion::default().without_plots();
-    targets = interp_bench::interp_benches
-}
+criterion_group!(interp_benches, interp_bench::interp_benches);
+criterion_group!(toolpath_benches, toolpath_bench::toolpath_compensate);
 criterion_main!(
     io_benches,
     interp_benches,
     linear_bench::linear_benches,
-    rotary_benches
+    rotary_benches,
+    toolpath_benches
 );
