@@ -9,10 +9,12 @@
 //!    out). A point outside the convex hull of the others (a hull corner, an irregular edge) is
 //!    predicted by the mean of its Delaunay neighbours' linear extrapolations
 //!    `e_j + ∇e_j·(p_i − p_j)`, weighted by 1/|p_i − p_j|².
-//! 2. Residual `r_i = e_i − ê_i`; σ = max(1.4826·MAD(r), [`SIGMA_FLOOR_UM`]) — 1.4826·MAD
-//!    estimates the standard deviation of normal data (Rousseeuw & Croux 1993) and ignores a
-//!    minority of outliers.
-//! 3. If the largest |r_i| exceeds k·σ, reject that one point only and start again from 1:
+//! 2. Residual `r_i = e_i − ê_i`, studentised: the prediction is linear in the data,
+//!    `ê_i = Σ c_k·e_k`, so `z_i = r_i / √(1 + Σ c_k²)` has the noise's standard deviation for
+//!    every good point, interior or extrapolated. σ = max(1.4826·MAD(z), [`SIGMA_FLOOR_UM`]) —
+//!    1.4826·MAD estimates the standard deviation of normal data (Rousseeuw & Croux 1993) and
+//!    ignores a minority of outliers.
+//! 3. If the largest |z_i| exceeds k·σ, reject that one point only and start again from 1:
 //!    an outlier drags its neighbours' residuals too, so removing the worst first and
 //!    recomputing keeps a good neighbour from being rejected with it (and unmasks a second
 //!    outlier next to the first).
@@ -52,7 +54,8 @@ pub struct Cleaned {
     pub clean: Vec<ProbePoint>,
     /// Points rejected, in file order.
     pub rejected: Vec<Rejected>,
-    /// Robust σ of the leave-one-out residuals of the clean points, µm (at least the floor).
+    /// Robust σ of the studentised leave-one-out residuals of the clean points, µm (at least
+    /// the floor): an estimate of the probe noise.
     pub sigma_um: f64,
 }
 
