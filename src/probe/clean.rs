@@ -299,4 +299,56 @@ mod tests {
         assert!((s - 1.4826).abs() < 1e-12, "{s}");
         assert_eq!(robust_sigma(&[]), 0.0);
     }
+
+    fn scattered(n: usize, e: impl Fn(f64, f64) -> f64) -> Vec<ProbePoint> {
+        // A deterministic irregular layout (golden-angle spiral, stretched) over 300 × 200 mm.
+        (0..n)
+            .map(|k| {
+                let r = (k as f64 + 0.5).sqrt() / (n as f64).sqrt();
+                let t = k as f64 * 2.399_963_229_728_653;
+                let (u, v) = (150.0 + 150.0 * r * t.cos(), 100.0 + 100.0 * r * t.sin());
+                ProbePoint {
+                    id: None,
+                    line: k as u64 + 2,
+                    measured_mm: [u, v, 0.0],
+                    nominal_mm: [u, v, 0.0],
+                    u_mm: u,
+                    v_mm: v,
+                    e_um: e(u, v),
+                    repeats: 1,
+                    spread_um: 0.0,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn leave_one_out_predicts_a_plane_exactly_inside_and_at_the_hull() {
+        let plane = |u: f64, v: f64| 7.0 + 0.04 * u - 0.09 * v;
+        let points = scattered(60, plane);
+        let active: Vec<usize> = (0..points.len()).collect();
+        let residuals = loo_residuals(&points, &active);
+        for (k, r) in residuals.iter().enumerate() {
+            let (r, z) = r.unwrap_or_else(|| panic!("point {k} not predicted"));
+            assert!(r.abs() < 1e-9 && z.abs() <= r.abs(), "point {k}: {r} {z}");
+        }
+    }
+
+    #[test]
+    fn prediction_coefficients_sum_to_one() {
+        // Constant precision (Σ c = 1) for an interior and for an outside-the-hull prediction.
+        let points = scattered(40, |u, v| (u / 40.0).sin() * 10.0 + v * 0.01);
+        let sites: Vec<Site> = (1..points.len()).map(|k| site(&points, k)).collect();
+        let tri = Tri::bulk_load(sites).unwrap();
+        let inside = Point2::new(points[0].u_mm, points[0].v_mm);
+        let c = predict_sibson_c1(&tri, inside).expect("point 0 is inside the others' hull");
+        let sum: f64 = c.iter().map(|&(_, c)| c).sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{sum}");
+        let outside = Point2::new(400.0, 100.0);
+        assert!(predict_sibson_c1(&tri, outside).is_none());
+        let neighbours: Vec<usize> = (1..6).collect();
+        let c = predict_outside(&tri, points.len(), &neighbours, outside).unwrap();
+        let sum: f64 = c.iter().map(|&(_, c)| c).sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{sum}");
+    }
 }
