@@ -22,7 +22,7 @@ use crate::geom::Domain;
 use rayon::prelude::*;
 use spade::{DelaunayTriangulation, FloatTriangulation, HasPosition, Point2, Triangulation};
 
-pub(crate) use gradient::quadratic_gradient;
+pub(crate) use gradient::{gradient_coefficients, quadratic_gradient};
 
 /// Interpolation method. Names on the command line and in job files: `natural-neighbour`,
 /// `sibson-c1`, `linear`.
