@@ -2,3 +2,4 @@
 
 pub mod filter;
 pub mod pt100;
+pub mod sensors;
