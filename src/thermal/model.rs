@@ -809,3 +809,92 @@ impl ThermalModel {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::thermal::{write_campaigns, SynthThermalOptions};
+    use crate::thermal::sensors::{calibrate, SensorTable, TemperatureLog};
+
+    /// Generate campaigns, calibrate the sensors on the calibration log, read the campaigns.
+    pub(crate) fn synthetic(
+        dir: &std::path::Path,
+        options: &SynthThermalOptions,
+    ) -> (crate::synth::thermal::ThermalTruth, Vec<Campaign>) {
+        let truth = write_campaigns(dir, options).unwrap();
+        let table_path = dir.join("sensors.csv");
+        let mut table = SensorTable::read(&table_path).unwrap();
+        let log = TemperatureLog::read(&dir.join("calibration.csv"), &table).unwrap();
+        let fits = calibrate(&log, &table, 0.0, 1e9, 1.0).unwrap();
+        table.apply_calibrations(&fits);
+        table.write(&table_path).unwrap();
+        let campaigns = truth
+            .campaigns
+            .iter()
+            .map(|c| Campaign::read(&dir.join(&c.name)).unwrap())
+            .collect();
+        (truth, campaigns)
+    }
+
+    #[test]
+    fn recovers_gains_and_predicts_held_out_campaigns() {
+        let dir = tempfile::tempdir().unwrap();
+        let (truth, campaigns) = synthetic(dir.path(), &SynthThermalOptions::default());
+        let model = fit(&campaigns, &FitOptions::default()).unwrap();
+        assert_eq!(model.gain_sensors, ["nut", "bearing"]);
+        assert_eq!(model.coolant_states, ["off", "on"]);
+        for (di, dm) in model.directions.iter().enumerate() {
+            // The truth is a cubic: cross-validation must find order 3.
+            assert_eq!(dm.order, 3, "{:?}", dm.cv_rms_um_by_order);
+            for g in &dm.gains {
+                let t = truth.gains(di, &g.coolant).unwrap();
+                for (k, want) in g.k_um_per_m_k.iter().zip([t.k_nut_um_per_m_k, t.k_bearing_um_per_m_k]) {
+                    assert!(
+                        (k / want - 1.0).abs() < 0.05,
+                        "{} {}: k = {k}, truth {want}",
+                        dm.direction.name(),
+                        g.coolant
+                    );
+                }
+            }
+            assert!((dm.rho_um_per_m_k / truth.rho_um_per_m_k - 1.0).abs() < 0.1, "ρ {}", dm.rho_um_per_m_k);
+            // Er(x) shape: the Legendre coefficients above order 1 are independent of the
+            // reference temperatures (those only shift the constant and linear terms).
+            let want = &truth.directions[di].pitch_legendre_um;
+            for n in 2..=3 {
+                assert!((dm.legendre_um[n] - want[n]).abs() < 0.15, "c{n} = {}", dm.legendre_um[n]);
+            }
+        }
+        // Held-out campaign residual within 1.5× the laser noise, for every campaign.
+        for c in &model.campaigns {
+            let loco = c.loco_rms_um.unwrap();
+            assert!(loco < 1.5 * truth.laser_noise_um, "{}: {loco}", c.name);
+            assert!(c.residual_rms_um < 1.2 * truth.laser_noise_um, "{}", c.residual_rms_um);
+        }
+    }
+
+    #[test]
+    fn predictions_follow_the_sign_convention() {
+        let dir = tempfile::tempdir().unwrap();
+        let options = SynthThermalOptions { campaigns: 2, repeats: 1, ..Default::default() };
+        let (_, campaigns) = synthetic(dir.path(), &options);
+        let model = fit(&campaigns[..1], &FitOptions { order: Some(3), ..Default::default() }).unwrap();
+        // Warm nut (3 K above its cold rise), room at the reference: E grows as
+        // k_nut·3 K·(x − Px) — positive beyond Px for positive k.
+        let d = Direction::Forward;
+        let amb = model.reference_ambient_c.unwrap();
+        let state = ThermalState {
+            sensors_c: vec![amb + model.reference_rise_c[0] + 3.0, amb + model.reference_rise_c[1]],
+            ambient_c: Some(amb),
+            coolant: 0,
+        };
+        let k = model.direction(d).gains[0].k_um_per_m_k[0];
+        let x = 400.0;
+        let thermal = model.error_um(d, x, &state) - model.geometric_um(d, x);
+        assert!((thermal - k * 3.0 * (x - model.reference_point_mm) / 1000.0).abs() < 1e-9);
+        assert!(k > 0.0 && thermal > 0.0);
+        // Only one coolant state: no leave-one-out for it, and the note says why.
+        assert!(model.campaigns[0].loco_rms_um.is_none());
+        assert!(model.campaigns[0].loco_note.as_ref().unwrap().contains("one campaign"));
+    }
+}

@@ -271,6 +271,15 @@ impl SensorTable {
         })
     }
 
+    /// Store fitted calibrations in the table (sensors not in `fits` keep theirs).
+    pub fn apply_calibrations(&mut self, fits: &[CalibrationFit]) {
+        for f in fits {
+            if let Some(s) = self.sensors.iter_mut().find(|s| s.name == f.sensor) {
+                s.calibration = f.calibration;
+            }
+        }
+    }
+
     pub fn get(&self, name: &str) -> Option<&Sensor> {
         self.sensors.iter().find(|s| s.name == name)
     }
