@@ -1,0 +1,351 @@
+//! Positioning evaluation of an axis by standard: ISO 230-2:2014, ISO 230-2:1997 (= GB/T 17421.2-2000), GB 10931-1989, VDI/DGQ 3441.
+//!
+//! All figures are unit-agnostic: they come out in the unit of [`Sample::deviation`] (µm for linear
+//! axes, arcsec for rotary axes). Notation (ISO 230-2): target i = 1…m, approach j = 1…n,
+//! ↑ forward (`+`), ↓ reverse (`-`), x_ij = actual − target.
+//!
+//! | figure | ISO 230-2:2014 / :1997 | GB 10931-1989 | VDI/DGQ 3441 |
+//! |---|---|---|---|
+//! | x̄_i↑, x̄_i↓ | mean of x_ij (2014 3.8, 1997 2.8) | X̄_j | x̄_j |
+//! | s_i↑, s_i↓ | √(Σ(x_ij − x̄_i)²/(n−1)) (2014 3.13) | S_j, same | s_j, same |
+//! | reversal B_i | x̄_i↑ − x̄_i↓ (2014 3.10) | B_j | U_j |
+//! | repeatability ↑ at i | R_i↑ = 4 s_i↑ (2014 3.14) | R_j = 6 S_j | 6 s_i↑ (Ps of one direction, errmap) |
+//! | repeatability at i | R_i = max(2s_i↑ + 2s_i↓ + \|B_i\|, R_i↑, R_i↓) (2014 3.15) | max(R_j↑, R_j↓) | Ps_j = 6·s̄_j, s̄_j = (s_j↑ + s_j↓)/2 |
+//! | B | max \|B_i\| (2014 3.11) | max \|B_j\| | U = max \|U_j\| |
+//! | B̄ | Σ B_i / m, signed (2014 3.12) | same (errmap) | same (errmap) |
+//! | R↑, R↓, R | max over i (2014 3.16, 3.17) | max over j | Ps = max Ps_j |
+//! | E↑, E↓ | max x̄_i↑ − min x̄_i↑ (2014 3.18) | same (errmap) | same (errmap) |
+//! | E | max(x̄↑, x̄↓) − min(x̄↑, x̄↓) (2014 3.19) | same (errmap) | same (errmap) |
+//! | M | max x̄_i − min x̄_i, x̄_i = (x̄_i↑ + x̄_i↓)/2 (2014 3.20) | same (errmap) | Pa |
+//! | A↑ | max(x̄_i↑ + 2s_i↑) − min(x̄_i↑ − 2s_i↑) (2014 3.21) | (X̄ + 3S)max − (X̄ − 3S)min | same with 3s (errmap) |
+//! | A | max over both directions of x̄ + 2s − min of x̄ − 2s (2014 3.22) | same with 3S | P = max(x̄_j + ½(\|U_j\| + Ps_j)) − min(x̄_j − ½(\|U_j\| + Ps_j)) |
+//!
+//! ISO 230-2:1997 (and GB/T 17421.2-2000, its identical Chinese adoption) defines the same
+//! figures with the same 2s/4s factors as the 2014 edition (clause 2 of 1997 = clause 3 of 2014);
+//! the 2014 edition adds the measurement-uncertainty estimation (ISO/TR 230-9) and k = 2 wording.
+//! GB 10931-1989 (seed 002) uses ±3S: repeatability 6S, accuracy (X̄ + 3S)max − (X̄ − 3S)min.
+//! VDI/DGQ 3441 (1977): position scatter Ps = 6·s̄, reversal span U, position deviation Pa,
+//! position uncertainty P. Figures a standard does not define but that need no coverage factor
+//! (E, M, B̄) are computed by the ISO definitions and marked "errmap" above.
+//!
+//! With a single approach (n = 1) no standard deviation exists: every figure that needs one
+//! (s, repeatability, accuracy) is `None` ("not applicable"), never zero.
+
+use super::runs::{distinct_targets, target_index, Direction, Sample};
+use crate::error::{Error, Result};
+use std::fmt;
+use std::str::FromStr;
+
+/// The evaluation standard.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Standard {
+    /// ISO 230-2:2014 (k = 2: R↑ = 4s, A from x̄ ± 2s).
+    #[value(name = "iso230-2:2014")]
+    Iso230_2_2014,
+    /// ISO 230-2:1997 = GB/T 17421.2-2000 (same 2s/4s figures).
+    #[value(name = "iso230-2:1997", alias = "gb/t17421.2-2000")]
+    Iso230_2_1997,
+    /// GB 10931-1989 (±3S: repeatability 6S).
+    #[value(name = "gb10931-1989")]
+    Gb10931_1989,
+    /// VDI/DGQ 3441 (Ps = 6s̄, U, Pa, P).
+    #[value(name = "vdi3441")]
+    Vdi3441,
+}
+
+impl Standard {
+    /// Every standard, in a fixed order.
+    pub const ALL: [Standard; 4] = [
+        Standard::Iso230_2_2014,
+        Standard::Iso230_2_1997,
+        Standard::Gb10931_1989,
+        Standard::Vdi3441,
+    ];
+
+    /// The name used on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Standard::Iso230_2_2014 => "iso230-2:2014",
+            Standard::Iso230_2_1997 => "iso230-2:1997",
+            Standard::Gb10931_1989 => "gb10931-1989",
+            Standard::Vdi3441 => "vdi3441",
+        }
+    }
+
+    /// Coverage factor of the ±k·s band: 2 for ISO 230-2, 3 for GB 10931 and VDI 3441.
+    pub fn k(self) -> f64 {
+        match self {
+            Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => 2.0,
+            Standard::Gb10931_1989 | Standard::Vdi3441 => 3.0,
+        }
+    }
+}
+
+impl fmt::Display for Standard {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Standard {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Standard> {
+        let key = s.trim().to_ascii_lowercase();
+        let found = match key.as_str() {
+            "iso230-2:2014" | "iso230-2" | "iso" => Some(Standard::Iso230_2_2014),
+            "iso230-2:1997" | "gb/t17421.2-2000" | "gbt17421.2-2000" => {
+                Some(Standard::Iso230_2_1997)
+            }
+            "gb10931-1989" | "gb10931" => Some(Standard::Gb10931_1989),
+            "vdi3441" | "vdi/dgq3441" => Some(Standard::Vdi3441),
+            _ => None,
+        };
+        found.ok_or_else(|| {
+            Error::usage(
+                format!("unknown standard '{s}'"),
+                "use iso230-2:2014, iso230-2:1997, gb10931-1989 or vdi3441",
+            )
+        })
+    }
+}
+
+impl serde::Serialize for Standard {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+/// Figures at one target position.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TargetFigures {
+    pub target: f64,
+    pub n_up: usize,
+    pub n_down: usize,
+    /// x̄_i↑, x̄_i↓: mean deviation of each direction.
+    pub mean_up: f64,
+    pub mean_down: f64,
+    /// x̄_i = (x̄_i↑ + x̄_i↓)/2.
+    pub mean: f64,
+    /// s_i↑, s_i↓ (n − 1 in the denominator); `None` when n = 1.
+    pub s_up: Option<f64>,
+    pub s_down: Option<f64>,
+    /// B_i = x̄_i↑ − x̄_i↓ (signed).
+    pub reversal: f64,
+    pub repeatability_up: Option<f64>,
+    pub repeatability_down: Option<f64>,
+    /// Bidirectional repeatability at the target (ISO R_i, GB max(R↑, R↓), VDI Ps_j).
+    pub repeatability: Option<f64>,
+}
+
+/// Figures of the whole axis. `None` = not applicable (n = 1).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[allow(non_snake_case)]
+pub struct AxisFigures {
+    pub B: f64,
+    pub B_mean: f64,
+    pub R_up: Option<f64>,
+    pub R_down: Option<f64>,
+    pub R: Option<f64>,
+    pub E_up: f64,
+    pub E_down: f64,
+    pub E: f64,
+    pub M: f64,
+    pub A_up: Option<f64>,
+    pub A_down: Option<f64>,
+    pub A: Option<f64>,
+}
+
+/// The result of [`evaluate`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Evaluation {
+    pub standard: Standard,
+    /// Coverage factor of the band (2 or 3).
+    pub k: f64,
+    /// Targets ascending.
+    pub targets: Vec<TargetFigures>,
+    pub axis: AxisFigures,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// Sample standard deviation (n − 1); `None` for n < 2.
+fn std_dev(v: &[f64]) -> Option<f64> {
+    if v.len() < 2 {
+        return None;
+    }
+    let m = mean(v);
+    let ss: f64 = v.iter().map(|x| (x - m) * (x - m)).sum();
+    Some((ss / (v.len() - 1) as f64).sqrt())
+}
+
+fn max_of(it: impl Iterator<Item = f64>) -> f64 {
+    it.fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn min_of(it: impl Iterator<Item = f64>) -> f64 {
+    it.fold(f64::INFINITY, f64::min)
+}
+
+/// Max over options: `None` if any is `None`.
+fn max_opt(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let mut out = f64::NEG_INFINITY;
+    for v in it {
+        out = out.max(v?);
+    }
+    Some(out)
+}
+
+/// Evaluate an axis by `standard` (see the module table for every formula and its clause).
+///
+/// Every target needs at least one approach from each direction. Targets closer than
+/// 1e-6 (in the samples' target unit) are one target.
+pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
+    if samples.is_empty() {
+        return Err(Error::numeric(
+            "no samples to evaluate",
+            "give at least one reading per target and direction",
+        ));
+    }
+    if let Some(bad) = samples
+        .iter()
+        .find(|s| !s.target.is_finite() || !s.deviation.is_finite())
+    {
+        return Err(Error::numeric(
+            format!(
+                "run {} direction {} has a non-finite target or deviation",
+                bad.run,
+                bad.direction.symbol()
+            ),
+            "remove NaN and infinite values",
+        ));
+    }
+    let positions = distinct_targets(samples.iter().map(|s| s.target));
+    let mut up: Vec<Vec<f64>> = vec![Vec::new(); positions.len()];
+    let mut down: Vec<Vec<f64>> = vec![Vec::new(); positions.len()];
+    for s in samples {
+        let i = target_index(&positions, s.target)
+            .ok_or_else(|| Error::Internal("sample target not among targets".into()))?;
+        match s.direction {
+            Direction::Forward => up[i].push(s.deviation),
+            Direction::Reverse => down[i].push(s.deviation),
+        }
+    }
+    let k = standard.k();
+    let mut targets = Vec::with_capacity(positions.len());
+    for (i, &target) in positions.iter().enumerate() {
+        if up[i].is_empty() || down[i].is_empty() {
+            let missing = if up[i].is_empty() { "+" } else { "-" };
+            return Err(Error::numeric(
+                format!("target {target} has no approach in direction {missing}"),
+                "measure every target from both directions (bidirectional runs)",
+            ));
+        }
+        let mean_up = mean(&up[i]);
+        let mean_down = mean(&down[i]);
+        let s_up = std_dev(&up[i]);
+        let s_down = std_dev(&down[i]);
+        let reversal = mean_up - mean_down;
+        // Unidirectional repeatability: 2k·s (ISO 4s, GB 6S, VDI 6s).
+        let repeatability_up = s_up.map(|s| 2.0 * k * s);
+        let repeatability_down = s_down.map(|s| 2.0 * k * s);
+        let repeatability = match (s_up, s_down) {
+            (Some(su), Some(sd)) => Some(match standard {
+                // ISO 230-2:2014 3.15 (1997 2.15): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
+                Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => {
+                    (2.0 * su + 2.0 * sd + reversal.abs())
+                        .max(4.0 * su)
+                        .max(4.0 * sd)
+                }
+                // GB 10931-1989: repeatability 6S of each direction; the larger at the target.
+                Standard::Gb10931_1989 => (6.0 * su).max(6.0 * sd),
+                // VDI/DGQ 3441: Ps_j = 6·s̄_j with s̄_j = (s_j↑ + s_j↓)/2.
+                Standard::Vdi3441 => 6.0 * (su + sd) / 2.0,
+            }),
+            _ => None,
+        };
+        targets.push(TargetFigures {
+            target,
+            n_up: up[i].len(),
+            n_down: down[i].len(),
+            mean_up,
+            mean_down,
+            mean: (mean_up + mean_down) / 2.0,
+            s_up,
+            s_down,
+            reversal,
+            repeatability_up,
+            repeatability_down,
+            repeatability,
+        });
+    }
+
+    let t = &targets;
+    let b = max_of(t.iter().map(|f| f.reversal.abs()));
+    let b_mean = t.iter().map(|f| f.reversal).sum::<f64>() / t.len() as f64;
+    let e_up = max_of(t.iter().map(|f| f.mean_up)) - min_of(t.iter().map(|f| f.mean_up));
+    let e_down = max_of(t.iter().map(|f| f.mean_down)) - min_of(t.iter().map(|f| f.mean_down));
+    let e = max_of(t.iter().flat_map(|f| [f.mean_up, f.mean_down]))
+        - min_of(t.iter().flat_map(|f| [f.mean_up, f.mean_down]));
+    let m = max_of(t.iter().map(|f| f.mean)) - min_of(t.iter().map(|f| f.mean));
+    // Unidirectional accuracy: max(x̄ + k·s) − min(x̄ − k·s) over the targets of one direction.
+    let accuracy_one = |pick: &dyn Fn(&TargetFigures) -> (f64, Option<f64>)| -> Option<f64> {
+        let hi = max_opt(t.iter().map(|f| {
+            let (x, s) = pick(f);
+            s.map(|s| x + k * s)
+        }))?;
+        let lo = max_opt(t.iter().map(|f| {
+            let (x, s) = pick(f);
+            s.map(|s| -(x - k * s))
+        }))?;
+        Some(hi + lo)
+    };
+    let a_up = accuracy_one(&|f| (f.mean_up, f.s_up));
+    let a_down = accuracy_one(&|f| (f.mean_down, f.s_down));
+    let a = match standard {
+        // VDI/DGQ 3441: P = max(x̄_j + ½(|U_j| + Ps_j)) − min(x̄_j − ½(|U_j| + Ps_j)).
+        Standard::Vdi3441 => {
+            let half = |f: &TargetFigures| f.repeatability.map(|ps| (f.reversal.abs() + ps) / 2.0);
+            let hi = max_opt(t.iter().map(|f| half(f).map(|h| f.mean + h)));
+            let lo = max_opt(t.iter().map(|f| half(f).map(|h| -(f.mean - h))));
+            hi.zip(lo).map(|(h, l)| h + l)
+        }
+        // ISO 230-2:2014 3.22 (±2s), GB 10931-1989 (±3S): both directions together.
+        _ => {
+            let hi = max_opt(t.iter().flat_map(|f| {
+                [
+                    f.s_up.map(|s| f.mean_up + k * s),
+                    f.s_down.map(|s| f.mean_down + k * s),
+                ]
+            }));
+            let lo = max_opt(t.iter().flat_map(|f| {
+                [
+                    f.s_up.map(|s| -(f.mean_up - k * s)),
+                    f.s_down.map(|s| -(f.mean_down - k * s)),
+                ]
+            }));
+            hi.zip(lo).map(|(h, l)| h + l)
+        }
+    };
+    let axis = AxisFigures {
+        B: b,
+        B_mean: b_mean,
+        R_up: max_opt(t.iter().map(|f| f.repeatability_up)),
+        R_down: max_opt(t.iter().map(|f| f.repeatability_down)),
+        R: max_opt(t.iter().map(|f| f.repeatability)),
+        E_up: e_up,
+        E_down: e_down,
+        E: e,
+        M: m,
+        A_up: a_up,
+        A_down: a_down,
+        A: a,
+    };
+    Ok(Evaluation {
+        standard,
+        k,
+        targets,
+        axis,
+    })
+}

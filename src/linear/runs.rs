@@ -1,0 +1,344 @@
+//! Laser-interferometer run files: reading, validating and flattening `run,direction,target_mm,…` CSV into samples.
+
+use crate::error::{Error, Location, Result};
+use crate::io::CsvTable;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// Direction of approach to a target: `+` (forward, increasing coordinate) or `-` (reverse).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Direction {
+    Forward,
+    Reverse,
+}
+
+impl Direction {
+    /// The file symbol: `+` or `-`.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Direction::Forward => "+",
+            Direction::Reverse => "-",
+        }
+    }
+
+    /// Parse `+`/`-` (also `up`/`down`, `forward`/`reverse`, `fwd`/`rev`, any case).
+    pub fn parse(text: &str) -> Option<Direction> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "+" | "up" | "forward" | "fwd" => Some(Direction::Forward),
+            "-" | "down" | "reverse" | "rev" => Some(Direction::Reverse),
+            _ => None,
+        }
+    }
+}
+
+/// One measured deviation: the `run`-th approach from `direction` to `target`.
+///
+/// Unit-agnostic: linear axes use mm targets and µm deviations, rotary axes deg and arcsec;
+/// [`crate::linear::evaluate`] never converts.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Sample {
+    pub run: u32,
+    pub direction: Direction,
+    pub target: f64,
+    pub deviation: f64,
+}
+
+/// Optional environment of a row, as the laser's weather station and material sensors logged it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Env {
+    pub air_temp_c: Option<f64>,
+    pub pressure_kpa: Option<f64>,
+    pub humidity_pct: Option<f64>,
+    pub material_temp_c: Option<f64>,
+}
+
+/// One row of a run file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RunRow {
+    pub run: u32,
+    pub direction: Direction,
+    pub target_mm: f64,
+    /// Positional deviation, actual − target (ISO 230-2 sign), in µm.
+    pub deviation_um: f64,
+    pub env: Env,
+    /// Optional time stamp of the reading (seconds from any origin), for thermal campaigns.
+    pub time_s: Option<f64>,
+    /// 1-based line of the row in its file.
+    pub line: u64,
+}
+
+impl RunRow {
+    /// The position the laser read, mm: target + deviation.
+    pub fn actual_mm(&self) -> f64 {
+        self.target_mm + self.deviation_um * 1e-3
+    }
+}
+
+/// A validated run file: every (run, direction) pass visits the same set of targets once.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunFile {
+    pub path: PathBuf,
+    /// Rows in file order.
+    pub rows: Vec<RunRow>,
+    /// Whether the file gave `actual_mm` (true) or `deviation_um` (false).
+    pub had_actual: bool,
+}
+
+/// Columns a run file may have.
+pub const RUN_COLUMNS: &[&str] = &[
+    "run",
+    "direction",
+    "target_mm",
+    "actual_mm",
+    "deviation_um",
+    "air_temp_c",
+    "pressure_kpa",
+    "humidity_pct",
+    "material_temp_c",
+    "time_s",
+];
+
+/// Targets closer than this (mm) are the same target; a pass must hit each one exactly once.
+pub const TARGET_TOLERANCE_MM: f64 = 1e-6;
+
+/// Read and validate a run file (CSV with a header).
+///
+/// Required: `run` (non-negative integer), `direction` (`+`/`-`), `target_mm`, and exactly one of
+/// `actual_mm` (the laser's reading, mm) or `deviation_um` (actual − target, µm). Optional per row:
+/// `air_temp_c`, `pressure_kpa`, `humidity_pct`, `material_temp_c`, `time_s` (empty cell = not logged).
+/// Every error names file:line and column. A target visited by some passes but not by others,
+/// or twice in one pass, is an error that names the target and the pass.
+pub fn read_runs(path: &Path) -> Result<RunFile> {
+    let table = CsvTable::read(path)?;
+    parse_table(&table)
+}
+
+/// [`read_runs`] on CSV text already in memory (`path` is only used in messages).
+pub fn parse_runs(path: &Path, text: &str) -> Result<RunFile> {
+    let table = CsvTable::parse(path, text)?;
+    parse_table(&table)
+}
+
+fn parse_table(table: &CsvTable) -> Result<RunFile> {
+    let path = &table.path;
+    table.reject_unknown(RUN_COLUMNS)?;
+    let c_run = table.require("run")?;
+    let c_dir = table.require("direction")?;
+    let c_target = table.require("target_mm")?;
+    let c_actual = table.column("actual_mm");
+    let c_dev = table.column("deviation_um");
+    let had_actual = match (c_actual, c_dev) {
+        (Some(_), None) => true,
+        (None, Some(_)) => false,
+        (Some(_), Some(_)) => {
+            return Err(Error::input(
+                Location::cell(path, 1, "deviation_um"),
+                "the header has both actual_mm and deviation_um",
+                "keep one: actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
+            ))
+        }
+        (None, None) => {
+            return Err(Error::input(
+                Location::line(path, 1),
+                format!(
+                    "missing column 'actual_mm' or 'deviation_um' (header has: {})",
+                    table.headers.join(",")
+                ),
+                "add actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
+            ))
+        }
+    };
+    let c_air = table.column("air_temp_c");
+    let c_p = table.column("pressure_kpa");
+    let c_h = table.column("humidity_pct");
+    let c_mat = table.column("material_temp_c");
+    let c_time = table.column("time_s");
+    if table.rows.is_empty() {
+        return Err(Error::input(
+            Location::file(path),
+            "the file has a header but no rows",
+            "add one row per reading",
+        ));
+    }
+
+    let opt = |row, c: Option<usize>| -> Result<Option<f64>> {
+        match c {
+            Some(c) => table.f64_opt(row, c),
+            None => Ok(None),
+        }
+    };
+    let mut rows = Vec::with_capacity(table.rows.len());
+    for row in &table.rows {
+        let run_text = table.text(row, c_run);
+        let run: u32 = run_text.parse().map_err(|_| {
+            table.error_at(
+                row,
+                Some(c_run),
+                format!("'{run_text}' is not a run number"),
+                "number runs 1, 2, 3 … (a non-negative integer)",
+            )
+        })?;
+        let dir_text = table.text(row, c_dir);
+        let direction = Direction::parse(dir_text).ok_or_else(|| {
+            table.error_at(
+                row,
+                Some(c_dir),
+                format!("'{dir_text}' is not a direction"),
+                "write + for the forward (increasing) approach or - for the reverse",
+            )
+        })?;
+        let target_mm = table.f64(row, c_target)?;
+        let deviation_um = if let Some(c) = c_actual {
+            (table.f64(row, c)? - target_mm) * 1e3
+        } else if let Some(c) = c_dev {
+            table.f64(row, c)?
+        } else {
+            return Err(Error::Internal("run file without a reading column".into()));
+        };
+        let env = Env {
+            air_temp_c: opt(row, c_air)?,
+            pressure_kpa: opt(row, c_p)?,
+            humidity_pct: opt(row, c_h)?,
+            material_temp_c: opt(row, c_mat)?,
+        };
+        if let (Some(p), Some(c)) = (env.pressure_kpa, c_p) {
+            if p <= 0.0 {
+                return Err(table.error_at(
+                    row,
+                    Some(c),
+                    format!("pressure {p} kPa is not positive"),
+                    "write the absolute air pressure in kPa, e.g. 101.325",
+                ));
+            }
+        }
+        if let (Some(h), Some(c)) = (env.humidity_pct, c_h) {
+            if !(0.0..=100.0).contains(&h) {
+                return Err(table.error_at(
+                    row,
+                    Some(c),
+                    format!("relative humidity {h} % is outside 0…100"),
+                    "write the relative humidity in percent",
+                ));
+            }
+        }
+        rows.push(RunRow {
+            run,
+            direction,
+            target_mm,
+            deviation_um,
+            env,
+            time_s: opt(row, c_time)?,
+            line: row.line,
+        });
+    }
+    check_passes(path, &rows)?;
+    Ok(RunFile {
+        path: path.to_path_buf(),
+        rows,
+        had_actual,
+    })
+}
+
+/// Every pass (run, direction) must visit every target of the file exactly once.
+fn check_passes(path: &Path, rows: &[RunRow]) -> Result<()> {
+    let targets = distinct_targets(rows.iter().map(|r| r.target_mm));
+    let mut passes: BTreeMap<(u32, Direction), Vec<Option<u64>>> = BTreeMap::new();
+    for r in rows {
+        let slots = passes
+            .entry((r.run, r.direction))
+            .or_insert_with(|| vec![None; targets.len()]);
+        let i = target_index(&targets, r.target_mm)
+            .ok_or_else(|| Error::Internal("target not in its own list".into()))?;
+        if let Some(first) = slots[i] {
+            return Err(Error::input(
+                Location::line(path, r.line),
+                format!(
+                    "run {} direction {} visits target {} mm twice (first at line {first})",
+                    r.run,
+                    r.direction.symbol(),
+                    r.target_mm
+                ),
+                "keep one reading per run, direction and target (or give the repeat its own run number)",
+            ));
+        }
+        slots[i] = Some(r.line);
+    }
+    for ((run, dir), slots) in &passes {
+        let missing: Vec<String> = slots
+            .iter()
+            .zip(&targets)
+            .filter(|(s, _)| s.is_none())
+            .map(|(_, t)| format!("{t}"))
+            .collect();
+        if !missing.is_empty() {
+            let where_seen = rows
+                .iter()
+                .find(|r| r.run == *run && r.direction == *dir)
+                .map(|r| r.line)
+                .unwrap_or(1);
+            return Err(Error::input(
+                Location::line(path, where_seen),
+                format!(
+                    "target {} mm missing from run {run} direction {} (other runs visit it)",
+                    missing.join(", "),
+                    dir.symbol()
+                ),
+                "every run must measure every target in each direction it runs; add the readings or drop the target from all runs",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Sorted distinct targets, merging values closer than [`TARGET_TOLERANCE_MM`].
+pub(crate) fn distinct_targets(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut all: Vec<f64> = values.collect();
+    all.sort_by(f64::total_cmp);
+    let mut out: Vec<f64> = Vec::new();
+    for v in all {
+        match out.last() {
+            Some(&last) if (v - last).abs() <= TARGET_TOLERANCE_MM => {}
+            _ => out.push(v),
+        }
+    }
+    out
+}
+
+pub(crate) fn target_index(targets: &[f64], value: f64) -> Option<usize> {
+    targets
+        .iter()
+        .position(|t| (t - value).abs() <= TARGET_TOLERANCE_MM)
+}
+
+impl RunFile {
+    /// The rows as unit-agnostic samples (target in mm, deviation in µm), in file order.
+    pub fn samples(&self) -> Vec<Sample> {
+        self.rows
+            .iter()
+            .map(|r| Sample {
+                run: r.run,
+                direction: r.direction,
+                target: r.target_mm,
+                deviation: r.deviation_um,
+            })
+            .collect()
+    }
+
+    /// Distinct targets, ascending (mm).
+    pub fn targets_mm(&self) -> Vec<f64> {
+        distinct_targets(self.rows.iter().map(|r| r.target_mm))
+    }
+
+    /// Distinct run numbers, ascending.
+    pub fn runs(&self) -> Vec<u32> {
+        self.rows
+            .iter()
+            .map(|r| r.run)
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    }
+}

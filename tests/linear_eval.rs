@@ -1,0 +1,313 @@
+//! Positioning figures of every standard against hand arithmetic, and the run-file reader's validation.
+
+use errmap::linear::{evaluate, parse_runs, Direction, Sample, Standard};
+use std::path::Path;
+
+const TOL: f64 = 1e-12;
+
+fn close(a: f64, b: f64, what: &str) {
+    assert!((a - b).abs() < TOL, "{what}: got {a}, expected {b}");
+}
+
+fn some(a: Option<f64>, b: f64, what: &str) {
+    match a {
+        Some(a) => close(a, b, what),
+        None => panic!("{what}: got None, expected {b}"),
+    }
+}
+
+/// 3 targets × 2 directions × 3 runs, chosen so every mean and s is exact:
+///
+/// | target | ↑ readings | x̄↑ | s↑ | ↓ readings | x̄↓ | s↓ | B_i = x̄↑ − x̄↓ | x̄_i |
+/// |---|---|---|---|---|---|---|---|---|
+/// | 0   | 1, 2, 3    | 2  | √((1+0+1)/2) = 1 | −1, 0, 1  | 0  | 1 | 2 | 1   |
+/// | 100 | 4, 6, 8    | 6  | √((4+0+4)/2) = 2 | 2, 3, 4   | 3  | 1 | 3 | 4.5 |
+/// | 200 | −1, −1, −1 | −1 | 0                | −7, −5, −3 | −5 | 2 | 4 | −3  |
+fn data() -> Vec<Sample> {
+    let table: [(f64, [f64; 3], [f64; 3]); 3] = [
+        (0.0, [1.0, 2.0, 3.0], [-1.0, 0.0, 1.0]),
+        (100.0, [4.0, 6.0, 8.0], [2.0, 3.0, 4.0]),
+        (200.0, [-1.0, -1.0, -1.0], [-7.0, -5.0, -3.0]),
+    ];
+    let mut out = Vec::new();
+    for (target, up, down) in table {
+        for run in 0..3 {
+            out.push(Sample {
+                run: run as u32 + 1,
+                direction: Direction::Forward,
+                target,
+                deviation: up[run],
+            });
+            out.push(Sample {
+                run: run as u32 + 1,
+                direction: Direction::Reverse,
+                target,
+                deviation: down[run],
+            });
+        }
+    }
+    out
+}
+
+#[test]
+fn per_target_means_std_and_reversal() {
+    let ev = evaluate(&data(), Standard::Iso230_2_2014).unwrap();
+    assert_eq!(ev.targets.len(), 3);
+    let expect = [
+        (0.0, 2.0, 0.0, 1.0, 1.0, 2.0, 1.0),
+        (100.0, 6.0, 3.0, 2.0, 1.0, 3.0, 4.5),
+        (200.0, -1.0, -5.0, 0.0, 2.0, 4.0, -3.0),
+    ];
+    for (f, (t, mu, md, su, sd, b, m)) in ev.targets.iter().zip(expect) {
+        close(f.target, t, "target");
+        close(f.mean_up, mu, "mean_up");
+        close(f.mean_down, md, "mean_down");
+        some(f.s_up, su, "s_up");
+        some(f.s_down, sd, "s_down");
+        close(f.reversal, b, "reversal");
+        close(f.mean, m, "mean bidirectional");
+        assert_eq!((f.n_up, f.n_down), (3, 3));
+    }
+}
+
+#[test]
+fn iso230_2_2014_and_1997_figures() {
+    for std in [Standard::Iso230_2_2014, Standard::Iso230_2_1997] {
+        let ev = evaluate(&data(), std).unwrap();
+        close(ev.k, 2.0, "k");
+        // R_i↑ = 4s↑: 4, 8, 0; R_i↓ = 4s↓: 4, 4, 8.
+        // R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓):
+        //   0: max(2+2+2, 4, 4) = 6;  100: max(4+2+3, 8, 4) = 9;  200: max(0+4+4, 0, 8) = 8.
+        let t = &ev.targets;
+        for (f, (ru, rd, r)) in t
+            .iter()
+            .zip([(4.0, 4.0, 6.0), (8.0, 4.0, 9.0), (0.0, 8.0, 8.0)])
+        {
+            some(f.repeatability_up, ru, "R_i up");
+            some(f.repeatability_down, rd, "R_i down");
+            some(f.repeatability, r, "R_i");
+        }
+        let a = &ev.axis;
+        close(a.B, 4.0, "B = max|B_i| = max(2,3,4)");
+        close(a.B_mean, 3.0, "B̄ = (2+3+4)/3");
+        some(a.R_up, 8.0, "R↑ = max(4,8,0)");
+        some(a.R_down, 8.0, "R↓ = max(4,4,8)");
+        some(a.R, 9.0, "R = max(6,9,8)");
+        close(a.E_up, 7.0, "E↑ = 6 − (−1)");
+        close(a.E_down, 8.0, "E↓ = 3 − (−5)");
+        close(a.E, 11.0, "E = max(2,0,6,3,−1,−5) − min(…) = 6 − (−5)");
+        close(a.M, 7.5, "M = 4.5 − (−3)");
+        // A↑: x̄↑ + 2s↑ = 4, 10, −1 → 10; x̄↑ − 2s↑ = 0, 2, −1 → −1; A↑ = 11.
+        some(a.A_up, 11.0, "A↑");
+        // A↓: x̄↓ + 2s↓ = 2, 5, −1 → 5; x̄↓ − 2s↓ = −2, 1, −9 → −9; A↓ = 14.
+        some(a.A_down, 14.0, "A↓");
+        // A = max(10, 5) − min(−1, −9) = 19.
+        some(a.A, 19.0, "A");
+    }
+}
+
+#[test]
+fn gb10931_1989_figures() {
+    let ev = evaluate(&data(), Standard::Gb10931_1989).unwrap();
+    close(ev.k, 3.0, "k");
+    // R_j = 6S: ↑ 6, 12, 0; ↓ 6, 6, 12; at the target the larger: 6, 12, 12.
+    let t = &ev.targets;
+    for (f, (ru, rd, r)) in t
+        .iter()
+        .zip([(6.0, 6.0, 6.0), (12.0, 6.0, 12.0), (0.0, 12.0, 12.0)])
+    {
+        some(f.repeatability_up, ru, "R_j up");
+        some(f.repeatability_down, rd, "R_j down");
+        some(f.repeatability, r, "R_j");
+    }
+    let a = &ev.axis;
+    some(a.R_up, 12.0, "R↑");
+    some(a.R_down, 12.0, "R↓");
+    some(a.R, 12.0, "R");
+    close(a.B, 4.0, "B");
+    // A↑ = (x̄ + 3S)max − (x̄ − 3S)min: 2+3, 6+6, −1+0 → 12; 2−3, 6−6, −1−0 → −1; 13.
+    some(a.A_up, 13.0, "A↑");
+    // A↓: 0+3, 3+3, −5+6 → 6; 0−3, 3−3, −5−6 → −11; 17.
+    some(a.A_down, 17.0, "A↓");
+    // A: 12 − (−11) = 23.
+    some(a.A, 23.0, "A");
+    close(a.M, 7.5, "M");
+    close(a.E, 11.0, "E");
+}
+
+#[test]
+fn vdi3441_figures() {
+    let ev = evaluate(&data(), Standard::Vdi3441).unwrap();
+    // s̄_j = (s↑ + s↓)/2 = 1, 1.5, 1; Ps_j = 6 s̄_j = 6, 9, 6.
+    let t = &ev.targets;
+    for (f, ps) in t.iter().zip([6.0, 9.0, 6.0]) {
+        some(f.repeatability, ps, "Ps_j");
+    }
+    let a = &ev.axis;
+    some(a.R, 9.0, "Ps = max Ps_j");
+    close(a.B, 4.0, "U = max|U_j|");
+    close(a.M, 7.5, "Pa = max x̄_j − min x̄_j");
+    // P: x̄_j + ½(|U_j| + Ps_j) = 1 + 4, 4.5 + 6, −3 + 5 = 5, 10.5, 2 → 10.5;
+    //    x̄_j − ½(|U_j| + Ps_j) = −3, −1.5, −8 → −8;  P = 18.5.
+    some(a.A, 18.5, "P");
+    // Unidirectional with 3s (as GB): 13 and 17.
+    some(a.A_up, 13.0, "A↑");
+    some(a.A_down, 17.0, "A↓");
+    some(a.R_up, 12.0, "6s↑ max");
+}
+
+#[test]
+fn single_approach_gives_not_applicable_not_zero() {
+    // n = 1: targets 0 and 500; ↑ 3, 1; ↓ −1, −4.
+    let s = |direction, target, deviation| Sample {
+        run: 1,
+        direction,
+        target,
+        deviation,
+    };
+    let samples = [
+        s(Direction::Forward, 0.0, 3.0),
+        s(Direction::Forward, 500.0, 1.0),
+        s(Direction::Reverse, 0.0, -1.0),
+        s(Direction::Reverse, 500.0, -4.0),
+    ];
+    for std in Standard::ALL {
+        let ev = evaluate(&samples, std).unwrap();
+        for f in &ev.targets {
+            assert_eq!(f.s_up, None);
+            assert_eq!(f.repeatability, None);
+            assert_eq!(f.repeatability_up, None);
+        }
+        let a = &ev.axis;
+        assert_eq!((a.R_up, a.R_down, a.R), (None, None, None), "{std}");
+        assert_eq!((a.A_up, a.A_down, a.A), (None, None, None), "{std}");
+        // B_i = 4, 5 → B = 5, B̄ = 4.5; E↑ = 3 − 1 = 2; E↓ = −1 − (−4) = 3; E = 3 − (−4) = 7;
+        // x̄_i = 1, −1.5 → M = 2.5.
+        close(a.B, 5.0, "B");
+        close(a.B_mean, 4.5, "B̄");
+        close(a.E_up, 2.0, "E↑");
+        close(a.E_down, 3.0, "E↓");
+        close(a.E, 7.0, "E");
+        close(a.M, 2.5, "M");
+    }
+}
+
+#[test]
+fn figures_are_unit_agnostic_and_scale_linearly() {
+    // Rotary use: deviations in arcsec scale every figure by the same factor.
+    let scaled: Vec<Sample> = data()
+        .into_iter()
+        .map(|s| Sample {
+            deviation: s.deviation * 3.6,
+            ..s
+        })
+        .collect();
+    let ev = evaluate(&scaled, Standard::Iso230_2_2014).unwrap();
+    close(ev.axis.A.unwrap(), 19.0 * 3.6, "A scaled");
+    close(ev.axis.B, 4.0 * 3.6, "B scaled");
+}
+
+#[test]
+fn one_sided_target_is_an_error() {
+    let samples = [Sample {
+        run: 1,
+        direction: Direction::Forward,
+        target: 10.0,
+        deviation: 1.0,
+    }];
+    let err = evaluate(&samples, Standard::Vdi3441)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("target 10") && err.contains("direction -"),
+        "{err}"
+    );
+    assert!(evaluate(&[], Standard::Vdi3441).is_err());
+}
+
+#[test]
+fn standard_names_parse() {
+    for s in Standard::ALL {
+        assert_eq!(s.name().parse::<Standard>().unwrap(), s);
+    }
+    assert_eq!(
+        "GB/T17421.2-2000".parse::<Standard>().unwrap(),
+        Standard::Iso230_2_1997
+    );
+    assert!("iso9000".parse::<Standard>().is_err());
+}
+
+#[test]
+fn reader_converts_actual_mm_and_keeps_env_and_time() {
+    let text = "run,direction,target_mm,actual_mm,air_temp_c,pressure_kpa,humidity_pct,material_temp_c,time_s\n\
+                1,+,0,0.0012,20.1,101.3,45,20.5,0\n\
+                1,+,100,100.0030,,,,,12.5\n\
+                1,-,100,99.9990,20.2,101.2,46,20.6,30\n\
+                1,-,0,-0.0005,20.2,101.2,46,20.6,40\n";
+    let f = parse_runs(Path::new("r.csv"), text).unwrap();
+    assert!(f.had_actual);
+    assert_eq!(f.rows.len(), 4);
+    // (0.0012 − 0) mm = 1.2 µm; (100.003 − 100) mm = 3 µm; 99.999 − 100 = −1 µm.
+    assert!((f.rows[0].deviation_um - 1.2).abs() < 1e-9);
+    assert!((f.rows[1].deviation_um - 3.0).abs() < 1e-9);
+    assert!((f.rows[2].deviation_um + 1.0).abs() < 1e-9);
+    assert_eq!(f.rows[0].env.air_temp_c, Some(20.1));
+    assert_eq!(f.rows[0].env.material_temp_c, Some(20.5));
+    assert_eq!(f.rows[1].env.pressure_kpa, None);
+    assert_eq!(f.rows[1].time_s, Some(12.5));
+    assert_eq!(f.rows[3].line, 5);
+    assert_eq!(f.rows[2].direction, Direction::Reverse);
+    assert_eq!(f.targets_mm(), vec![0.0, 100.0]);
+    let samples = f.samples();
+    assert_eq!(samples.len(), 4);
+    assert!((samples[1].deviation - 3.0).abs() < 1e-9 && samples[1].target == 100.0);
+}
+
+#[test]
+fn reader_errors_name_file_line_and_what_to_fix() {
+    let cases: [(&str, &[&str]); 7] = [
+        (
+            "run,direction,target_mm,deviation_um\n1,+,0,1\n1,x,100,2\n",
+            &["r.csv:3, column direction", "'x' is not a direction"],
+        ),
+        (
+            "run,direction,target_mm,deviation_um\n1,+,0,1\n1,+,100,abc\n",
+            &["r.csv:3, column deviation_um", "'abc' is not a number"],
+        ),
+        (
+            "run,direction,target_mm,deviation_um\n1,+,0,1\n1,+,100,2\n2,+,0,1\n",
+            &["target 100 mm missing from run 2 direction +", "r.csv:4"],
+        ),
+        (
+            "run,direction,target_mm,deviation_um\n1,+,0,1\n1,+,0,2\n",
+            &["r.csv:3", "visits target 0 mm twice (first at line 2)"],
+        ),
+        (
+            "run,direction,target_mm,actual_mm,deviation_um\n1,+,0,0,1\n",
+            &["both actual_mm and deviation_um"],
+        ),
+        (
+            "run,direction,target_mm,dev_um\n1,+,0,1\n",
+            &["r.csv:1, column dev_um", "unknown column"],
+        ),
+        (
+            "run,direction,target_mm,deviation_um\n-1,+,0,1\n",
+            &["r.csv:2, column run", "not a run number"],
+        ),
+    ];
+    for (text, needles) in cases {
+        let err = parse_runs(Path::new("r.csv"), text)
+            .unwrap_err()
+            .to_string();
+        for n in needles {
+            assert!(err.contains(n), "for {text:?}: '{err}' lacks '{n}'");
+        }
+    }
+    let err = parse_runs(
+        Path::new("r.csv"),
+        "run,direction,target_mm,deviation_um,humidity_pct\n1,+,0,1,120\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("r.csv:2, column humidity_pct"), "{err}");
+}
