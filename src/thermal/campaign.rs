@@ -20,41 +20,16 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Travel direction of a pass, as in the run file ('+' forward, '-' reverse).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Direction {
-    Forward,
-    Reverse,
-}
+pub use crate::linear::Direction;
 
-impl Direction {
-    pub const BOTH: [Direction; 2] = [Direction::Forward, Direction::Reverse];
-    pub fn name(self) -> &'static str {
-        match self {
-            Direction::Forward => "forward",
-            Direction::Reverse => "reverse",
-        }
-    }
-    pub fn sign(self) -> &'static str {
-        match self {
-            Direction::Forward => "+",
-            Direction::Reverse => "-",
-        }
-    }
-    /// '+', '-', forward, reverse (any case).
-    pub fn parse(text: &str) -> Option<Direction> {
-        match text {
-            "+" => Some(Direction::Forward),
-            "-" => Some(Direction::Reverse),
-            t if t.eq_ignore_ascii_case("forward") || t.eq_ignore_ascii_case("fwd") => {
-                Some(Direction::Forward)
-            }
-            t if t.eq_ignore_ascii_case("reverse") || t.eq_ignore_ascii_case("rev") => {
-                Some(Direction::Reverse)
-            }
-            _ => None,
-        }
+/// Forward then reverse: the order of per-direction results everywhere in thermal.
+pub const DIRECTIONS: [Direction; 2] = [Direction::Forward, Direction::Reverse];
+
+/// "forward" or "reverse".
+pub fn direction_name(d: Direction) -> &'static str {
+    match d {
+        Direction::Forward => "forward",
+        Direction::Reverse => "reverse",
     }
 }
 

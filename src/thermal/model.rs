@@ -19,7 +19,7 @@
 //! pitch polynomial fitted jointly), giving standard errors for each. The polynomial order is
 //! chosen by leave-one-target-out cross-validation, capped, or given.
 
-use super::campaign::{Campaign, Direction, Measurement};
+use super::campaign::{direction_name, Campaign, Direction, Measurement, DIRECTIONS};
 use super::lsq::{legendre_into, legendre_sum, lstsq};
 use super::sensors::{Role, Sensor};
 use crate::error::{Error, Result};
@@ -433,11 +433,11 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
     let n_sensors = prep.gain_sensors.len();
     let mut directions = Vec::new();
     let mut residual_sq = vec![(0.0, 0usize); campaigns.len()];
-    for dir in Direction::BOTH {
+    for dir in DIRECTIONS {
         let obs: Vec<&Obs> = prep.obs.iter().filter(|o| o.direction == dir).collect();
         if obs.is_empty() {
             return Err(Error::usage(
-                format!("no {} readings in the campaigns", dir.name()),
+                format!("no {} readings in the campaigns", direction_name(dir)),
                 "measure both directions (bidirectional runs)",
             ));
         }
@@ -451,7 +451,7 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
                         format!(
                             "order {o} needs {} target positions, the {} readings have {}",
                             o + 1,
-                            dir.name(),
+                            direction_name(dir),
                             targets.len()
                         ),
                         "give a lower --order",
@@ -474,7 +474,7 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
                 let best = cv.iter().flatten().cloned().fold(f64::INFINITY, f64::min);
                 if !best.is_finite() {
                     return Err(Error::numeric(
-                        format!("no polynomial order could be cross-validated for {}", dir.name()),
+                        format!("no polynomial order could be cross-validated for {}", direction_name(dir)),
                         "measure more target positions or give --order",
                     ));
                 }
@@ -492,7 +492,7 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
             fit_rho,
             rho_given,
         };
-        let what = format!("the {} model", dir.name());
+        let what = format!("the {} model", direction_name(dir));
         let f = ctx.fit(&obs, &d, &what)?;
         let se_at = |i: usize| f.se.as_ref().map(|se| se[i]);
         let mut gains = Vec::new();
@@ -852,7 +852,7 @@ mod tests {
                     assert!(
                         (k / want - 1.0).abs() < 0.05,
                         "{} {}: k = {k}, truth {want}",
-                        dm.direction.name(),
+                        direction_name(dm.direction),
                         g.coolant
                     );
                 }

@@ -1,36 +1,28 @@
-//! Laser readings of a campaign from a linear-axis run file with a `time_s` column.
+//! Laser readings of a campaign: the linear module's run file, whose rows must carry `time_s`.
 
-use super::campaign::{Direction, LaserPoint};
-use crate::error::Result;
-use crate::io::CsvTable;
+use super::campaign::LaserPoint;
+use crate::error::{Error, Location, Result};
 use std::path::Path;
 
-/// Every reading of a run file with its measurement time.
+/// Every reading of a run file with its measurement time (`time_s`, required on every row).
 pub fn read_timed_points(path: &Path) -> Result<Vec<(f64, LaserPoint)>> {
-    // Interim reader until the linear module's run-file reader is merged.
-    let t = CsvTable::read(path)?;
-    let (c_run, c_dir, c_x, c_e, c_t) = (
-        t.require("run")?,
-        t.require("direction")?,
-        t.require("target_mm")?,
-        t.require("deviation_um")?,
-        t.require("time_s")?,
-    );
-    let mut out = Vec::new();
-    for row in &t.rows {
-        let direction = Direction::parse(t.text(row, c_dir)).ok_or_else(|| {
-            t.error_at(row, Some(c_dir), "direction must be + or -", "write + or -")
-        })?;
-        let run = t.text(row, c_run).parse::<u32>().map_err(|_| {
-            t.error_at(row, Some(c_run), "run must be a whole number", "number runs 1, 2, …")
+    let file = crate::linear::read_runs(path)?;
+    let mut out = Vec::with_capacity(file.rows.len());
+    for row in &file.rows {
+        let time_s = row.time_s.ok_or_else(|| {
+            Error::input(
+                Location::cell(path, row.line, "time_s"),
+                "a thermal campaign needs the measurement time on every row",
+                "add a time_s column: the start time (s) of the measurement the row belongs to",
+            )
         })?;
         out.push((
-            t.f64(row, c_t)?,
+            time_s,
             LaserPoint {
-                run,
-                direction,
-                target_mm: t.f64(row, c_x)?,
-                deviation_um: t.f64(row, c_e)?,
+                run: row.run,
+                direction: row.direction,
+                target_mm: row.target_mm,
+                deviation_um: row.deviation_um,
                 line: row.line,
             },
         ));
