@@ -105,6 +105,10 @@ pub struct Campaign {
     pub reference_point_mm: f64,
     pub measurement_s: f64,
     pub sensors: SensorTable,
+    /// The run file the readings came from (for messages).
+    pub runs_path: PathBuf,
+    /// The temperature log as read (°C, before calibration).
+    pub raw_log: TemperatureLog,
     /// Processed temperatures (calibrated, denoised).
     pub log: ProcessedLog,
     /// Measurements sorted by time; the first is the cold one.
@@ -167,6 +171,7 @@ impl Campaign {
             dir,
             &settings,
             sensors,
+            raw,
             log,
             timed,
             &runs_path,
@@ -179,6 +184,7 @@ impl Campaign {
         dir: PathBuf,
         settings: &CampaignFile,
         sensors: SensorTable,
+        raw_log: TemperatureLog,
         log: ProcessedLog,
         timed: Vec<(f64, LaserPoint)>,
         runs_path: &Path,
@@ -231,6 +237,8 @@ impl Campaign {
             reference_point_mm: settings.reference_point_mm,
             measurement_s: settings.measurement_s,
             sensors,
+            runs_path: runs_path.to_path_buf(),
+            raw_log,
             log,
             measurements,
         })
