@@ -1,7 +1,10 @@
 //! Thermal positioning error of linear axes: cold/warm difference (seed 000), the composite geometric + thermal model (seed 004), sensors and the temperature store.
 
 pub mod campaign;
+pub mod charts;
+pub mod compensate;
 pub mod difference;
+pub mod evaluate;
 pub mod filter;
 pub mod lsq;
 pub mod model;
