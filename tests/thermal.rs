@@ -138,6 +138,10 @@ fn store_round_trip_versions_and_interrupted_ingests() {
     let mut line = String::new();
     err.read_line(&mut line).unwrap();
     assert!(line.contains("paused after 300"), "{line}");
+    // WAL: a reader is not blocked by the open write transaction and sees the last commit.
+    let reader = Store::open(&db).unwrap();
+    assert_eq!(reader.counts().unwrap(), before);
+    drop(reader);
     child.kill().unwrap();
     child.wait().unwrap();
     let store = Store::open(&db).unwrap();

@@ -155,7 +155,18 @@ impl Store {
         }
         conn.execute_batch("PRAGMA foreign_keys=ON; PRAGMA busy_timeout=5000;")
             .map_err(|e| read_err(path, e))?;
-        conn.execute_batch(SCHEMA).map_err(|e| write_err(path, e))?;
+        // Create the schema only when missing: a reader must not need the write lock, so that
+        // it never waits for an ingest in progress (WAL readers see the last commit).
+        let have: i64 = conn
+            .query_row(
+                "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'models'",
+                [],
+                |r| r.get(0),
+            )
+            .map_err(|e| read_err(path, e))?;
+        if have == 0 {
+            conn.execute_batch(SCHEMA).map_err(|e| write_err(path, e))?;
+        }
         Ok(Store {
             path: path.to_path_buf(),
             conn,
@@ -719,6 +730,11 @@ mod tests {
         let truth = write_campaigns(dir.path(), &small()).unwrap();
         let db = dir.path().join(DEFAULT_STORE);
         let mut store = Store::open(&db).unwrap();
+        let mode: String = Connection::open(&db)
+            .unwrap()
+            .query_row("PRAGMA journal_mode", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(mode.to_ascii_lowercase(), "wal");
         // A non-trivial calibration must survive the round trip.
         let table_path = dir.path().join("sensors.csv");
         let mut table = SensorTable::read(&table_path).unwrap();
