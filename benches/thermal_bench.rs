@@ -65,8 +65,13 @@ pub fn compensate_throughput(c: &mut Criterion) {
         group.throughput(Throughput::Elements(rows as u64));
         group.bench_with_input(BenchmarkId::from_parameter(rows), &input, |b, input| {
             b.iter(|| {
-                compensate_stream(&model, input.as_slice(), Path::new("bench.csv"), std::io::sink())
-                    .expect("compensate")
+                compensate_stream(
+                    &model,
+                    input.as_slice(),
+                    Path::new("bench.csv"),
+                    std::io::sink(),
+                )
+                .expect("compensate")
             })
         });
     }

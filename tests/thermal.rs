@@ -31,7 +31,10 @@ fn run(dir: &Path, args: &[&str], expect: i32) -> Output {
 
 fn json(out: &Output) -> Value {
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!("stdout is not one JSON document ({e}):\n{}", String::from_utf8_lossy(&out.stdout))
+        panic!(
+            "stdout is not one JSON document ({e}):\n{}",
+            String::from_utf8_lossy(&out.stdout)
+        )
     })
 }
 
@@ -57,7 +60,13 @@ fn synth(dir: &Path, extra: &[&str]) -> PathBuf {
     run(dir, &args, 0);
     run(
         dir,
-        &["thermal", "calibrate", "--sensors", "syn/sensors.csv", "syn/calibration.csv"],
+        &[
+            "thermal",
+            "calibrate",
+            "--sensors",
+            "syn/sensors.csv",
+            "syn/calibration.csv",
+        ],
         0,
     );
     dir.join("syn")
@@ -67,15 +76,24 @@ fn synth(dir: &Path, extra: &[&str]) -> PathBuf {
 fn fit_recovers_gains_within_5_percent_and_predicts_held_out_campaigns() {
     let tmp = tempfile::tempdir().unwrap();
     let syn = synth(tmp.path(), &[]);
-    let truth: Value = serde_json::from_str(&std::fs::read_to_string(syn.join("truth.json")).unwrap()).unwrap();
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(syn.join("truth.json")).unwrap()).unwrap();
     let names = campaigns(&syn);
     assert_eq!(names.len(), 4);
-    let mut args = vec!["thermal".to_string(), "fit".into(), "-o".into(), "model.json".into(), "--json".into()];
+    let mut args = vec![
+        "thermal".to_string(),
+        "fit".into(),
+        "-o".into(),
+        "model.json".into(),
+        "--json".into(),
+    ];
     args.extend(names.iter().map(|n| format!("syn/{n}")));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let model = json(&run(tmp.path(), &args, 0));
     // The file and the JSON on stdout are the same model.
-    let file: Value = serde_json::from_str(&std::fs::read_to_string(tmp.path().join("model.json")).unwrap()).unwrap();
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("model.json")).unwrap())
+            .unwrap();
     assert_eq!(file, model);
     let noise = truth["laser_noise_um"].as_f64().unwrap();
     for (di, dm) in model["directions"].as_array().unwrap().iter().enumerate() {
@@ -89,9 +107,15 @@ fn fit_recovers_gains_within_5_percent_and_predicts_held_out_campaigns() {
                 .find(|t| t["coolant"] == coolant)
                 .unwrap();
             let k = g["k_um_per_m_k"].as_array().unwrap();
-            for (fitted, want) in k.iter().zip([&t["k_nut_um_per_m_k"], &t["k_bearing_um_per_m_k"]]) {
+            for (fitted, want) in k
+                .iter()
+                .zip([&t["k_nut_um_per_m_k"], &t["k_bearing_um_per_m_k"]])
+            {
                 let (fitted, want) = (fitted.as_f64().unwrap(), want.as_f64().unwrap());
-                assert!((fitted / want - 1.0).abs() < 0.05, "{di} {coolant}: {fitted} vs {want}");
+                assert!(
+                    (fitted / want - 1.0).abs() < 0.05,
+                    "{di} {coolant}: {fitted} vs {want}"
+                );
             }
         }
     }
@@ -104,7 +128,10 @@ fn fit_recovers_gains_within_5_percent_and_predicts_held_out_campaigns() {
 #[test]
 fn store_round_trip_versions_and_interrupted_ingests() {
     let tmp = tempfile::tempdir().unwrap();
-    let syn = synth(tmp.path(), &["--campaigns", "2", "--repeats", "1", "--every-s", "1800"]);
+    let syn = synth(
+        tmp.path(),
+        &["--campaigns", "2", "--repeats", "1", "--every-s", "1800"],
+    );
     let names = campaigns(&syn);
     let first = format!("syn/{}", names[0]);
     let second = format!("syn/{}", names[1]);
@@ -156,11 +183,25 @@ fn store_round_trip_versions_and_interrupted_ingests() {
     for out in ["m1.json", "m2.json"] {
         run(
             tmp.path(),
-            &["thermal", "fit", "--from-store", "--db", &db_arg, "--order", "3", "-o", out],
+            &[
+                "thermal",
+                "fit",
+                "--from-store",
+                "--db",
+                &db_arg,
+                "--order",
+                "3",
+                "-o",
+                out,
+            ],
             0,
         );
     }
-    let listed = json(&run(tmp.path(), &["thermal", "models", "--db", &db_arg, "--json"], 0));
+    let listed = json(&run(
+        tmp.path(),
+        &["thermal", "models", "--db", &db_arg, "--json"],
+        0,
+    ));
     let versions: Vec<i64> = listed["models"]
         .as_array()
         .unwrap()
@@ -169,17 +210,37 @@ fn store_round_trip_versions_and_interrupted_ingests() {
         .collect();
     assert_eq!(versions, [1, 2]);
     assert_eq!(listed["counts"]["campaigns"], 2);
-    assert_eq!(listed["models"][0]["campaigns"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        listed["models"][0]["campaigns"].as_array().unwrap().len(),
+        2
+    );
 
     // Round trip: the model fitted from the store equals the one fitted from the files.
-    let mut args = vec!["thermal", "fit", "--order", "3", "-o", "files.json", &first, &second];
+    let mut args = vec![
+        "thermal",
+        "fit",
+        "--order",
+        "3",
+        "-o",
+        "files.json",
+        &first,
+        &second,
+    ];
     args.retain(|a| !a.is_empty());
     run(tmp.path(), &args, 0);
-    let a: Value = serde_json::from_str(&std::fs::read_to_string(tmp.path().join("m1.json")).unwrap()).unwrap();
-    let b: Value = serde_json::from_str(&std::fs::read_to_string(tmp.path().join("files.json")).unwrap()).unwrap();
+    let a: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("m1.json")).unwrap())
+            .unwrap();
+    let b: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("files.json")).unwrap())
+            .unwrap();
     for d in 0..2 {
-        let ka = a["directions"][d]["gains"][0]["k_um_per_m_k"][0].as_f64().unwrap();
-        let kb = b["directions"][d]["gains"][0]["k_um_per_m_k"][0].as_f64().unwrap();
+        let ka = a["directions"][d]["gains"][0]["k_um_per_m_k"][0]
+            .as_f64()
+            .unwrap();
+        let kb = b["directions"][d]["gains"][0]["k_um_per_m_k"][0]
+            .as_f64()
+            .unwrap();
         assert!((ka - kb).abs() < 1e-9 * kb.abs(), "{ka} vs {kb}");
     }
 }
@@ -212,7 +273,11 @@ fn difference_gives_et_and_the_line_of_each_time() {
         2,+,0,1,600\n2,+,100,3,600\n2,+,200,5,600\n2,-,200,4,600\n2,-,100,3.5,600\n2,-,0,3,600\n";
     let temps = "time_s,nut,room\n0,20,20\n60,20,20\n600,24,20\n660,24,20\n";
     hand_campaign(tmp.path(), runs, temps);
-    let out = json(&run(tmp.path(), &["thermal", "difference", "hand", "--json"], 0));
+    let out = json(&run(
+        tmp.path(),
+        &["thermal", "difference", "hand", "--json"],
+        0,
+    ));
     let lines = out["lines"].as_array().unwrap();
     let line = |dir: &str, t: f64| {
         lines
@@ -244,7 +309,10 @@ fn bad_input_names_file_line_and_column() {
     hand_campaign(tmp.path(), runs, temps);
     let out = run(tmp.path(), &["thermal", "difference", "hand"], 2);
     let msg = stderr(&out);
-    assert!(msg.contains("temperatures.csv:3, column room") && msg.contains("'abc'"), "{msg}");
+    assert!(
+        msg.contains("temperatures.csv:3, column room") && msg.contains("'abc'"),
+        "{msg}"
+    );
     // A run row without time_s.
     let runs = "run,direction,target_mm,deviation_um,time_s\n1,+,0,1,0\n1,-,0,1,\n";
     hand_campaign(tmp.path(), runs, "time_s,nut,room\n0,20,20\n60,20,20\n");
@@ -294,7 +362,16 @@ fn compensate_streams_the_values_of_the_model() {
     std::fs::write(tmp.path().join("log.csv"), log).unwrap();
     let summary = json(&run(
         tmp.path(),
-        &["thermal", "compensate", "--model", "model.json", "log.csv", "-o", "out.csv", "--json"],
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "model.json",
+            "log.csv",
+            "-o",
+            "out.csv",
+            "--json",
+        ],
         0,
     ));
     assert_eq!(summary["rows"], 3);
@@ -313,23 +390,48 @@ fn compensate_streams_the_values_of_the_model() {
     .unwrap();
     let msg = stderr(&run(
         tmp.path(),
-        &["thermal", "compensate", "--model", "model.json", "bad.csv", "-o", "bad_out.csv"],
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "model.json",
+            "bad.csv",
+            "-o",
+            "bad_out.csv",
+        ],
         2,
     ));
-    assert!(msg.contains("bad.csv:3, column coolant") && msg.contains("mist"), "{msg}");
+    assert!(
+        msg.contains("bad.csv:3, column coolant") && msg.contains("mist"),
+        "{msg}"
+    );
     assert!(!tmp.path().join("bad_out.csv").exists());
 }
 
 #[test]
 fn evaluate_shows_the_compensation_shrinking_the_error() {
     let tmp = tempfile::tempdir().unwrap();
-    let syn = synth(tmp.path(), &["--campaigns", "2", "--repeats", "2", "--every-s", "1800"]);
+    let syn = synth(
+        tmp.path(),
+        &["--campaigns", "2", "--repeats", "2", "--every-s", "1800"],
+    );
     let names = campaigns(&syn);
     let c1 = format!("syn/{}", names[0]);
-    run(tmp.path(), &["thermal", "fit", "--order", "3", "-o", "model.json", &c1], 0);
+    run(
+        tmp.path(),
+        &["thermal", "fit", "--order", "3", "-o", "model.json", &c1],
+        0,
+    );
     let report = json(&run(
         tmp.path(),
-        &["thermal", "evaluate", "--model", "model.json", &c1, "--json"],
+        &[
+            "thermal",
+            "evaluate",
+            "--model",
+            "model.json",
+            &c1,
+            "--json",
+        ],
         0,
     ));
     assert_eq!(report["standard"], "iso230-2:2014");
@@ -339,7 +441,11 @@ fn evaluate_shows_the_compensation_shrinking_the_error() {
         let before = t["before"]["E"].as_f64().unwrap();
         let after = t["after"]["E"].as_f64().unwrap();
         // The fitted campaign: what is left is noise (σ = 0.5 µm), far below the thermal error.
-        assert!(after < 3.0 && after < before, "t = {}: E {before} → {after}", t["time_s"]);
+        assert!(
+            after < 3.0 && after < before,
+            "t = {}: E {before} → {after}",
+            t["time_s"]
+        );
         assert!(t["rms_after_um"].as_f64().unwrap() < 0.8);
     }
     assert!(tmp.path().join("evaluate.png").exists());

@@ -260,7 +260,11 @@ fn run_calibrate(a: CalibrateArgs, g: Globals) -> Result<i32> {
                 f.calibration.scale,
                 f.residual_rms_c,
                 f.samples,
-                if f.scale_fitted { "" } else { "  (offset only: too little range)" }
+                if f.scale_fitted {
+                    ""
+                } else {
+                    "  (offset only: too little range)"
+                }
             );
         }
         if !g.quiet {
@@ -308,7 +312,11 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
                 l.rms_um
             )?;
             for s in &sensors {
-                write!(w, ",{:.3}", l.temperatures_c.get(s).copied().unwrap_or(f64::NAN))?;
+                write!(
+                    w,
+                    ",{:.3}",
+                    l.temperatures_c.get(s).copied().unwrap_or(f64::NAN)
+                )?;
             }
             writeln!(w)?;
         }
@@ -320,7 +328,8 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
     } else {
         outln!(
             "campaign {} — thermal error lines Et = offset + slope·x (cold measurement at {} s)",
-            d.campaign, d.cold_time_s
+            d.campaign,
+            d.cold_time_s
         );
         outln!("  time_s  dir  slope_um_per_m  offset_um  rms_um");
         for l in &d.lines {
@@ -334,7 +343,10 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
             );
         }
         if !g.quiet {
-            eprintln!("wrote difference.csv, lines.csv, fan.png in {}", out.display());
+            eprintln!(
+                "wrote difference.csv, lines.csv, fan.png in {}",
+                out.display()
+            );
         }
     }
     Ok(0)
@@ -344,7 +356,11 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
 fn store_beside(campaign: &Path) -> PathBuf {
     let file = campaign_file_path(campaign);
     let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
-    let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
+    let dir = if dir.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        dir
+    };
     dir.parent()
         .filter(|p| !p.as_os_str().is_empty())
         .map(|p| p.join(DEFAULT_STORE))
@@ -352,10 +368,9 @@ fn store_beside(campaign: &Path) -> PathBuf {
 }
 
 fn run_ingest(a: IngestArgs, g: Globals) -> Result<i32> {
-    let db = a
-        .db
-        .clone()
-        .unwrap_or_else(|| store_beside(&a.campaigns[0]));
+    let db =
+        a.db.clone()
+            .unwrap_or_else(|| store_beside(&a.campaigns[0]));
     let mut store = Store::open(&db)?;
     let hooks = IngestHooks {
         fail_after_samples: a.fail_after_samples,
@@ -411,7 +426,10 @@ fn run_fit(a: FitArgs, g: Globals) -> Result<i32> {
                 "name campaign folders, or use --from-store",
             ));
         }
-        a.campaigns.iter().map(|p| Campaign::read(p)).collect::<Result<_>>()?
+        a.campaigns
+            .iter()
+            .map(|p| Campaign::read(p))
+            .collect::<Result<_>>()?
     };
     if campaigns.is_empty() {
         return Err(Error::usage(
@@ -444,7 +462,10 @@ fn run_fit(a: FitArgs, g: Globals) -> Result<i32> {
     if !g.quiet {
         eprintln!("model written to {}", a.output.display());
         if let Some((db, name, version)) = saved {
-            eprintln!("saved as model '{name}' version {version} in {}", db.display());
+            eprintln!(
+                "saved as model '{name}' version {version} in {}",
+                db.display()
+            );
         }
     }
     Ok(0)
@@ -562,7 +583,11 @@ fn run_compensate(a: CompensateArgs, g: Globals) -> Result<i32> {
     } else {
         outln!(
             "{} rows, max |compensation| {:.3} µm, {} rows outside the fitted travel {} … {} mm",
-            s.rows, s.max_abs_compensation_um, s.outside_travel, model.x_min_mm, model.x_max_mm
+            s.rows,
+            s.max_abs_compensation_um,
+            s.outside_travel,
+            model.x_min_mm,
+            model.x_max_mm
         );
         if !g.quiet {
             eprintln!("wrote {}", a.output.display());
@@ -573,7 +598,11 @@ fn run_compensate(a: CompensateArgs, g: Globals) -> Result<i32> {
 
 fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
     let model = ThermalModel::read(&a.model)?;
-    let campaigns: Vec<Campaign> = a.campaigns.iter().map(|p| Campaign::read(p)).collect::<Result<_>>()?;
+    let campaigns: Vec<Campaign> = a
+        .campaigns
+        .iter()
+        .map(|p| Campaign::read(p))
+        .collect::<Result<_>>()?;
     let report = evaluate_campaigns(&model, &campaigns, a.standard)?;
     let out = a.output.unwrap_or_else(|| {
         a.model
@@ -613,7 +642,10 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
         print_json(&report)?;
         return Ok(0);
     }
-    outln!("standard {}: figures before → after compensation (µm)", report.standard);
+    outln!(
+        "standard {}: figures before → after compensation (µm)",
+        report.standard
+    );
     outln!("campaign                      time_s   E before → after   A before → after   B before → after");
     for t in &report.times {
         outln!(

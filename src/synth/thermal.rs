@@ -131,7 +131,13 @@ impl TrueCampaign {
     /// True (ambient, nut, bearing) temperatures at time t (°C).
     pub fn temperatures_c(&self, t: f64) -> (f64, f64, f64) {
         let amb = self.ambient_start_c + self.ambient_drift_c_per_h * t / 3600.0;
-        let nut = Self::lag(self.nut_rise_c, self.nut_tau_s, self.machine_on_s, self.machine_off_s, t);
+        let nut = Self::lag(
+            self.nut_rise_c,
+            self.nut_tau_s,
+            self.machine_on_s,
+            self.machine_off_s,
+            t,
+        );
         let bearing = Self::lag(
             self.bearing_rise_c,
             self.bearing_tau_s,
@@ -169,7 +175,11 @@ impl ThermalTruth {
 
     /// Gains of a direction (0 forward, 1 reverse) and coolant state.
     pub fn gains(&self, direction: usize, coolant: &str) -> Option<&TrueGains> {
-        self.directions.get(direction)?.gains.iter().find(|g| g.coolant == coolant)
+        self.directions
+            .get(direction)?
+            .gains
+            .iter()
+            .find(|g| g.coolant == coolant)
     }
 }
 
@@ -196,7 +206,11 @@ pub fn truth(options: &SynthThermalOptions) -> ThermalTruth {
             let on = i % 2 == 1;
             let spread = 1.0 + 0.08 * i as f64;
             TrueCampaign {
-                name: format!("campaign-{}-{}", i + 1, if on { "coolant-on" } else { "coolant-off" }),
+                name: format!(
+                    "campaign-{}-{}",
+                    i + 1,
+                    if on { "coolant-on" } else { "coolant-off" }
+                ),
                 coolant: if on { "on" } else { "off" }.into(),
                 ambient_start_c: 19.5 + ((i * 7) % 5) as f64 * 0.6,
                 ambient_drift_c_per_h: if i % 2 == 0 { 0.4 } else { -0.3 },
@@ -230,10 +244,26 @@ pub fn truth(options: &SynthThermalOptions) -> ThermalTruth {
             },
         ],
         sensors: vec![
-            TrueSensor { name: "nut".into(), offset_c: 0.35, scale: 1.004 },
-            TrueSensor { name: "bearing".into(), offset_c: -0.2, scale: 0.995 },
-            TrueSensor { name: "room".into(), offset_c: 0.15, scale: 1.0 },
-            TrueSensor { name: "ref".into(), offset_c: 0.0, scale: 1.0 },
+            TrueSensor {
+                name: "nut".into(),
+                offset_c: 0.35,
+                scale: 1.004,
+            },
+            TrueSensor {
+                name: "bearing".into(),
+                offset_c: -0.2,
+                scale: 0.995,
+            },
+            TrueSensor {
+                name: "room".into(),
+                offset_c: 0.15,
+                scale: 1.0,
+            },
+            TrueSensor {
+                name: "ref".into(),
+                offset_c: 0.0,
+                scale: 1.0,
+            },
         ],
         campaigns,
     }
@@ -255,7 +285,10 @@ pub fn write_campaigns(dir: &Path, options: &SynthThermalOptions) -> Result<Ther
         .map_err(|e| crate::Error::usage(format!("laser noise: {e}"), "give a noise ≥ 0"))?;
 
     write_atomic(&dir.join("sensors.csv"), |w| {
-        writeln!(w, "name,role,unit,offset_c,scale,median_window,sg_window,sg_order")?;
+        writeln!(
+            w,
+            "name,role,unit,offset_c,scale,median_window,sg_window,sg_order"
+        )?;
         writeln!(w, "nut,nut,ohm,,,5,11,2")?;
         writeln!(w, "bearing,bearing,c,,,5,11,2")?;
         writeln!(w, "room,ambient,c,,,5,11,2")?;
@@ -280,7 +313,9 @@ pub fn write_campaigns(dir: &Path, options: &SynthThermalOptions) -> Result<Ther
     crate::io::write_atomic_bytes(&dir.join("calibration.csv"), cal.as_bytes())?;
 
     let n_targets = (options.travel_mm / options.step_mm).round() as usize;
-    let targets: Vec<f64> = (0..=n_targets).map(|i| i as f64 * options.step_mm).collect();
+    let targets: Vec<f64> = (0..=n_targets)
+        .map(|i| i as f64 * options.step_mm)
+        .collect();
     let n_log = (options.duration_s / options.log_period_s).round() as usize;
     for c in &truth.campaigns {
         let cdir = dir.join(&c.name);
@@ -305,7 +340,8 @@ pub fn write_campaigns(dir: &Path, options: &SynthThermalOptions) -> Result<Ther
         // Laser runs: each measurement's error uses the true temperatures averaged over the
         // log samples inside the measurement, as the fit averages the logged ones.
         let mut runs = String::from("run,direction,target_mm,deviation_um,time_s\n");
-        let n_meas = ((options.duration_s - options.measurement_s) / options.every_s).floor() as usize + 1;
+        let n_meas =
+            ((options.duration_s - options.measurement_s) / options.every_s).floor() as usize + 1;
         for k in 0..n_meas {
             let t0 = k as f64 * options.every_s;
             let (mut amb, mut nut, mut bearing, mut n) = (0.0, 0.0, 0.0, 0.0);

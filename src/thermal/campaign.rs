@@ -157,7 +157,10 @@ impl Campaign {
         if !(settings.measurement_s >= 0.0 && settings.measurement_s.is_finite()) {
             return Err(Error::input(
                 Location::file(&file),
-                format!("measurement_s = {} must be zero or more", settings.measurement_s),
+                format!(
+                    "measurement_s = {} must be zero or more",
+                    settings.measurement_s
+                ),
                 "give the duration of one measurement in seconds",
             ));
         }
@@ -166,16 +169,7 @@ impl Campaign {
         let log = raw.process(&sensors)?;
         let runs_path = dir.join(&settings.runs);
         let timed = super::runs::read_timed_points(&runs_path)?;
-        Campaign::assemble(
-            name,
-            dir,
-            &settings,
-            sensors,
-            raw,
-            log,
-            timed,
-            &runs_path,
-        )
+        Campaign::assemble(name, dir, &settings, sensors, raw, log, timed, &runs_path)
     }
 
     /// Group timed laser points into measurements and attach their mean temperatures.

@@ -11,7 +11,11 @@ use std::path::Path;
 
 /// Colour of time `t` on a blue (cold) → red (warm) scale over `[t0, t1]`.
 fn time_colour(t: f64, t0: f64, t1: f64) -> RGBColor {
-    let w = if t1 > t0 { ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+    let w = if t1 > t0 {
+        ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     RGBColor((40.0 + 200.0 * w) as u8, 60, (230.0 - 200.0 * w) as u8)
 }
 
@@ -38,7 +42,11 @@ pub fn fan_chart(path: &Path, d: &Difference) -> Result<()> {
         for (area, dir) in panels.iter().zip(DIRECTIONS) {
             let mut chart = ChartBuilder::on(area)
                 .caption(
-                    format!("{} {}: Et = E − Es (blue cold → red warm)", d.campaign, direction_name(dir)),
+                    format!(
+                        "{} {}: Et = E − Es (blue cold → red warm)",
+                        d.campaign,
+                        direction_name(dir)
+                    ),
                     (FONT, 16),
                 )
                 .margin(12)
@@ -76,14 +84,9 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
     let hours = |t: f64| t / 3600.0;
     let (x0, x1) = span(report.times.iter().map(|t| hours(t.time_s)));
     let values = report.times.iter().flat_map(|t| {
-        [
-            Some(t.before.E),
-            Some(t.after.E),
-            t.before.A,
-            t.after.A,
-        ]
-        .into_iter()
-        .flatten()
+        [Some(t.before.E), Some(t.after.E), t.before.A, t.after.A]
+            .into_iter()
+            .flatten()
     });
     let (_, y1) = span(values);
     let mut campaigns: Vec<&str> = report.times.iter().map(|t| t.campaign.as_str()).collect();
@@ -91,7 +94,10 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
     save_png(path, 1000, 600, |root| {
         let mut chart = ChartBuilder::on(root)
             .caption(
-                format!("positioning figures before / after compensation ({})", report.standard),
+                format!(
+                    "positioning figures before / after compensation ({})",
+                    report.standard
+                ),
                 (FONT, 18),
             )
             .margin(14)
@@ -105,7 +111,11 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
             .label_style((FONT, 13))
             .axis_desc_style((FONT, 14))
             .draw()?;
-        let series: [(&str, RGBColor, fn(&super::evaluate::TimeFigures) -> Option<f64>); 4] = [
+        let series: [(
+            &str,
+            RGBColor,
+            fn(&super::evaluate::TimeFigures) -> Option<f64>,
+        ); 4] = [
             ("E before", RED, |t| Some(t.before.E)),
             ("E after", BLUE, |t| Some(t.after.E)),
             ("A before", RGBColor(240, 150, 40), |t| t.before.A),

@@ -58,11 +58,16 @@ fn columns(model: &ThermalModel, headers: &csv::ByteRecord, source: &Path) -> Re
             .iter()
             .find(|s| s.name == name)
             .cloned()
-            .ok_or_else(|| Error::Internal(format!("model lacks the definition of sensor '{name}'")))
+            .ok_or_else(|| {
+                Error::Internal(format!("model lacks the definition of sensor '{name}'"))
+            })
     };
     let mut sensors = Vec::new();
     for name in &model.gain_sensors {
-        let c = need(name, "log one column per model sensor, named as in the sensor table")?;
+        let c = need(
+            name,
+            "log one column per model sensor, named as in the sensor table",
+        )?;
         sensors.push((c, sensor_def(name)?));
     }
     let ambient = match &model.ambient_sensor {
@@ -84,7 +89,10 @@ fn columns(model: &ThermalModel, headers: &csv::ByteRecord, source: &Path) -> Re
         ));
     }
     Ok(Columns {
-        time: need("time_s", "the first columns are time_s,position_mm,direction")?,
+        time: need(
+            "time_s",
+            "the first columns are time_s,position_mm,direction",
+        )?,
         position: need("position_mm", "log the axis position in mm")?,
         direction: need("direction", "log the travel direction as + or -")?,
         sensors,
@@ -94,7 +102,13 @@ fn columns(model: &ThermalModel, headers: &csv::ByteRecord, source: &Path) -> Re
 }
 
 #[inline]
-fn number(record: &csv::ByteRecord, col: usize, line: u64, name: &str, source: &Path) -> Result<f64> {
+fn number(
+    record: &csv::ByteRecord,
+    col: usize,
+    line: u64,
+    name: &str,
+    source: &Path,
+) -> Result<f64> {
     let bytes = record.get(col).unwrap_or(b"");
     let value = std::str::from_utf8(bytes)
         .ok()
@@ -103,7 +117,10 @@ fn number(record: &csv::ByteRecord, col: usize, line: u64, name: &str, source: &
     value.ok_or_else(|| {
         Error::input(
             Location::cell(source, line, name),
-            format!("'{}' is not a finite number", String::from_utf8_lossy(bytes)),
+            format!(
+                "'{}' is not a finite number",
+                String::from_utf8_lossy(bytes)
+            ),
             "write a decimal number such as 12.5",
         )
     })
@@ -199,7 +216,11 @@ pub fn compensate_stream<R: Read, W: Write>(
         if record.len() != headers.len() {
             return Err(Error::input(
                 Location::line(source, line),
-                format!("{} fields, but the header names {}", record.len(), headers.len()),
+                format!(
+                    "{} fields, but the header names {}",
+                    record.len(),
+                    headers.len()
+                ),
                 "give every row one value per header column",
             ));
         }
@@ -223,7 +244,11 @@ pub fn compensate_stream<R: Read, W: Write>(
         for (k, (c, sensor)) in cols.sensors.iter().enumerate() {
             let raw = number(&record, *c, line, &sensor.name, source)?;
             let celsius = sensor.unit.to_celsius(raw).map_err(|e| {
-                Error::input(Location::cell(source, line, sensor.name.clone()), e.to_string(), "")
+                Error::input(
+                    Location::cell(source, line, sensor.name.clone()),
+                    e.to_string(),
+                    "",
+                )
             })?;
             state.sensors_c[k] = sensor.calibration.apply(celsius);
         }
@@ -262,7 +287,8 @@ pub fn compensate_stream<R: Read, W: Write>(
         let error_um = model.error_um(direction, x_mm, &state);
         let compensation_um = -error_um;
         summary.rows += 1;
-        summary.max_abs_compensation_um = summary.max_abs_compensation_um.max(compensation_um.abs());
+        summary.max_abs_compensation_um =
+            summary.max_abs_compensation_um.max(compensation_um.abs());
         let ne = format_fixed4(error_um, &mut e_buf);
         let nc = format_fixed4(compensation_um, &mut c_buf);
         writer
@@ -282,12 +308,21 @@ pub fn compensate_stream<R: Read, W: Write>(
 }
 
 /// Compensate a log file into `output` (written atomically).
-pub fn compensate_file(model: &ThermalModel, input: &Path, output: &Path) -> Result<CompensateSummary> {
+pub fn compensate_file(
+    model: &ThermalModel,
+    input: &Path,
+    output: &Path,
+) -> Result<CompensateSummary> {
     let file = std::fs::File::open(input).map_err(|e| Error::read(input, e))?;
     let mut failure: Option<Error> = None;
     let mut summary = CompensateSummary::default();
     let written = crate::io::write_atomic(output, |w| {
-        match compensate_stream(model, std::io::BufReader::with_capacity(1 << 16, file), input, w) {
+        match compensate_stream(
+            model,
+            std::io::BufReader::with_capacity(1 << 16, file),
+            input,
+            w,
+        ) {
             Ok(s) => {
                 summary = s;
                 Ok(())

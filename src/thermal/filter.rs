@@ -214,7 +214,10 @@ mod tests {
             .zip(&cubic)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        assert!(worst > 1e-4, "an order-2 filter should bend a cubic ({worst})");
+        assert!(
+            worst > 1e-4,
+            "an order-2 filter should bend a cubic ({worst})"
+        );
     }
 
     #[test]

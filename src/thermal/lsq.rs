@@ -143,7 +143,11 @@ mod tests {
         let xs = [0.0, 1.0, 2.0, 3.0];
         let noise = [e, -e, -e, e];
         let rows: Vec<f64> = xs.iter().flat_map(|&x| [1.0, x]).collect();
-        let y: Vec<f64> = xs.iter().zip(noise).map(|(x, n)| 1.0 + 2.0 * x + n).collect();
+        let y: Vec<f64> = xs
+            .iter()
+            .zip(noise)
+            .map(|(x, n)| 1.0 + 2.0 * x + n)
+            .collect();
         let fit = lstsq(&rows, 2, &y, "line").unwrap();
         assert!((fit.beta[0] - 1.0).abs() < 1e-12 && (fit.beta[1] - 2.0).abs() < 1e-12);
         assert!((fit.rss - 4.0 * e * e).abs() < 1e-12);

@@ -196,7 +196,10 @@ fn choose_sensors(campaigns: &[Campaign], options: &FitOptions) -> Result<Vec<St
 
 fn prepare(campaigns: &[Campaign], options: &FitOptions) -> Result<Prepared> {
     if campaigns.is_empty() {
-        return Err(Error::usage("no campaigns to fit", "give at least one campaign"));
+        return Err(Error::usage(
+            "no campaigns to fit",
+            "give at least one campaign",
+        ));
     }
     let gain_sensors = choose_sensors(campaigns, options)?;
     let ambient = campaigns[0]
@@ -245,7 +248,13 @@ fn prepare(campaigns: &[Campaign], options: &FitOptions) -> Result<Prepared> {
             .unwrap_or(0);
         let mut per_m = Vec::new();
         for (mi, m) in c.measurements.iter().enumerate() {
-            per_m.push(measurement_rises(c, m, &gain_sensors, ambient.as_deref(), coolant)?);
+            per_m.push(measurement_rises(
+                c,
+                m,
+                &gain_sensors,
+                ambient.as_deref(),
+                coolant,
+            )?);
             for p in &m.points {
                 x_min_mm = x_min_mm.min(p.target_mm);
                 x_max_mm = x_max_mm.max(p.target_mm);
@@ -286,14 +295,15 @@ fn measurement_rises(
     ambient: Option<&str>,
     coolant: usize,
 ) -> Result<Rises> {
-    let get = |name: &str| {
-        m.temperatures_c.get(name).copied().ok_or_else(|| {
-            Error::usage(
+    let get =
+        |name: &str| {
+            m.temperatures_c.get(name).copied().ok_or_else(|| {
+                Error::usage(
                 format!("campaign '{}' has no temperatures for sensor '{name}'", c.name),
                 "log every sensor of the model in every campaign, or choose others with --sensors",
             )
-        })
-    };
+            })
+        };
     let ambient_c = match ambient {
         Some(a) => Some(get(a)?),
         None => None,
@@ -474,7 +484,10 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
                 let best = cv.iter().flatten().cloned().fold(f64::INFINITY, f64::min);
                 if !best.is_finite() {
                     return Err(Error::numeric(
-                        format!("no polynomial order could be cross-validated for {}", direction_name(dir)),
+                        format!(
+                            "no polynomial order could be cross-validated for {}",
+                            direction_name(dir)
+                        ),
                         "measure more target positions or give --order",
                     ));
                 }
@@ -535,7 +548,11 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
     let mut reports = Vec::new();
     let (mut loco_sq, mut loco_n) = (0.0, 0usize);
     for (ci, c) in campaigns.iter().enumerate() {
-        let coolant = prep.coolant_states.iter().position(|s| s == &c.coolant).unwrap_or(0);
+        let coolant = prep
+            .coolant_states
+            .iter()
+            .position(|s| s == &c.coolant)
+            .unwrap_or(0);
         let others_same_state = campaigns
             .iter()
             .enumerate()
@@ -597,12 +614,7 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
 
 /// Leave-one-target-out RMS of a design: every target position is predicted by a fit
 /// without any reading at that position.
-fn cross_validate_targets(
-    ctx: &Context,
-    obs: &[&Obs],
-    targets: &[i64],
-    d: &Design,
-) -> Result<f64> {
+fn cross_validate_targets(ctx: &Context, obs: &[&Obs], targets: &[i64], d: &Design) -> Result<f64> {
     let (mut sq, mut n) = (0.0, 0usize);
     for &t in targets {
         let train: Vec<&Obs> = obs.iter().copied().filter(|o| o.target_key != t).collect();
@@ -715,7 +727,10 @@ impl ThermalModel {
             }
             for (g, state) in d.gains.iter().zip(&self.coolant_states) {
                 if &g.coolant != state || g.k_um_per_m_k.len() != self.gain_sensors.len() {
-                    return Err(format!("gains of coolant '{}' do not match the sensors", g.coolant));
+                    return Err(format!(
+                        "gains of coolant '{}' do not match the sensors",
+                        g.coolant
+                    ));
                 }
             }
         }
@@ -757,7 +772,11 @@ impl ThermalModel {
             .zip(&state.sensors_c)
             .zip(&self.reference_rise_c)
         {
-            let above = if self.ambient_sensor.is_some() { t - amb } else { *t };
+            let above = if self.ambient_sensor.is_some() {
+                t - amb
+            } else {
+                *t
+            };
             slope += k * (above - r0);
         }
         if let (Some(a), Some(a0)) = (state.ambient_c, self.reference_ambient_c) {
@@ -848,7 +867,11 @@ mod tests {
             assert_eq!(dm.order, 3, "{:?}", dm.cv_rms_um_by_order);
             for g in &dm.gains {
                 let t = truth.gains(di, &g.coolant).unwrap();
-                for (k, want) in g.k_um_per_m_k.iter().zip([t.k_nut_um_per_m_k, t.k_bearing_um_per_m_k]) {
+                for (k, want) in g
+                    .k_um_per_m_k
+                    .iter()
+                    .zip([t.k_nut_um_per_m_k, t.k_bearing_um_per_m_k])
+                {
                     assert!(
                         (k / want - 1.0).abs() < 0.05,
                         "{} {}: k = {k}, truth {want}",
@@ -857,34 +880,60 @@ mod tests {
                     );
                 }
             }
-            assert!((dm.rho_um_per_m_k / truth.rho_um_per_m_k - 1.0).abs() < 0.1, "ρ {}", dm.rho_um_per_m_k);
+            assert!(
+                (dm.rho_um_per_m_k / truth.rho_um_per_m_k - 1.0).abs() < 0.1,
+                "ρ {}",
+                dm.rho_um_per_m_k
+            );
             // Er(x) shape: the Legendre coefficients above order 1 are independent of the
             // reference temperatures (those only shift the constant and linear terms).
             let want = &truth.directions[di].pitch_legendre_um;
             for n in 2..=3 {
-                assert!((dm.legendre_um[n] - want[n]).abs() < 0.15, "c{n} = {}", dm.legendre_um[n]);
+                assert!(
+                    (dm.legendre_um[n] - want[n]).abs() < 0.15,
+                    "c{n} = {}",
+                    dm.legendre_um[n]
+                );
             }
         }
         // Held-out campaign residual within 1.5× the laser noise, for every campaign.
         for c in &model.campaigns {
             let loco = c.loco_rms_um.unwrap();
             assert!(loco < 1.5 * truth.laser_noise_um, "{}: {loco}", c.name);
-            assert!(c.residual_rms_um < 1.2 * truth.laser_noise_um, "{}", c.residual_rms_um);
+            assert!(
+                c.residual_rms_um < 1.2 * truth.laser_noise_um,
+                "{}",
+                c.residual_rms_um
+            );
         }
     }
 
     #[test]
     fn predictions_follow_the_sign_convention() {
         let dir = tempfile::tempdir().unwrap();
-        let options = SynthThermalOptions { campaigns: 2, repeats: 1, ..Default::default() };
+        let options = SynthThermalOptions {
+            campaigns: 2,
+            repeats: 1,
+            ..Default::default()
+        };
         let (_, campaigns) = synthetic(dir.path(), &options);
-        let model = fit(&campaigns[..1], &FitOptions { order: Some(3), ..Default::default() }).unwrap();
+        let model = fit(
+            &campaigns[..1],
+            &FitOptions {
+                order: Some(3),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         // Warm nut (3 K above its cold rise), room at the reference: E grows as
         // k_nut·3 K·(x − Px) — positive beyond Px for positive k.
         let d = Direction::Forward;
         let amb = model.reference_ambient_c.unwrap();
         let state = ThermalState {
-            sensors_c: vec![amb + model.reference_rise_c[0] + 3.0, amb + model.reference_rise_c[1]],
+            sensors_c: vec![
+                amb + model.reference_rise_c[0] + 3.0,
+                amb + model.reference_rise_c[1],
+            ],
             ambient_c: Some(amb),
             coolant: 0,
         };
@@ -895,6 +944,10 @@ mod tests {
         assert!(k > 0.0 && thermal > 0.0);
         // Only one coolant state: no leave-one-out for it, and the note says why.
         assert!(model.campaigns[0].loco_rms_um.is_none());
-        assert!(model.campaigns[0].loco_note.as_ref().unwrap().contains("one campaign"));
+        assert!(model.campaigns[0]
+            .loco_note
+            .as_ref()
+            .unwrap()
+            .contains("one campaign"));
     }
 }

@@ -375,7 +375,10 @@ impl TemperatureLog {
         for (name, raw) in self.sensors.iter().zip(&self.raw_c) {
             let sensor = table.get(name).ok_or_else(|| {
                 Error::usage(
-                    format!("sensor '{name}' of {} is not in the sensor table", self.path.display()),
+                    format!(
+                        "sensor '{name}' of {} is not in the sensor table",
+                        self.path.display()
+                    ),
                     "use the sensor table the log was read with",
                 )
             })?;
@@ -467,7 +470,10 @@ pub fn calibrate(
     let k_ref = log.index(&reference.name).ok_or_else(|| {
         Error::input(
             Location::line(&log.path, 1),
-            format!("the log has no column for the reference sensor '{}'", reference.name),
+            format!(
+                "the log has no column for the reference sensor '{}'",
+                reference.name
+            ),
             "log the reference sensor during the calibration period",
         )
     })?;
@@ -571,10 +577,21 @@ mod tests {
     #[test]
     fn errors_name_file_line_and_column() {
         let dir = tempfile::tempdir().unwrap();
-        let tp = write(dir.path(), "s.csv", "name,role,unit,offset_c,scale\nnut,screw,c,,\n");
+        let tp = write(
+            dir.path(),
+            "s.csv",
+            "name,role,unit,offset_c,scale\nnut,screw,c,,\n",
+        );
         let err = SensorTable::read(&tp).unwrap_err().to_string();
-        assert!(err.contains("s.csv:2, column role") && err.contains("screw"), "{err}");
-        let tp = write(dir.path(), "s2.csv", "name,role,unit,offset_c,scale,sg_window\nnut,nut,c,,,4\n");
+        assert!(
+            err.contains("s.csv:2, column role") && err.contains("screw"),
+            "{err}"
+        );
+        let tp = write(
+            dir.path(),
+            "s2.csv",
+            "name,role,unit,offset_c,scale,sg_window\nnut,nut,c,,,4\n",
+        );
         let err = SensorTable::read(&tp).unwrap_err().to_string();
         assert!(err.contains("s2.csv:2") && err.contains("odd"), "{err}");
         let table = SensorTable::read(&write(dir.path(), "t.csv", TABLE)).unwrap();
@@ -586,7 +603,10 @@ mod tests {
         assert!(err.contains("l2.csv:4, column time_s"), "{err}");
         let lp = write(dir.path(), "l3.csv", "time_s,nut\n0,100\n1,5000\n");
         let err = TemperatureLog::read(&lp, &table).unwrap_err().to_string();
-        assert!(err.contains("l3.csv:3, column nut") && err.contains("Pt100"), "{err}");
+        assert!(
+            err.contains("l3.csv:3, column nut") && err.contains("Pt100"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -598,7 +618,13 @@ mod tests {
         let mut text = String::from("time_s,ref,bearing,room\n");
         for i in 0..=100 {
             let t = 18.0 + 0.17 * i as f64;
-            text.push_str(&format!("{},{},{},{}\n", i * 10, t, (t - 0.4) / 1.02, t + 0.25));
+            text.push_str(&format!(
+                "{},{},{},{}\n",
+                i * 10,
+                t,
+                (t - 0.4) / 1.02,
+                t + 0.25
+            ));
         }
         let log = TemperatureLog::read(&write(dir.path(), "cal.csv", &text), &table).unwrap();
         let fits = calibrate(&log, &table, 0.0, 1000.0, 1.0).unwrap();

@@ -296,7 +296,9 @@ impl Store {
                 )
                 .map_err(|e| read_err(p, e))?;
             let samples = stmt
-                .query_map(params![id, sid], |r| Ok((r.get::<_, f64>(0)?, r.get::<_, f64>(1)?)))
+                .query_map(params![id, sid], |r| {
+                    Ok((r.get::<_, f64>(0)?, r.get::<_, f64>(1)?))
+                })
                 .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
                 .map_err(|e| read_err(p, e))?;
             if k == 0 {
@@ -416,7 +418,14 @@ impl Store {
         tx.execute(
             "INSERT INTO models (name, version, created_unix, campaigns, loco_rms_um, model_json)
              VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-            params![name, version, now_unix(), campaigns.join(","), model.loco_rms_um, json],
+            params![
+                name,
+                version,
+                now_unix(),
+                campaigns.join(","),
+                model.loco_rms_um,
+                json
+            ],
         )
         .map_err(|e| write_err(&p, e))?;
         tx.commit().map_err(|e| write_err(&p, e))?;
@@ -466,7 +475,10 @@ impl Store {
             .map_err(|e| read_err(&self.path, e))?;
         let json = json.ok_or_else(|| {
             Error::usage(
-                format!("no model '{name}' (version {version:?}) in {}", self.path.display()),
+                format!(
+                    "no model '{name}' (version {version:?}) in {}",
+                    self.path.display()
+                ),
                 "list the stored models with `errmap thermal models`",
             )
         })?;
@@ -521,16 +533,23 @@ fn ingest_in(
             ));
         }
         for table in ["temperature_samples", "laser_readings", "campaign_sensors"] {
-            tx.execute(&format!("DELETE FROM {table} WHERE campaign_id = ?1"), params![id])
-                .map_err(w)?;
+            tx.execute(
+                &format!("DELETE FROM {table} WHERE campaign_id = ?1"),
+                params![id],
+            )
+            .map_err(w)?;
         }
         tx.execute("DELETE FROM campaigns WHERE id = ?1", params![id])
             .map_err(w)?;
     }
-    let ambient_c = campaign
-        .sensors
-        .with_role(Role::Ambient)
-        .and_then(|a| campaign.measurements.first()?.temperatures_c.get(&a.name).copied());
+    let ambient_c = campaign.sensors.with_role(Role::Ambient).and_then(|a| {
+        campaign
+            .measurements
+            .first()?
+            .temperatures_c
+            .get(&a.name)
+            .copied()
+    });
     tx.execute(
         "INSERT INTO campaigns (name, axis, coolant, ambient_c, reference_point_mm, measurement_s,
                                 source, ingested_unix)
@@ -646,7 +665,12 @@ fn ingest_in(
             )
             .map_err(w)?;
         for (k, (sid, cal)) in sensor_ids.iter().enumerate() {
-            for (t, raw) in campaign.raw_log.time_s.iter().zip(&campaign.raw_log.raw_c[k]) {
+            for (t, raw) in campaign
+                .raw_log
+                .time_s
+                .iter()
+                .zip(&campaign.raw_log.raw_c[k])
+            {
                 insert
                     .execute(params![campaign_id, sid, t, cal.apply(*raw)])
                     .map_err(w)?;
@@ -738,12 +762,20 @@ mod tests {
         // A non-trivial calibration must survive the round trip.
         let table_path = dir.path().join("sensors.csv");
         let mut table = SensorTable::read(&table_path).unwrap();
-        table.sensors[1].calibration = Calibration { offset_c: 0.3, scale: 1.01 };
+        table.sensors[1].calibration = Calibration {
+            offset_c: 0.3,
+            scale: 1.01,
+        };
         table.write(&table_path).unwrap();
         let original = Campaign::read(&dir.path().join(&truth.campaigns[0].name)).unwrap();
-        let summary = store.ingest(&original, false, IngestHooks::default()).unwrap();
+        let summary = store
+            .ingest(&original, false, IngestHooks::default())
+            .unwrap();
         assert_eq!(summary.sensors, 3);
-        assert_eq!(summary.temperature_samples, 3 * original.raw_log.time_s.len() as u64);
+        assert_eq!(
+            summary.temperature_samples,
+            3 * original.raw_log.time_s.len() as u64
+        );
         let back = store.load_campaign(&original.name).unwrap();
         assert_eq!(back.coolant, original.coolant);
         assert_eq!(back.measurements.len(), original.measurements.len());
@@ -751,8 +783,10 @@ mod tests {
             assert_eq!(a.time_s, b.time_s);
             assert_eq!(a.points.len(), b.points.len());
             for (pa, pb) in a.points.iter().zip(&b.points) {
-                assert_eq!((pa.run, pa.direction, pa.target_mm, pa.deviation_um),
-                           (pb.run, pb.direction, pb.target_mm, pb.deviation_um));
+                assert_eq!(
+                    (pa.run, pa.direction, pa.target_mm, pa.deviation_um),
+                    (pb.run, pb.direction, pb.target_mm, pb.deviation_um)
+                );
             }
             for (k, v) in &b.temperatures_c {
                 assert!((a.temperatures_c[k] - v).abs() < 1e-9, "{k}");
@@ -763,13 +797,27 @@ mod tests {
         assert_eq!(back.sensors.sensors[1].calibration.scale, 1.01);
         // The same name again is refused without --replace and leaves the store as it was.
         let before = store.counts().unwrap();
-        assert!(store.ingest(&original, false, IngestHooks::default()).is_err());
+        assert!(store
+            .ingest(&original, false, IngestHooks::default())
+            .is_err());
         assert_eq!(store.counts().unwrap(), before);
-        let again = store.ingest(&original, true, IngestHooks::default()).unwrap();
+        let again = store
+            .ingest(&original, true, IngestHooks::default())
+            .unwrap();
         assert!(again.replaced);
-        assert_eq!(store.counts().unwrap().temperature_samples, before.temperature_samples);
+        assert_eq!(
+            store.counts().unwrap().temperature_samples,
+            before.temperature_samples
+        );
 
-        let model = crate::thermal::fit(&[back], &crate::thermal::FitOptions { order: Some(3), ..Default::default() }).unwrap();
+        let model = crate::thermal::fit(
+            &[back],
+            &crate::thermal::FitOptions {
+                order: Some(3),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(store.save_model("X", &model).unwrap(), 1);
         assert_eq!(store.save_model("X", &model).unwrap(), 2);
         let list = store.models().unwrap();
@@ -798,7 +846,10 @@ mod tests {
         store.ingest(&first, false, IngestHooks::default()).unwrap();
         let before = store.counts().unwrap();
         let second = Campaign::read(&dir.path().join(&truth.campaigns[1].name)).unwrap();
-        let hooks = IngestHooks { fail_after_samples: Some(100), ..Default::default() };
+        let hooks = IngestHooks {
+            fail_after_samples: Some(100),
+            ..Default::default()
+        };
         let err = store.ingest(&second, false, hooks).unwrap_err();
         assert!(err.to_string().contains("injected"), "{err}");
         assert_eq!(store.counts().unwrap(), before);
