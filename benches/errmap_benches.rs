@@ -20,5 +20,10 @@ fn csv_table_parse(c: &mut Criterion) {
 }
 
 criterion_group!(io_benches, csv_table_parse);
-criterion_group!(thermal_benches, thermal_bench::compensate_throughput);
+criterion_group! {
+    name = thermal_benches;
+    // No system fonts on CI: criterion's own plots would fail to draw their text.
+    config = Criterion::default().without_plots();
+    targets = thermal_bench::compensate_throughput
+}
 criterion_main!(io_benches, thermal_benches);

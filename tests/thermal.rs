@@ -406,6 +406,29 @@ fn compensate_streams_the_values_of_the_model() {
         "{msg}"
     );
     assert!(!tmp.path().join("bad_out.csv").exists());
+    // A hand-edited model without coolant states is refused, not a crash.
+    let broken = MODEL.replace(
+        r#""coolant_states": ["off", "on"]"#,
+        r#""coolant_states": []"#,
+    );
+    std::fs::write(tmp.path().join("broken.json"), broken).unwrap();
+    let msg = stderr(&run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "broken.json",
+            "log.csv",
+            "-o",
+            "x.csv",
+        ],
+        2,
+    ));
+    assert!(
+        msg.contains("broken.json") && msg.contains("coolant"),
+        "{msg}"
+    );
 }
 
 #[test]

@@ -667,7 +667,7 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
 }
 
 pub fn run_synth(a: SynthThermalArgs, g: Globals) -> Result<i32> {
-    if a.campaigns == 0 || a.repeats == 0 || !(a.every_s > 0.0) {
+    if a.campaigns == 0 || a.repeats == 0 || a.every_s.is_nan() || a.every_s <= 0.0 {
         return Err(Error::usage(
             "campaigns, repeats and --every-s must be positive",
             "e.g. --campaigns 4 --repeats 2 --every-s 900",

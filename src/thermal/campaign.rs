@@ -154,7 +154,7 @@ impl Campaign {
                 .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
                 .unwrap_or_else(|| "campaign".into())
         });
-        if !(settings.measurement_s >= 0.0 && settings.measurement_s.is_finite()) {
+        if !settings.measurement_s.is_finite() || settings.measurement_s < 0.0 {
             return Err(Error::input(
                 Location::file(&file),
                 format!(
@@ -173,6 +173,7 @@ impl Campaign {
     }
 
     /// Group timed laser points into measurements and attach their mean temperatures.
+    #[allow(clippy::too_many_arguments)] // every part of a campaign, from files or the store
     pub fn assemble(
         name: String,
         dir: PathBuf,

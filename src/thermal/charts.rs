@@ -9,6 +9,9 @@ use crate::report::chart::{save_png, FONT};
 use plotters::prelude::*;
 use std::path::Path;
 
+/// Picks one figure of a time, if the standard defines it there.
+type Figure = fn(&super::evaluate::TimeFigures) -> Option<f64>;
+
 /// Colour of time `t` on a blue (cold) → red (warm) scale over `[t0, t1]`.
 fn time_colour(t: f64, t0: f64, t1: f64) -> RGBColor {
     let w = if t1 > t0 {
@@ -111,11 +114,7 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
             .label_style((FONT, 13))
             .axis_desc_style((FONT, 14))
             .draw()?;
-        let series: [(
-            &str,
-            RGBColor,
-            fn(&super::evaluate::TimeFigures) -> Option<f64>,
-        ); 4] = [
+        let series: [(&str, RGBColor, Figure); 4] = [
             ("E before", RED, |t| Some(t.before.E)),
             ("E after", BLUE, |t| Some(t.after.E)),
             ("A before", RGBColor(240, 150, 40), |t| t.before.A),

@@ -131,7 +131,7 @@ fn number(
 #[inline]
 pub fn format_fixed4(value: f64, buf: &mut [u8; 40]) -> usize {
     let scaled = (value * 1e4).round();
-    if !(scaled.abs() < 9e18) {
+    if scaled.is_nan() || scaled.abs() >= 9e18 {
         let mut cursor = std::io::Cursor::new(&mut buf[..]);
         let _ = write!(cursor, "{value:.4}");
         return cursor.position() as usize;
@@ -153,14 +153,14 @@ pub fn format_fixed4(value: f64, buf: &mut [u8; 40]) -> usize {
         buf[out] = b'-';
         out += 1;
     }
-    for i in (4..len).rev() {
-        buf[out] = digits[i];
+    for &d in digits[4..len].iter().rev() {
+        buf[out] = d;
         out += 1;
     }
     buf[out] = b'.';
     out += 1;
-    for i in (0..4).rev() {
-        buf[out] = digits[i];
+    for &d in digits[..4].iter().rev() {
+        buf[out] = d;
         out += 1;
     }
     // "-0.0000" reads as negative zero: write zero plainly.
@@ -281,7 +281,7 @@ pub fn compensate_stream<R: Read, W: Write>(
             }
             state.coolant = last_coolant_index;
         }
-        if x_mm < model.x_min_mm || x_mm > model.x_max_mm {
+        if !(model.x_min_mm..=model.x_max_mm).contains(&x_mm) {
             summary.outside_travel += 1;
         }
         let error_um = model.error_um(direction, x_mm, &state);

@@ -43,13 +43,13 @@ impl FilterSpec {
 
     /// Check the parameters; the message says what is wrong, the caller adds the location.
     pub fn validate(&self) -> std::result::Result<(), String> {
-        if self.median_window == 0 || self.median_window % 2 == 0 {
+        if self.median_window == 0 || self.median_window.is_multiple_of(2) {
             return Err(format!(
                 "median window {} must be an odd number of samples (1 = off)",
                 self.median_window
             ));
         }
-        if self.sg_window == 0 || self.sg_window % 2 == 0 {
+        if self.sg_window == 0 || self.sg_window.is_multiple_of(2) {
             return Err(format!(
                 "Savitzky–Golay window {} must be an odd number of samples (1 = off)",
                 self.sg_window
@@ -134,7 +134,7 @@ pub fn savitzky_golay(samples: &[f64], window: usize, order: usize) -> Result<Ve
     let half = w / 2;
     let centre = sg_weights(w, order, half)?;
     let mut out = vec![0.0; n];
-    for i in 0..n {
+    for (i, slot) in out.iter_mut().enumerate() {
         let (start, weights);
         let edge;
         if i < half {
@@ -149,7 +149,7 @@ pub fn savitzky_golay(samples: &[f64], window: usize, order: usize) -> Result<Ve
             start = i - half;
             weights = &centre;
         }
-        out[i] = weights
+        *slot = weights
             .iter()
             .zip(&samples[start..start + w])
             .map(|(a, b)| a * b)

@@ -330,8 +330,8 @@ fn references(prep: &Prepared, include: &[bool]) -> (Vec<f64>, Option<f64>) {
             continue;
         }
         if let Some(cold) = per_m.first() {
-            for j in 0..n {
-                rise[j] += cold.above_c[j];
+            for (r, above) in rise.iter_mut().zip(&cold.above_c) {
+                *r += above;
             }
             amb += cold.ambient_c.unwrap_or(0.0);
             count += 1.0;
@@ -692,7 +692,7 @@ impl ThermalModel {
                 "give a model.json written by `errmap thermal fit`",
             )
         })?;
-        model.check().map_err(|m| {
+        model.validate().map_err(|m| {
             Error::input(
                 crate::error::Location::file(path),
                 m,
@@ -702,7 +702,8 @@ impl ThermalModel {
         Ok(model)
     }
 
-    fn check(&self) -> std::result::Result<(), String> {
+    /// Consistency of a model read from a file or the store (the message says what is wrong).
+    pub fn validate(&self) -> std::result::Result<(), String> {
         if self.format != MODEL_FORMAT {
             return Err(format!("format '{}' is not {MODEL_FORMAT}", self.format));
         }
@@ -712,8 +713,22 @@ impl ThermalModel {
         {
             return Err("the model must hold a forward and a reverse direction".into());
         }
-        if !(self.x_max_mm > self.x_min_mm) {
-            return Err("x_max_mm must exceed x_min_mm".into());
+        if !self.x_min_mm.is_finite()
+            || !self.x_max_mm.is_finite()
+            || self.x_max_mm <= self.x_min_mm
+        {
+            return Err("x_max_mm must exceed x_min_mm (finite numbers)".into());
+        }
+        if self.coolant_states.is_empty() {
+            return Err("the model names no coolant state".into());
+        }
+        for name in self.gain_sensors.iter().chain(self.ambient_sensor.iter()) {
+            if !self.sensors.iter().any(|s| &s.name == name) {
+                return Err(format!("sensor '{name}' has no definition in 'sensors'"));
+            }
+        }
+        if self.ambient_sensor.is_some() != self.reference_ambient_c.is_some() {
+            return Err("ambient_sensor and reference_ambient_c go together".into());
         }
         if self.reference_rise_c.len() != self.gain_sensors.len() {
             return Err("reference_rise_c needs one value per gain sensor".into());
@@ -888,9 +903,9 @@ mod tests {
             // Er(x) shape: the Legendre coefficients above order 1 are independent of the
             // reference temperatures (those only shift the constant and linear terms).
             let want = &truth.directions[di].pitch_legendre_um;
-            for n in 2..=3 {
+            for (n, want_n) in want.iter().enumerate().skip(2) {
                 assert!(
-                    (dm.legendre_um[n] - want[n]).abs() < 0.15,
+                    (dm.legendre_um[n] - want_n).abs() < 0.15,
                     "c{n} = {}",
                     dm.legendre_um[n]
                 );

@@ -482,13 +482,21 @@ impl Store {
                 "list the stored models with `errmap thermal models`",
             )
         })?;
-        serde_json::from_str(&json).map_err(|e| {
+        let model: ThermalModel = serde_json::from_str(&json).map_err(|e| {
             Error::input(
                 Location::file(&self.path),
                 format!("stored model '{name}' is unreadable: {e}"),
                 "refit it with `errmap thermal fit --from-store`",
             )
-        })
+        })?;
+        model.validate().map_err(|m| {
+            Error::input(
+                Location::file(&self.path),
+                format!("stored model '{name}': {m}"),
+                "refit it with `errmap thermal fit --from-store`",
+            )
+        })?;
+        Ok(model)
     }
 
     /// Row counts of every table.
@@ -853,7 +861,10 @@ mod tests {
         let err = store.ingest(&second, false, hooks).unwrap_err();
         assert!(err.to_string().contains("injected"), "{err}");
         assert_eq!(store.counts().unwrap(), before);
-        assert_eq!(store.campaign_names().unwrap(), [first.name.clone()]);
+        assert_eq!(
+            store.campaign_names().unwrap(),
+            std::slice::from_ref(&first.name)
+        );
         // A fresh connection sees the same.
         drop(store);
         let store = Store::open(&db).unwrap();
