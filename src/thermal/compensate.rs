@@ -42,7 +42,8 @@ struct Columns {
 }
 
 fn columns(model: &ThermalModel, headers: &csv::ByteRecord, source: &Path) -> Result<Columns> {
-    let find = |name: &str| headers.iter().position(|h| h == name.as_bytes());
+    // Fields are trimmed where they are used (cheaper than trimming whole records).
+    let find = |name: &str| headers.iter().position(|h| h.trim_ascii() == name.as_bytes());
     let need = |name: &str, hint: &str| {
         find(name).ok_or_else(|| {
             Error::input(
@@ -109,10 +110,10 @@ fn number(
     name: &str,
     source: &Path,
 ) -> Result<f64> {
-    let bytes = record.get(col).unwrap_or(b"");
+    let bytes = record.get(col).unwrap_or(b"").trim_ascii();
     let value = std::str::from_utf8(bytes)
         .ok()
-        .and_then(|t| t.trim().parse::<f64>().ok())
+        .and_then(|t| t.parse::<f64>().ok())
         .filter(|v| v.is_finite());
     value.ok_or_else(|| {
         Error::input(
@@ -180,7 +181,6 @@ pub fn compensate_stream<R: Read, W: Write>(
 ) -> Result<CompensateSummary> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
-        .trim(csv::Trim::All)
         .comment(Some(b'#'))
         .buffer_capacity(1 << 16)
         .from_reader(input);
@@ -226,7 +226,7 @@ pub fn compensate_stream<R: Read, W: Write>(
         }
         number(&record, cols.time, line, "time_s", source)?;
         let x_mm = number(&record, cols.position, line, "position_mm", source)?;
-        let dir_bytes = record.get(cols.direction).unwrap_or(b"");
+        let dir_bytes = record.get(cols.direction).unwrap_or(b"").trim_ascii();
         let direction = match dir_bytes {
             b"+" => Direction::Forward,
             b"-" => Direction::Reverse,
@@ -260,7 +260,7 @@ pub fn compensate_stream<R: Read, W: Write>(
             state.ambient_c = Some(sensor.calibration.apply(celsius));
         }
         if let Some(c) = cols.coolant {
-            let value = record.get(c).unwrap_or(b"");
+            let value = record.get(c).unwrap_or(b"").trim_ascii();
             if value != last_coolant.as_slice() {
                 last_coolant_index = model
                     .coolant_states
@@ -293,8 +293,8 @@ pub fn compensate_stream<R: Read, W: Write>(
         let nc = format_fixed4(compensation_um, &mut c_buf);
         writer
             .write_record([
-                record.get(cols.time).unwrap_or(b""),
-                record.get(cols.position).unwrap_or(b""),
+                record.get(cols.time).unwrap_or(b"").trim_ascii(),
+                record.get(cols.position).unwrap_or(b"").trim_ascii(),
                 dir_bytes,
                 &e_buf[..ne],
                 &c_buf[..nc],
