@@ -1,5 +1,7 @@
 //! errmap's criterion benchmarks, one harness: each area adds a module beside this file and a group to `criterion_main!`.
 
+mod linear_bench;
+
 use criterion::{criterion_group, criterion_main, Criterion};
 
 mod thermal_bench;
@@ -26,4 +28,4 @@ criterion_group! {
     config = Criterion::default().without_plots();
     targets = thermal_bench::compensate_throughput
 }
-criterion_main!(io_benches, thermal_benches);
+criterion_main!(io_benches, linear_bench::linear_benches, thermal_benches);

@@ -311,3 +311,32 @@ fn reader_errors_name_file_line_and_what_to_fix() {
     .to_string();
     assert!(err.contains("r.csv:2, column humidity_pct"), "{err}");
 }
+
+#[test]
+fn malformed_tables_are_errors_not_panics() {
+    use errmap::linear::{read_table, TableFormat, TableOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, Option<TableFormat>); 12] = [
+        ("0 1\n", Some(TableFormat::Linuxcnc)),
+        ("0 a 1\n", Some(TableFormat::Linuxcnc)),
+        ("5 5 5\n1 1 1\n", Some(TableFormat::Linuxcnc)),
+        ("$AA_ENC_COMP[0,x,AX1]=1\n", Some(TableFormat::Sinumerik)),
+        ("$AA_ENC_COMP[0,0,AX1]=1\n", Some(TableFormat::Sinumerik)),
+        ("%\nN3620A1P0\n%\n", Some(TableFormat::Fanuc)),
+        ("%\nN3620A1P0\nN3621A1P-5\nN3622A1P99999999\nN3623A1P1\nN3624A1P1\nN3626A1P0\nN3627A1P0\n%\n", Some(TableFormat::Fanuc)),
+        ("%\nNxyz\n%\n", Some(TableFormat::Fanuc)),
+        ("BEGIN X.COM MM\n", Some(TableFormat::Heidenhain)),
+        ("BEGIN X.COM MM\nNR AXISPOS X\n0 1\n[END]\n", Some(TableFormat::Heidenhain)),
+        ("position_mm,forward_um\n0,1\n", Some(TableFormat::Csv)),
+        ("hello\n", None),
+    ];
+    for (i, (text, format)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("t{i}.txt"));
+        std::fs::write(&path, text).unwrap();
+        let result = read_table(&path, *format, &TableOptions::default());
+        assert!(
+            result.is_err(),
+            "case {i} {text:?} was accepted: {result:?}"
+        );
+    }
+}

@@ -1,25 +1,490 @@
-//! CLI of `errmap linear …`.
+//! CLI of `errmap linear …` and `errmap synth linear`: analyse laser runs, air index, error budget, compensation tables, sample data.
 
 use super::Globals;
-use errmap::Result;
+use errmap::linear::{
+    compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
+    read_runs, read_table, refractive_index, render_table, save_chart, AirConditions,
+    AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation, PitchFit, RunFile,
+    Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+};
+use errmap::{Error, Result};
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Subcommand)]
 pub enum LinearCommand {
-    /// Analyse measurements.
-    Analyze { file: std::path::PathBuf },
+    /// Evaluate laser runs by a standard (ISO 230-2, GB 10931, VDI 3441); optional corrections, pitch fit, chart, table check.
+    Analyze(AnalyzeArgs),
+    /// Refractive index of air (Ciddor 1996 or modified Edlén), as NIST's metrology toolbox computes it.
+    AirIndex(AirIndexArgs),
+    /// Error budget of the laser set-up (seed 002): each term and the root-sum-square total.
+    Budget(BudgetArgs),
+    /// Write a bidirectional pitch-error compensation table for a controller.
+    Table(TableArgs),
+}
+
+/// Corrections applied to the readings before anything else.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CorrectionArgs {
+    /// Readings are on the vacuum-wavelength scale: rescale each by the refractive index of its
+    /// row's air (air_temp_c, pressure_kpa, humidity_pct columns).
+    #[arg(long)]
+    pub correct_air: bool,
+    /// Air equation for --correct-air.
+    #[arg(long, value_enum, default_value = "ciddor")]
+    pub air_formula: AirFormula,
+    /// Vacuum wavelength of the laser (nm) for --correct-air.
+    #[arg(long, default_value_t = HENE_WAVELENGTH_NM)]
+    pub wavelength_nm: f64,
+    /// CO2 content (µmol/mol) for --correct-air with Ciddor.
+    #[arg(long, default_value_t = DEFAULT_CO2_PPM)]
+    pub co2_ppm: f64,
+    /// Normalise to 20 °C with this expansion coefficient (µm/(m·K)) and each row's material_temp_c.
+    #[arg(long, value_name = "PPM_PER_K")]
+    pub material_expansion: Option<f64>,
+    /// Machine position (mm) where the laser was zeroed; corrections scale lengths from here.
+    #[arg(long, default_value_t = 0.0)]
+    pub datum_mm: f64,
+}
+
+/// Options shared by table writing and reading.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TableOptionArgs {
+    /// LinuxCNC COMP_FILE_TYPE: 0 = nominal/actual positions, 1 = trims.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=1))]
+    pub linuxcnc_type: u8,
+    /// Fanuc detection unit in µm (1 = IS-B, 0.1 = IS-C).
+    #[arg(long, default_value_t = 1.0)]
+    pub fanuc_unit_um: f64,
+    /// Fanuc reference position (mm), a table point; default: the first target.
+    #[arg(long)]
+    pub reference_mm: Option<f64>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct AnalyzeArgs {
+    /// Run file (CSV): run,direction,target_mm, actual_mm or deviation_um, optional environment.
+    pub runs: PathBuf,
+    /// Evaluation standard.
+    #[arg(long, value_enum)]
+    pub standard: Standard,
+    /// Print one JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a chart (PNG).
+    #[arg(long, value_name = "PNG")]
+    pub chart: Option<PathBuf>,
+    #[command(flatten)]
+    pub corrections: CorrectionArgs,
+    /// Fit e(x) = a + k·x + d·sin(2πx/P + φ) with the screw lead P (mm) to the mean bidirectional deviation.
+    #[arg(long, value_name = "LEAD_MM")]
+    pub fit_pitch: Option<f64>,
+    /// Apply a compensation table to the runs and report the figures before and after.
+    #[arg(long, value_name = "FILE")]
+    pub apply_table: Option<PathBuf>,
+    /// Format of --apply-table (default: recognised from the content).
+    #[arg(long, value_enum)]
+    pub table_format: Option<TableFormat>,
+    #[command(flatten)]
+    pub table_options: TableOptionArgs,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct AirIndexArgs {
+    /// Air temperature (°C).
+    #[arg(long, allow_negative_numbers = true)]
+    pub temp_c: f64,
+    /// Absolute air pressure (kPa).
+    #[arg(long)]
+    pub pressure_kpa: f64,
+    /// Relative humidity (%).
+    #[arg(long)]
+    pub humidity_pct: f64,
+    /// Vacuum wavelength (nm).
+    #[arg(long)]
+    pub wavelength_nm: f64,
+    /// CO2 content (µmol/mol); Ciddor only.
+    #[arg(long, default_value_t = DEFAULT_CO2_PPM)]
+    pub co2_ppm: f64,
+    /// Equation.
+    #[arg(long, value_enum, default_value = "ciddor")]
+    pub formula: AirFormula,
+    /// Print one JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct BudgetArgs {
+    /// Set-up file (TOML), see docs/linear.md.
+    pub setup: PathBuf,
+    /// Print one JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TableArgs {
+    /// Run file (CSV).
+    pub runs: PathBuf,
+    /// Controller format.
+    #[arg(long, value_enum)]
+    pub format: TableFormat,
+    /// Spacing of the table points (mm), from the first target.
+    #[arg(long, value_name = "MM")]
+    pub spacing: f64,
+    /// Output file (Sinumerik also writes <name>_cec.<ext> beside it).
+    #[arg(short = 'o', long = "output", value_name = "FILE")]
+    pub output: PathBuf,
+    /// Axis name: Sinumerik machine axis (default AX1), Heidenhain column (default X), Fanuc axis number (default 1).
+    #[arg(long)]
+    pub axis: Option<String>,
+    /// First Sinumerik CEC table index for the direction-dependent part (uses it and the next).
+    #[arg(long, default_value_t = 0)]
+    pub cec_table: u32,
+    #[command(flatten)]
+    pub corrections: CorrectionArgs,
+    #[command(flatten)]
+    pub table_options: TableOptionArgs,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct SynthLinearArgs {
     /// Output folder.
     #[arg(long)]
-    pub out: std::path::PathBuf,
+    pub out: PathBuf,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
-pub fn run(_cmd: LinearCommand, _globals: Globals) -> Result<i32> {
-    super::not_built("linear")
+pub fn run(cmd: LinearCommand, globals: Globals) -> Result<i32> {
+    match cmd {
+        LinearCommand::Analyze(args) => analyze(args, globals),
+        LinearCommand::AirIndex(args) => air_index(args),
+        LinearCommand::Budget(args) => budget(args),
+        LinearCommand::Table(args) => table(args, globals),
+    }
 }
 
-pub fn run_synth(_args: SynthLinearArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("synth linear")
+pub fn run_synth(args: SynthLinearArgs, globals: Globals) -> Result<i32> {
+    let (truth, rows) = errmap::synth::linear::generate(args.seed)?;
+    errmap::synth::linear::write(&args.out, &truth, &rows)?;
+    if !globals.quiet {
+        eprintln!(
+            "wrote {} readings ({} targets × 2 directions × {} runs) to {}",
+            rows.len(),
+            truth.targets_mm.len(),
+            truth.runs,
+            args.out.display()
+        );
+    }
+    Ok(0)
+}
+
+/// Read the runs and apply the requested corrections; notes go to `notes`.
+fn load_runs(path: &Path, c: &CorrectionArgs, notes: &mut Vec<String>) -> Result<RunFile> {
+    let mut file = read_runs(path)?;
+    if c.correct_air {
+        let (corrected, n) = correct_air(
+            &file,
+            &AirCorrection {
+                formula: c.air_formula,
+                wavelength_nm: c.wavelength_nm,
+                co2_ppm: c.co2_ppm,
+                datum_mm: c.datum_mm,
+            },
+        )?;
+        let mean = n.iter().sum::<f64>() / n.len().max(1) as f64;
+        notes.push(format!(
+            "air-corrected with {} at {} nm: mean n = {mean:.9}",
+            c.air_formula.name(),
+            c.wavelength_nm
+        ));
+        file = corrected;
+    }
+    if let Some(alpha) = c.material_expansion {
+        file = normalise_material(&file, alpha, c.datum_mm)?;
+        notes.push(format!("normalised to 20 °C with α = {alpha} µm/(m·K)"));
+    }
+    Ok(file)
+}
+
+fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> TableOptions {
+    TableOptions {
+        linuxcnc_type: t.linuxcnc_type,
+        axis,
+        fanuc_unit_um: t.fanuc_unit_um,
+        reference_mm: t.reference_mm,
+        cec_table,
+    }
+}
+
+/// One target of the analyze JSON (issue 4's shape, in its order).
+#[derive(serde::Serialize)]
+struct TargetJson {
+    target_mm: f64,
+    mean_up: f64,
+    mean_down: f64,
+    s_up: Option<f64>,
+    s_down: Option<f64>,
+    reversal: f64,
+    repeatability_up: Option<f64>,
+    repeatability_down: Option<f64>,
+    repeatability: Option<f64>,
+}
+
+fn targets_json(ev: &Evaluation) -> Vec<TargetJson> {
+    ev.targets
+        .iter()
+        .map(|t| TargetJson {
+            target_mm: t.target,
+            mean_up: t.mean_up,
+            mean_down: t.mean_down,
+            s_up: t.s_up,
+            s_down: t.s_down,
+            reversal: t.reversal,
+            repeatability_up: t.repeatability_up,
+            repeatability_down: t.repeatability_down,
+            repeatability: t.repeatability,
+        })
+        .collect()
+}
+
+#[derive(serde::Serialize)]
+struct AfterJson<'a> {
+    table: String,
+    targets: Vec<TargetJson>,
+    axis: &'a AxisFigures,
+}
+
+/// The analyze document: `standard`, `unit`, `targets`, `axis`, then the optional parts.
+#[derive(serde::Serialize)]
+struct AnalyzeJson<'a> {
+    standard: &'static str,
+    unit: &'static str,
+    targets: Vec<TargetJson>,
+    axis: &'a AxisFigures,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pitch_fit: Option<&'a PitchFit>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    after: Option<AfterJson<'a>>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    corrections: Vec<String>,
+}
+
+fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
+    println!("{text}");
+    Ok(())
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map(|v| format!("{v:9.3}"))
+        .unwrap_or_else(|| format!("{:>9}", "n/a"))
+}
+
+fn print_evaluation(title: &str, ev: &Evaluation) {
+    println!("{title} — {} (k = {}), µm", ev.standard, ev.k);
+    println!(
+        "{:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+        "target_mm", "mean↑", "mean↓", "s↑", "s↓", "B_i", "R↑_i", "R↓_i", "R_i"
+    );
+    for t in &ev.targets {
+        println!(
+            "{:>10.3} {:9.3} {:9.3} {} {} {:9.3} {} {} {}",
+            t.target,
+            t.mean_up,
+            t.mean_down,
+            fmt_opt(t.s_up),
+            fmt_opt(t.s_down),
+            t.reversal,
+            fmt_opt(t.repeatability_up),
+            fmt_opt(t.repeatability_down),
+            fmt_opt(t.repeatability)
+        );
+    }
+    let a = &ev.axis;
+    println!(
+        "axis: A = {}  A↑ = {}  A↓ = {}",
+        fmt_opt(a.A).trim(),
+        fmt_opt(a.A_up).trim(),
+        fmt_opt(a.A_down).trim()
+    );
+    println!(
+        "      R = {}  R↑ = {}  R↓ = {}",
+        fmt_opt(a.R).trim(),
+        fmt_opt(a.R_up).trim(),
+        fmt_opt(a.R_down).trim()
+    );
+    println!(
+        "      E = {:.3}  E↑ = {:.3}  E↓ = {:.3}  M = {:.3}  B = {:.3}  B̄ = {:.3}",
+        a.E, a.E_up, a.E_down, a.M, a.B, a.B_mean
+    );
+}
+
+fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
+    let mut notes = Vec::new();
+    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let samples = file.samples();
+    let ev = evaluate(&samples, args.standard)?;
+    let fit = match args.fit_pitch {
+        Some(lead) => {
+            let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
+            let es: Vec<f64> = ev.targets.iter().map(|t| t.mean).collect();
+            Some(fit_pitch(&xs, &es, lead)?)
+        }
+        None => None,
+    };
+    let after = match &args.apply_table {
+        Some(path) => {
+            let opts = table_options(&args.table_options, None, 0);
+            let opts = TableOptions {
+                reference_mm: opts.reference_mm.or(ev.targets.first().map(|t| t.target)),
+                ..opts
+            };
+            let table = read_table(path, args.table_format, &opts)?;
+            Some((
+                path.clone(),
+                evaluate(&apply(&samples, &table), args.standard)?,
+            ))
+        }
+        None => None,
+    };
+    if let Some(png) = &args.chart {
+        let title = format!(
+            "{} — positioning deviation",
+            args.runs
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        );
+        save_chart(
+            png,
+            &ChartInput {
+                title,
+                unit: "µm",
+                before: &ev,
+                after: after.as_ref().map(|a| &a.1),
+                fit: fit.as_ref(),
+            },
+        )?;
+    }
+    if args.json {
+        print_json(&AnalyzeJson {
+            standard: ev.standard.name(),
+            unit: "um",
+            targets: targets_json(&ev),
+            axis: &ev.axis,
+            pitch_fit: fit.as_ref(),
+            after: after.as_ref().map(|(path, a)| AfterJson {
+                table: path.display().to_string(),
+                targets: targets_json(a),
+                axis: &a.axis,
+            }),
+            corrections: notes.clone(),
+        })?;
+    } else {
+        for n in &notes {
+            println!("{n}");
+        }
+        print_evaluation(&args.runs.display().to_string(), &ev);
+        if let Some(f) = &fit {
+            println!(
+                "pitch fit (P = {} mm, {} targets): a = {:.3} µm, k = {:.3} µm/m, d = {:.3} µm, φ = {:.4} rad, residual RMS = {:.3} µm",
+                f.lead_mm, f.points, f.a_um, f.k_um_per_m, f.d_um, f.phi_rad, f.residual_rms_um
+            );
+        }
+        if let Some((path, after_ev)) = &after {
+            print_evaluation(&format!("after applying {}", path.display()), after_ev);
+        }
+    }
+    if let (Some(png), false) = (&args.chart, globals.quiet || args.json) {
+        eprintln!("chart written to {}", png.display());
+    }
+    Ok(0)
+}
+
+/// The deviations the runs would show with the table active: e − e_table(direction, x).
+fn apply(samples: &[Sample], table: &CompTable) -> Vec<Sample> {
+    samples
+        .iter()
+        .map(|s| Sample {
+            deviation: s.deviation - table.error_at(s.direction, s.target),
+            ..*s
+        })
+        .collect()
+}
+
+fn air_index(args: AirIndexArgs) -> Result<i32> {
+    let cond = AirConditions {
+        temp_c: args.temp_c,
+        pressure_kpa: args.pressure_kpa,
+        humidity_pct: args.humidity_pct,
+        wavelength_nm: args.wavelength_nm,
+        co2_ppm: args.co2_ppm,
+    };
+    let n = refractive_index(&cond, args.formula)?;
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct AirJson {
+            formula: &'static str,
+            n: f64,
+            air_wavelength_nm: f64,
+            #[serde(flatten)]
+            conditions: AirConditions,
+        }
+        print_json(&AirJson {
+            formula: args.formula.name(),
+            n,
+            air_wavelength_nm: cond.wavelength_nm / n,
+            conditions: cond,
+        })?;
+    } else {
+        println!("n = {n:.9} ({})", args.formula.name());
+        println!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
+    }
+    Ok(0)
+}
+
+fn budget(args: BudgetArgs) -> Result<i32> {
+    let setup = read_budget_setup(&args.setup)?;
+    let b = compute_budget(&setup)?;
+    if args.json {
+        print_json(&b)?;
+    } else {
+        println!("error budget over {} mm (µm):", b.length_mm);
+        for t in &b.terms {
+            println!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
+        }
+        println!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
+    }
+    Ok(0)
+}
+
+fn table(args: TableArgs, globals: Globals) -> Result<i32> {
+    let mut notes = Vec::new();
+    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
+    let table = CompTable::from_evaluation(&ev, args.spacing)?;
+    let opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
+    for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
+        errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
+        if !globals.quiet {
+            eprintln!(
+                "wrote {} ({} points, {} format)",
+                path.display(),
+                table.positions_mm.len(),
+                args.format.name()
+            );
+        }
+    }
+    if !globals.quiet {
+        for n in &notes {
+            eprintln!("{n}");
+        }
+        if args.format == TableFormat::Fanuc {
+            eprintln!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
+        }
+    }
+    Ok(0)
 }

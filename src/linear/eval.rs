@@ -6,7 +6,7 @@
 //!
 //! | figure | ISO 230-2:2014 / :1997 | GB 10931-1989 | VDI/DGQ 3441 |
 //! |---|---|---|---|
-//! | x̄_i↑, x̄_i↓ | mean of x_ij (2014 3.8, 1997 2.8) | X̄_j | x̄_j |
+//! | x̄_i↑, x̄_i↓ | mean of x_ij (2014 3.8) | X̄_j | x̄_j |
 //! | s_i↑, s_i↓ | √(Σ(x_ij − x̄_i)²/(n−1)) (2014 3.13) | S_j, same | s_j, same |
 //! | reversal B_i | x̄_i↑ − x̄_i↓ (2014 3.10) | B_j | U_j |
 //! | repeatability ↑ at i | R_i↑ = 4 s_i↑ (2014 3.14) | R_j = 6 S_j | 6 s_i↑ (Ps of one direction, errmap) |
@@ -21,7 +21,7 @@
 //! | A | max over both directions of x̄ + 2s − min of x̄ − 2s (2014 3.22) | same with 3S | P = max(x̄_j + ½(\|U_j\| + Ps_j)) − min(x̄_j − ½(\|U_j\| + Ps_j)) |
 //!
 //! ISO 230-2:1997 (and GB/T 17421.2-2000, its identical Chinese adoption) defines the same
-//! figures with the same 2s/4s factors as the 2014 edition (clause 2 of 1997 = clause 3 of 2014);
+//! figures with the same 2s/4s factors as the 2014 edition in its terms-and-definitions clause;
 //! the 2014 edition adds the measurement-uncertainty estimation (ISO/TR 230-9) and k = 2 wording.
 //! GB 10931-1989 (seed 002) uses ±3S: repeatability 6S, accuracy (X̄ + 3S)max − (X̄ − 3S)min.
 //! VDI/DGQ 3441 (1977): position scatter Ps = 6·s̄, reversal span U, position deviation Pa,
@@ -252,7 +252,7 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
         let repeatability_down = s_down.map(|s| 2.0 * k * s);
         let repeatability = match (s_up, s_down) {
             (Some(su), Some(sd)) => Some(match standard {
-                // ISO 230-2:2014 3.15 (1997 2.15): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
+                // ISO 230-2:2014 3.15 (same in 1997): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
                 Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => {
                     (2.0 * su + 2.0 * sd + reversal.abs())
                         .max(4.0 * su)

@@ -1,10 +1,31 @@
 //! Linear axes measured by laser interferometer: run files, positioning evaluation by standard, air and material correction, error budget, pitch-error fit, compensation tables.
 
+mod air;
+mod budget;
+mod chart;
+mod correct;
 mod eval;
+mod pitch;
 mod runs;
+mod table;
 
+pub use air::{
+    refractive_index, saturation_vapour_pressure_pa, sensitivities, vapour_pressure_pa,
+    AirConditions, AirFormula, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+};
+pub use budget::{
+    compute_budget, read_budget_setup, AbbeSetup, AirSetup, AlignmentSetup, Budget, BudgetSetup,
+    BudgetTerm, ThermalSetup,
+};
+pub use chart::{save_chart, ChartInput};
+pub use correct::{correct_air, normalise_material, AirCorrection, REFERENCE_TEMP_C};
 pub use eval::{evaluate, AxisFigures, Evaluation, Standard, TargetFigures};
+pub use pitch::{fit_pitch, PitchFit};
 pub use runs::{
     parse_runs, read_runs, Direction, Env, RunFile, RunRow, Sample, RUN_COLUMNS,
     TARGET_TOLERANCE_MM,
+};
+pub use table::{
+    detect_format, read_table, render_table, sinumerik_cec_path, CompTable, TableFormat,
+    TableOptions, FANUC_MAX_POINTS, LINUXCNC_MAX_LINES,
 };
