@@ -475,3 +475,45 @@ fn evaluate_shows_the_compensation_shrinking_the_error() {
     let csv = std::fs::read_to_string(tmp.path().join("evaluate.csv")).unwrap();
     assert_eq!(csv.lines().count(), times.len() + 1);
 }
+
+#[test]
+fn synth_is_deterministic_and_seeded() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (out, seed) in [("a", "7"), ("b", "7"), ("c", "8")] {
+        run(
+            tmp.path(),
+            &[
+                "synth",
+                "thermal",
+                "--out",
+                out,
+                "--seed",
+                seed,
+                "--campaigns",
+                "2",
+                "--repeats",
+                "1",
+            ],
+            0,
+        );
+    }
+    let read = |d: &str, f: &str| std::fs::read(tmp.path().join(d).join(f)).unwrap();
+    for f in [
+        "sensors.csv",
+        "calibration.csv",
+        "truth.json",
+        "campaign-1-coolant-off/runs.csv",
+        "campaign-2-coolant-on/temperatures.csv",
+    ] {
+        assert_eq!(
+            read("a", f),
+            read("b", f),
+            "{f} differs between runs of one seed"
+        );
+    }
+    assert_ne!(
+        read("a", "campaign-1-coolant-off/runs.csv"),
+        read("c", "campaign-1-coolant-off/runs.csv"),
+        "another seed must give other noise"
+    );
+}
