@@ -95,7 +95,8 @@ pub struct IngestArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
-    /// Campaign folders (or campaign.toml files); with --from-store, the stored campaigns.
+    /// Campaign folders (or campaign.toml files). With --from-store they only locate the
+    /// default store (thermal.sqlite beside them).
     pub campaigns: Vec<PathBuf>,
     /// Write the model here.
     #[arg(short, long)]
@@ -105,7 +106,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub from_store: bool,
     /// With --from-store: only these stored campaigns (repeatable).
-    #[arg(long = "campaign")]
+    #[arg(long = "campaign", value_name = "NAME")]
     pub campaign_names: Vec<String>,
     /// Store file (default: thermal.sqlite beside the first campaign, or in the current folder).
     /// Given without --from-store, the model is also saved there as a new version.
