@@ -143,6 +143,7 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
         }
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
             .label_font((FONT, 14))
             .border_style(BLACK)
             .background_style(WHITE.mix(0.85))
