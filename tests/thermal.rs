@@ -406,6 +406,32 @@ fn compensate_streams_the_values_of_the_model() {
         "{msg}"
     );
     assert!(!tmp.path().join("bad_out.csv").exists());
+    // The same first row with the nut as a Pt100 logged in ohms: R(25 °C) = 100·(1 + A·25 +
+    // B·625) = 109.73465625 Ω by IEC 60751, so the model sees 25 °C (+0.5 calibration) as before.
+    let ohm_model = MODEL.replacen(r#""unit": "c""#, r#""unit": "ohm""#, 1);
+    std::fs::write(tmp.path().join("ohm.json"), ohm_model).unwrap();
+    std::fs::write(
+        tmp.path().join("ohm.csv"),
+        "time_s,position_mm,direction,nut,ambient_c,coolant
+0.5,250,+,109.73465625,21,off
+",
+    )
+    .unwrap();
+    run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "ohm.json",
+            "ohm.csv",
+            "-o",
+            "ohm_out.csv",
+        ],
+        0,
+    );
+    let out = std::fs::read_to_string(tmp.path().join("ohm_out.csv")).unwrap();
+    assert!(out.ends_with("0.5,250,+,12.2500,-12.2500\n"), "{out}");
     // A hand-edited model without coolant states is refused, not a crash.
     let broken = MODEL.replace(
         r#""coolant_states": ["off", "on"]"#,
