@@ -43,7 +43,11 @@ struct Columns {
 
 fn columns(model: &ThermalModel, headers: &csv::ByteRecord, source: &Path) -> Result<Columns> {
     // Fields are trimmed where they are used (cheaper than trimming whole records).
-    let find = |name: &str| headers.iter().position(|h| h.trim_ascii() == name.as_bytes());
+    let find = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h.trim_ascii() == name.as_bytes())
+    };
     let need = |name: &str, hint: &str| {
         find(name).ok_or_else(|| {
             Error::input(
