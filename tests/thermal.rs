@@ -318,6 +318,21 @@ fn bad_input_names_file_line_and_column() {
     hand_campaign(tmp.path(), runs, "time_s,nut,room\n0,20,20\n60,20,20\n");
     let msg = stderr(&run(tmp.path(), &["thermal", "difference", "hand"], 2));
     assert!(msg.contains("runs.csv:3, column time_s"), "{msg}");
+    // A misspelt key in campaign.toml names its line.
+    std::fs::write(
+        tmp.path().join("hand/campaign.toml"),
+        "name = \"hand\"\ncoolent = \"on\"\n",
+    )
+    .unwrap();
+    let msg = stderr(&run(
+        tmp.path(),
+        &["thermal", "fit", "-o", "m.json", "hand"],
+        2,
+    ));
+    assert!(
+        msg.contains("campaign.toml:2") && msg.contains("coolent"),
+        "{msg}"
+    );
 }
 
 /// A model written by hand: Er(x) = 1 + 2·s (forward) and 3 (reverse) over 0 … 500 mm, Px = 0,
