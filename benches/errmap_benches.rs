@@ -6,6 +6,7 @@ mod linear_bench;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 mod rotary_bench;
+mod thermal_bench;
 mod toolpath_bench;
 
 fn csv_table_parse(c: &mut Criterion) {
@@ -31,10 +32,12 @@ criterion_group!(
 );
 criterion_group!(interp_benches, interp_bench::interp_benches);
 criterion_group!(toolpath_benches, toolpath_bench::toolpath_compensate);
+criterion_group!(thermal_benches, thermal_bench::compensate_throughput);
 criterion_main!(
     io_benches,
     interp_benches,
     linear_bench::linear_benches,
     rotary_benches,
+    thermal_benches,
     toolpath_benches
 );

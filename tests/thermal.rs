@@ -1,0 +1,560 @@
+//! End-to-end tests of `errmap thermal …` and `errmap synth thermal`, running the real binary.
+
+use errmap::thermal::store::Store;
+use serde_json::Value;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn errmap() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_errmap"))
+}
+
+/// Run errmap in `dir`; on an unexpected exit code print the command, its output and the folder.
+fn run(dir: &Path, args: &[&str], expect: i32) -> Output {
+    let out = errmap().args(args).current_dir(dir).output().unwrap();
+    if out.status.code() != Some(expect) {
+        let listing: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        panic!(
+            "errmap {} exited {:?} (expected {expect})\nstdout:\n{}\nstderr:\n{}\nfolder: {listing:?}",
+            args.join(" "),
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    out
+}
+
+fn json(out: &Output) -> Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not one JSON document ({e}):\n{}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn campaigns(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.path().join("campaign.toml").exists())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// synth → calibrate: a folder of campaigns with calibrated sensors.
+fn synth(dir: &Path, extra: &[&str]) -> PathBuf {
+    let mut args = vec!["synth", "thermal", "--out", "syn"];
+    args.extend_from_slice(extra);
+    run(dir, &args, 0);
+    run(
+        dir,
+        &[
+            "thermal",
+            "calibrate",
+            "--sensors",
+            "syn/sensors.csv",
+            "syn/calibration.csv",
+        ],
+        0,
+    );
+    dir.join("syn")
+}
+
+#[test]
+fn fit_recovers_gains_within_5_percent_and_predicts_held_out_campaigns() {
+    let tmp = tempfile::tempdir().unwrap();
+    let syn = synth(tmp.path(), &[]);
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(syn.join("truth.json")).unwrap()).unwrap();
+    let names = campaigns(&syn);
+    assert_eq!(names.len(), 4);
+    let mut args = vec![
+        "thermal".to_string(),
+        "fit".into(),
+        "-o".into(),
+        "model.json".into(),
+        "--json".into(),
+    ];
+    args.extend(names.iter().map(|n| format!("syn/{n}")));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let model = json(&run(tmp.path(), &args, 0));
+    // The file and the JSON on stdout are the same model.
+    let file: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("model.json")).unwrap())
+            .unwrap();
+    assert_eq!(file, model);
+    let noise = truth["laser_noise_um"].as_f64().unwrap();
+    for (di, dm) in model["directions"].as_array().unwrap().iter().enumerate() {
+        let tdir = &truth["directions"][di];
+        for g in dm["gains"].as_array().unwrap() {
+            let coolant = g["coolant"].as_str().unwrap();
+            let t = tdir["gains"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|t| t["coolant"] == coolant)
+                .unwrap();
+            let k = g["k_um_per_m_k"].as_array().unwrap();
+            for (fitted, want) in k
+                .iter()
+                .zip([&t["k_nut_um_per_m_k"], &t["k_bearing_um_per_m_k"]])
+            {
+                let (fitted, want) = (fitted.as_f64().unwrap(), want.as_f64().unwrap());
+                assert!(
+                    (fitted / want - 1.0).abs() < 0.05,
+                    "{di} {coolant}: {fitted} vs {want}"
+                );
+            }
+        }
+    }
+    for c in model["campaigns"].as_array().unwrap() {
+        let loco = c["loco_rms_um"].as_f64().unwrap();
+        assert!(loco < 1.5 * noise, "{}: held-out RMS {loco} µm", c["name"]);
+    }
+}
+
+#[test]
+fn store_round_trip_versions_and_interrupted_ingests() {
+    let tmp = tempfile::tempdir().unwrap();
+    let syn = synth(
+        tmp.path(),
+        &["--campaigns", "2", "--repeats", "1", "--every-s", "1800"],
+    );
+    let names = campaigns(&syn);
+    let first = format!("syn/{}", names[0]);
+    let second = format!("syn/{}", names[1]);
+    // Default store: thermal.sqlite beside the campaign folders.
+    run(tmp.path(), &["thermal", "ingest", &first], 0);
+    let db = syn.join("thermal.sqlite");
+    assert!(db.exists());
+    let before = Store::open(&db).unwrap().counts().unwrap();
+    assert_eq!(before.campaigns, 1);
+
+    // An injected failure part-way: exit 3 and nothing of the campaign stored.
+    let out = run(
+        tmp.path(),
+        &["thermal", "ingest", &second, "--fail-after-samples", "200"],
+        3,
+    );
+    assert!(stderr(&out).contains("injected"), "{}", stderr(&out));
+    assert_eq!(Store::open(&db).unwrap().counts().unwrap(), before);
+
+    // A process killed inside the transaction: it pauses after 300 samples (waiting on stdin),
+    // the test kills it there, and the store is as it was.
+    let mut child = errmap()
+        .args(["thermal", "ingest", &second, "--pause-after-samples", "300"])
+        .current_dir(tmp.path())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    err.read_line(&mut line).unwrap();
+    assert!(line.contains("paused after 300"), "{line}");
+    // WAL: a reader is not blocked by the open write transaction and sees the last commit.
+    let reader = Store::open(&db).unwrap();
+    assert_eq!(reader.counts().unwrap(), before);
+    drop(reader);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let store = Store::open(&db).unwrap();
+    assert_eq!(store.counts().unwrap(), before);
+    drop(store);
+
+    // Then a real ingest of the second campaign and two fits from the store.
+    run(tmp.path(), &["thermal", "ingest", &second], 0);
+    let again = run(tmp.path(), &["thermal", "ingest", &second], 2);
+    assert!(stderr(&again).contains("already in"), "{}", stderr(&again));
+    let db_arg = db.to_string_lossy().into_owned();
+    for out in ["m1.json", "m2.json"] {
+        run(
+            tmp.path(),
+            &[
+                "thermal",
+                "fit",
+                "--from-store",
+                "--db",
+                &db_arg,
+                "--order",
+                "3",
+                "-o",
+                out,
+            ],
+            0,
+        );
+    }
+    let listed = json(&run(
+        tmp.path(),
+        &["thermal", "models", "--db", &db_arg, "--json"],
+        0,
+    ));
+    let versions: Vec<i64> = listed["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["version"].as_i64().unwrap())
+        .collect();
+    assert_eq!(versions, [1, 2]);
+    assert_eq!(listed["counts"]["campaigns"], 2);
+    assert_eq!(
+        listed["models"][0]["campaigns"].as_array().unwrap().len(),
+        2
+    );
+
+    // Round trip: the model fitted from the store equals the one fitted from the files.
+    let mut args = vec![
+        "thermal",
+        "fit",
+        "--order",
+        "3",
+        "-o",
+        "files.json",
+        &first,
+        &second,
+    ];
+    args.retain(|a| !a.is_empty());
+    run(tmp.path(), &args, 0);
+    let a: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("m1.json")).unwrap())
+            .unwrap();
+    let b: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("files.json")).unwrap())
+            .unwrap();
+    for d in 0..2 {
+        let ka = a["directions"][d]["gains"][0]["k_um_per_m_k"][0]
+            .as_f64()
+            .unwrap();
+        let kb = b["directions"][d]["gains"][0]["k_um_per_m_k"][0]
+            .as_f64()
+            .unwrap();
+        assert!((ka - kb).abs() < 1e-9 * kb.abs(), "{ka} vs {kb}");
+    }
+}
+
+const SENSORS: &str = "name,role,unit,offset_c,scale,median_window,sg_window,sg_order\n\
+    nut,nut,c,,,1,1,0\nroom,ambient,c,,,1,1,0\n";
+
+/// A hand-made campaign: targets 0, 100, 200 mm, one run each way at two times.
+fn hand_campaign(dir: &Path, runs: &str, temps: &str) -> PathBuf {
+    let c = dir.join("hand");
+    std::fs::create_dir_all(&c).unwrap();
+    std::fs::write(dir.join("sensors.csv"), SENSORS).unwrap();
+    std::fs::write(
+        c.join("campaign.toml"),
+        "name = \"hand\"\nsensors = \"../sensors.csv\"\nmeasurement_s = 60\n",
+    )
+    .unwrap();
+    std::fs::write(c.join("runs.csv"), runs).unwrap();
+    std::fs::write(c.join("temperatures.csv"), temps).unwrap();
+    c
+}
+
+#[test]
+fn difference_gives_et_and_the_line_of_each_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Cold E = 1, 2, 3 µm; warm E = 1, 3, 5 µm (forward) → Et = 0, 1, 2: slope 10 µm/m, offset 0.
+    // Reverse: cold 2, 2, 2; warm 3, 3.5, 4 → Et = 1, 1.5, 2: slope 5 µm/m, offset 1.
+    let runs = "run,direction,target_mm,deviation_um,time_s\n\
+        1,+,0,1,0\n1,+,100,2,0\n1,+,200,3,0\n1,-,200,2,0\n1,-,100,2,0\n1,-,0,2,0\n\
+        2,+,0,1,600\n2,+,100,3,600\n2,+,200,5,600\n2,-,200,4,600\n2,-,100,3.5,600\n2,-,0,3,600\n";
+    let temps = "time_s,nut,room\n0,20,20\n60,20,20\n600,24,20\n660,24,20\n";
+    hand_campaign(tmp.path(), runs, temps);
+    let out = json(&run(
+        tmp.path(),
+        &["thermal", "difference", "hand", "--json"],
+        0,
+    ));
+    let lines = out["lines"].as_array().unwrap();
+    let line = |dir: &str, t: f64| {
+        lines
+            .iter()
+            .find(|l| l["direction"] == dir && l["time_s"].as_f64() == Some(t))
+            .unwrap()
+            .clone()
+    };
+    let f = line("forward", 600.0);
+    assert!((f["slope_um_per_m"].as_f64().unwrap() - 10.0).abs() < 1e-9);
+    assert!(f["offset_um"].as_f64().unwrap().abs() < 1e-9);
+    assert!((f["temperatures_c"]["nut"].as_f64().unwrap() - 24.0).abs() < 1e-12);
+    let r = line("reverse", 600.0);
+    assert!((r["slope_um_per_m"].as_f64().unwrap() - 5.0).abs() < 1e-9);
+    assert!((r["offset_um"].as_f64().unwrap() - 1.0).abs() < 1e-9);
+    // The cold line is zero by construction.
+    assert_eq!(line("forward", 0.0)["slope_um_per_m"].as_f64(), Some(0.0));
+    let csv = std::fs::read_to_string(tmp.path().join("hand/difference/difference.csv")).unwrap();
+    assert!(csv.contains("600,+,200,5.0000,3.0000,2.0000"), "{csv}");
+    assert!(tmp.path().join("hand/difference/fan.png").exists());
+    assert!(tmp.path().join("hand/difference/lines.csv").exists());
+}
+
+#[test]
+fn bad_input_names_file_line_and_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    let runs = "run,direction,target_mm,deviation_um,time_s\n1,+,0,1,0\n1,-,0,1,0\n";
+    let temps = "time_s,nut,room\n0,20,20\n60,20,abc\n";
+    hand_campaign(tmp.path(), runs, temps);
+    let out = run(tmp.path(), &["thermal", "difference", "hand"], 2);
+    let msg = stderr(&out);
+    assert!(
+        msg.contains("temperatures.csv:3, column room") && msg.contains("'abc'"),
+        "{msg}"
+    );
+    // A run row without time_s.
+    let runs = "run,direction,target_mm,deviation_um,time_s\n1,+,0,1,0\n1,-,0,1,\n";
+    hand_campaign(tmp.path(), runs, "time_s,nut,room\n0,20,20\n60,20,20\n");
+    let msg = stderr(&run(tmp.path(), &["thermal", "difference", "hand"], 2));
+    assert!(msg.contains("runs.csv:3, column time_s"), "{msg}");
+    // A misspelt key in campaign.toml names its line.
+    std::fs::write(
+        tmp.path().join("hand/campaign.toml"),
+        "name = \"hand\"\ncoolent = \"on\"\n",
+    )
+    .unwrap();
+    let msg = stderr(&run(
+        tmp.path(),
+        &["thermal", "fit", "-o", "m.json", "hand"],
+        2,
+    ));
+    assert!(
+        msg.contains("campaign.toml:2") && msg.contains("coolent"),
+        "{msg}"
+    );
+}
+
+/// A model written by hand: Er(x) = 1 + 2·s (forward) and 3 (reverse) over 0 … 500 mm, Px = 0,
+/// nut gains 10 (off) and 4 (on) µm/m/K, ρ = 5 µm/m/K, references: nut 0.5 °C above a 20 °C room.
+const MODEL: &str = r#"{
+  "format": "errmap-thermal-model/1", "axis": "X", "reference_point_mm": 0.0,
+  "x_min_mm": 0.0, "x_max_mm": 500.0, "gain_sensors": ["nut"], "ambient_sensor": "room",
+  "sensors": [
+    {"name": "nut", "role": "nut", "unit": "c", "calibration": {"offset_c": 0.5, "scale": 1.0},
+     "filter": {"median_window": 1, "sg_window": 1, "sg_order": 0}},
+    {"name": "room", "role": "ambient", "unit": "c", "calibration": {"offset_c": 0.0, "scale": 1.0},
+     "filter": {"median_window": 1, "sg_window": 1, "sg_order": 0}}],
+  "reference_rise_c": [0.5], "reference_ambient_c": 20.0, "coolant_states": ["off", "on"],
+  "directions": [
+    {"direction": "forward", "order": 1, "order_chosen_by": "given", "cv_rms_um_by_order": [],
+     "legendre_um": [1.0, 2.0], "legendre_se_um": [null, null],
+     "gains": [{"coolant": "off", "k_um_per_m_k": [10.0], "k_se_um_per_m_k": [null]},
+               {"coolant": "on", "k_um_per_m_k": [4.0], "k_se_um_per_m_k": [null]}],
+     "rho_um_per_m_k": 5.0, "rho_se_um_per_m_k": null, "rho_fitted": false,
+     "residual_rms_um": 0.0, "points": 0},
+    {"direction": "reverse", "order": 0, "order_chosen_by": "given", "cv_rms_um_by_order": [],
+     "legendre_um": [3.0], "legendre_se_um": [null],
+     "gains": [{"coolant": "off", "k_um_per_m_k": [10.0], "k_se_um_per_m_k": [null]},
+               {"coolant": "on", "k_um_per_m_k": [4.0], "k_se_um_per_m_k": [null]}],
+     "rho_um_per_m_k": 5.0, "rho_se_um_per_m_k": null, "rho_fitted": false,
+     "residual_rms_um": 0.0, "points": 0}],
+  "campaigns": [], "loco_rms_um": null
+}"#;
+
+#[test]
+fn compensate_streams_the_values_of_the_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("model.json"), MODEL).unwrap();
+    // Row 1: x = 250 (s = 0), forward, nut reads 25 (+0.5 calibration = 25.5), room 21, off:
+    //   ΔT_nut = (25.5 − 21) − 0.5 = 4, ΔT_env = 1, tanβ = 10·4 + 5·1 = 45 µm/m,
+    //   E = 1 + 2·0 + 45·0.25 = 12.25 µm, compensation −12.25.
+    // Row 2: x = 500 (s = 1), reverse, nut 19.5 (20 calibrated), room 20, on:
+    //   ΔT_nut = 0 − 0.5 = −0.5, tanβ = 4·(−0.5) = −2, E = 3 − 2·0.5 = 2 µm.
+    // Row 3: x = 0, forward, warm: E = Er(0) = 1 + 2·(−1) = −1 (no lever at Px).
+    let log = "time_s,position_mm,direction,nut,ambient_c,coolant,spindle_rpm\n\
+        0.5,250.000,+,25,21,off,1000\n1.0,500,-,19.5,20,on,0\n1.5,0,+,30,22,off,0\n";
+    std::fs::write(tmp.path().join("log.csv"), log).unwrap();
+    let summary = json(&run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "model.json",
+            "log.csv",
+            "-o",
+            "out.csv",
+            "--json",
+        ],
+        0,
+    ));
+    assert_eq!(summary["rows"], 3);
+    assert_eq!(summary["outside_travel"], 0);
+    let out = std::fs::read_to_string(tmp.path().join("out.csv")).unwrap();
+    assert_eq!(
+        out,
+        "time_s,position_mm,direction,error_um,compensation_um\n\
+         0.5,250.000,+,12.2500,-12.2500\n1.0,500,-,2.0000,-2.0000\n1.5,0,+,-1.0000,1.0000\n"
+    );
+    // An unknown coolant state names its line and leaves no output file behind.
+    std::fs::write(
+        tmp.path().join("bad.csv"),
+        "time_s,position_mm,direction,nut,ambient_c,coolant\n0,1,+,20,20,off\n1,1,+,20,20,mist\n",
+    )
+    .unwrap();
+    let msg = stderr(&run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "model.json",
+            "bad.csv",
+            "-o",
+            "bad_out.csv",
+        ],
+        2,
+    ));
+    assert!(
+        msg.contains("bad.csv:3, column coolant") && msg.contains("mist"),
+        "{msg}"
+    );
+    assert!(!tmp.path().join("bad_out.csv").exists());
+    // The same first row with the nut as a Pt100 logged in ohms: R(25 °C) = 100·(1 + A·25 +
+    // B·625) = 109.73465625 Ω by IEC 60751, so the model sees 25 °C (+0.5 calibration) as before.
+    let ohm_model = MODEL.replacen(r#""unit": "c""#, r#""unit": "ohm""#, 1);
+    std::fs::write(tmp.path().join("ohm.json"), ohm_model).unwrap();
+    std::fs::write(
+        tmp.path().join("ohm.csv"),
+        "time_s,position_mm,direction,nut,ambient_c,coolant
+0.5,250,+,109.73465625,21,off
+",
+    )
+    .unwrap();
+    run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "ohm.json",
+            "ohm.csv",
+            "-o",
+            "ohm_out.csv",
+        ],
+        0,
+    );
+    let out = std::fs::read_to_string(tmp.path().join("ohm_out.csv")).unwrap();
+    assert!(out.ends_with("0.5,250,+,12.2500,-12.2500\n"), "{out}");
+    // A hand-edited model without coolant states is refused, not a crash.
+    let broken = MODEL.replace(
+        r#""coolant_states": ["off", "on"]"#,
+        r#""coolant_states": []"#,
+    );
+    std::fs::write(tmp.path().join("broken.json"), broken).unwrap();
+    let msg = stderr(&run(
+        tmp.path(),
+        &[
+            "thermal",
+            "compensate",
+            "--model",
+            "broken.json",
+            "log.csv",
+            "-o",
+            "x.csv",
+        ],
+        2,
+    ));
+    assert!(
+        msg.contains("broken.json") && msg.contains("coolant"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn evaluate_shows_the_compensation_shrinking_the_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let syn = synth(
+        tmp.path(),
+        &["--campaigns", "2", "--repeats", "2", "--every-s", "1800"],
+    );
+    let names = campaigns(&syn);
+    let c1 = format!("syn/{}", names[0]);
+    run(
+        tmp.path(),
+        &["thermal", "fit", "--order", "3", "-o", "model.json", &c1],
+        0,
+    );
+    let report = json(&run(
+        tmp.path(),
+        &[
+            "thermal",
+            "evaluate",
+            "--model",
+            "model.json",
+            &c1,
+            "--json",
+        ],
+        0,
+    ));
+    assert_eq!(report["standard"], "iso230-2:2014");
+    let times = report["times"].as_array().unwrap();
+    assert!(times.len() >= 5);
+    for t in times {
+        let before = t["before"]["E"].as_f64().unwrap();
+        let after = t["after"]["E"].as_f64().unwrap();
+        // The fitted campaign: what is left is noise (σ = 0.5 µm), far below the thermal error.
+        assert!(
+            after < 3.0 && after < before,
+            "t = {}: E {before} → {after}",
+            t["time_s"]
+        );
+        assert!(t["rms_after_um"].as_f64().unwrap() < 0.8);
+    }
+    assert!(tmp.path().join("evaluate.png").exists());
+    let csv = std::fs::read_to_string(tmp.path().join("evaluate.csv")).unwrap();
+    assert_eq!(csv.lines().count(), times.len() + 1);
+}
+
+#[test]
+fn synth_is_deterministic_and_seeded() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (out, seed) in [("a", "7"), ("b", "7"), ("c", "8")] {
+        run(
+            tmp.path(),
+            &[
+                "synth",
+                "thermal",
+                "--out",
+                out,
+                "--seed",
+                seed,
+                "--campaigns",
+                "2",
+                "--repeats",
+                "1",
+            ],
+            0,
+        );
+    }
+    let read = |d: &str, f: &str| std::fs::read(tmp.path().join(d).join(f)).unwrap();
+    for f in [
+        "sensors.csv",
+        "calibration.csv",
+        "truth.json",
+        "campaign-1-coolant-off/runs.csv",
+        "campaign-2-coolant-on/temperatures.csv",
+    ] {
+        assert_eq!(
+            read("a", f),
+            read("b", f),
+            "{f} differs between runs of one seed"
+        );
+    }
+    assert_ne!(
+        read("a", "campaign-1-coolant-off/runs.csv"),
+        read("c", "campaign-1-coolant-off/runs.csv"),
+        "another seed must give other noise"
+    );
+}
