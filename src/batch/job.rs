@@ -142,9 +142,7 @@ fn line_col(text: &str, byte: usize) -> (u64, u64) {
         .iter()
         .rposition(|&b| b == b'\n')
         .map_or(0, |p| p + 1);
-    let col = 1 + text
-        .get(line_start..end)
-        .map_or(0, |s| s.chars().count()) as u64;
+    let col = 1 + text.get(line_start..end).map_or(0, |s| s.chars().count()) as u64;
     (line, col)
 }
 
@@ -207,7 +205,11 @@ impl Job {
         }
         if let Some(z) = self.nominal_plane_mm {
             if !z.is_finite() {
-                return Err(bad("nominal_plane_mm", format!("{z} is not finite"), "give the nominal coordinate in mm"));
+                return Err(bad(
+                    "nominal_plane_mm",
+                    format!("{z} is not finite"),
+                    "give the nominal coordinate in mm",
+                ));
             }
         }
         if let Some([a, b, c, d]) = self.domain {
@@ -228,7 +230,11 @@ impl Job {
         ];
         for (key, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(bad(key, format!("{v} must be a positive number"), "see docs/job.md for the default"));
+                return Err(bad(
+                    key,
+                    format!("{v} must be a positive number"),
+                    "see docs/job.md for the default",
+                ));
             }
         }
         if let Some([lo, hi]) = self.toolpaths.zone {
@@ -248,7 +254,11 @@ impl Job {
             ));
         }
         self.model.validate().map_err(|e| {
-            Error::input(Location::file(path), format!("[model]: {e}"), "see docs/job.md")
+            Error::input(
+                Location::file(path),
+                format!("[model]: {e}"),
+                "see docs/job.md",
+            )
         })
     }
 }
@@ -273,7 +283,10 @@ impl JobFile {
                 "write a glob such as \"probes/*.csv\"",
             )
         })?;
-        let mut files: Vec<PathBuf> = paths.filter_map(|p| p.ok()).filter(|p| p.is_file()).collect();
+        let mut files: Vec<PathBuf> = paths
+            .filter_map(|p| p.ok())
+            .filter(|p| p.is_file())
+            .collect();
         files.sort();
         if files.is_empty() {
             return Err(Error::input(
@@ -355,14 +368,20 @@ map = "part"
 
     #[test]
     fn errors_name_line_and_column() {
-        let err = Job::parse(Path::new("j.toml"), "family = \"a\"\n\n[clean]\nk_sigmaa = 3\n")
-            .unwrap_err()
-            .to_string();
+        let err = Job::parse(
+            Path::new("j.toml"),
+            "family = \"a\"\n\n[clean]\nk_sigmaa = 3\n",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.starts_with("j.toml:4, column 1:"), "{err}");
         assert!(err.contains("k_sigmaa"), "{err}");
-        let err = Job::parse(Path::new("j.toml"), "family = \"a\"\ngrid_step_mm = \"x\"\n")
-            .unwrap_err()
-            .to_string();
+        let err = Job::parse(
+            Path::new("j.toml"),
+            "family = \"a\"\ngrid_step_mm = \"x\"\n",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.starts_with("j.toml:2, column 16:"), "{err}");
         let err = Job::parse(Path::new("j.toml"), "normal = \"w\"\n")
             .unwrap_err()
@@ -371,6 +390,9 @@ map = "part"
         let err = Job::parse(Path::new("j.toml"), "grid_step_mm = -1\n")
             .unwrap_err()
             .to_string();
-        assert!(err.contains("grid_step_mm") && err.contains("positive"), "{err}");
+        assert!(
+            err.contains("grid_step_mm") && err.contains("positive"),
+            "{err}"
+        );
     }
 }

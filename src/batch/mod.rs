@@ -3,6 +3,7 @@
 pub mod job;
 pub mod run;
 pub mod summary;
+mod tp;
 
 pub use job::{Job, JobFile, MapChoice};
 pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan};
@@ -26,9 +27,16 @@ impl Shard {
         let (a, b) = text
             .split_once('/')
             .ok_or_else(|| Error::usage(format!("--shard '{text}' is not INDEX/COUNT"), hint))?;
-        let index: usize = a.trim().parse().map_err(|_| Error::usage(format!("--shard index '{a}' is not a number"), hint))?;
-        let count: usize = b.trim().parse().map_err(|_| Error::usage(format!("--shard count '{b}' is not a number"), hint))?;
-        Shard::new(index, count).ok_or_else(|| Error::usage(format!("--shard {index}/{count} is out of range"), hint))
+        let index: usize = a
+            .trim()
+            .parse()
+            .map_err(|_| Error::usage(format!("--shard index '{a}' is not a number"), hint))?;
+        let count: usize = b
+            .trim()
+            .parse()
+            .map_err(|_| Error::usage(format!("--shard count '{b}' is not a number"), hint))?;
+        Shard::new(index, count)
+            .ok_or_else(|| Error::usage(format!("--shard {index}/{count} is out of range"), hint))
     }
 
     pub fn new(index: usize, count: usize) -> Option<Shard> {
@@ -38,7 +46,10 @@ impl Shard {
     /// The shard from a scheduler's environment: `SLURM_ARRAY_TASK_ID` (with
     /// `SLURM_ARRAY_TASK_COUNT`, or `count`) or `JOB_COMPLETION_INDEX` of a Kubernetes
     /// Indexed Job (with `count`). `None` when neither variable is set.
-    pub fn from_env(count: Option<usize>, env: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>> {
+    pub fn from_env(
+        count: Option<usize>,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Option<Shard>> {
         let hint = "pass --shards COUNT (the number of array tasks / completions)";
         for (var, count_var) in [
             ("SLURM_ARRAY_TASK_ID", Some("SLURM_ARRAY_TASK_COUNT")),
@@ -54,13 +65,25 @@ impl Shard {
                 None => count_var
                     .and_then(|v| env(v))
                     .and_then(|v| v.trim().parse().ok())
-                    .ok_or_else(|| Error::usage(format!("{var} is set but the number of shards is not known"), hint))?,
+                    .ok_or_else(|| {
+                        Error::usage(
+                            format!("{var} is set but the number of shards is not known"),
+                            hint,
+                        )
+                    })?,
             };
             // Slurm arrays often start at 1 (--array=1-N); accept index == count as the last shard.
-            let index = if var == "SLURM_ARRAY_TASK_ID" && index == count { 0 } else { index };
-            return Shard::new(index, count)
-                .map(Some)
-                .ok_or_else(|| Error::usage(format!("{var}={index} is not below the shard count {count}"), hint));
+            let index = if var == "SLURM_ARRAY_TASK_ID" && index == count {
+                0
+            } else {
+                index
+            };
+            return Shard::new(index, count).map(Some).ok_or_else(|| {
+                Error::usage(
+                    format!("{var}={index} is not below the shard count {count}"),
+                    hint,
+                )
+            });
         }
         Ok(None)
     }
@@ -75,7 +98,10 @@ impl Shard {
 pub fn part_names(files: &[PathBuf]) -> Vec<String> {
     let stems: Vec<String> = files
         .iter()
-        .map(|f| f.file_stem().map_or("part".into(), |s| s.to_string_lossy().to_string()))
+        .map(|f| {
+            f.file_stem()
+                .map_or("part".into(), |s| s.to_string_lossy().to_string())
+        })
         .collect();
     stems
         .iter()
@@ -121,7 +147,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
     }
     let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
         files: file.toolpath_files(),
-        settings: crate::toolpath::CompensationSettings {
+        settings: crate::batch::tp::CompensationSettings {
             zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
             max_segment: job.toolpaths.max_segment,
             chord_tol: job.toolpaths.chord_tol,
@@ -192,7 +218,11 @@ mod tests {
 
     #[test]
     fn repeated_stems_get_distinct_names() {
-        let files = vec![PathBuf::from("a/p1.csv"), PathBuf::from("b/p1.csv"), PathBuf::from("b/p2.csv")];
+        let files = vec![
+            PathBuf::from("a/p1.csv"),
+            PathBuf::from("b/p1.csv"),
+            PathBuf::from("b/p2.csv"),
+        ];
         assert_eq!(part_names(&files), vec!["p1-1", "p1-2", "p2"]);
     }
 }

@@ -46,7 +46,7 @@ pub struct PartInput {
 #[derive(Debug, Clone)]
 pub struct ToolpathPlan {
     pub files: Vec<PathBuf>,
-    pub settings: crate::toolpath::CompensationSettings,
+    pub settings: crate::batch::tp::CompensationSettings,
     /// `true`: each part's map (outputs in the part's folder); `false`: the family map.
     pub per_part: bool,
 }
@@ -115,7 +115,9 @@ fn hull_boundary(points: &[ProbePoint]) -> Vec<bool> {
             Box::new(idx.iter().rev())
         };
         for &p in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
                 hull.pop();
             }
             hull.push(p);
@@ -156,7 +158,9 @@ fn choose_holdout(clean: &[ProbePoint], fraction: f64, seed: u64, name: &str) ->
     let boundary = hull_boundary(clean);
     let mut candidates: Vec<usize> = (0..clean.len()).filter(|&i| !boundary[i]).collect();
     let want = ((fraction * clean.len() as f64).round() as usize).max(1);
-    let want = want.min(candidates.len()).min(clean.len().saturating_sub(5));
+    let want = want
+        .min(candidates.len())
+        .min(clean.len().saturating_sub(5));
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ fnv1a(name));
     candidates.shuffle(&mut rng);
     let mut chosen: Vec<usize> = candidates.into_iter().take(want).collect();
@@ -179,7 +183,12 @@ fn prepare(input: PartInput, s: &Settings) -> std::result::Result<Prepared, (Par
         Err(e) => return Err((input, e)),
     };
     let rows: u32 = set.points.iter().map(|p| p.repeats).sum();
-    let holdout = choose_holdout(&cleaned.clean, s.model.holdout_fraction, s.model.seed, &input.name);
+    let holdout = choose_holdout(
+        &cleaned.clean,
+        s.model.holdout_fraction,
+        s.model.seed,
+        &input.name,
+    );
     Ok(Prepared {
         points: set.points.len(),
         repeats_averaged: (rows as usize).saturating_sub(set.points.len()),
@@ -191,7 +200,11 @@ fn prepare(input: PartInput, s: &Settings) -> std::result::Result<Prepared, (Par
     })
 }
 
-fn interpolate(prep: Prepared, s: &Settings, train_grid: &Grid) -> std::result::Result<Interpolated, (PartInput, Error)> {
+fn interpolate(
+    prep: Prepared,
+    s: &Settings,
+    train_grid: &Grid,
+) -> std::result::Result<Interpolated, (PartInput, Error)> {
     let full = match Surface::new(&probe::uve(&prep.clean)) {
         Ok(surface) => interp::resample(&surface, s.method, train_grid),
         Err(e) => return Err((prep.input, e)),
@@ -230,7 +243,11 @@ fn interpolate(prep: Prepared, s: &Settings, train_grid: &Grid) -> std::result::
 }
 
 /// A training set from node values: the nodes that have a value.
-fn training_set(grid: &Grid, values: &[Option<f64>], domain: &Domain) -> (TrainingSet, Normalisation) {
+fn training_set(
+    grid: &Grid,
+    values: &[Option<f64>],
+    domain: &Domain,
+) -> (TrainingSet, Normalisation) {
     let present: Vec<f64> = values.iter().flatten().copied().collect();
     let norm = Normalisation::new(domain, &present);
     let mut set = TrainingSet {
@@ -272,7 +289,9 @@ fn union_box(parts: &[Prepared]) -> Option<Domain> {
 pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchSummary> {
     let s = &plan.settings;
     let mut failed: Vec<PartSummary> = Vec::new();
-    let fail = |input: &PartInput, e: &Error| PartSummary::failed(&input.name, &input.probe_file, e.to_string());
+    let fail = |input: &PartInput, e: &Error| {
+        PartSummary::failed(&input.name, &input.probe_file, e.to_string())
+    };
 
     // 1. Read and clean every part (rayon).
     let bar = crate::progress::bar(plan.parts.len() as u64, "clean", quiet);
@@ -306,10 +325,9 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         None => None,
     };
     let mut interpolated = Vec::new();
-    let mut map_grid = None;
     if let Some(domain) = domain {
         let train_grid = Grid::covering(&domain, s.spacing_mm)?;
-        map_grid = Some(Grid::covering(&domain, s.grid_step_mm)?);
+        let grid = Grid::covering(&domain, s.grid_step_mm)?;
         let bar = crate::progress::bar(ok_parts.len() as u64, "interpolate", quiet);
         let results: Vec<_> = ok_parts
             .into_par_iter()
@@ -345,7 +363,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         let family_slot = if plan.family_dir.is_some() && !interpolated.is_empty() {
             let mean: Vec<Option<f64>> = (0..train_grid.len())
                 .map(|k| {
-                    let vals: Option<Vec<f64>> = interpolated.iter().map(|p| p.full_nodes[k]).collect();
+                    let vals: Option<Vec<f64>> =
+                        interpolated.iter().map(|p| p.full_nodes[k]).collect();
                     vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
                 })
                 .collect();
@@ -379,7 +398,6 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 )));
             }
             // 4. Evaluate the delivered and family networks on the map grid.
-            let grid = map_grid.unwrap_or(train_grid);
             let scale = Normalisation::new(&domain, &[]);
             let mut inputs = Vec::with_capacity(grid.len());
             for j in 0..grid.nv {
@@ -406,9 +424,21 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 .zip(outputs.par_iter())
                 .map(|((p, &(h, d)), out)| {
                     let map = to_map(d, out);
-                    let model = FittedModel::new(&p.prep.input.name, s.normal, domain, norms[d].clone(), nets[d].clone());
+                    let model = FittedModel::new(
+                        &p.prep.input.name,
+                        s.normal,
+                        domain,
+                        norms[d].clone(),
+                        nets[d].clone(),
+                    );
                     let holdout_rmse_um = h.map(|h| {
-                        let hm = FittedModel::new("holdout", s.normal, domain, norms[h].clone(), nets[h].clone());
+                        let hm = FittedModel::new(
+                            "holdout",
+                            s.normal,
+                            domain,
+                            norms[h].clone(),
+                            nets[h].clone(),
+                        );
                         let sq: f64 = p
                             .prep
                             .holdout
@@ -446,7 +476,13 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             if let (Some(dir), Some(fslot)) = (&plan.family_dir, family_slot) {
                 let maps: Vec<&ErrorMap> = part_maps.iter().map(|(_, _, m, _)| m).collect();
                 if let Some((mean, std)) = family_stats(&maps) {
-                    let model = FittedModel::new("family", s.normal, domain, norms[fslot].clone(), nets[fslot].clone());
+                    let model = FittedModel::new(
+                        "family",
+                        s.normal,
+                        domain,
+                        norms[fslot].clone(),
+                        nets[fslot].clone(),
+                    );
                     let probes: Vec<(f64, f64)> = Vec::new();
                     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
                     std.write_csv(&dir.join("std.csv"), "std_um")?;
@@ -457,12 +493,30 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         s.family,
                         maps.len()
                     );
-                    draw(&dir.join("mean.png"), &title_mean, &mean, &probes, &probes, Scale::Diverging, (ua, va), "E (µm)")?;
+                    draw(
+                        &dir.join("mean.png"),
+                        &title_mean,
+                        &mean,
+                        &probes,
+                        &probes,
+                        Scale::Diverging,
+                        (ua, va),
+                        "E (µm)",
+                    )?;
                     let title_std = format!(
                         "{} part-to-part standard deviation — max {std_max:.2} µm",
                         s.family
                     );
-                    draw(&dir.join("std.png"), &title_std, &std, &probes, &probes, Scale::Sequential, (ua, va), "σ (µm)")?;
+                    draw(
+                        &dir.join("std.png"),
+                        &title_std,
+                        &std,
+                        &probes,
+                        &probes,
+                        Scale::Sequential,
+                        (ua, va),
+                        "σ (µm)",
+                    )?;
                     crate::io::write_json(&dir.join("model.json"), &model)?;
                     family_summary = Some(FamilySummary {
                         parts: maps.len(),
@@ -492,7 +546,14 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                     }
                 }
             }
-            return Ok(finish(plan, trainer, Some(domain), failed, family_summary, toolpaths));
+            return Ok(finish(
+                plan,
+                trainer,
+                Some(domain),
+                failed,
+                family_summary,
+                toolpaths,
+            ));
         }
     }
     // Nothing could be fitted: every part failed before training.
@@ -508,7 +569,12 @@ fn finish(
     toolpaths: Vec<ToolpathSummary>,
 ) -> BatchSummary {
     // Stable order: the plan's part order.
-    let order = |p: &PartSummary| plan.parts.iter().position(|q| q.name == p.part).unwrap_or(usize::MAX);
+    let order = |p: &PartSummary| {
+        plan.parts
+            .iter()
+            .position(|q| q.name == p.part)
+            .unwrap_or(usize::MAX)
+    };
     parts.sort_by_key(order);
     BatchSummary {
         family: plan.settings.family.clone(),
@@ -526,7 +592,9 @@ fn finish(
 
 /// `finish.ngc` → `finish-compensated.ngc` in `dir`.
 fn compensated_name(input: &Path) -> PathBuf {
-    let stem = input.file_stem().map_or("toolpath".into(), |s| s.to_string_lossy().to_string());
+    let stem = input
+        .file_stem()
+        .map_or("toolpath".into(), |s| s.to_string_lossy().to_string());
     match input.extension() {
         Some(ext) => PathBuf::from(format!("{stem}-compensated.{}", ext.to_string_lossy())),
         None => PathBuf::from(format!("{stem}-compensated")),
@@ -538,10 +606,10 @@ fn compensate_one(
     dir: &Path,
     map_name: &str,
     model: &FittedModel,
-    settings: &crate::toolpath::CompensationSettings,
+    settings: &crate::batch::tp::CompensationSettings,
 ) -> ToolpathSummary {
     let output = dir.join(compensated_name(input));
-    match crate::toolpath::compensate_file(input, &output, model, settings) {
+    match crate::batch::tp::compensate_file(input, &output, model, settings) {
         Ok(report) => ToolpathSummary {
             input: input.to_path_buf(),
             output,
@@ -608,9 +676,23 @@ fn write_part(
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
     let (pv, rms) = map.pv_rms_um();
     let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
-    let rejected: Vec<(f64, f64)> = p.prep.rejected.iter().map(|r| (r.point.u_mm, r.point.v_mm)).collect();
+    let rejected: Vec<(f64, f64)> = p
+        .prep
+        .rejected
+        .iter()
+        .map(|r| (r.point.u_mm, r.point.v_mm))
+        .collect();
     let title = format!("{} {name} — PV {pv:.1} µm, RMS {rms:.1} µm", s.family);
-    draw(&dir.join("map.png"), &title, map, &probes, &rejected, Scale::Diverging, axes, "E (µm)")?;
+    draw(
+        &dir.join("map.png"),
+        &title,
+        map,
+        &probes,
+        &rejected,
+        Scale::Diverging,
+        axes,
+        "E (µm)",
+    )?;
     let summary = PartSummary {
         part: name.clone(),
         probe_file: p.prep.input.probe_file.clone(),

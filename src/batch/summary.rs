@@ -146,7 +146,9 @@ impl BatchSummary {
         }
         for t in &self.toolpaths {
             match (&t.error, &t.report) {
-                (Some(e), _) => s.push_str(&format!("toolpath {}: FAILED: {e}\n", t.input.display())),
+                (Some(e), _) => {
+                    s.push_str(&format!("toolpath {}: FAILED: {e}\n", t.input.display()))
+                }
                 (None, _) => s.push_str(&format!(
                     "toolpath {} → {} ({} map)\n",
                     t.input.display(),
@@ -162,7 +164,10 @@ impl BatchSummary {
 /// Join shard summaries of one family into one: parts of every shard in part order.
 pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
     let Some((first_path, first)) = summaries.first() else {
-        return Err(Error::usage("no summaries to merge", "pass the shards' summary files"));
+        return Err(Error::usage(
+            "no summaries to merge",
+            "pass the shards' summary files",
+        ));
     };
     let mut merged = first.clone();
     merged.shard = None;
@@ -217,7 +222,9 @@ pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
             ));
         }
     }
-    merged.parts.sort_by(|a, b| a.probe_file.cmp(&b.probe_file).then(a.part.cmp(&b.part)));
+    merged
+        .parts
+        .sort_by(|a, b| a.probe_file.cmp(&b.probe_file).then(a.part.cmp(&b.part)));
     merged.failed_parts = merged.parts.iter().filter(|p| !p.ok).count();
     Ok(merged)
 }

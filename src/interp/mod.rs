@@ -26,7 +26,16 @@ pub(crate) use gradient::quadratic_gradient;
 /// Interpolation method. Names on the command line and in job files: `natural-neighbour`,
 /// `sibson-c1`, `linear`.
 #[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {

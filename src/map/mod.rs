@@ -11,7 +11,6 @@ use crate::geom::{Axis, Domain, ErrorField};
 use crate::interp::Grid;
 use crate::nn::{Mlp, Normalisation};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::Path;
 
 /// Format tag written into every `model.json`.
@@ -33,7 +32,13 @@ pub struct FittedModel {
 }
 
 impl FittedModel {
-    pub fn new(name: &str, normal: Axis, domain: Domain, normalisation: Normalisation, network: Mlp) -> Self {
+    pub fn new(
+        name: &str,
+        normal: Axis,
+        domain: Domain,
+        normalisation: Normalisation,
+        network: Mlp,
+    ) -> Self {
         FittedModel {
             format: MODEL_FORMAT.into(),
             name: name.into(),
@@ -87,9 +92,20 @@ impl FittedModel {
         }
         let n = &model.normalisation;
         let d = &model.domain;
-        let finite = [n.u_min_mm, n.u_max_mm, n.v_min_mm, n.v_max_mm, n.e_mean_um, n.e_std_um, d.u_min_mm, d.u_max_mm, d.v_min_mm, d.v_max_mm]
-            .iter()
-            .all(|v| v.is_finite());
+        let finite = [
+            n.u_min_mm,
+            n.u_max_mm,
+            n.v_min_mm,
+            n.v_max_mm,
+            n.e_mean_um,
+            n.e_std_um,
+            d.u_min_mm,
+            d.u_max_mm,
+            d.v_min_mm,
+            d.v_max_mm,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
         if !finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
             return Err(Error::input(
                 Location::file(path),
@@ -144,7 +160,11 @@ impl ErrorMap {
             for j in 0..self.grid.nv {
                 for i in 0..self.grid.nu {
                     let (u, v) = self.grid.node(i, j);
-                    let e = self.values.get(j * self.grid.nu + i).copied().unwrap_or(f64::NAN);
+                    let e = self
+                        .values
+                        .get(j * self.grid.nu + i)
+                        .copied()
+                        .unwrap_or(f64::NAN);
                     writeln!(w, "{},{},{:.4}", round_mm(u), round_mm(v), e)?;
                 }
             }
@@ -168,7 +188,10 @@ pub fn family_stats(maps: &[&ErrorMap]) -> Option<(ErrorMap, ErrorMap)> {
     let first = maps.first()?;
     let n = maps.len() as f64;
     let len = first.values.len();
-    if maps.iter().any(|m| m.values.len() != len || m.grid != first.grid) {
+    if maps
+        .iter()
+        .any(|m| m.values.len() != len || m.grid != first.grid)
+    {
         return None;
     }
     let mut mean = vec![0.0; len];
@@ -262,8 +285,16 @@ mod tests {
             nu: 2,
             nv: 1,
         };
-        let a = ErrorMap { grid, normal: Axis::Z, values: vec![1.0, 4.0] };
-        let b = ErrorMap { grid, normal: Axis::Z, values: vec![3.0, 4.0] };
+        let a = ErrorMap {
+            grid,
+            normal: Axis::Z,
+            values: vec![1.0, 4.0],
+        };
+        let b = ErrorMap {
+            grid,
+            normal: Axis::Z,
+            values: vec![3.0, 4.0],
+        };
         let (mean, std) = family_stats(&[&a, &b]).unwrap();
         assert_eq!(mean.values, vec![2.0, 4.0]);
         assert_eq!(std.values, vec![1.0, 0.0]);

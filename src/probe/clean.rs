@@ -205,7 +205,12 @@ fn predict_sibson_c1(tri: &Tri, p: Point2<f64>) -> Option<f64> {
 
 /// Prediction at a point outside the hull of the others: the mean of its Delaunay neighbours'
 /// linear extrapolations `e_j + ∇e_j·(p − p_j)`, weighted by 1/|p − p_j|².
-fn predict_outside(tri: &Tri, n_points: usize, neighbours: &[usize], p: Point2<f64>) -> Option<f64> {
+fn predict_outside(
+    tri: &Tri,
+    n_points: usize,
+    neighbours: &[usize],
+    p: Point2<f64>,
+) -> Option<f64> {
     let mut handle_of: Vec<Option<FixedVertexHandle>> = vec![None; n_points];
     for v in tri.vertices() {
         handle_of[v.data().index] = Some(v.fix());

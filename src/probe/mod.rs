@@ -377,7 +377,8 @@ fn merge_repeats(rows: &[Row], normal: Axis) -> Vec<ProbePoint> {
 fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -> Result<()> {
     // The two points furthest apart (O(n²) is fine for probe files; use the first point's
     // furthest, then that one's furthest: a 2-approximation that suffices for a tolerance test).
-    let dist2 = |a: &ProbePoint, b: &ProbePoint| (a.u_mm - b.u_mm).powi(2) + (a.v_mm - b.v_mm).powi(2);
+    let dist2 =
+        |a: &ProbePoint, b: &ProbePoint| (a.u_mm - b.u_mm).powi(2) + (a.v_mm - b.v_mm).powi(2);
     if points.is_empty() {
         return Ok(());
     }
@@ -395,7 +396,8 @@ fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -
         points
             .iter()
             .map(|p| {
-                ((b.u_mm - a.u_mm) * (p.v_mm - a.v_mm) - (b.v_mm - a.v_mm) * (p.u_mm - a.u_mm)).abs()
+                ((b.u_mm - a.u_mm) * (p.v_mm - a.v_mm) - (b.v_mm - a.v_mm) * (p.u_mm - a.u_mm))
+                    .abs()
                     / length
             })
             .fold(0.0, f64::max)

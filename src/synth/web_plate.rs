@@ -492,7 +492,7 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          probes = \"probes/*.csv\"\n\
          # The web floor inside the walls; x_min, y_min, x_max, y_max in mm.\n\
          domain = [{x0}, {y0}, {x1}, {y1}]\n\
-         grid_step_mm = 10.0\n\
+         grid_step_mm = 5.0\n\
          \n\
          [clean]\n\
          k_sigma = 3.0\n\
