@@ -1,14 +1,67 @@
 //! CLI of `errmap compensate`: rewrite a G-code or CSV toolpath with P' = P − E.
 
 use super::Globals;
-use errmap::Result;
+use errmap::toolpath::{compensate_file, CompensationSettings};
+use errmap::{Error, Result};
+use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 pub struct CompensateArgs {
-    /// The toolpath to compensate.
-    pub input: std::path::PathBuf,
+    /// Fitted map (`model.json` from `errmap map` or a batch).
+    #[arg(long, value_name = "MODEL.json")]
+    pub model: PathBuf,
+    /// Band along the map's normal axis where moves are compensated, in program units
+    /// (inches in a G20 program). Default: everywhere.
+    #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
+    pub zone: Option<String>,
+    /// Longest segment emitted in the zone, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    pub max_segment: f64,
+    /// Largest distance between an arc and its chords, mm.
+    #[arg(long, value_name = "MM", default_value_t = 0.005)]
+    pub chord_tol: f64,
+    /// The toolpath to compensate: G-code (.ngc, .nc, …) or CSV (x_mm,y_mm,z_mm).
+    pub input: PathBuf,
+    /// Where to write the compensated toolpath.
+    #[arg(short = 'o', long = "output", value_name = "OUT")]
+    pub output: PathBuf,
+    /// Print the report as one JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
-pub fn run(_args: CompensateArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("compensate")
+/// Parse `MIN,MAX`.
+pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
+    let bad = || {
+        Error::usage(
+            format!("--zone '{text}' is not MIN,MAX"),
+            "give two numbers in program units, e.g. --zone -5,0",
+        )
+    };
+    let (a, b) = text.split_once(',').ok_or_else(bad)?;
+    let lo: f64 = a.trim().parse().map_err(|_| bad())?;
+    let hi: f64 = b.trim().parse().map_err(|_| bad())?;
+    Ok((lo, hi))
+}
+
+pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
+    let settings = CompensationSettings {
+        zone: args.zone.as_deref().map(parse_zone).transpose()?,
+        max_segment: args.max_segment,
+        chord_tol: args.chord_tol,
+    };
+    settings.validate()?;
+    let field = errmap::map::load_error_field(&args.model)?;
+    let report = compensate_file(&args.input, &args.output, field.as_ref(), &settings)?;
+    if args.json {
+        let doc = serde_json::json!({
+            "input": args.input,
+            "output": args.output,
+            "report": report,
+        });
+        println!("{doc}");
+    } else {
+        println!("{}: {}", args.output.display(), report.summary_line());
+    }
+    Ok(0)
 }

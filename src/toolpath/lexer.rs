@@ -1,0 +1,480 @@
+//! G-code lexer that keeps the byte span of every token, so unchanged lines can be copied byte for byte.
+//!
+//! RS274/NGC (LinuxCNC dialect): words are a letter and a value, case-insensitive; spaces and
+//! tabs may sit between the letter and its value; values are numbers, `#` parameter references
+//! or `[expressions]`. Comments are `( … )` and `;` to the end of the line. `%` delimits the
+//! program. `O` words are flow control (sub, call, while, if, repeat …). `#name = value` assigns
+//! a parameter. Polar words `@` (radius) and `^` (angle) are lexed like letters.
+//! Nothing is evaluated here: see `expr` for the small evaluator used to classify moves.
+
+use std::ops::Range;
+
+/// What a token is. The tokens of a line tile its content exactly.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TokenKind {
+    /// A word: upper-cased letter (or `@`/`^`) and its value.
+    Word { letter: u8, value: WordValue },
+    /// `( … )` comment (also `(msg, …)`, `(debug, …)`).
+    Comment,
+    /// `;` comment to the end of the line.
+    LineComment,
+    /// `%` program delimiter.
+    Percent,
+    /// `#n = value` or `#<name> = value`: `target` is the normalised parameter name.
+    Assignment {
+        target: String,
+        value_span: Range<usize>,
+    },
+    /// An O-word line: `keyword` is `sub`, `endsub`, `call`, `while`, … (lower case).
+    OWord { name: String, keyword: String },
+    /// Spaces and tabs.
+    Space,
+    /// Anything else (a letter without a value, a stray character).
+    Other,
+}
+
+/// The value of a word.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WordValue {
+    /// A literal number.
+    Number(f64),
+    /// A `#` parameter reference, `[expression]` or function: its text span (not evaluated here).
+    Expr(Range<usize>),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Token {
+    pub kind: TokenKind,
+    pub span: Range<usize>,
+}
+
+/// One line of the program: `span` is its content, `end` the byte after its terminator
+/// (`\n` or `\r\n`, or nothing on a last line without one).
+#[derive(Debug, Clone)]
+pub struct Line {
+    /// 1-based line number as an editor shows it.
+    pub number: u64,
+    pub span: Range<usize>,
+    pub end: usize,
+    pub tokens: Vec<Token>,
+}
+
+impl Line {
+    /// The line terminator (`"\n"`, `"\r\n"` or `""`).
+    pub fn terminator<'a>(&self, text: &'a str) -> &'a str {
+        text.get(self.span.end..self.end).unwrap_or("")
+    }
+}
+
+/// Split a program into lines and tokens. Never fails: what it cannot read becomes `Other`.
+pub fn lex(text: &str) -> Vec<Line> {
+    let bytes = text.as_bytes();
+    let mut lines = Vec::new();
+    let mut start = 0usize;
+    let mut number = 1u64;
+    while start < bytes.len() {
+        let nl = bytes[start..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map(|p| start + p);
+        let (content_end, end) = match nl {
+            Some(p) => {
+                let ce = if p > start && bytes[p - 1] == b'\r' {
+                    p - 1
+                } else {
+                    p
+                };
+                (ce, p + 1)
+            }
+            None => (bytes.len(), bytes.len()),
+        };
+        lines.push(Line {
+            number,
+            span: start..content_end,
+            end,
+            tokens: lex_line(bytes, start, content_end),
+        });
+        number += 1;
+        start = end;
+    }
+    lines
+}
+
+fn is_space(b: u8) -> bool {
+    b == b' ' || b == b'\t'
+}
+
+fn lex_line(b: &[u8], start: usize, end: usize) -> Vec<Token> {
+    let mut tokens = Vec::new();
+    let mut i = start;
+    while i < end {
+        let c = b[i];
+        let (kind, next) = if is_space(c) {
+            let mut j = i;
+            while j < end && is_space(b[j]) {
+                j += 1;
+            }
+            (TokenKind::Space, j)
+        } else if c == b'(' {
+            let j = b[i..end]
+                .iter()
+                .position(|&x| x == b')')
+                .map(|p| i + p + 1)
+                .unwrap_or(end);
+            (TokenKind::Comment, j)
+        } else if c == b';' {
+            (TokenKind::LineComment, end)
+        } else if c == b'%' {
+            (TokenKind::Percent, i + 1)
+        } else if c == b'#' {
+            lex_assignment(b, i, end)
+        } else if c == b'o' || c == b'O' {
+            lex_oword(b, i, end)
+        } else if c.is_ascii_alphabetic() || c == b'@' || c == b'^' {
+            lex_word(b, i, end)
+        } else {
+            // Keep multi-byte UTF-8 characters whole so every span is a valid `str` range.
+            let mut j = i + 1;
+            while j < end && (0x80..0xC0).contains(&b[j]) {
+                j += 1;
+            }
+            (TokenKind::Other, j)
+        };
+        tokens.push(Token {
+            kind,
+            span: i..next,
+        });
+        i = next;
+    }
+    tokens
+}
+
+fn skip_spaces(b: &[u8], mut i: usize, end: usize) -> usize {
+    while i < end && is_space(b[i]) {
+        i += 1;
+    }
+    i
+}
+
+/// A number: optional sign, digits and one decimal point; spaces between digits are allowed
+/// (LinuxCNC ignores them). Returns the end and the value.
+fn lex_number(b: &[u8], i: usize, end: usize) -> Option<(usize, f64)> {
+    let mut j = skip_spaces(b, i, end);
+    let mut text = String::new();
+    if j < end && (b[j] == b'+' || b[j] == b'-') {
+        if b[j] == b'-' {
+            text.push('-');
+        }
+        j = skip_spaces(b, j + 1, end);
+    }
+    let mut digits = 0;
+    let mut dot = false;
+    let mut last = j;
+    while j < end {
+        let c = b[j];
+        if c.is_ascii_digit() {
+            text.push(c as char);
+            digits += 1;
+            j += 1;
+            last = j;
+        } else if c == b'.' && !dot {
+            text.push('.');
+            dot = true;
+            j += 1;
+            last = j;
+        } else if is_space(c) {
+            // Continue only if more digits follow the spaces.
+            let k = skip_spaces(b, j, end);
+            if k < end && (b[k].is_ascii_digit() || (b[k] == b'.' && !dot)) {
+                j = k;
+            } else {
+                break;
+            }
+        } else {
+            break;
+        }
+    }
+    if digits == 0 {
+        return None;
+    }
+    if text.ends_with('.') {
+        text.push('0');
+    }
+    if text.starts_with('.') || text.starts_with("-.") {
+        text = text.replacen('.', "0.", 1);
+    }
+    text.parse::<f64>().ok().map(|v| (last, v))
+}
+
+/// End of a `[ … ]` group starting at `i` (which holds `[`), balanced.
+fn bracket_end(b: &[u8], i: usize, end: usize) -> usize {
+    let mut depth = 0i32;
+    let mut j = i;
+    while j < end {
+        match b[j] {
+            b'[' => depth += 1,
+            b']' => {
+                depth -= 1;
+                if depth == 0 {
+                    return j + 1;
+                }
+            }
+            _ => {}
+        }
+        j += 1;
+    }
+    end
+}
+
+/// A parameter reference starting at `#`: `#12`, `#<name>`, `#[expr]`, `##1`.
+fn param_end(b: &[u8], i: usize, end: usize) -> usize {
+    let mut j = skip_spaces(b, i + 1, end);
+    if j >= end {
+        return j;
+    }
+    match b[j] {
+        b'<' => b[j..end]
+            .iter()
+            .position(|&x| x == b'>')
+            .map(|p| j + p + 1)
+            .unwrap_or(end),
+        b'[' => bracket_end(b, j, end),
+        b'#' => param_end(b, j, end),
+        _ => {
+            while j < end && b[j].is_ascii_digit() {
+                j += 1;
+            }
+            j
+        }
+    }
+}
+
+/// A value that is not a plain number: `#…`, `[…]`, or a function such as `SQRT[…]`, with a sign.
+fn expr_value_end(b: &[u8], i: usize, end: usize) -> Option<usize> {
+    let mut j = skip_spaces(b, i, end);
+    if j < end && (b[j] == b'+' || b[j] == b'-') {
+        j = skip_spaces(b, j + 1, end);
+    }
+    if j >= end {
+        return None;
+    }
+    match b[j] {
+        b'#' => Some(param_end(b, j, end)),
+        b'[' => Some(bracket_end(b, j, end)),
+        c if c.is_ascii_alphabetic() => {
+            let mut k = j;
+            while k < end && b[k].is_ascii_alphabetic() {
+                k += 1;
+            }
+            let k2 = skip_spaces(b, k, end);
+            if k - j >= 2 && k2 < end && b[k2] == b'[' {
+                Some(bracket_end(b, k2, end))
+            } else {
+                None
+            }
+        }
+        _ => None,
+    }
+}
+
+fn lex_word(b: &[u8], i: usize, end: usize) -> (TokenKind, usize) {
+    let letter = b[i].to_ascii_uppercase();
+    if let Some((j, v)) = lex_number(b, i + 1, end) {
+        return (
+            TokenKind::Word {
+                letter,
+                value: WordValue::Number(v),
+            },
+            j,
+        );
+    }
+    if let Some(j) = expr_value_end(b, i + 1, end) {
+        let vs = skip_spaces(b, i + 1, end);
+        return (
+            TokenKind::Word {
+                letter,
+                value: WordValue::Expr(vs..j),
+            },
+            j,
+        );
+    }
+    (TokenKind::Other, i + 1)
+}
+
+/// Normalised parameter name: `#<Name >` → `<name>`, `#12` → `12`.
+pub fn param_name(text: &str) -> String {
+    let t: String = text
+        .trim_start_matches('#')
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .collect();
+    t.to_ascii_lowercase()
+}
+
+fn lex_assignment(b: &[u8], i: usize, end: usize) -> (TokenKind, usize) {
+    let pe = param_end(b, i, end);
+    let eq = skip_spaces(b, pe, end);
+    if eq < end && b[eq] == b'=' {
+        let vs = skip_spaces(b, eq + 1, end);
+        let ve = lex_number(b, vs, end)
+            .map(|(j, _)| j)
+            .or_else(|| expr_value_end(b, vs, end))
+            .unwrap_or(vs);
+        let target = param_name(&String::from_utf8_lossy(&b[i..pe]));
+        return (
+            TokenKind::Assignment {
+                target,
+                value_span: vs..ve,
+            },
+            ve.max(eq + 1),
+        );
+    }
+    (TokenKind::Other, pe.max(i + 1))
+}
+
+/// `o100 sub`, `O<name> call [1] [2]`, `o101 while [#8 GT #4]` …: the token runs to the end of
+/// the line, stopping before a trailing comment outside brackets.
+fn lex_oword(b: &[u8], i: usize, end: usize) -> (TokenKind, usize) {
+    let mut j = skip_spaces(b, i + 1, end);
+    let name_start = j;
+    if j < end && b[j] == b'<' {
+        j = b[j..end]
+            .iter()
+            .position(|&x| x == b'>')
+            .map(|p| j + p + 1)
+            .unwrap_or(end);
+    } else if j < end && b[j] == b'#' {
+        j = param_end(b, j, end);
+    } else {
+        while j < end && b[j].is_ascii_digit() {
+            j += 1;
+        }
+    }
+    if j == name_start {
+        // A lone `o` is not an O-word.
+        return (TokenKind::Other, i + 1);
+    }
+    let name = param_name(&String::from_utf8_lossy(&b[name_start..j]));
+    let ks = skip_spaces(b, j, end);
+    let mut k = ks;
+    while k < end && b[k].is_ascii_alphabetic() {
+        k += 1;
+    }
+    let keyword = String::from_utf8_lossy(&b[ks..k]).to_ascii_lowercase();
+    // The rest (arguments, conditions) up to a comment outside brackets.
+    let mut depth = 0i32;
+    let mut m = k;
+    while m < end {
+        match b[m] {
+            b'[' => depth += 1,
+            b']' => depth -= 1,
+            b'(' | b';' if depth <= 0 => break,
+            _ => {}
+        }
+        m += 1;
+    }
+    // Keep trailing spaces out of the token.
+    while m > k && is_space(b[m - 1]) {
+        m -= 1;
+    }
+    (TokenKind::OWord { name, keyword }, m.max(k))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn words(text: &str) -> Vec<(u8, WordValue)> {
+        lex(text)
+            .into_iter()
+            .flat_map(|l| l.tokens)
+            .filter_map(|t| match t.kind {
+                TokenKind::Word { letter, value } => Some((letter, value)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn words_are_case_insensitive_with_signs_and_spaces() {
+        let w = words("n0080 g0 x +0.5 Y-.25 z 1.\tF 100");
+        let letters: Vec<u8> = w.iter().map(|(l, _)| *l).collect();
+        assert_eq!(letters, b"NGXYZF".to_vec());
+        assert_eq!(w[0].1, WordValue::Number(80.0));
+        assert_eq!(w[2].1, WordValue::Number(0.5));
+        assert_eq!(w[3].1, WordValue::Number(-0.25));
+        assert_eq!(w[4].1, WordValue::Number(1.0));
+        assert_eq!(w[5].1, WordValue::Number(100.0));
+    }
+
+    #[test]
+    fn packed_words_and_decimal_g_codes() {
+        let w = words("N40G90G64P.1 G5.1");
+        assert_eq!(w.len(), 5);
+        assert_eq!(w[1], (b'G', WordValue::Number(90.0)));
+        assert_eq!(w[3], (b'P', WordValue::Number(0.1)));
+        assert_eq!(w[4], (b'G', WordValue::Number(5.1)));
+    }
+
+    #[test]
+    fn expressions_parameters_and_polar_words() {
+        let text = "G1 X[#<xscale>*53.] Y#2 @-.0025 ^4.5 Z SQRT[4]";
+        let w = words(text);
+        assert!(
+            matches!(&w[1], (b'X', WordValue::Expr(r)) if &text[r.clone()] == "[#<xscale>*53.]")
+        );
+        assert!(matches!(&w[2], (b'Y', WordValue::Expr(r)) if &text[r.clone()] == "#2"));
+        assert_eq!(w[3], (b'@', WordValue::Number(-0.0025)));
+        assert_eq!(w[4], (b'^', WordValue::Number(4.5)));
+        assert!(matches!(&w[5], (b'Z', WordValue::Expr(r)) if &text[r.clone()] == "SQRT[4]"));
+    }
+
+    #[test]
+    fn comments_assignments_owords_percent() {
+        let text = "%\r\n#<level> = #1 (save)\r\no100 repeat [800] ; loop\r\nG0 (a) X1\r\n";
+        let lines = lex(text);
+        assert_eq!(lines.len(), 4);
+        assert_eq!(lines[0].tokens[0].kind, TokenKind::Percent);
+        assert_eq!(lines[0].terminator(text), "\r\n");
+        match &lines[1].tokens[0].kind {
+            TokenKind::Assignment { target, value_span } => {
+                assert_eq!(target, "<level>");
+                assert_eq!(&text[value_span.clone()], "#1");
+            }
+            k => panic!("not an assignment: {k:?}"),
+        }
+        assert_eq!(
+            lines[1].tokens.last().map(|t| &t.kind),
+            Some(&TokenKind::Comment)
+        );
+        match &lines[2].tokens[0].kind {
+            TokenKind::OWord { name, keyword } => {
+                assert_eq!(name, "100");
+                assert_eq!(keyword, "repeat");
+            }
+            k => panic!("not an O-word: {k:?}"),
+        }
+        assert_eq!(
+            lines[2].tokens.last().map(|t| &t.kind),
+            Some(&TokenKind::LineComment)
+        );
+        assert!(lines[3].tokens.iter().any(|t| t.kind == TokenKind::Comment));
+    }
+
+    #[test]
+    fn tokens_tile_the_text() {
+        let text = "N1 G1 X1 (c)\nbad ! line\r\n\nlast";
+        let mut rebuilt = String::new();
+        for l in lex(text) {
+            let mut at = l.span.start;
+            for t in &l.tokens {
+                assert_eq!(t.span.start, at);
+                at = t.span.end;
+                rebuilt.push_str(&text[t.span.clone()]);
+            }
+            assert_eq!(at, l.span.end);
+            rebuilt.push_str(l.terminator(text));
+        }
+        assert_eq!(rebuilt, text);
+    }
+}
