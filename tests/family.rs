@@ -199,8 +199,9 @@ fn check_family(data: &Path, out: &Path, truth: &Truth) {
     // Re-machining with the compensated program: residual = truth − E applied.
     let comp = out.join("family/finish-compensated.ngc");
     let floor = truth.spec.floor_z_mm;
-    let points = cutting_points(&comp, (floor - 1.0, floor + 1.0));
-    let original = cutting_points(&data.join("finish.ngc"), (floor - 1.0, floor + 1.0));
+    // The floor: E is tens of µm, so ±0.2 mm keeps the cut and leaves out the plunge through the zone.
+    let points = cutting_points(&comp, (floor - 0.2, floor + 0.2));
+    let original = cutting_points(&data.join("finish.ngc"), (floor - 0.2, floor + 0.2));
     assert!(
         points.len() > 4 * original.len(),
         "long moves and arcs are split: {} points from {}",

@@ -3,7 +3,6 @@
 pub mod job;
 pub mod run;
 pub mod summary;
-mod tp;
 
 pub use job::{Job, JobFile, MapChoice};
 pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan};
@@ -147,7 +146,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
     }
     let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
         files: file.toolpath_files(),
-        settings: crate::batch::tp::CompensationSettings {
+        settings: crate::toolpath::CompensationSettings {
             zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
             max_segment: job.toolpaths.max_segment,
             chord_tol: job.toolpaths.chord_tol,

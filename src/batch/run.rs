@@ -46,7 +46,7 @@ pub struct PartInput {
 #[derive(Debug, Clone)]
 pub struct ToolpathPlan {
     pub files: Vec<PathBuf>,
-    pub settings: crate::batch::tp::CompensationSettings,
+    pub settings: crate::toolpath::CompensationSettings,
     /// `true`: each part's map (outputs in the part's folder); `false`: the family map.
     pub per_part: bool,
 }
@@ -606,10 +606,10 @@ fn compensate_one(
     dir: &Path,
     map_name: &str,
     model: &FittedModel,
-    settings: &crate::batch::tp::CompensationSettings,
+    settings: &crate::toolpath::CompensationSettings,
 ) -> ToolpathSummary {
     let output = dir.join(compensated_name(input));
-    match crate::batch::tp::compensate_file(input, &output, model, settings) {
+    match crate::toolpath::compensate_file(input, &output, model, settings) {
         Ok(report) => ToolpathSummary {
             input: input.to_path_buf(),
             output,
