@@ -169,18 +169,23 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
         let small = (FONT, 15).into_font().color(&BLACK);
         let y = 44;
         let mut x = MARGIN as i32 + 6;
-        header.draw(&Circle::new((x, y), 3, BLACK.filled()))?;
-        let probe_text = format!("probe point ({})", map.probes.len());
-        header.draw(&Text::new(
-            probe_text.clone(),
-            (x + 10, y - 9),
-            small.clone(),
-        ))?;
-        x += 24 + 8 * probe_text.chars().count() as i32;
-        draw_rejected_mark(&header, (x, y))?;
-        let rej_text = format!("rejected gross error ({})", map.rejected.len());
-        header.draw(&Text::new(rej_text.clone(), (x + 12, y - 9), small.clone()))?;
-        x += 28 + 8 * rej_text.chars().count() as i32;
+        // Marks appear in the legend only when the picture has them.
+        if !map.probes.is_empty() {
+            header.draw(&Circle::new((x, y), 3, BLACK.filled()))?;
+            let probe_text = format!("probe point ({})", map.probes.len());
+            header.draw(&Text::new(
+                probe_text.clone(),
+                (x + 10, y - 9),
+                small.clone(),
+            ))?;
+            x += 24 + 8 * probe_text.chars().count() as i32;
+        }
+        if !map.rejected.is_empty() || !map.probes.is_empty() {
+            draw_rejected_mark(&header, (x, y))?;
+            let rej_text = format!("rejected gross error ({})", map.rejected.len());
+            header.draw(&Text::new(rej_text.clone(), (x + 12, y - 9), small.clone()))?;
+            x += 28 + 8 * rej_text.chars().count() as i32;
+        }
         let sense = match map.scale {
             Scale::Diverging => "red: above nominal (E > 0), blue: below",
             Scale::Sequential => "darker: larger",
