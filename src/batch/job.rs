@@ -213,7 +213,8 @@ impl Job {
             }
         }
         if let Some([a, b, c, d]) = self.domain {
-            if ![a, b, c, d].iter().all(|x| x.is_finite()) || !(a < c && b < d) {
+            let finite = [a, b, c, d].iter().all(|x| x.is_finite());
+            if !finite || a >= c || b >= d {
                 return Err(bad(
                     "domain",
                     format!("[{a}, {b}, {c}, {d}] is not a rectangle"),

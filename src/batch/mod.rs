@@ -62,7 +62,7 @@ impl Shard {
             let count = match count {
                 Some(c) => c,
                 None => count_var
-                    .and_then(|v| env(v))
+                    .and_then(&env)
                     .and_then(|v| v.trim().parse().ok())
                     .ok_or_else(|| {
                         Error::usage(

@@ -168,7 +168,10 @@ fn choose_holdout(clean: &[ProbePoint], fraction: f64, seed: u64, name: &str) ->
     chosen
 }
 
-fn prepare(input: PartInput, s: &Settings) -> std::result::Result<Prepared, (PartInput, Error)> {
+fn prepare(
+    input: PartInput,
+    s: &Settings,
+) -> std::result::Result<Prepared, Box<(PartInput, Error)>> {
     let spec = ProbeSpec {
         normal: s.normal,
         nominal_plane_mm: s.nominal_plane_mm,
@@ -176,11 +179,11 @@ fn prepare(input: PartInput, s: &Settings) -> std::result::Result<Prepared, (Par
     };
     let set = match probe::read_probes(&input.probe_file, &spec) {
         Ok(set) => set,
-        Err(e) => return Err((input, e)),
+        Err(e) => return Err(Box::new((input, e))),
     };
     let cleaned = match probe::reject_gross_errors(&set, s.k_sigma) {
         Ok(c) => c,
-        Err(e) => return Err((input, e)),
+        Err(e) => return Err(Box::new((input, e))),
     };
     let rows: u32 = set.points.iter().map(|p| p.repeats).sum();
     let holdout = choose_holdout(
@@ -204,10 +207,10 @@ fn interpolate(
     prep: Prepared,
     s: &Settings,
     train_grid: &Grid,
-) -> std::result::Result<Interpolated, (PartInput, Error)> {
+) -> std::result::Result<Interpolated, Box<(PartInput, Error)>> {
     let full = match Surface::new(&probe::uve(&prep.clean)) {
         Ok(surface) => interp::resample(&surface, s.method, train_grid),
-        Err(e) => return Err((prep.input, e)),
+        Err(e) => return Err(Box::new((prep.input, e))),
     };
     let holdout_nodes = if prep.holdout.is_empty() {
         None
@@ -221,7 +224,7 @@ fn interpolate(
             .collect();
         match Surface::new(&probe::uve(&kept)) {
             Ok(surface) => Some(interp::resample(&surface, s.method, train_grid)),
-            Err(e) => return Err((prep.input, e)),
+            Err(e) => return Err(Box::new((prep.input, e))),
         }
     };
     if full.iter().flatten().count() < 3 {
@@ -233,7 +236,7 @@ fn interpolate(
             ),
             "use a smaller [interp] spacing_mm or probe a larger area",
         );
-        return Err((prep.input, e));
+        return Err(Box::new((prep.input, e)));
     }
     Ok(Interpolated {
         prep,
@@ -309,7 +312,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
     for r in prepared {
         match r {
             Ok(p) => ok_parts.push(p),
-            Err((input, e)) => failed.push(fail(&input, &e)),
+            Err(b) => failed.push(fail(&b.0, &b.1)),
         }
     }
 
@@ -341,7 +344,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         for r in results {
             match r {
                 Ok(p) => interpolated.push(p),
-                Err((input, e)) => failed.push(fail(&input, &e)),
+                Err(b) => failed.push(fail(&b.0, &b.1)),
             }
         }
         // 3. All training sets: per part [hold-out fit], delivered fit; then the family.
@@ -467,7 +470,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 }
                 summaries.push(summary);
             }
-            summaries.extend(failed.drain(..));
+            summaries.append(&mut failed);
             failed = summaries;
 
             // 6. Family maps.
