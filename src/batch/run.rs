@@ -714,3 +714,56 @@ fn write_part(
     crate::io::write_json(&dir.join("summary.json"), &summary)?;
     Ok(summary)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid_points(nx: usize, ny: usize) -> Vec<ProbePoint> {
+        let mut pts = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                pts.push(ProbePoint {
+                    id: None,
+                    line: (pts.len() + 2) as u64,
+                    measured_mm: [i as f64 * 10.0, j as f64 * 5.0, 0.0],
+                    nominal_mm: [i as f64 * 10.0, j as f64 * 5.0, 0.0],
+                    u_mm: i as f64 * 10.0,
+                    v_mm: j as f64 * 5.0,
+                    e_um: 0.0,
+                    repeats: 1,
+                    spread_um: 0.0,
+                });
+            }
+        }
+        pts
+    }
+
+    #[test]
+    fn hull_boundary_is_the_outer_ring_of_a_grid() {
+        let pts = grid_points(5, 4);
+        let on = hull_boundary(&pts);
+        for (k, p) in pts.iter().enumerate() {
+            let ring = p.u_mm == 0.0 || p.u_mm == 40.0 || p.v_mm == 0.0 || p.v_mm == 15.0;
+            assert_eq!(on[k], ring, "point {k} at ({}, {})", p.u_mm, p.v_mm);
+        }
+        // 5 × 4 grid: 14 ring points, 6 interior.
+        assert_eq!(on.iter().filter(|&&b| b).count(), 14);
+    }
+
+    #[test]
+    fn holdout_takes_a_tenth_of_interior_points_seeded_by_part_name() {
+        let pts = grid_points(12, 12);
+        let on = hull_boundary(&pts);
+        let a = choose_holdout(&pts, 0.1, 1, "p01");
+        // round(0.1 · 144) = 14 points, none on the hull, sorted, distinct.
+        assert_eq!(a.len(), 14);
+        assert!(a.iter().all(|&i| !on[i]));
+        assert!(a.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(a, choose_holdout(&pts, 0.1, 1, "p01"));
+        assert_ne!(a, choose_holdout(&pts, 0.1, 1, "p02"));
+        assert!(choose_holdout(&pts, 0.0, 1, "p01").is_empty());
+        // Too few points to spare any.
+        assert!(choose_holdout(&grid_points(2, 3), 0.1, 1, "p01").is_empty());
+    }
+}
