@@ -1,5 +1,7 @@
 //! errmap's criterion benchmarks, one harness: each area adds a module beside this file and a group to `criterion_main!`.
 
+mod interp_bench;
+
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn csv_table_parse(c: &mut Criterion) {
@@ -18,4 +20,5 @@ fn csv_table_parse(c: &mut Criterion) {
 }
 
 criterion_group!(io_benches, csv_table_parse);
-criterion_main!(io_benches);
+criterion_group!(interp_benches, interp_bench::interp_benches);
+criterion_main!(io_benches, interp_benches);

@@ -20,7 +20,7 @@ impl ErrorField for Lin {
     fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
         self.dom
             .contains(u_mm, v_mm)
-            .then(|| self.e0 + self.g * u_mm)
+            .then_some(self.e0 + self.g * u_mm)
     }
 }
 
@@ -388,6 +388,28 @@ fn comments_numbers_and_crlf_survive_a_rewrite() {
 }
 
 #[test]
+fn program_stops_on_a_split_move_go_to_its_last_segment() {
+    let f = z_field(0.01, 0.0);
+    let text = "G0 X0 Y0 Z0\nN5 G1 X8 F100 M2\n";
+    let (out, _) = run(text, &f, &settings(None, 5.0));
+    assert_eq!(
+        out,
+        "G0 X0 Y0 Z0\nN5 G1 X0.0000 Y0.0000 Z-0.0100 F100\nG1 X4.0000 Y0.0000 Z-0.0100\nG1 X8.0000 Y0.0000 Z-0.0100 M2\n"
+    );
+}
+
+#[test]
+fn unit_switch_mid_program_converts_the_position() {
+    // Start in mm at x = 25.4, switch to inches: the next cut starts at x = 1 in.
+    let f = z_field(0.0254, 0.0);
+    let text = "G21 G0 X25.4 Y0 Z0\nG20\nG1 X1.1 F10\n";
+    let (out, _) = run(text, &f, &settings(None, 5.0));
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines[2], "G1 X1.00000 Y0.00000 Z-0.00100 F10");
+    assert_eq!(lines[3], "G1 X1.10000 Y0.00000 Z-0.00100");
+}
+
+#[test]
 fn csv_rows_are_split_and_compensated() {
     // Domain x ∈ [0, 10], E = 0.01 + 0.001·x, zone z ∈ [-1, 0]; extra column passed through.
     let f = Lin {
@@ -491,6 +513,14 @@ fn corpus_programs_with_parameters_or_o_words_are_refused_in_the_zone() {
             14,
             "# parameters or [expressions]",
         ),
+        // No parameters, but cutter compensation and a G91 polar canned cycle in the zone.
+        (
+            "comp-g1.ngc",
+            (-100.0, 100.0),
+            28,
+            "cutter radius compensation G41 (from line 27)",
+        ),
+        ("hole-circle.ngc", (-100.0, 100.0), 10, "canned cycle G81"),
     ];
     for (name, zone, line, what) in cases {
         let text = std::fs::read_to_string(dir.join(name)).unwrap();

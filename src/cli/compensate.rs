@@ -15,10 +15,20 @@ pub struct CompensateArgs {
     #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
     pub zone: Option<String>,
     /// Longest segment emitted in the zone, mm.
-    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 5.0,
+        allow_negative_numbers = true
+    )]
     pub max_segment: f64,
     /// Largest distance between an arc and its chords, mm.
-    #[arg(long, value_name = "MM", default_value_t = 0.005)]
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 0.005,
+        allow_negative_numbers = true
+    )]
     pub chord_tol: f64,
     /// The toolpath to compensate: G-code (.ngc, .nc, …) or CSV (x_mm,y_mm,z_mm).
     pub input: PathBuf,

@@ -26,7 +26,7 @@ impl Activation {
     #[inline]
     pub fn apply(self, z: f32) -> f32 {
         match self {
-            Activation::Tanh => z.tanh(),
+            Activation::Tanh => tanh_f32(z),
             Activation::Relu => z.max(0.0),
         }
     }
@@ -56,6 +56,47 @@ impl Activation {
             Activation::Tanh => "tanh",
             Activation::Relu => "relu",
         }
+    }
+}
+
+/// tanh as a rational function (Eigen's `generic_fast_tanh_float`: odd degree-13 numerator over
+/// even degree-6 denominator, input clamped to ±7.9053, identity below |x| < 4e-4), accurate
+/// to a few ulp. Written with plain multiplies, adds and one division, in the same order as
+/// `tanh_f32` in shaders/common.wgsl, with the same f32 coefficients (given by their bits, as
+/// hex floats there), so every IEEE device that does not contract a·b + c into an FMA gets
+/// the very same bits as the CPU: libm's `tanhf` and the GPU's `tanh` differ in the last ulp,
+/// and full-batch Adam amplifies such differences.
+#[inline]
+pub fn tanh_f32(x: f32) -> f32 {
+    const A1: f32 = f32::from_bits(0x3ba0_59dc);
+    const A3: f32 = f32::from_bits(0x3a27_0ded);
+    const A5: f32 = f32::from_bits(0x3779_434a);
+    const A7: f32 = f32::from_bits(0x335c_0041);
+    const A9: f32 = f32::from_bits(0xaebd_37ff);
+    const A11: f32 = f32::from_bits(0x2a61_337e);
+    const A13: f32 = f32::from_bits(0xa59f_25c0);
+    const B0: f32 = f32::from_bits(0x3ba0_59dd);
+    const B2: f32 = f32::from_bits(0x3b14_aa05);
+    const B4: f32 = f32::from_bits(0x38f8_95d6);
+    const B6: f32 = f32::from_bits(0x35a0_d3d8);
+    const CLAMP: f32 = f32::from_bits(0x40fc_f84f);
+    const TINY: f32 = f32::from_bits(0x39d1_b717);
+    let x = x.max(-CLAMP).min(CLAMP);
+    let x2 = x * x;
+    let mut p = x2 * A13 + A11;
+    p = x2 * p + A9;
+    p = x2 * p + A7;
+    p = x2 * p + A5;
+    p = x2 * p + A3;
+    p = x2 * p + A1;
+    p = x * p;
+    let mut q = x2 * B6 + B4;
+    q = x2 * q + B2;
+    q = x2 * q + B0;
+    if x.abs() < TINY {
+        x
+    } else {
+        p / q
     }
 }
 

@@ -10,11 +10,11 @@ mod norm;
 mod train;
 
 pub use config::{
-    network_seed, Activation, Backend, ModelConfig, MAX_EPOCHS, MAX_HIDDEN_LAYERS, MAX_WIDTH,
+    network_seed, tanh_f32, Activation, Backend, ModelConfig, MAX_EPOCHS, MAX_HIDDEN_LAYERS,
+    MAX_WIDTH,
 };
 pub use mlp::{layer_spans, param_count, LayerSpan, Mlp};
 pub use norm::Normalisation;
-#[allow(unused_imports)]
 pub(crate) use train::diverged;
 pub use train::{
     adam_update, check_batch, check_nets, initial_networks, loss_gradient, mse, train_network,

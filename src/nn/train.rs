@@ -58,17 +58,18 @@ pub fn initial_networks(count: usize, config: &ModelConfig) -> Vec<Mlp> {
 
 /// Gradient sums use this many lanes: sample s goes to lane s mod 64, each lane sums its
 /// samples in ascending order, then the lanes are added in a binary tree (32, 16, … 1).
-/// `shaders/train.wgsl` does the same with one workgroup of 64 threads per parameter,
-/// so both backends round identically in the reduction.
+/// `shaders/train.wgsl` does the same in each parameter's thread, so both backends
+/// round identically in the reduction.
 pub const GRAD_LANES: usize = 64;
 
 /// Adam (Kingma & Ba 2015, Algorithm 1) constants. 1 − β is written out, not computed,
 /// so CPU and shader use the very same f32 values.
-pub const ADAM_BETA1: f32 = 0.9;
-pub const ADAM_ONE_MINUS_BETA1: f32 = 0.1;
-pub const ADAM_BETA2: f32 = 0.999;
-pub const ADAM_ONE_MINUS_BETA2: f32 = 0.001;
-pub const ADAM_EPSILON: f32 = 1e-8;
+/// The shader spells them as hex floats with these bits.
+pub const ADAM_BETA1: f32 = f32::from_bits(0x3f66_6666); // 0.9
+pub const ADAM_ONE_MINUS_BETA1: f32 = f32::from_bits(0x3dcc_cccd); // 0.1
+pub const ADAM_BETA2: f32 = f32::from_bits(0x3f7f_be77); // 0.999
+pub const ADAM_ONE_MINUS_BETA2: f32 = f32::from_bits(0x3a83_126f); // 0.001
+pub const ADAM_EPSILON: f32 = f32::from_bits(0x322b_cc77); // 1e-8
 
 /// Per-step Adam scalars, computed on the host in f64: learning rate and the bias
 /// corrections 1/(1 − β₁ᵗ), 1/(1 − β₂ᵗ) for step t = epoch + 1.

@@ -65,6 +65,8 @@ struct Rewriter<'a> {
     blocks: Vec<Block>,
     sub: Option<(String, SubInfo)>,
     subs: HashMap<String, SubInfo>,
+    /// Most decimals in any coordinate word of the program (capped at 9).
+    program_decimals: usize,
     /// Line where the position became unknown, for messages.
     unknown_since: Option<u64>,
     report: CompensationReport,
@@ -102,10 +104,12 @@ pub fn compensate(
         sub: None,
         subs: HashMap::new(),
         unknown_since: None,
+        program_decimals: 0,
         report: CompensationReport::default(),
         out: String::with_capacity(text.len() + text.len() / 4),
     };
     let lines = lex(text);
+    rw.program_decimals = coordinate_decimals(text, &lines);
     rw.report.lines_in = lines.len() as u64;
     for line in &lines {
         rw.line(line)?;
@@ -117,7 +121,11 @@ pub fn compensate(
 
 /// Fixed-point text of a coordinate: 4 decimals in mm, 5 in inches; never `-0` nor an exponent.
 pub fn format_coord(v: f64, inches: bool) -> String {
-    let d = if inches { 5 } else { 4 };
+    format_decimals(v, if inches { 5 } else { 4 })
+}
+
+/// Fixed-point text with `d` decimals; never `-0` nor an exponent.
+pub fn format_decimals(v: f64, d: usize) -> String {
     let s = format!("{v:.d$}");
     if s.trim_start_matches('-')
         .chars()
@@ -127,6 +135,30 @@ pub fn format_coord(v: f64, inches: bool) -> String {
     } else {
         s
     }
+}
+
+/// Most decimals written in an X/Y/Z/I/J/K/R number of the program, capped at 9.
+fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
+    let mut most = 0;
+    for line in lines {
+        for t in &line.tokens {
+            if let TokenKind::Word {
+                letter: b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R',
+                value: WordValue::Number(_),
+            } = t.kind
+            {
+                let w = text.get(t.span.clone()).unwrap_or("");
+                if let Some(dot) = w.find('.') {
+                    let d = w[dot + 1..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_digit())
+                        .count();
+                    most = most.max(d);
+                }
+            }
+        }
+    }
+    most.min(9)
 }
 
 fn g_code(v: f64) -> i32 {
@@ -144,6 +176,13 @@ fn is_group1(code: i32) -> bool {
 }
 
 impl<'a> Rewriter<'a> {
+    /// Coordinates get at least 4 decimals in mm and 5 in inches, and as many as the program
+    /// itself uses (so unchanged end points are written back exactly).
+    fn fmt(&self, v: f64) -> String {
+        let d = if self.inches { 5 } else { 4 };
+        format_decimals(v, d.max(self.program_decimals))
+    }
+
     fn scale_mm(&self) -> f64 {
         if self.inches {
             25.4
@@ -830,11 +869,8 @@ impl<'a> Rewriter<'a> {
         } else {
             "G1"
         };
-        self.out.push_str(&format!(
-            "{code} {}{}",
-            n as char,
-            format_coord(value, self.inches)
-        ));
+        self.out
+            .push_str(&format!("{code} {}{}", n as char, self.fmt(value)));
         self.out.push_str(line_terminator(self.text, line));
         self.out_motion = Some(if code == "G0" { 0 } else { 10 });
         self.offset = 0.0;
@@ -876,12 +912,12 @@ impl<'a> Rewriter<'a> {
                 }
             }
         }
-        for i in 0..3 {
-            if end[i] != self.pos[i] {
+        for (i, e) in end.iter().enumerate() {
+            if *e != self.pos[i] {
                 if let Some(b) = self.blocks.last_mut() {
                     b.written[i] = true;
                 }
-                if end[i].is_none() {
+                if e.is_none() {
                     self.unknown_since = Some(line.number);
                 }
             }
@@ -977,7 +1013,7 @@ impl<'a> Rewriter<'a> {
                 } else {
                     q[i] - out_pos[i]
                 };
-                let t = format_coord(v, self.inches);
+                let t = self.fmt(v);
                 // Track the position the controller will reach after rounding.
                 let rounded: f64 = t.parse().unwrap_or(v);
                 out_pos[i] = if self.absolute {
@@ -988,16 +1024,41 @@ impl<'a> Rewriter<'a> {
                 words_text.push_str(&format!(" {}{}", *l as char, t));
             }
             if let Some(r) = r_word {
-                words_text.push_str(&format!(" R{}", format_coord(r, self.inches)));
+                words_text.push_str(&format!(" R{}", self.fmt(r)));
             }
             self.out_motion = Some(if code == "G1" { 10 } else { motion });
             lines_text.push(words_text);
         }
+        // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
+        // segment, so the program does not stop after the first one.
+        let stops: Vec<&W> = if nseg > 1 {
+            words
+                .iter()
+                .filter(|w| {
+                    w.letter == b'M'
+                        && w.value
+                            .is_some_and(|v| [0.0, 1.0, 2.0, 30.0, 60.0].contains(&v))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if let Some(last) = lines_text.last_mut() {
+            for w in &stops {
+                last.push(' ');
+                last.push_str(&w.text);
+            }
+        }
+        let stop_tokens: HashSet<usize> = stops.iter().map(|w| w.token).collect();
         // First line: the original line with its motion words replaced by the first segment.
         let mut first = String::new();
         let mut inserted = false;
         let mut skip_space = false;
         for (ti, tok) in line.tokens.iter().enumerate() {
+            if stop_tokens.contains(&ti) {
+                skip_space = true;
+                continue;
+            }
             if removed_tokens.contains(&ti) {
                 if !inserted {
                     first.push_str(&lines_text[0]);
@@ -1080,7 +1141,8 @@ pub(crate) fn emit_points(
         let mut t_prev = 0.0;
         let mut e_prev = error_at(&a);
         for t in ts {
-            let p = lerp(&a, &b, t);
+            // The last point is the piece end exactly (lerp can round past a domain edge).
+            let p = if t >= 1.0 { b } else { lerp(&a, &b, t) };
             let e_here = error_at(&p);
             if e_prev.is_some() != e_here.is_some() {
                 // Bisect for the boundary: keep `lo_t` on the side of e_prev.
