@@ -506,6 +506,9 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          epochs = {epochs}\n\
          seed = {seed}\n\
          holdout_fraction = 0.1\n\
+         # A 2-core machine without a GPU trains fastest on the CPU; use \"auto\" (or --backend gpu)\n\
+         # where a hardware GPU is present.\n\
+         backend = \"cpu\"\n\
          \n\
          [toolpaths]\n\
          files = [\"finish.ngc\"]\n\
