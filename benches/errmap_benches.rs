@@ -1,5 +1,6 @@
 //! errmap's criterion benchmarks, one harness: each area adds a module beside this file and a group to `criterion_main!`.
 
+mod family_bench;
 mod interp_bench;
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -21,4 +22,5 @@ fn csv_table_parse(c: &mut Criterion) {
 
 criterion_group!(io_benches, csv_table_parse);
 criterion_group!(interp_benches, interp_bench::interp_benches);
-criterion_main!(io_benches, interp_benches);
+criterion_group!(family_benches, family_bench::family_benches);
+criterion_main!(io_benches, interp_benches, family_benches);
