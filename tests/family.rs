@@ -10,12 +10,23 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn errmap(args: &[&str], cwd: &Path) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_errmap"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run errmap");
-    out
+    errmap_env(args, cwd, &[])
+}
+
+/// Run errmap with extra environment variables; a scheduler's shard index in the test's own
+/// environment is removed so it cannot split these batches.
+fn errmap_env(args: &[&str], cwd: &Path, env: &[(&str, &str)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_errmap"));
+    cmd.args(args).current_dir(cwd);
+    for var in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_COUNT",
+        "JOB_COMPLETION_INDEX",
+    ] {
+        cmd.env_remove(var);
+    }
+    cmd.envs(env.iter().copied());
+    cmd.output().expect("run errmap")
 }
 
 fn describe(args: &[&str], out: &Output, cwd: &Path) -> String {
