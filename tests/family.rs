@@ -644,6 +644,49 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         (map[0][0], map[0][1]),
         (truth.probed_mm[0], truth.probed_mm[1])
     );
+    // A wall: E along x over the y,z plane, nominal plane x = 100 mm, E = 10 µm + 20 µm·z/40.
+    let mut wall = String::from("x_mm,y_mm,z_mm\n");
+    for j in 0..6 {
+        for i in 0..8 {
+            let (y, z) = (i as f64 * 20.0, j as f64 * 8.0);
+            wall.push_str(&format!(
+                "{:.4},{y},{z}\n",
+                100.0 + (10.0 + 20.0 * z / 40.0) / 1000.0
+            ));
+        }
+    }
+    std::fs::write(d.join("wall.csv"), wall).unwrap();
+    run_expect(
+        &[
+            "map",
+            "wall.csv",
+            "--normal",
+            "x",
+            "--nominal-plane",
+            "100",
+            "--out",
+            "wall",
+            "--grid-step",
+            "4",
+            "--epochs",
+            "300",
+            "--backend",
+            "cpu",
+            "--quiet",
+        ],
+        d,
+        0,
+    );
+    let (header, map) = read_csv(&d.join("wall/map.csv"));
+    assert_eq!(header, ["y_mm", "z_mm", "e_um"]);
+    // Nodes run u (y) fastest over the bounding box y 0…140, z 0…40.
+    assert_eq!((map[1][0], map[1][1]), (4.0, 0.0));
+    assert_eq!(map.last().unwrap()[1], 40.0);
+    let worst = map
+        .iter()
+        .map(|r| (r[2] - (10.0 + 20.0 * r[1] / 40.0)).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 2.0, "wall map off the plane by {worst} µm");
     // A probe file without z_mm.
     std::fs::write(d.join("bad.csv"), "x_mm,y_mm\n1,2\n").unwrap();
     let out = run_expect(

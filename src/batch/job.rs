@@ -106,10 +106,10 @@ pub struct ToolpathConfig {
     /// Band `[min, max]` along the normal axis, in the program's units, where moves are
     /// compensated; default: everywhere.
     pub zone: Option<[f64; 2]>,
-    /// Longest segment after splitting, in the program's units.
-    pub max_segment: f64,
-    /// Chord tolerance when arcs are linearised, in the program's units.
-    pub chord_tol: f64,
+    /// Longest segment after splitting, mm (converted to inches for G20 programs).
+    pub max_segment_mm: f64,
+    /// Chord tolerance when arcs are linearised, mm.
+    pub chord_tol_mm: f64,
     /// `family` or `part`.
     pub map: MapChoice,
 }
@@ -119,8 +119,8 @@ impl Default for ToolpathConfig {
         ToolpathConfig {
             files: Vec::new(),
             zone: None,
-            max_segment: 5.0,
-            chord_tol: 0.005,
+            max_segment_mm: 5.0,
+            chord_tol_mm: 0.005,
             map: MapChoice::Family,
         }
     }
@@ -226,8 +226,8 @@ impl Job {
             ("grid_step_mm", self.grid_step_mm),
             ("clean.k_sigma", self.clean.k_sigma),
             ("interp.spacing_mm", self.interp.spacing_mm),
-            ("toolpaths.max_segment", self.toolpaths.max_segment),
-            ("toolpaths.chord_tol", self.toolpaths.chord_tol),
+            ("toolpaths.max_segment_mm", self.toolpaths.max_segment_mm),
+            ("toolpaths.chord_tol_mm", self.toolpaths.chord_tol_mm),
         ];
         for (key, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -353,8 +353,8 @@ seed = 9
 [toolpaths]
 files = ["a.ngc", "b.csv"]
 zone = [4, 6]
-max_segment = 2.0
-chord_tol = 0.01
+max_segment_mm = 2.0
+chord_tol_mm = 0.01
 map = "part"
 "#;
         let job = Job::parse(Path::new("j.toml"), text).unwrap();

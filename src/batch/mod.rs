@@ -148,8 +148,8 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
         files: file.toolpath_files(),
         settings: crate::toolpath::CompensationSettings {
             zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
-            max_segment: job.toolpaths.max_segment,
-            chord_tol: job.toolpaths.chord_tol,
+            max_segment: job.toolpaths.max_segment_mm,
+            chord_tol: job.toolpaths.chord_tol_mm,
         },
         per_part: job.toolpaths.map == MapChoice::Part,
     });

@@ -685,7 +685,13 @@ fn write_part(
         .iter()
         .map(|r| (r.point.u_mm, r.point.v_mm))
         .collect();
-    let title = format!("{} {name} — PV {pv:.1} µm, RMS {rms:.1} µm", s.family);
+    // `errmap map` names the family after the part: say it once.
+    let label = if s.family == *name {
+        name.clone()
+    } else {
+        format!("{} {name}", s.family)
+    };
+    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm");
     draw(
         &dir.join("map.png"),
         &title,

@@ -514,8 +514,8 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          files = [\"finish.ngc\"]\n\
          # Only moves on the web floor (Z {zlo} … {zhi}) are compensated.\n\
          zone = [{zlo}, {zhi}]\n\
-         max_segment = 5.0\n\
-         chord_tol = 0.005\n\
+         max_segment_mm = 5.0\n\
+         chord_tol_mm = 0.005\n\
          map = \"family\"\n",
         family = spec.family,
         epochs = spec.epochs,
