@@ -413,6 +413,11 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
         "id,x_mm,y_mm,z_mm\nA,30,30,5.001\nB,60,30,5.002\nC,30,60,abc\n",
     )
     .unwrap();
+    // Each part's own map compensates its own copy of the program.
+    let job = std::fs::read_to_string(d.join("data/job.toml")).unwrap();
+    assert!(job.contains("map = \"family\""));
+    let job = job.replace("map = \"family\"", "map = \"part\"");
+    std::fs::write(d.join("data/job.toml"), job).unwrap();
     let out = run_expect(
         &[
             "batch",
@@ -431,6 +436,11 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
         stdout.contains("p00") && stdout.contains("FAILED"),
         "{stdout}"
     );
+    for part in ["p01", "p02"] {
+        let comp = d.join("out").join(part).join("finish-compensated.ngc");
+        assert!(comp.is_file(), "{}", comp.display());
+    }
+    assert!(!d.join("out/family/finish-compensated.ngc").exists());
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/summary.json")).unwrap())
             .unwrap();
