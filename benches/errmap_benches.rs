@@ -21,6 +21,15 @@ fn csv_table_parse(c: &mut Criterion) {
 }
 
 criterion_group!(io_benches, csv_table_parse);
-criterion_group!(interp_benches, interp_bench::interp_benches);
-criterion_group!(family_benches, family_bench::family_benches);
+criterion_group! {
+    name = interp_benches;
+    // No plots: criterion's plotters backend looks for system fonts, which CI machines lack.
+    config = Criterion::default().without_plots();
+    targets = interp_bench::interp_benches
+}
+criterion_group! {
+    name = family_benches;
+    config = Criterion::default().without_plots();
+    targets = family_bench::family_benches
+}
 criterion_main!(io_benches, interp_benches, family_benches);

@@ -266,3 +266,55 @@ fn method_names_match_the_command_line_and_files() {
         assert_eq!(Method::from_str(name, false).unwrap(), m);
     }
 }
+
+/// `resample` finds natural neighbours with its own row sweep; `Surface::sample` goes through
+/// spade's walk and exact predicates. The two must agree node for node, inside and outside.
+#[test]
+fn resample_sweep_agrees_with_spade_point_queries() {
+    fn wavy(u: f64, v: f64) -> f64 {
+        30.0 * (u / 90.0).sin() * (v / 70.0).cos() + 0.01 * u
+    }
+    // Scattered sites (irregular hull) and the regular 12 × 12 layout (cocircular quadruples,
+    // nodes on grid lines through Delaunay edges).
+    let mut layouts: Vec<Vec<(f64, f64)>> = vec![scattered_sites(150, 8)[4..].to_vec()];
+    let mut regular = Vec::new();
+    for j in 0..12 {
+        for i in 0..12 {
+            regular.push((600.0 * i as f64 / 11.0, 300.0 * j as f64 / 11.0));
+        }
+    }
+    layouts.push(regular);
+    let domain = Domain {
+        u_min_mm: -10.0,
+        v_min_mm: -10.0,
+        u_max_mm: 610.0,
+        v_max_mm: 310.0,
+    };
+    let grid = Grid::covering(&domain, 2.5).unwrap();
+    for (n, sites) in layouts.iter().enumerate() {
+        let surface = surface_of(sites, wavy);
+        for method in [Method::NaturalNeighbour, Method::SibsonC1] {
+            let values = resample(&surface, method, &grid);
+            let mut inside = 0;
+            for j in 0..grid.nv {
+                for i in 0..grid.nu {
+                    let (u, v) = grid.node(i, j);
+                    let expected = surface.sample(method, u, v);
+                    let got = values[j * grid.nu + i];
+                    match (got, expected) {
+                        (Some(g), Some(e)) => {
+                            inside += 1;
+                            assert!(
+                                (g - e).abs() < 1e-8,
+                                "layout {n} {method} at ({u}, {v}): {g} vs {e}"
+                            )
+                        }
+                        (None, None) => {}
+                        _ => panic!("layout {n} {method} at ({u}, {v}): {got:?} vs {expected:?}"),
+                    }
+                }
+            }
+            assert!(inside > grid.len() / 2, "layout {n}: {inside} nodes inside");
+        }
+    }
+}

@@ -258,3 +258,19 @@ fn points_and_rejected_files_have_their_columns() {
         "x_mm,y_mm,z_mm,residual_um\n1,2,30.5,41.5\n"
     );
 }
+
+#[test]
+fn absurd_but_finite_coordinates_do_not_panic() {
+    // 1e300 mm saturates the repeat lookup's cells; 1e-300 is below what the triangulation takes.
+    let (_d, path) = file(
+        "huge.csv",
+        "x_mm,y_mm,z_mm\n1e300,1e300,1\n-1e300,1e300,1\n1e300,-1e300,1\n1e300,1e300,2\n",
+    );
+    let set = read_probes(&path, &plane_spec(1.0)).unwrap();
+    assert_eq!(set.points.len(), 3);
+    assert_eq!(set.points[0].repeats, 2);
+    let err = errmap::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1.0, 1.0]])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cannot triangulate"), "{err}");
+}

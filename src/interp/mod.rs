@@ -15,13 +15,14 @@
 //! triangulation so spade's walk hint and interpolation buffers stay local to one thread).
 
 mod gradient;
+mod sweep;
 
 use crate::error::{Error, Result};
 use crate::geom::Domain;
 use rayon::prelude::*;
 use spade::{DelaunayTriangulation, FloatTriangulation, HasPosition, Point2, Triangulation};
 
-pub(crate) use gradient::quadratic_gradient;
+pub(crate) use gradient::{gradient_coefficients, quadratic_gradient};
 
 /// Interpolation method. Names on the command line and in job files: `natural-neighbour`,
 /// `sibson-c1`, `linear`.
@@ -320,13 +321,47 @@ impl Grid {
 /// balance the rows that cross the hull against the empty ones.
 const ROWS_PER_BLOCK: usize = 8;
 
+/// Sibson's C1 interpolant at `p` from natural-neighbour weights: items are
+/// `(position, value, gradient, weight)` of each natural neighbour. Flatness 0.5, i.e. the C1
+/// weights are w_j / |p − p_j| (Sibson 1981; the formula of spade's `interpolate_gradient`).
+pub(crate) fn sibson_c1(
+    p: [f64; 2],
+    neighbours: impl Iterator<Item = ([f64; 2], f64, [f64; 2], f64)>,
+) -> Option<f64> {
+    let (mut sum_c0, mut sum_c1, mut sum_c1_weights, mut alpha, mut beta) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (q, e, g, w) in neighbours {
+        let (du, dv) = (p[0] - q[0], p[1] - q[1]);
+        let r2 = du * du + dv * dv;
+        if r2 == 0.0 {
+            return Some(e);
+        }
+        let c1_weight = w / r2.sqrt();
+        let zeta = e + du * g[0] + dv * g[1];
+        alpha += c1_weight * r2;
+        beta += w * r2;
+        sum_c1_weights += c1_weight;
+        sum_c1 += zeta * c1_weight;
+        sum_c0 += e * w;
+    }
+    alpha /= sum_c1_weights;
+    sum_c1 /= sum_c1_weights;
+    let value = (alpha * sum_c0 + beta * sum_c1) / (alpha + beta);
+    value.is_finite().then_some(value)
+}
+
 /// Interpolate the surface at every node of the grid (index `j·nu + i`); `None` where the node
 /// lies outside the convex hull of the sites.
+///
+/// Natural-neighbour and Sibson C1 weights come from a sweep along each row over the sites'
+/// circumcircles (see `sweep.rs`), with spade's exact path for nodes on or next to the hull and
+/// other near-degenerate cases; linear uses spade's barycentric interpolation.
 pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f64>> {
     let mut out = vec![None; grid.len()];
     if grid.is_empty() {
         return out;
     }
+    let sweep = sweep::Sweep::new(&surface.tri);
     out.par_chunks_mut(grid.nu * ROWS_PER_BLOCK)
         .enumerate()
         .for_each(|(block, chunk)| {
@@ -334,15 +369,42 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
             // between threads would make every walk start from another thread's last point.
             let tri = surface.tri.clone();
             let sampler = Sampler::new(&tri);
+            let mut buf = sweep::RowBuffers::default();
             for (k, row) in chunk.chunks_mut(grid.nu).enumerate() {
                 let j = block * ROWS_PER_BLOCK + k;
                 let v_mm = grid.v0_mm + j as f64 * grid.step_mm;
                 if v_mm < surface.bbox.v_min_mm || v_mm > surface.bbox.v_max_mm {
                     continue;
                 }
+                let span = match method {
+                    Method::Linear => Some(None),
+                    _ => sweep.start_row(v_mm, &mut buf),
+                };
+                let Some(span) = span else {
+                    continue;
+                };
                 for (i, cell) in row.iter_mut().enumerate() {
                     let u_mm = grid.u0_mm + i as f64 * grid.step_mm;
-                    *cell = sampler.sample(method, &surface.bbox, u_mm, v_mm);
+                    let Some(span) = span else {
+                        *cell = sampler.sample(method, &surface.bbox, u_mm, v_mm);
+                        continue;
+                    };
+                    *cell = match sweep.node(u_mm, v_mm, span, &mut buf) {
+                        sweep::Node::Outside => None,
+                        sweep::Node::Fallback => sampler.sample(method, &surface.bbox, u_mm, v_mm),
+                        sweep::Node::Weights => {
+                            let weights = buf.weights.iter().map(|&(k, w)| (sweep.site(k), w));
+                            match method {
+                                Method::SibsonC1 => sibson_c1(
+                                    [u_mm, v_mm],
+                                    weights.map(|(s, w)| {
+                                        ([s.position.x, s.position.y], s.e, s.grad, w)
+                                    }),
+                                ),
+                                _ => Some(weights.map(|(s, w)| s.e * w).sum()),
+                            }
+                        }
+                    };
                 }
             }
         });

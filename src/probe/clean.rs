@@ -9,17 +9,19 @@
 //!    out). A point outside the convex hull of the others (a hull corner, an irregular edge) is
 //!    predicted by the mean of its Delaunay neighbours' linear extrapolations
 //!    `e_j + ∇e_j·(p_i − p_j)`, weighted by 1/|p_i − p_j|².
-//! 2. Residual `r_i = e_i − ê_i`; σ = max(1.4826·MAD(r), [`SIGMA_FLOOR_UM`]) — 1.4826·MAD
-//!    estimates the standard deviation of normal data (Rousseeuw & Croux 1993) and ignores a
-//!    minority of outliers.
-//! 3. If the largest |r_i| exceeds k·σ, reject that one point only and start again from 1:
+//! 2. Residual `r_i = e_i − ê_i`, studentised: the prediction is linear in the data,
+//!    `ê_i = Σ c_k·e_k`, so `z_i = r_i / √(1 + Σ c_k²)` has the noise's standard deviation for
+//!    every good point, interior or extrapolated. σ = max(1.4826·MAD(z), [`SIGMA_FLOOR_UM`]) —
+//!    1.4826·MAD estimates the standard deviation of normal data (Rousseeuw & Croux 1993) and
+//!    ignores a minority of outliers.
+//! 3. If the largest |z_i| exceeds k·σ, reject that one point only and start again from 1:
 //!    an outlier drags its neighbours' residuals too, so removing the worst first and
 //!    recomputing keeps a good neighbour from being rejected with it (and unmasks a second
 //!    outlier next to the first).
 
 use super::{ProbePoint, ProbeSet};
 use crate::error::{Error, Result};
-use crate::interp::{quadratic_gradient, Site, Tri};
+use crate::interp::{gradient_coefficients, Site, Tri};
 use rayon::prelude::*;
 use spade::handles::FixedVertexHandle;
 use spade::{Point2, Triangulation};
@@ -52,7 +54,8 @@ pub struct Cleaned {
     pub clean: Vec<ProbePoint>,
     /// Points rejected, in file order.
     pub rejected: Vec<Rejected>,
-    /// Robust σ of the leave-one-out residuals of the clean points, µm (at least the floor).
+    /// Robust σ of the studentised leave-one-out residuals of the clean points, µm (at least
+    /// the floor): an estimate of the probe noise.
     pub sigma_um: f64,
 }
 
@@ -70,15 +73,17 @@ pub fn reject_gross_errors(set: &ProbeSet, k_sigma: f64) -> Result<Cleaned> {
     let mut sigma_um = SIGMA_FLOOR_UM;
     while active.len() >= MIN_POINTS_TO_JUDGE {
         let residuals = loo_residuals(points, &active);
-        let known: Vec<f64> = residuals.iter().flatten().copied().collect();
-        sigma_um = robust_sigma(&known).max(SIGMA_FLOOR_UM);
+        let scaled: Vec<f64> = residuals.iter().flatten().map(|&(_, z)| z).collect();
+        sigma_um = robust_sigma(&scaled).max(SIGMA_FLOOR_UM);
         let worst = residuals
             .iter()
             .enumerate()
             .filter_map(|(k, r)| r.map(|r| (k, r)))
-            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()).then(b.0.cmp(&a.0)));
+            .max_by(|a, b| a.1 .1.abs().total_cmp(&b.1 .1.abs()).then(b.0.cmp(&a.0)));
         match worst {
-            Some((k, r)) if r.abs() > k_sigma * sigma_um && active.len() > MIN_POINTS_TO_JUDGE => {
+            Some((k, (r, z)))
+                if z.abs() > k_sigma * sigma_um && active.len() > MIN_POINTS_TO_JUDGE =>
+            {
                 rejected.push((active[k], r));
                 active.remove(k);
             }
@@ -128,9 +133,24 @@ fn site(points: &[ProbePoint], i: usize) -> Site {
     }
 }
 
-/// Leave-one-out residual of each active point (same order as `active`); `None` where the
-/// others cannot predict it (they lie on one line).
-fn loo_residuals(points: &[ProbePoint], active: &[usize]) -> Vec<Option<f64>> {
+/// A leave-one-out prediction as a linear combination of the other points' values:
+/// `ê = Σ c_k·e_k` over `(point index, c_k)`.
+type Prediction = Vec<(usize, f64)>;
+
+fn add_coefficient(prediction: &mut Prediction, index: usize, c: f64) {
+    match prediction.iter_mut().find(|(k, _)| *k == index) {
+        Some((_, sum)) => *sum += c,
+        None => prediction.push((index, c)),
+    }
+}
+
+/// Leave-one-out residual of each active point (same order as `active`), divided by
+/// `sqrt(1 + Σ c_k²)`: with independent noise of standard deviation s on every value, the
+/// residual `e_i − Σ c_k·e_k` has standard deviation `s·sqrt(1 + Σ c_k²)`, so the scaled
+/// residuals of good points share one σ whether they are predicted from close neighbours or
+/// extrapolated at the hull. Returns `(residual_um, scaled)`; `None` where the others cannot
+/// predict the point (they lie on one line).
+fn loo_residuals(points: &[ProbePoint], active: &[usize]) -> Vec<Option<(f64, f64)>> {
     let full: Option<Tri> = Tri::bulk_load(active.iter().map(|&i| site(points, i)).collect()).ok();
     let Some(full) = full else {
         return vec![None; active.len()];
@@ -153,7 +173,7 @@ fn loo_residuals(points: &[ProbePoint], active: &[usize]) -> Vec<Option<f64>> {
                 return None;
             }
             let p = Point2::new(points[i].u_mm, points[i].v_mm);
-            let predicted = predict_sibson_c1(&tri, p).or_else(|| {
+            let prediction = predict_sibson_c1(&tri, p).or_else(|| {
                 let neighbours: Vec<usize> = full_handle[i]
                     .map(|h| {
                         full.vertex(h)
@@ -164,43 +184,71 @@ fn loo_residuals(points: &[ProbePoint], active: &[usize]) -> Vec<Option<f64>> {
                     .unwrap_or_default();
                 predict_outside(&tri, points.len(), &neighbours, p)
             })?;
-            Some(points[i].e_um - predicted)
+            let predicted: f64 = prediction.iter().map(|&(k, c)| c * points[k].e_um).sum();
+            let gain2: f64 = prediction.iter().map(|&(_, c)| c * c).sum();
+            let residual = points[i].e_um - predicted;
+            residual
+                .is_finite()
+                .then_some((residual, residual / (1.0 + gain2).sqrt()))
         })
         .collect()
 }
 
-/// Sibson's C1 interpolant at `p` (flatness 0.5: Sibson 1981, as in spade's
-/// `interpolate_gradient`), estimating gradients only at the natural neighbours of `p`.
-/// `None` outside the convex hull.
-fn predict_sibson_c1(tri: &Tri, p: Point2<f64>) -> Option<f64> {
+/// Add `weight · (e_j + ∇e_j·d)` (the linear extrapolation of site `h` by `d`) to a prediction.
+fn add_extrapolation(
+    prediction: &mut Prediction,
+    tri: &Tri,
+    h: FixedVertexHandle,
+    d: [f64; 2],
+    weight: f64,
+) {
+    add_coefficient(prediction, tri.vertex(h).data().index, weight);
+    for (k, c) in gradient_coefficients(tri, h) {
+        add_coefficient(
+            prediction,
+            tri.vertex(k).data().index,
+            weight * (d[0] * c[0] + d[1] * c[1]),
+        );
+    }
+}
+
+/// Sibson's C1 interpolant at `p` (flatness 0.5: Sibson 1981, the formula of spade's
+/// `interpolate_gradient` and [`crate::interp`]'s `sibson_c1`), as coefficients on the site
+/// values. `None` outside the convex hull.
+fn predict_sibson_c1(tri: &Tri, p: Point2<f64>) -> Option<Prediction> {
     let mut weights = Vec::new();
     tri.natural_neighbor().get_weights(p, &mut weights);
     if weights.is_empty() {
         return None;
     }
-    let (mut sum_c0, mut sum_c1, mut sum_c1_weights, mut alpha, mut beta) =
-        (0.0, 0.0, 0.0, 0.0, 0.0);
+    // value = (α·Σ w_j e_j + β·Σ (c_j/S) ζ_j) / (α + β), with c_j = w_j / r_j, S = Σ c_j,
+    // α = Σ c_j r_j² / S, β = Σ w_j r_j², ζ_j = e_j + ∇e_j·(p − p_j).
+    let (mut alpha, mut beta, mut s) = (0.0, 0.0, 0.0);
+    let mut geometry = Vec::with_capacity(weights.len());
     for &(h, w) in &weights {
-        let v = tri.vertex(h);
-        let q = v.position();
-        let (du, dv) = (p.x - q.x, p.y - q.y);
-        let r2 = du * du + dv * dv;
+        let q = tri.vertex(h).position();
+        let d = [p.x - q.x, p.y - q.y];
+        let r2 = d[0] * d[0] + d[1] * d[1];
         if r2 == 0.0 {
-            return Some(v.data().e);
+            return Some(vec![(tri.vertex(h).data().index, 1.0)]);
         }
-        let g = quadratic_gradient(tri, h);
-        let c1_weight = w / r2.sqrt();
-        let zeta = v.data().e + du * g[0] + dv * g[1];
-        alpha += c1_weight * r2;
+        let c = w / r2.sqrt();
+        alpha += c * r2;
         beta += w * r2;
-        sum_c1_weights += c1_weight;
-        sum_c1 += zeta * c1_weight;
-        sum_c0 += v.data().e * w;
+        s += c;
+        geometry.push((h, w, c, d));
     }
-    alpha /= sum_c1_weights;
-    sum_c1 /= sum_c1_weights;
-    let value = (alpha * sum_c0 + beta * sum_c1) / (alpha + beta);
-    value.is_finite().then_some(value)
+    alpha /= s;
+    let mut prediction = Prediction::new();
+    for (h, w, c, d) in geometry {
+        add_coefficient(
+            &mut prediction,
+            tri.vertex(h).data().index,
+            alpha * w / (alpha + beta),
+        );
+        add_extrapolation(&mut prediction, tri, h, d, beta * c / s / (alpha + beta));
+    }
+    Some(prediction)
 }
 
 /// Prediction at a point outside the hull of the others: the mean of its Delaunay neighbours'
@@ -210,28 +258,34 @@ fn predict_outside(
     n_points: usize,
     neighbours: &[usize],
     p: Point2<f64>,
-) -> Option<f64> {
+) -> Option<Prediction> {
     let mut handle_of: Vec<Option<FixedVertexHandle>> = vec![None; n_points];
     for v in tri.vertices() {
         handle_of[v.data().index] = Some(v.fix());
     }
-    let (mut sum, mut sum_weights) = (0.0, 0.0);
+    let mut geometry = Vec::new();
+    let mut sum_weights = 0.0;
     for &k in neighbours {
         let Some(h) = handle_of.get(k).copied().flatten() else {
             continue;
         };
-        let v = tri.vertex(h);
-        let q = v.position();
-        let (du, dv) = (p.x - q.x, p.y - q.y);
-        let r2 = du * du + dv * dv;
+        let q = tri.vertex(h).position();
+        let d = [p.x - q.x, p.y - q.y];
+        let r2 = d[0] * d[0] + d[1] * d[1];
         if r2 == 0.0 {
-            return Some(v.data().e);
+            return Some(vec![(k, 1.0)]);
         }
-        let g = quadratic_gradient(tri, h);
-        sum += (v.data().e + du * g[0] + dv * g[1]) / r2;
         sum_weights += 1.0 / r2;
+        geometry.push((h, d, 1.0 / r2));
     }
-    (sum_weights > 0.0).then(|| sum / sum_weights)
+    if sum_weights <= 0.0 {
+        return None;
+    }
+    let mut prediction = Prediction::new();
+    for (h, d, w) in geometry {
+        add_extrapolation(&mut prediction, tri, h, d, w / sum_weights);
+    }
+    Some(prediction)
 }
 
 #[cfg(test)]
@@ -244,5 +298,57 @@ mod tests {
         let s = robust_sigma(&[1.0, 2.0, 3.0, 4.0, 100.0]);
         assert!((s - 1.4826).abs() < 1e-12, "{s}");
         assert_eq!(robust_sigma(&[]), 0.0);
+    }
+
+    fn scattered(n: usize, e: impl Fn(f64, f64) -> f64) -> Vec<ProbePoint> {
+        // A deterministic irregular layout (golden-angle spiral, stretched) over 300 × 200 mm.
+        (0..n)
+            .map(|k| {
+                let r = (k as f64 + 0.5).sqrt() / (n as f64).sqrt();
+                let t = k as f64 * 2.399_963_229_728_653;
+                let (u, v) = (150.0 + 150.0 * r * t.cos(), 100.0 + 100.0 * r * t.sin());
+                ProbePoint {
+                    id: None,
+                    line: k as u64 + 2,
+                    measured_mm: [u, v, 0.0],
+                    nominal_mm: [u, v, 0.0],
+                    u_mm: u,
+                    v_mm: v,
+                    e_um: e(u, v),
+                    repeats: 1,
+                    spread_um: 0.0,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn leave_one_out_predicts_a_plane_exactly_inside_and_at_the_hull() {
+        let plane = |u: f64, v: f64| 7.0 + 0.04 * u - 0.09 * v;
+        let points = scattered(60, plane);
+        let active: Vec<usize> = (0..points.len()).collect();
+        let residuals = loo_residuals(&points, &active);
+        for (k, r) in residuals.iter().enumerate() {
+            let (r, z) = r.unwrap_or_else(|| panic!("point {k} not predicted"));
+            assert!(r.abs() < 1e-9 && z.abs() <= r.abs(), "point {k}: {r} {z}");
+        }
+    }
+
+    #[test]
+    fn prediction_coefficients_sum_to_one() {
+        // Constant precision (Σ c = 1) for an interior and for an outside-the-hull prediction.
+        let points = scattered(40, |u, v| (u / 40.0).sin() * 10.0 + v * 0.01);
+        let sites: Vec<Site> = (1..points.len()).map(|k| site(&points, k)).collect();
+        let tri = Tri::bulk_load(sites).unwrap();
+        let inside = Point2::new(points[0].u_mm, points[0].v_mm);
+        let c = predict_sibson_c1(&tri, inside).expect("point 0 is inside the others' hull");
+        let sum: f64 = c.iter().map(|&(_, c)| c).sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{sum}");
+        let outside = Point2::new(400.0, 100.0);
+        assert!(predict_sibson_c1(&tri, outside).is_none());
+        let neighbours: Vec<usize> = (1..6).collect();
+        let c = predict_outside(&tri, points.len(), &neighbours, outside).unwrap();
+        let sum: f64 = c.iter().map(|&(_, c)| c).sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{sum}");
     }
 }

@@ -307,7 +307,12 @@ fn merge_repeats(rows: &[Row], normal: Axis) -> Vec<ProbePoint> {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(members) = by_cell.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                    let key = [
+                        c[0].saturating_add(dx),
+                        c[1].saturating_add(dy),
+                        c[2].saturating_add(dz),
+                    ];
+                    if let Some(members) = by_cell.get(&key) {
                         for &j in members {
                             let close = (0..3).all(|k| {
                                 (rows[j].nominal_mm[k] - row.nominal_mm[k]).abs()
@@ -375,35 +380,38 @@ fn merge_repeats(rows: &[Row], normal: Axis) -> Vec<ProbePoint> {
 
 /// All points on one line (within [`COLLINEAR_RELATIVE_TOLERANCE`]) span no surface.
 fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -> Result<()> {
-    // The two points furthest apart (O(n²) is fine for probe files; use the first point's
-    // furthest, then that one's furthest: a 2-approximation that suffices for a tolerance test).
-    let dist2 =
-        |a: &ProbePoint, b: &ProbePoint| (a.u_mm - b.u_mm).powi(2) + (a.v_mm - b.v_mm).powi(2);
-    if points.is_empty() {
+    // The two points furthest apart, approximately: the first point's furthest, then that
+    // one's furthest (within a factor 2 of the diameter, enough for a tolerance test).
+    // Coordinates are taken relative to the first point and scaled by the largest offset so
+    // squares cannot overflow.
+    let Some(p0) = points.first() else {
         return Ok(());
+    };
+    let scale = points
+        .iter()
+        .map(|p| (p.u_mm - p0.u_mm).abs().max((p.v_mm - p0.v_mm).abs()))
+        .fold(0.0, f64::max);
+    if !(scale > 0.0 && scale.is_finite()) {
+        return Ok(()); // one distinct position: caught by the point count
     }
+    let uv: Vec<(f64, f64)> = points
+        .iter()
+        .map(|p| ((p.u_mm - p0.u_mm) / scale, (p.v_mm - p0.v_mm) / scale))
+        .collect();
+    let dist2 = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).powi(2) + (a.1 - b.1).powi(2);
     let far = |from: usize| {
-        (0..points.len())
-            .max_by(|&a, &b| {
-                dist2(&points[from], &points[a]).total_cmp(&dist2(&points[from], &points[b]))
-            })
+        (0..uv.len())
+            .max_by(|&a, &b| dist2(uv[from], uv[a]).total_cmp(&dist2(uv[from], uv[b])))
             .unwrap_or(from)
     };
     let ia = far(0);
-    let (a, b) = (&points[ia], &points[far(ia)]);
+    let ib = far(ia);
+    let (a, b) = (uv[ia], uv[ib]);
     let length = dist2(a, b).sqrt();
-    let spread = if length > 0.0 {
-        points
-            .iter()
-            .map(|p| {
-                ((b.u_mm - a.u_mm) * (p.v_mm - a.v_mm) - (b.v_mm - a.v_mm) * (p.u_mm - a.u_mm))
-                    .abs()
-                    / length
-            })
-            .fold(0.0, f64::max)
-    } else {
-        0.0
-    };
+    let spread = uv
+        .iter()
+        .map(|p| ((b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0)).abs() / length)
+        .fold(0.0, f64::max);
     if spread <= COLLINEAR_RELATIVE_TOLERANCE * length {
         return Err(Error::input(
             Location::file(path),
@@ -412,8 +420,8 @@ fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -
                 points.len(),
                 ua.name(),
                 va.name(),
-                a.line.min(b.line),
-                a.line.max(b.line)
+                points[ia].line.min(points[ib].line),
+                points[ia].line.max(points[ib].line)
             ),
             "probe points off that line, or check that --normal names the error direction",
         ));
