@@ -2,6 +2,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
+mod training_bench;
+
 fn csv_table_parse(c: &mut Criterion) {
     let mut text = String::from("x_mm,y_mm,z_mm\n");
     for i in 0..10_000 {
@@ -18,4 +20,4 @@ fn csv_table_parse(c: &mut Criterion) {
 }
 
 criterion_group!(io_benches, csv_table_parse);
-criterion_main!(io_benches);
+criterion_main!(io_benches, training_bench::benches);
