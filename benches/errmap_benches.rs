@@ -5,6 +5,8 @@ mod interp_bench;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
+mod training_bench;
+
 fn csv_table_parse(c: &mut Criterion) {
     let mut text = String::from("x_mm,y_mm,z_mm\n");
     for i in 0..10_000 {
@@ -32,4 +34,4 @@ criterion_group! {
     config = Criterion::default().without_plots();
     targets = family_bench::family_benches
 }
-criterion_main!(io_benches, interp_benches, family_benches);
+criterion_main!(io_benches, interp_benches, training_bench::benches, family_benches);

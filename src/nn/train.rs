@@ -267,13 +267,26 @@ impl<'a> Evaluator<'a> {
     }
 }
 
+/// Samples processed together in the CPU forward/backward pass (SIMD across samples; each
+/// sample keeps its own operation order, so blocking changes no bit).
+const BLOCK: usize = 8;
+/// Lane groups: the samples of block b go to lanes (8b mod 64)…(8b mod 64) + 7, so the
+/// 8 groups of 8 lanes are disjoint and run in parallel without changing any sum.
+const LANE_GROUPS: usize = GRAD_LANES / BLOCK;
+
+/// Per-thread scratch of the blocked pass: unit-major, BLOCK samples innermost.
+struct BlockScratch {
+    acts: Vec<[f32; BLOCK]>,
+    deltas: Vec<[f32; BLOCK]>,
+    back: Vec<[f32; BLOCK]>,
+    column: Vec<f32>,
+}
+
 /// Scratch of one network's gradient computation, reused across epochs.
 struct GradientWorkspace {
     spans: Vec<LayerSpan>,
     unit_offset: Vec<usize>,
-    acts: Vec<f32>,
-    deltas: Vec<f32>,
-    back: Vec<f32>,
+    scratch: Vec<BlockScratch>,
     /// `GRAD_LANES` partial gradients; after [`GradientWorkspace::gradient`] lane 0 holds the sum.
     lanes: Vec<f32>,
 }
@@ -287,83 +300,65 @@ impl GradientWorkspace {
             unit_offset.push(units);
             units += span.outputs;
         }
+        let width = net.layer_sizes.iter().copied().max().unwrap_or(2);
+        let scratch = (0..LANE_GROUPS)
+            .map(|_| BlockScratch {
+                acts: vec![[0.0; BLOCK]; units],
+                deltas: vec![[0.0; BLOCK]; units],
+                back: vec![[0.0; BLOCK]; width],
+                column: vec![0.0; width],
+            })
+            .collect();
         GradientWorkspace {
             spans,
             unit_offset,
-            acts: vec![0.0; units],
-            deltas: vec![0.0; units],
-            back: vec![0.0; net.layer_sizes.iter().copied().max().unwrap_or(2)],
+            scratch,
             lanes: vec![0.0; GRAD_LANES * net.params.len()],
         }
     }
 
     /// Gradient of the mean squared error over `set` w.r.t. `params` into `lanes[..P]`;
-    /// returns the mean squared error (f64 sum, for progress only).
+    /// returns the mean squared error (f64, for progress only).
+    ///
+    /// Per sample: forward z = b[i] + Σ_j W[i][j]·a[j] (j ascending), δ_out = (y − t)·(2/n),
+    /// δ_prev[j] = (Σ_i W[i][j]·δ[i], i ascending)·f'(a[j]); sample s adds δ[i]·a[j] to lane
+    /// s mod 64, lanes sum their samples in ascending order, then a binary tree adds lanes.
     fn gradient(&mut self, params: &[f32], activation: Activation, set: &TrainingSet) -> f64 {
         let n_params = params.len();
+        let n = set.len();
         let spans = &self.spans;
         let unit_offset = &self.unit_offset;
-        let last = spans.len() - 1;
-        let grad_scale = 2.0f32 / set.len() as f32;
+        let grad_scale = 2.0f32 / n as f32;
         self.lanes.fill(0.0);
-        let mut loss = 0.0f64;
-        for (s, (x, &target)) in set.inputs.iter().zip(&set.targets).enumerate() {
-            // Forward, keeping every layer's output.
-            for (l, span) in spans.iter().enumerate() {
-                let (done, rest) = self.acts.split_at_mut(unit_offset[l]);
-                let prev: &[f32] = if l == 0 {
-                    x
-                } else {
-                    &done[unit_offset[l - 1]..]
-                };
-                let out = &mut rest[..span.outputs];
-                for (i, o) in out.iter_mut().enumerate() {
-                    let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-                    let mut z = params[span.bias_offset + i];
-                    for (w, a) in row.iter().zip(prev) {
-                        z += w * a;
-                    }
-                    *o = if l == last { z } else { activation.apply(z) };
+        let losses: Vec<f64> = self
+            .lanes
+            .par_chunks_mut(BLOCK * n_params)
+            .zip(self.scratch.par_iter_mut())
+            .enumerate()
+            .map(|(group, (lanes, scratch))| {
+                let mut loss = 0.0f64;
+                // Blocks group, group + 8, … : samples 8·block … 8·block + 7.
+                let mut block = group;
+                while block * BLOCK < n {
+                    let s0 = block * BLOCK;
+                    let count = BLOCK.min(n - s0);
+                    loss += block_pass(
+                        params,
+                        activation,
+                        spans,
+                        unit_offset,
+                        set,
+                        s0,
+                        count,
+                        grad_scale,
+                        scratch,
+                        lanes,
+                    );
+                    block += LANE_GROUPS;
                 }
-            }
-            let err = self.acts[unit_offset[last]] - target;
-            loss += (err as f64) * (err as f64);
-            self.deltas[unit_offset[last]] = err * grad_scale;
-            // Backward: contributions into this sample's lane, then the previous layer's delta.
-            let lane = &mut self.lanes[(s % GRAD_LANES) * n_params..][..n_params];
-            for l in (0..spans.len()).rev() {
-                let span = spans[l];
-                let (before, current) = self.deltas.split_at_mut(unit_offset[l]);
-                let delta = &current[..span.outputs];
-                let prev: &[f32] = if l == 0 {
-                    x
-                } else {
-                    &self.acts[unit_offset[l - 1]..][..span.inputs]
-                };
-                for (i, &d) in delta.iter().enumerate() {
-                    lane[span.bias_offset + i] += d;
-                    let row = &mut lane[span.weight_offset + i * span.inputs..][..span.inputs];
-                    for (g, a) in row.iter_mut().zip(prev) {
-                        *g += d * a;
-                    }
-                }
-                if l > 0 {
-                    // back[j] = Σ_i W[i][j]·δ[i], i ascending (the shader's order per j).
-                    let back = &mut self.back[..span.inputs];
-                    back.fill(0.0);
-                    for (i, &d) in delta.iter().enumerate() {
-                        let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-                        for (b, w) in back.iter_mut().zip(row) {
-                            *b += w * d;
-                        }
-                    }
-                    let prev_delta = &mut before[unit_offset[l - 1]..][..span.inputs];
-                    for ((pd, b), a) in prev_delta.iter_mut().zip(back.iter()).zip(prev) {
-                        *pd = b * activation.derivative_from_output(*a);
-                    }
-                }
-            }
-        }
+                loss
+            })
+            .collect();
         // Tree over lanes: lane l += lane l + stride, stride 32, 16, … 1.
         let mut stride = GRAD_LANES / 2;
         while stride > 0 {
@@ -373,8 +368,118 @@ impl GradientWorkspace {
             }
             stride /= 2;
         }
-        loss / set.len().max(1) as f64
+        losses.iter().sum::<f64>() / n.max(1) as f64
     }
+}
+
+/// Forward and backward pass of samples s0 … s0 + count − 1 (count ≤ BLOCK), adding their
+/// gradient contributions to `lanes` (the 8 lanes of this block, each `P` long).
+#[allow(clippy::too_many_arguments)]
+fn block_pass(
+    params: &[f32],
+    activation: Activation,
+    spans: &[LayerSpan],
+    unit_offset: &[usize],
+    set: &TrainingSet,
+    s0: usize,
+    count: usize,
+    grad_scale: f32,
+    scratch: &mut BlockScratch,
+    lanes: &mut [f32],
+) -> f64 {
+    let n_params = params.len();
+    let last = spans.len() - 1;
+    let mut input = [[0.0f32; BLOCK]; 2];
+    for b in 0..count {
+        input[0][b] = set.inputs[s0 + b][0];
+        input[1][b] = set.inputs[s0 + b][1];
+    }
+    let BlockScratch {
+        acts,
+        deltas,
+        back,
+        column,
+    } = scratch;
+    // Forward.
+    for (l, span) in spans.iter().enumerate() {
+        let (done, rest) = acts.split_at_mut(unit_offset[l]);
+        let prev: &[[f32; BLOCK]] = if l == 0 {
+            &input
+        } else {
+            &done[unit_offset[l - 1]..][..span.inputs]
+        };
+        for (i, out) in rest[..span.outputs].iter_mut().enumerate() {
+            let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+            let mut z = [params[span.bias_offset + i]; BLOCK];
+            for (w, a) in row.iter().zip(prev) {
+                for b in 0..BLOCK {
+                    z[b] += w * a[b];
+                }
+            }
+            if l != last {
+                for zb in &mut z {
+                    *zb = activation.apply(*zb);
+                }
+            }
+            *out = z;
+        }
+    }
+    let mut loss = 0.0f64;
+    let out = unit_offset[last];
+    for b in 0..BLOCK {
+        let err = if b < count {
+            acts[out][b] - set.targets[s0 + b]
+        } else {
+            0.0
+        };
+        loss += (err as f64) * (err as f64);
+        deltas[out][b] = err * grad_scale;
+    }
+    // Backward.
+    for l in (0..spans.len()).rev() {
+        let span = spans[l];
+        let (before, current) = deltas.split_at_mut(unit_offset[l]);
+        let delta = &current[..span.outputs];
+        let prev: &[[f32; BLOCK]] = if l == 0 {
+            &input
+        } else {
+            &acts[unit_offset[l - 1]..][..span.inputs]
+        };
+        for b in 0..count {
+            let lane = &mut lanes[((s0 + b) % BLOCK) * n_params..][..n_params];
+            let column = &mut column[..span.inputs];
+            for (c, a) in column.iter_mut().zip(prev) {
+                *c = a[b];
+            }
+            for (i, d) in delta.iter().enumerate() {
+                let d = d[b];
+                lane[span.bias_offset + i] += d;
+                let row = &mut lane[span.weight_offset + i * span.inputs..][..span.inputs];
+                for (g, a) in row.iter_mut().zip(column.iter()) {
+                    *g += d * a;
+                }
+            }
+        }
+        if l > 0 {
+            let back = &mut back[..span.inputs];
+            back.iter_mut().for_each(|v| *v = [0.0; BLOCK]);
+            for (i, d) in delta.iter().enumerate() {
+                let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+                for (bj, w) in back.iter_mut().zip(row) {
+                    for b in 0..BLOCK {
+                        bj[b] += w * d[b];
+                    }
+                }
+            }
+            let prev_delta = &mut before[unit_offset[l - 1]..][..span.inputs];
+            for ((pd, bj), a) in prev_delta.iter_mut().zip(back.iter()).zip(prev) {
+                for b in 0..BLOCK {
+                    pd[b] = bj[b] * activation.derivative_from_output(a[b]);
+                }
+            }
+        }
+    }
+    loss
 }
 
 /// Gradient of the mean squared error of `net` on `set` w.r.t. its parameters, summed
