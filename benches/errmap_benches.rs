@@ -5,6 +5,7 @@ mod interp_bench;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
+mod toolpath_bench;
 mod training_bench;
 
 fn csv_table_parse(c: &mut Criterion) {
@@ -34,4 +35,11 @@ criterion_group! {
     config = Criterion::default().without_plots();
     targets = family_bench::family_benches
 }
-criterion_main!(io_benches, interp_benches, training_bench::benches, family_benches);
+criterion_group!(toolpath_benches, toolpath_bench::toolpath_compensate);
+criterion_main!(
+    io_benches,
+    interp_benches,
+    training_bench::benches,
+    toolpath_benches,
+    family_benches
+);

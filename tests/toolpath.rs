@@ -327,7 +327,7 @@ fn full_helical_circle_in_g18_and_r_form() {
 fn refusals_name_the_line_and_what_to_do() {
     let f = z_field(0.01, 0.0);
     let s = settings(Some((-5.0, 0.0)), 5.0);
-    let cases: [(&str, u64, &str); 8] = [
+    let cases: [(&str, u64, &str); 9] = [
         (
             "G0 X0 Y0 Z1\nG41 D1\nG1 Z-1 F10\n",
             3,
@@ -360,6 +360,7 @@ fn refusals_name_the_line_and_what_to_do() {
             "start point of this move is unknown",
         ),
         ("G0 X0 Y0 Z0\nG1 X1 A10 F10\n", 2, "axis A moves"),
+        ("G0 X0 Y0 Z-1\n/G1 X1 F10\n", 2, "block delete"),
     ];
     for (text, line, what) in cases {
         let msg = refuse(text, &f, &s);
@@ -410,6 +411,31 @@ fn unit_switch_mid_program_converts_the_position() {
 }
 
 #[test]
+fn a_return_step_keeps_later_modal_arcs_arcs() {
+    // The arc ends compensated; G92 needs the original position, so a G1 return is inserted;
+    // the next line relies on modal G2 and gets `G2` after its N-word.
+    let f = Lin {
+        normal: Axis::Z,
+        dom: dom(1.0, -50.0, 10.0, 50.0),
+        e0: 0.01,
+        g: 0.0,
+    };
+    let text = "G0 X1 Y0 Z0\nG2 X9 Y0 R4 F100\nG92 X0 Y0\nN9 X-20 Y0 R10\nM2\n";
+    let (out, rep) = run(text, &f, &settings(None, 1000.0));
+    let lines: Vec<&str> = out.lines().collect();
+    let n = lines.len();
+    assert!(
+        lines[n - 5].starts_with("G2 X9.0000 Y0.0000 Z-0.0100 R4.0000"),
+        "{out}"
+    );
+    assert_eq!(
+        &lines[n - 4..],
+        ["G1 Z0.0000", "G92 X0 Y0", "N9 G2 X-20 Y0 R10", "M2"]
+    );
+    assert_eq!((rep.returns_inserted, rep.lines_prefixed), (1, 1));
+}
+
+#[test]
 fn csv_rows_are_split_and_compensated() {
     // Domain x ∈ [0, 10], E = 0.01 + 0.001·x, zone z ∈ [-1, 0]; extra column passed through.
     let f = Lin {
@@ -433,6 +459,21 @@ fn csv_rows_are_split_and_compensated() {
     assert_eq!(out, expected);
     assert_eq!(rep.moves_changed, 2);
     assert!((rep.max_abs_error_mm - 0.02).abs() < 1e-12);
+    // A plunge through the zone z ∈ [-1, 0] (E = 0.01 everywhere): split at both edges, each
+    // boundary point written once uncompensated and once compensated, no repeated rows.
+    let flat = z_field(0.01, 0.0);
+    let (out, _) = compensate_csv(
+        "x_mm,y_mm,z_mm\n0,0,5\n0,0,-5\n",
+        Path::new("p.csv"),
+        &flat,
+        &settings(Some((-1.0, 0.0)), 5.0),
+    )
+    .unwrap();
+    assert_eq!(
+        out,
+        "x_mm,y_mm,z_mm\n0,0,5\n0.0000,0.0000,0.0000\n0.0000,0.0000,-0.0100\n\
+         0.0000,0.0000,-1.0100\n0.0000,0.0000,-1.0000\n0,0,-5\n"
+    );
     // Bad input names the cell.
     let err = compensate_csv(
         "x_mm,y_mm,z_mm\n1,2,abc\n",
@@ -533,5 +574,61 @@ fn corpus_programs_with_parameters_or_o_words_are_refused_in_the_zone() {
             assert!(msg.contains(&format!("{name}:{line},")), "{msg}");
             assert!(msg.contains(what), "{msg}");
         }
+    }
+}
+
+#[test]
+fn mutated_programs_never_panic() {
+    use rand::{Rng, SeedableRng};
+    // A program touching most features; random edits from G-code's own alphabet must give
+    // Ok or an error, never a panic or an endless output.
+    let base = "%\nG21 G90 G17 (start)\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X10 Y0 I5 J0\nG3 X0 Y0 R5\n\
+                G18 G2 X5 Z-1 I2.5 K0\nG19 G3 Y5 Z-1 J2.5 K0 P2\nG17 G91 G1 X5 Y5\nG90 G20 G1 X1\n\
+                #1=2\nG1 X#1 ; c\no100 repeat [2]\nG1 X1\no100 endrepeat\nG81 X1 Y1 Z-1 R1\nG80\nG41 D1\nG1 X2\nG40\nM2\n%\n";
+    let alphabet: Vec<char> = "GXYZIJKRFPMNO#[]()%;@^.-+0123456789 \n\r\tabc"
+        .chars()
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let fields = [
+        z_field(0.01, 0.001),
+        Lin {
+            normal: Axis::X,
+            dom: dom(-50.0, -50.0, 50.0, 50.0),
+            e0: 0.02,
+            g: 0.0,
+        },
+    ];
+    for i in 0..1500 {
+        let mut chars: Vec<char> = base.chars().collect();
+        for _ in 0..rng.random_range(1..6) {
+            let at = rng.random_range(0..chars.len());
+            let c = alphabet[rng.random_range(0..alphabet.len())];
+            match rng.random_range(0..3) {
+                0 => chars[at] = c,
+                1 => chars.insert(at, c),
+                _ => {
+                    chars.remove(at);
+                }
+            }
+        }
+        let text: String = chars.into_iter().collect();
+        let zone = if i % 2 == 0 { None } else { Some((-2.0, 0.5)) };
+        let field = &fields[i % 2];
+        if let Ok((out, _)) =
+            compensate_gcode(&text, Path::new("m.ngc"), field, &settings(zone, 5.0))
+        {
+            assert!(
+                out.len() < 200 * text.len() + 100_000,
+                "output exploded for:\n{text}"
+            );
+        }
+    }
+    // CSV with bad cells and huge numbers.
+    for text in [
+        "x_mm,y_mm,z_mm\n1e308,0,0\n-1e308,0,0\n",
+        "x_mm,y_mm,z_mm\n\"1,2\",3\n",
+        "x_mm,y_mm,z_mm\n",
+    ] {
+        let _ = compensate_csv(text, Path::new("m.csv"), &fields[0], &settings(None, 5.0));
     }
 }

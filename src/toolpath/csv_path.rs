@@ -69,6 +69,8 @@ pub fn compensate(
     // Rewritten text per line index (0-based); `None` = copy.
     let mut replaced: Vec<Option<String>> = vec![None; lines.len()];
     let mut prev: Option<[f64; 3]> = None;
+    // Last point written (compensated or not), to drop repeated boundary points.
+    let mut prev_out: Option<[f64; 3]> = None;
     for row in &table.rows {
         let p = [
             table.f64(row, cols[0])?,
@@ -85,6 +87,16 @@ pub fn compensate(
                 "a row that spans several lines (a quoted field with a line break) cannot be rewritten",
                 "keep each toolpath point on one line",
             ));
+        }
+        if let Some(q) = prev {
+            let len = super::gcode::dist(&q, &p);
+            if len / settings.max_segment > 1e6 {
+                return Err(Error::input(
+                    Location::line(source, row.line),
+                    format!("the move to this row ({len:.6e} mm) would need more than a million segments"),
+                    "check the coordinates and units, or raise --max-segment",
+                ));
+            }
         }
         let path: Vec<[f64; 3]> = match prev {
             Some(q) => vec![q, p],
@@ -103,18 +115,27 @@ pub fn compensate(
         prev = Some(p);
         let untouched = emitted.len() == 1 && emitted[0].1.is_none();
         if untouched {
+            prev_out = Some(p);
             continue;
         }
         let mut new_text = String::new();
-        let n = emitted.len();
+        let total = emitted.len();
+        let mut n = 0;
         for (k, (q, e)) in emitted.iter().enumerate() {
             let mut q = *q;
             if let Some(e) = e {
                 q[normal] -= e;
+            }
+            let last = k + 1 == total;
+            if !last && prev_out.is_some_and(|po| super::gcode::dist(&po, &q) < 1e-12) {
+                continue;
+            }
+            if let Some(e) = e {
                 report.points_compensated += 1;
                 report.max_abs_error_mm = report.max_abs_error_mm.max(e.abs());
             }
-            let last = k + 1 == n;
+            prev_out = Some(q);
+            n += 1;
             let mut out_fields: Vec<String> = fields.iter().map(|f| f.to_string()).collect();
             for axis in 0..3 {
                 // The row's own point keeps the text of coordinates that did not change.

@@ -616,6 +616,14 @@ impl<'a> Rewriter<'a> {
             .find(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'));
         let expr_word = words.iter().find(|w| w.is_expr);
         let cutting = matches!(motion, 10 | 20 | 30);
+        // `/` at the start of a line: block delete, the controller may skip the line.
+        let block_delete = line
+            .tokens
+            .iter()
+            .find(|t| t.kind != TokenKind::Space)
+            .is_some_and(|t| {
+                t.kind == TokenKind::Other && self.text.get(t.span.clone()) == Some("/")
+            });
 
         // Refusals: things errmap cannot compensate safely, if the move may touch the zone.
         let refusal: Option<(String, String, &str)> = if !cutting {
@@ -677,6 +685,14 @@ impl<'a> Rewriter<'a> {
                     "post the program as the tool-centre path (G40) for the zone, or move the zone away",
                 )
             })
+        } else if block_delete {
+            self.may_touch(&[start, end]).then(|| {
+                (
+                    "/".into(),
+                    "block delete `/` on a move in the compensation zone (the controller may skip the line)".into(),
+                    "remove the `/` or move the zone away",
+                )
+            })
         } else if let Some(w) = polar {
             self.may_touch(&[start, end]).then(|| {
                 (
@@ -732,6 +748,7 @@ impl<'a> Rewriter<'a> {
         }
 
         let plain = cutting
+            && !block_delete
             && self.blocks.is_empty()
             && self.cutter_comp.is_none()
             && polar.is_none()
@@ -742,6 +759,22 @@ impl<'a> Rewriter<'a> {
         if !plain {
             // Not compensable, but shown above not to touch the zone: copy as is.
             let mut end = end;
+            if block_delete {
+                // Executed or not: the axes it writes are unknown afterwards.
+                for i in 0..3 {
+                    if end[i] != start[i] {
+                        end[i] = None;
+                    }
+                }
+            }
+            if (380..=385).contains(&motion) {
+                // A probing move stops where it touches.
+                for i in 0..3 {
+                    if end[i] != start[i] {
+                        end[i] = None;
+                    }
+                }
+            }
             if is_canned(motion) {
                 // The cycle retracts to the R level or the start (G98/G99): not tracked.
                 end[self.plane.axes().2] = None;
@@ -764,15 +797,30 @@ impl<'a> Rewriter<'a> {
         } else {
             Some(self.arc(line, words, s, e, motion == 20)?)
         };
+        // Keep the output finite: a move needing over a million segments is a typo or a unit
+        // mistake, not a toolpath.
+        let step = self.settings.max_segment_in(self.inches);
+        let (length, chords) = match &arc {
+            None => (dist(&s, &e), 1),
+            Some(a) => {
+                let (_, _, ax) = a.plane.axes();
+                let len = (a.sweep.abs() * a.r_start.max(a.r_end)).hypot(a.end[ax] - a.start[ax]);
+                (len, a.chords(self.settings.chord_tol_in(self.inches), step))
+            }
+        };
+        if !length.is_finite() || length / step > 1e6 || chords >= 1_000_000 {
+            return Err(self.err(
+                line,
+                "X",
+                format!("this move ({length:.6e} program units) would need more than a million segments"),
+                "check the coordinates and units, or raise --max-segment / --chord-tol",
+            ));
+        }
         let path: Vec<[f64; 3]> = match &arc {
             None => vec![s, e],
-            Some(a) => {
-                let n = a.chords(
-                    self.settings.chord_tol_in(self.inches),
-                    self.settings.max_segment_in(self.inches),
-                );
-                (0..=n).map(|i| a.point(i as f64 / n as f64)).collect()
-            }
+            Some(a) => (0..=chords)
+                .map(|i| a.point(i as f64 / chords as f64))
+                .collect(),
         };
         let emitted = self.emit_points(&path);
         if !emitted.iter().any(|(_, e)| e.is_some()) {
@@ -893,15 +941,56 @@ impl<'a> Rewriter<'a> {
         let has_motion_g = words
             .iter()
             .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1));
-        if !has_motion_g && self.out_motion != self.motion {
-            // The output's modal motion differs (after a return step): say it on this line.
-            if let Some(m) = self.motion {
+        let moves = words.iter().any(|w| {
+            matches!(
+                w.letter,
+                b'X' | b'Y'
+                    | b'Z'
+                    | b'A'
+                    | b'B'
+                    | b'C'
+                    | b'U'
+                    | b'V'
+                    | b'W'
+                    | b'I'
+                    | b'J'
+                    | b'K'
+                    | b'R'
+                    | b'@'
+                    | b'^'
+            )
+        });
+        match self.motion {
+            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => {
+                // The output's modal motion differs (after a return step): say it on this
+                // line, after its block delete and N-word, which must come first.
+                let mut at = line.span.start;
+                for t in &line.tokens {
+                    let lead = match &t.kind {
+                        TokenKind::Space => true,
+                        TokenKind::Word { letter: b'N', .. } => true,
+                        TokenKind::Other => self.text.get(t.span.clone()) == Some("/"),
+                        _ => false,
+                    };
+                    if !lead {
+                        break;
+                    }
+                    at = t.span.end;
+                }
+                let text = self.text;
+                self.out.push_str(&text[line.span.start..at]);
+                if at > line.span.start && !text[..at].ends_with([' ', '\t']) {
+                    self.out.push(' ');
+                }
                 self.out.push_str(&format!("G{} ", m as f64 / 10.0));
+                self.out.push_str(&text[at..line.end]);
                 self.report.lines_prefixed += 1;
             }
+            _ => self.copy_line(line),
         }
-        self.out_motion = self.motion;
-        self.copy_line(line);
+        if has_motion_g || moves {
+            self.out_motion = self.motion;
+        }
         // Position bookkeeping.
         let mut end = end;
         if !self.blocks.is_empty() && !self.absolute {

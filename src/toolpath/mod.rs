@@ -164,6 +164,15 @@ pub fn compensate_file(
     field: &dyn ErrorField,
     settings: &CompensationSettings,
 ) -> Result<CompensationReport> {
+    let same = input == output
+        || matches!((input.canonicalize(), output.canonicalize()), (Ok(a), Ok(b)) if a == b);
+    if same {
+        return Err(Error::input(
+            Location::file(output),
+            "the output would overwrite the input toolpath",
+            "write the compensated toolpath to another file (-o)",
+        ));
+    }
     let text = crate::io::read_text(input)?;
     let is_csv = input
         .extension()
@@ -174,13 +183,6 @@ pub fn compensate_file(
     } else {
         compensate_gcode(&text, input, field, settings)?
     };
-    if input == output {
-        return Err(Error::input(
-            Location::file(output),
-            "the output would overwrite the input toolpath",
-            "write the compensated toolpath to another file (-o)",
-        ));
-    }
     crate::io::write_atomic_bytes(output, out.as_bytes())?;
     Ok(report)
 }
