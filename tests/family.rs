@@ -290,50 +290,56 @@ fn check_family(data: &Path, out: &Path, truth: &Truth) {
     );
 }
 
+/// The committed sample family, `data/web-plate/` (the quick start's data).
+fn sample_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/web-plate")
+}
+
+#[test]
+fn committed_sample_is_what_its_readme_command_makes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let readme = std::fs::read_to_string(sample_dir().join("README.md")).unwrap();
+    let command = "errmap synth web-plate --parts 8 --out data/web-plate";
+    assert!(readme.contains(command), "{readme}");
+    let args: Vec<&str> = command.split(' ').skip(1).collect();
+    run_expect(&args, d, 0);
+    let made = walk(&d.join("data/web-plate"));
+    let committed = walk(&sample_dir());
+    assert_eq!(made.len(), committed.len(), "{made:?} vs {committed:?}");
+    for (m, c) in made.iter().zip(&committed) {
+        assert!(
+            std::fs::read(m).unwrap() == std::fs::read(c).unwrap(),
+            "{} differs from the generator's",
+            c.display()
+        );
+    }
+}
+
 #[test]
 fn sample_family_rejects_outliers_matches_truth_and_compensation_removes_the_error() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
-        &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "2",
-            "--out",
-            "data",
-            "--epochs",
-            "400",
-        ],
-        d,
-        0,
-    );
+    let job = sample_dir().join("job.toml");
+    let job = job.to_str().unwrap();
     let out = run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "out",
-            "--quiet",
-        ],
+        &["batch", job, "--backend", "cpu", "--out", "out", "--quiet"],
         d,
         0,
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("hold-out RMS µm") && stdout.contains("p02"),
+        stdout.contains("hold-out RMS µm") && stdout.contains("p08"),
         "{stdout}"
     );
-    let truth = Truth::read(&d.join("data/truth.json")).unwrap();
-    check_family(&d.join("data"), &d.join("out"), &truth);
+    let truth = Truth::read(&sample_dir().join("truth.json")).unwrap();
+    check_family(&sample_dir(), &d.join("out"), &truth);
     // The batch summary lists every part with its figures.
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/summary.json")).unwrap())
             .unwrap();
     let parts = summary["parts"].as_array().unwrap();
-    assert_eq!(parts.len(), 2);
+    assert_eq!(parts.len(), 8);
     for p in parts {
         assert_eq!(p["ok"], true);
         assert_eq!(p["points"], 144);
