@@ -392,7 +392,12 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                     trainer.name()
                 );
             }
-            let nets = trainer.train_batch(&sets, &s.model)?;
+            // One call trains every network; the bar ticks so a terminal shows it is alive.
+            let bar = crate::progress::bar(1, "train", quiet);
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+            let nets = trainer.train_batch(&sets, &s.model);
+            bar.finish_and_clear();
+            let nets = nets?;
             if nets.len() != sets.len() {
                 return Err(Error::Internal(format!(
                     "trainer returned {} networks for {} training sets",
