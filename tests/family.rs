@@ -603,6 +603,26 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
         .collect();
     assert_eq!(names, ["p01", "p02", "p03"]);
     assert!(d.join("out/summary.json").is_file());
+    // The family maps are the node-wise mean and std of the three parts' maps.
+    let maps: Vec<Vec<Vec<f64>>> = ["p01", "p02", "p03"]
+        .iter()
+        .map(|p| read_csv(&d.join("out").join(p).join("map.csv")).1)
+        .collect();
+    let (_, mean) = read_csv(&d.join("out/family/mean.csv"));
+    let (_, std) = read_csv(&d.join("out/family/std.csv"));
+    assert_eq!(mean.len(), maps[0].len());
+    for k in [0, mean.len() / 2, mean.len() - 1] {
+        let v: Vec<f64> = maps.iter().map(|m| m[k][2]).collect();
+        let mu = v.iter().sum::<f64>() / 3.0;
+        let sd = (v.iter().map(|x| (x - mu).powi(2)).sum::<f64>() / 3.0).sqrt();
+        assert!(
+            (mean[k][2] - mu).abs() < 2e-4 && (std[k][2] - sd).abs() < 2e-4,
+            "node {k}: {v:?}"
+        );
+        assert_eq!((mean[k][0], mean[k][1]), (maps[0][k][0], maps[0][k][1]));
+    }
+    assert!(d.join("out/family/mean.png").is_file() && d.join("out/family/std.png").is_file());
+    assert_eq!(merged["family_map"]["parts"], 3);
     // A missing shard is an error.
     let out = run_expect(&["merge", "out/summary-shard-1-of-2.json"], d, 2);
     assert!(String::from_utf8_lossy(&out.stderr).contains("shards [0] of 2 are missing"));

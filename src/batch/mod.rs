@@ -185,6 +185,75 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
     Ok((plan, summary_path))
 }
 
+/// Family mean and standard-deviation maps (CSV + heatmaps, no network) rebuilt from the
+/// `map.csv` of every mapped part of a merged summary, written to `dir`.
+pub fn family_maps_from_files(
+    summary: &BatchSummary,
+    dir: &Path,
+) -> Result<Option<summary::FamilySummary>> {
+    let mut maps = Vec::new();
+    for p in summary.parts.iter().filter(|p| p.ok) {
+        if let Some(out) = &p.output_dir {
+            maps.push(crate::map::ErrorMap::read_csv(
+                &out.join("map.csv"),
+                summary.normal,
+            )?);
+        }
+    }
+    let refs: Vec<&crate::map::ErrorMap> = maps.iter().collect();
+    let Some((mean, std)) = crate::map::family_stats(&refs) else {
+        if maps.is_empty() {
+            return Ok(None);
+        }
+        return Err(Error::usage(
+            "the parts' maps are on different grids",
+            "merge the shards of one job (same domain and grid step)",
+        ));
+    };
+    let axes = summary.normal.plane_axes();
+    mean.write_csv(&dir.join("mean.csv"), "e_um")?;
+    std.write_csv(&dir.join("std.csv"), "std_um")?;
+    let (pv, rms) = mean.pv_rms_um();
+    let std_max = std.values.iter().cloned().fold(0.0, f64::max);
+    let none: Vec<(f64, f64)> = Vec::new();
+    let title = format!(
+        "{} family mean of {} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
+        summary.family,
+        maps.len()
+    );
+    run::draw(
+        &dir.join("mean.png"),
+        &title,
+        &mean,
+        &none,
+        &none,
+        crate::report::heatmap::Scale::Diverging,
+        axes,
+        "E (µm)",
+    )?;
+    let title = format!(
+        "{} part-to-part standard deviation — max {std_max:.2} µm",
+        summary.family
+    );
+    run::draw(
+        &dir.join("std.png"),
+        &title,
+        &std,
+        &none,
+        &none,
+        crate::report::heatmap::Scale::Sequential,
+        axes,
+        "σ (µm)",
+    )?;
+    Ok(Some(summary::FamilySummary {
+        parts: maps.len(),
+        output_dir: dir.to_path_buf(),
+        mean_rms_um: rms,
+        mean_pv_um: pv,
+        std_max_um: std_max,
+    }))
+}
+
 /// Where a summary for `out` goes when shards are merged: `summary.json` beside the first.
 pub fn merged_summary_path(first_shard: &Path) -> PathBuf {
     first_shard

@@ -588,6 +588,7 @@ fn finish(
         family: plan.settings.family.clone(),
         job: plan.job.clone(),
         backend: trainer.name(),
+        normal: plan.settings.normal,
         shard: plan.shard,
         domain_mm: domain.map(|d| [d.u_min_mm, d.v_min_mm, d.u_max_mm, d.v_max_mm]),
         grid_step_mm: plan.settings.grid_step_mm,
@@ -636,7 +637,7 @@ fn compensate_one(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn draw(
+pub(crate) fn draw(
     path: &Path,
     title: &str,
     map: &ErrorMap,

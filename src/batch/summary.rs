@@ -80,6 +80,8 @@ pub struct BatchSummary {
     pub job: Option<PathBuf>,
     /// The trainer that fitted the networks ("cpu", "gpu (…)").
     pub backend: String,
+    /// Error direction of the maps.
+    pub normal: crate::geom::Axis,
     /// `[index, count]` of this shard (0-based index), absent when the batch was not split.
     pub shard: Option<[usize; 2]>,
     /// Map domain `[u_min, v_min, u_max, v_max]`, mm.

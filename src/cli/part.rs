@@ -219,11 +219,16 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
     for p in &args.summaries {
         shards.push((p.clone(), BatchSummary::read(p)?));
     }
-    let merged = batch::merge(&shards)?;
+    let mut merged = batch::merge(&shards)?;
     let out = args
         .out
         .clone()
         .unwrap_or_else(|| batch::merged_summary_path(&args.summaries[0]));
+    // Shards could not see each other's parts: the family mean and std maps are made here.
+    let family_dir = out
+        .parent()
+        .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
+    merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
     errmap::io::write_json(&out, &merged)?;
     report(&merged, &out, args.json, globals.quiet)?;
     Ok(merged.exit_code())

@@ -173,6 +173,85 @@ impl ErrorMap {
     }
 }
 
+impl ErrorMap {
+    /// Read a map file written by [`ErrorMap::write_csv`] (`<u>_mm,<v>_mm,<value>`, u fastest)
+    /// and recover its grid; rows that do not form a regular grid are an error naming the line.
+    pub fn read_csv(path: &Path, normal: Axis) -> Result<ErrorMap> {
+        let table = crate::io::CsvTable::read(path)?;
+        let (ua, va) = normal.plane_axes();
+        let cu = table.require(&format!("{}_mm", ua.name()))?;
+        let cv = table.require(&format!("{}_mm", va.name()))?;
+        let ce = table
+            .headers
+            .len()
+            .checked_sub(1)
+            .filter(|&c| c != cu && c != cv)
+            .ok_or_else(|| {
+                Error::input(
+                    Location::line(path, 1),
+                    "no value column after the coordinates",
+                    "write <u>_mm,<v>_mm,e_um",
+                )
+            })?;
+        let mut rows = Vec::with_capacity(table.rows.len());
+        for row in &table.rows {
+            rows.push((
+                table.f64(row, cu)?,
+                table.f64(row, cv)?,
+                table.f64(row, ce)?,
+                row.line,
+            ));
+        }
+        let first = rows.first().ok_or_else(|| {
+            Error::input(
+                Location::file(path),
+                "the map has no rows",
+                "map the part again",
+            )
+        })?;
+        let (u0, v0) = (first.0, first.1);
+        let nu = rows.iter().take_while(|r| r.1 == v0).count();
+        let step = if nu > 1 {
+            rows[1].0 - u0
+        } else if rows.len() > 1 {
+            rows[1].1 - v0
+        } else {
+            1.0
+        };
+        let nv = rows.len() / nu.max(1);
+        let grid = Grid {
+            u0_mm: u0,
+            v0_mm: v0,
+            step_mm: step,
+            nu,
+            nv,
+        };
+        let tol = 1e-5 * (1.0 + step.abs());
+        for (k, r) in rows.iter().enumerate() {
+            let (u, v) = grid.node(k % nu, k / nu);
+            if nu * nv != rows.len()
+                || !(step > 0.0)
+                || (r.0 - u).abs() > tol
+                || (r.1 - v).abs() > tol
+            {
+                return Err(Error::input(
+                    Location::line(path, r.3),
+                    format!(
+                        "({}, {}) is not node {k} of a regular grid ({u}, {v})",
+                        r.0, r.1
+                    ),
+                    "pass map files written by errmap",
+                ));
+            }
+        }
+        Ok(ErrorMap {
+            grid,
+            normal,
+            values: rows.iter().map(|r| r.2).collect(),
+        })
+    }
+}
+
 /// Coordinates to 1 nm, so 0.1 + 0.2 prints as 0.3.
 fn round_mm(x: f64) -> f64 {
     let r = (x * 1e6).round() / 1e6;
@@ -298,5 +377,16 @@ mod tests {
         let (mean, std) = family_stats(&[&a, &b]).unwrap();
         assert_eq!(mean.values, vec![2.0, 4.0]);
         assert_eq!(std.values, vec![1.0, 0.0]);
+        // A map file reads back onto the same grid.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("mean.csv");
+        mean.write_csv(&path, "e_um").unwrap();
+        assert_eq!(ErrorMap::read_csv(&path, Axis::Z).unwrap(), mean);
+        std::fs::write(&path, "x_mm,y_mm,e_um\n0,0,1\n1,0,2\n3,0,2\n").unwrap();
+        let err = ErrorMap::read_csv(&path, Axis::Z).unwrap_err().to_string();
+        assert!(
+            err.contains("mean.csv:4") && err.contains("regular grid"),
+            "{err}"
+        );
     }
 }
