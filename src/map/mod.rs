@@ -227,13 +227,10 @@ impl ErrorMap {
             nv,
         };
         let tol = 1e-5 * (1.0 + step.abs());
+        let step_ok = step.is_finite() && step > 0.0;
         for (k, r) in rows.iter().enumerate() {
             let (u, v) = grid.node(k % nu, k / nu);
-            if nu * nv != rows.len()
-                || !(step > 0.0)
-                || (r.0 - u).abs() > tol
-                || (r.1 - v).abs() > tol
-            {
+            if nu * nv != rows.len() || !step_ok || (r.0 - u).abs() > tol || (r.1 - v).abs() > tol {
                 return Err(Error::input(
                     Location::line(path, r.3),
                     format!(
