@@ -331,7 +331,8 @@ pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Genera
         chosen.sort_unstable();
         // Two repeated measurements per part, away from the outliers.
         let mut repeats: Vec<usize> = Vec::new();
-        while repeats.len() < 2 && !interior.is_empty() {
+        let spare = interior.iter().filter(|i| !chosen.contains(i)).count();
+        while repeats.len() < spare.min(2) {
             let cand = interior[rng.random_range(0..interior.len())];
             if !chosen.contains(&cand) && !repeats.contains(&cand) {
                 repeats.push(cand);
