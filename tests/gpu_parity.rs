@@ -318,3 +318,26 @@ fn host_structs_match_wgsl_layouts() {
     // LayerInfo and Dims in both shaders, NetInfo, Sample, Step in train.wgsl.
     assert_eq!(checked, 7);
 }
+
+#[test]
+fn backend_selection_follows_the_documented_order() {
+    use errmap::gpu::{auto_allows_software, select_trainer};
+    assert_eq!(select_trainer(Backend::Cpu, true).unwrap().name(), "cpu");
+    let Some(gpu) = gpu("backend_selection_follows_the_documented_order") else {
+        // Without any adapter, auto falls back to the CPU and gpu is a device error.
+        assert_eq!(select_trainer(Backend::Auto, true).unwrap().name(), "cpu");
+        let err = select_trainer(Backend::Gpu, true).err().unwrap();
+        assert_eq!(err.exit_code(), 3, "{err}");
+        return;
+    };
+    let forced = select_trainer(Backend::Gpu, true).unwrap();
+    assert_eq!(forced.name(), gpu.name());
+    assert!(forced.name().starts_with("gpu: "), "{}", forced.name());
+    let auto = select_trainer(Backend::Auto, true).unwrap().name();
+    let software = gpu.context().adapter.software;
+    if software && !auto_allows_software() {
+        assert_eq!(auto, "cpu");
+    } else {
+        assert_eq!(auto, gpu.name());
+    }
+}
