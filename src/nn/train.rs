@@ -432,9 +432,9 @@ fn block_pass(
     let n_params = params.len();
     let last = spans.len() - 1;
     let mut input = [[0.0f32; BLOCK]; 2];
-    for b in 0..count {
-        input[0][b] = set.inputs[s0 + b][0];
-        input[1][b] = set.inputs[s0 + b][1];
+    for (b, x) in set.inputs[s0..s0 + count].iter().enumerate() {
+        input[0][b] = x[0];
+        input[1][b] = x[1];
     }
     let BlockScratch {
         acts,
