@@ -26,7 +26,18 @@ fn gpu_info_json_is_one_document_naming_the_choice() {
     let doc: serde_json::Value = serde_json::from_str(&stdout)
         .unwrap_or_else(|e| panic!("not one JSON document ({e}):\n{stdout}"));
     let adapters = doc["adapters"].as_array().expect("adapters array");
+    let software = doc["chosen"]["software"].as_bool() == Some(true);
     match doc["auto_backend"].as_str() {
+        Some("cpu") if software => {
+            // A software adapter serves --backend gpu; auto prefers the CPU trainer.
+            assert_eq!(doc["chosen"]["name"], adapters[0]["name"], "{stdout}");
+            assert!(
+                doc["limits"]["max_storage_buffer_binding_size"]
+                    .as_u64()
+                    .unwrap()
+                    > 0
+            );
+        }
         Some("gpu") => {
             assert!(!adapters.is_empty());
             let chosen = &doc["chosen"];

@@ -318,3 +318,59 @@ fn host_structs_match_wgsl_layouts() {
     // LayerInfo and Dims in both shaders, NetInfo, Sample, Step in train.wgsl.
     assert_eq!(checked, 7);
 }
+
+#[test]
+fn backend_selection_follows_the_documented_order() {
+    use errmap::gpu::{auto_allows_software, select_trainer};
+    assert_eq!(select_trainer(Backend::Cpu, true).unwrap().name(), "cpu");
+    let Some(gpu) = gpu("backend_selection_follows_the_documented_order") else {
+        // Without any adapter, auto falls back to the CPU and gpu is a device error.
+        assert_eq!(select_trainer(Backend::Auto, true).unwrap().name(), "cpu");
+        let err = select_trainer(Backend::Gpu, true).err().unwrap();
+        assert_eq!(err.exit_code(), 3, "{err}");
+        return;
+    };
+    let forced = select_trainer(Backend::Gpu, true).unwrap();
+    assert_eq!(forced.name(), gpu.name());
+    assert!(forced.name().starts_with("gpu: "), "{}", forced.name());
+    let auto = select_trainer(Backend::Auto, true).unwrap().name();
+    let software = gpu.context().adapter.software;
+    if software && !auto_allows_software() {
+        assert_eq!(auto, "cpu");
+    } else {
+        assert_eq!(auto, gpu.name());
+    }
+}
+
+/// Batch splitting is planned from the limits alone (no device needed).
+#[test]
+fn batches_split_under_buffer_and_dispatch_limits() {
+    use errmap::gpu::train::plan_groups;
+    let set = |n: usize| TrainingSet {
+        inputs: vec![[0.0, 0.0]; n],
+        targets: vec![0.0; n],
+    };
+    let sets = vec![set(100), set(100), set(50), set(200)];
+    let units = 10u64;
+    // 9 000 bytes hold the activations of 225 samples (10 units × 4 bytes each):
+    // 100 + 100 fit, + 50 does not; 50 + 200 does not; 200 alone does.
+    let groups = plan_groups(9_000, 65_535, &sets, units, 20).unwrap();
+    assert_eq!(groups, vec![0..2, 2..3, 3..4]);
+    // Everything fits in one group when the limit allows it.
+    assert_eq!(
+        plan_groups(1 << 30, 65_535, &sets, units, 20).unwrap(),
+        vec![0..4]
+    );
+    // At most two networks per dispatch.
+    assert_eq!(
+        plan_groups(1 << 30, 2, &sets, units, 20).unwrap(),
+        vec![0..2, 2..4]
+    );
+    // A network that cannot fit alone is a device error naming it.
+    let err = plan_groups(3_999, 65_535, &sets, units, 20).unwrap_err();
+    assert_eq!(err.exit_code(), 3);
+    assert!(
+        err.to_string().contains("training set 0 (100 samples)"),
+        "{err}"
+    );
+}

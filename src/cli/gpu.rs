@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use super::Globals;
-use errmap::gpu::{list_adapters, AdapterSummary, GpuContext, LimitsSummary};
+use errmap::gpu::{auto_allows_software, list_adapters, AdapterSummary, GpuContext, LimitsSummary};
 use errmap::Result;
 
 /// List GPU adapters, the one `--backend auto|gpu` would use, and its limits.
@@ -17,9 +17,11 @@ pub struct GpuInfoArgs {
 #[derive(Serialize)]
 struct GpuInfo {
     adapters: Vec<AdapterSummary>,
+    /// The adapter `--backend gpu` uses (hardware first, else software).
     chosen: Option<AdapterSummary>,
     limits: Option<LimitsSummary>,
-    /// What `--backend auto` trains on: "gpu" or "cpu".
+    /// What `--backend auto` trains on: "gpu" or "cpu" (auto skips software adapters
+    /// unless ERRMAP_SOFTWARE_GPU=1).
     auto_backend: &'static str,
     /// Why no device could be opened, when none could.
     error: Option<String>,
@@ -27,12 +29,16 @@ struct GpuInfo {
 
 pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
     let adapters = list_adapters();
-    let info = match GpuContext::open() {
+    let info = match GpuContext::open(true) {
         Ok(ctx) => GpuInfo {
             adapters,
             chosen: Some(ctx.adapter.clone()),
             limits: Some(LimitsSummary::of(&ctx.limits)),
-            auto_backend: "gpu",
+            auto_backend: if ctx.adapter.software && !auto_allows_software() {
+                "cpu"
+            } else {
+                "gpu"
+            },
             error: None,
         },
         Err(e) => GpuInfo {
@@ -93,7 +99,14 @@ pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
                 "  min_uniform_buffer_offset_alignment  {}",
                 limits.min_uniform_buffer_offset_alignment
             );
-            println!("--backend auto trains on the GPU");
+            if info.auto_backend == "gpu" {
+                println!("--backend auto trains on the GPU");
+            } else {
+                println!(
+                    "--backend auto trains on the CPU (faster than a software adapter; ERRMAP_SOFTWARE_GPU=1 changes that); --backend gpu uses {}",
+                    chosen.name
+                );
+            }
         }
         _ => {
             println!(

@@ -6,6 +6,14 @@ use serde::Serialize;
 
 use crate::{Error, Result};
 
+/// With `1`, `--backend auto` also takes a software adapter (lavapipe) before the CPU trainer.
+pub const SOFTWARE_ENV: &str = "ERRMAP_SOFTWARE_GPU";
+
+/// Whether `--backend auto` may use a software adapter ([`SOFTWARE_ENV`] = 1).
+pub fn auto_allows_software() -> bool {
+    std::env::var(SOFTWARE_ENV).as_deref() == Ok("1")
+}
+
 /// What `errmap gpu-info` reports about one adapter.
 #[derive(Debug, Clone, Serialize)]
 pub struct AdapterSummary {
@@ -98,11 +106,29 @@ pub struct GpuContext {
 }
 
 impl GpuContext {
-    /// Opens the best adapter: hardware first, then a software Vulkan adapter (lavapipe).
-    /// The device gets every limit the adapter offers.
-    pub fn open() -> Result<GpuContext> {
+    /// Opens the best adapter: hardware first, then (if `allow_software`) a software Vulkan
+    /// adapter (lavapipe). The device gets every limit the adapter offers.
+    pub fn open(allow_software: bool) -> Result<GpuContext> {
         let instance = instance();
-        let candidates = adapters(&instance);
+        let mut candidates = adapters(&instance);
+        if !allow_software && !candidates.is_empty() {
+            let software: Vec<String> = candidates
+                .iter()
+                .map(|a| a.get_info())
+                .filter(|i| i.device_type == wgpu::DeviceType::Cpu)
+                .map(|i| i.name)
+                .collect();
+            candidates.retain(|a| a.get_info().device_type != wgpu::DeviceType::Cpu);
+            if candidates.is_empty() {
+                return Err(Error::device(
+                    format!(
+                        "only a software adapter ({}), which trains slower than errmap's CPU trainer",
+                        software.join(", ")
+                    ),
+                    format!("use --backend gpu (or {SOFTWARE_ENV}=1 with auto) to train on it anyway"),
+                ));
+            }
+        }
         if candidates.is_empty() {
             return Err(Error::device(
                 "no GPU adapter found (no Vulkan, Metal or DX12 device)",

@@ -9,7 +9,9 @@ pub mod evaluate;
 pub mod layout;
 pub mod train;
 
-pub use context::{list_adapters, AdapterSummary, GpuContext, LimitsSummary};
+pub use context::{
+    auto_allows_software, list_adapters, AdapterSummary, GpuContext, LimitsSummary, SOFTWARE_ENV,
+};
 
 use crate::nn::{
     check_batch, check_nets, Backend, CpuTrainer, Mlp, ModelConfig, Trainer, TrainingSet, MAX_WIDTH,
@@ -28,7 +30,12 @@ pub struct GpuTrainer {
 impl GpuTrainer {
     /// Opens the best adapter (hardware, else software Vulkan) and compiles the shaders.
     pub fn new() -> Result<GpuTrainer> {
-        let ctx = GpuContext::open()?;
+        GpuTrainer::open(true)
+    }
+
+    /// Like [`GpuTrainer::new`]; `allow_software = false` refuses software adapters.
+    pub fn open(allow_software: bool) -> Result<GpuTrainer> {
+        let ctx = GpuContext::open(allow_software)?;
         let train = train::TrainPipelines::new(&ctx)?;
         let eval = evaluate::EvalPipeline::new(&ctx)?;
         let buffer_limit_bytes = ctx
@@ -167,14 +174,19 @@ impl Trainer for AutoTrainer {
     }
 }
 
-/// Picks the trainer for `backend`: auto = hardware GPU → software Vulkan (lavapipe) → CPU
-/// reference (with a one-line note on stderr unless `quiet`); `gpu` fails with
-/// [`Error::device`] instead of falling back; `cpu` is the CPU reference.
+/// Picks the trainer for `backend`:
+/// - `auto`: a hardware GPU, else the CPU reference with a one-line note on stderr (unless
+///   `quiet`). A software Vulkan adapter (lavapipe) comes between the two only with
+///   `ERRMAP_SOFTWARE_GPU=1`: on a CPU it trains 10–20× slower than the CPU trainer
+///   (docs/performance.md), so by default auto skips it.
+/// - `gpu`: a hardware GPU, else a software adapter; fails with [`Error::device`] instead of
+///   falling back to the CPU.
+/// - `cpu`: the CPU reference.
 pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>> {
     match backend {
         Backend::Cpu => Ok(Box::new(CpuTrainer)),
         Backend::Gpu => Ok(Box::new(GpuTrainer::new()?)),
-        Backend::Auto => match GpuTrainer::new() {
+        Backend::Auto => match GpuTrainer::open(auto_allows_software()) {
             Ok(gpu) => Ok(Box::new(AutoTrainer { gpu, quiet })),
             Err(e) => {
                 if !quiet {

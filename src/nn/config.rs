@@ -81,7 +81,7 @@ pub fn tanh_f32(x: f32) -> f32 {
     const B6: f32 = f32::from_bits(0x35a0_d3d8);
     const CLAMP: f32 = f32::from_bits(0x40fc_f84f);
     const TINY: f32 = f32::from_bits(0x39d1_b717);
-    let x = x.max(-CLAMP).min(CLAMP);
+    let x = x.clamp(-CLAMP, CLAMP);
     let x2 = x * x;
     let mut p = x2 * A13 + A11;
     p = x2 * p + A9;
@@ -89,7 +89,7 @@ pub fn tanh_f32(x: f32) -> f32 {
     p = x2 * p + A5;
     p = x2 * p + A3;
     p = x2 * p + A1;
-    p = x * p;
+    p *= x;
     let mut q = x2 * B6 + B4;
     q = x2 * q + B2;
     q = x2 * q + B0;

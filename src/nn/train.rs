@@ -194,16 +194,17 @@ impl Trainer for CpuTrainer {
             .iter()
             .map(|net| {
                 let eval = Evaluator::new(net);
-                inputs
-                    .par_chunks(4096)
-                    .flat_map_iter(|chunk| {
-                        let mut scratch = eval.scratch();
-                        chunk
-                            .iter()
-                            .map(|&x| eval.forward(x, &mut scratch))
-                            .collect::<Vec<_>>()
-                    })
-                    .collect()
+                let mut out = vec![0.0f32; inputs.len()];
+                out.par_chunks_mut(4096)
+                    .zip(inputs.par_chunks(4096))
+                    .for_each(|(out, chunk)| {
+                        let mut scratch = eval.block_scratch();
+                        for (o, x) in out.chunks_mut(BLOCK).zip(chunk.chunks(BLOCK)) {
+                            let y = eval.forward_block(x, &mut scratch);
+                            o.copy_from_slice(&y[..o.len()]);
+                        }
+                    });
+                out
             })
             .collect())
     }
@@ -242,6 +243,47 @@ impl<'a> Evaluator<'a> {
     }
     fn scratch(&self) -> (Vec<f32>, Vec<f32>) {
         (vec![0.0; self.width], vec![0.0; self.width])
+    }
+    fn block_scratch(&self) -> (Vec<[f32; BLOCK]>, Vec<[f32; BLOCK]>) {
+        (
+            vec![[0.0; BLOCK]; self.width],
+            vec![[0.0; BLOCK]; self.width],
+        )
+    }
+    /// Up to BLOCK points at once (SIMD across points; each point's sums in the same order
+    /// as [`Evaluator::forward`], so the bits are the same).
+    fn forward_block(
+        &self,
+        x: &[[f32; 2]],
+        (prev, next): &mut (Vec<[f32; BLOCK]>, Vec<[f32; BLOCK]>),
+    ) -> [f32; BLOCK] {
+        prev[0] = [0.0; BLOCK];
+        prev[1] = [0.0; BLOCK];
+        for (b, p) in x.iter().take(BLOCK).enumerate() {
+            prev[0][b] = p[0];
+            prev[1][b] = p[1];
+        }
+        let last = self.spans.len() - 1;
+        let p = &self.net.params;
+        for (l, span) in self.spans.iter().enumerate() {
+            for (i, out) in next[..span.outputs].iter_mut().enumerate() {
+                let row = &p[span.weight_offset + i * span.inputs..][..span.inputs];
+                let mut z = [p[span.bias_offset + i]; BLOCK];
+                for (w, a) in row.iter().zip(prev.iter()) {
+                    for b in 0..BLOCK {
+                        z[b] += w * a[b];
+                    }
+                }
+                if l != last {
+                    for zb in &mut z {
+                        *zb = self.net.activation.apply(*zb);
+                    }
+                }
+                *out = z;
+            }
+            std::mem::swap(prev, next);
+        }
+        prev[0]
     }
     fn forward(&self, x: [f32; 2], (prev, next): &mut (Vec<f32>, Vec<f32>)) -> f32 {
         prev[0] = x[0];
@@ -390,9 +432,9 @@ fn block_pass(
     let n_params = params.len();
     let last = spans.len() - 1;
     let mut input = [[0.0f32; BLOCK]; 2];
-    for b in 0..count {
-        input[0][b] = set.inputs[s0 + b][0];
-        input[1][b] = set.inputs[s0 + b][1];
+    for (b, x) in set.inputs[s0..s0 + count].iter().enumerate() {
+        input[0][b] = x[0];
+        input[1][b] = x[1];
     }
     let BlockScratch {
         acts,
