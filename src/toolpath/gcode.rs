@@ -894,8 +894,11 @@ impl<'a> Rewriter<'a> {
             return Ok(());
         }
         let n = AXES[self.normal];
+        // A canned cycle's Z word is the hole bottom, and it retracts to its start: not a move
+        // to an absolute normal coordinate.
         let absolute_normal = !group0
             && self.absolute
+            && !self.motion.is_some_and(is_canned)
             && words.iter().any(|w| w.letter == n && w.value.is_some())
             && !words
                 .iter()
