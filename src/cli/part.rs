@@ -12,7 +12,7 @@ use std::path::PathBuf;
 pub struct BatchArgs {
     /// The job manifest (TOML; every key in docs/job.md).
     pub job: PathBuf,
-    /// Trainer: auto (GPU, else software Vulkan, else CPU), gpu (fail without one) or cpu; overrides [model] backend.
+    /// Trainer: auto (a hardware GPU, else the CPU; see docs/gpu.md), gpu (fail without one) or cpu; overrides [model] backend.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
     /// Map only shard INDEX of COUNT (0-based): the parts at positions INDEX, INDEX+COUNT, … of the sorted probe files.

@@ -507,9 +507,8 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          epochs = {epochs}\n\
          seed = {seed}\n\
          holdout_fraction = 0.1\n\
-         # A 2-core machine without a GPU trains fastest on the CPU; use \"auto\" (or --backend gpu)\n\
-         # where a hardware GPU is present.\n\
-         backend = \"cpu\"\n\
+         # auto: a hardware GPU when there is one, else the CPU trainer.\n\
+         backend = \"auto\"\n\
          \n\
          [toolpaths]\n\
          files = [\"finish.ngc\"]\n\
