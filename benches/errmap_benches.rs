@@ -3,7 +3,6 @@
 mod family_bench;
 mod interp_bench;
 mod linear_bench;
-
 mod rotary_bench;
 mod thermal_bench;
 mod toolpath_bench;
