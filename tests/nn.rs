@@ -97,7 +97,7 @@ fn backprop_matches_finite_differences() {
     for activation in [Activation::Tanh, Activation::Relu] {
         let set = small_set();
         let net = Mlp::init(&[2, 5, 4, 1], activation, 3);
-        let (_, grad) = loss_gradient(&net, &set);
+        let (_, grad) = loss_gradient(&net, &set).unwrap();
         // Central differences of an independent f64 implementation of the loss.
         let spans = layer_spans(&net.layer_sizes);
         let loss64 = |p: &[f64]| -> f64 {
@@ -365,6 +365,8 @@ fn bad_batches_are_errors_not_panics() {
     assert!(err.to_string().contains("NaN"), "{err}");
     let mut broken = initial_networks(1, &config);
     broken[0].params.pop();
+    assert!(broken[0].forward([0.0, 0.0]).is_nan());
+    assert!(loss_gradient(&broken[0], &small_set()).is_err());
     assert!(CpuTrainer.evaluate_batch(&broken, &[[0.0, 0.0]]).is_err());
     assert!(CpuTrainer
         .train_from(broken, &[small_set()], &config)
