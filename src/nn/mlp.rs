@@ -23,9 +23,9 @@ pub struct Mlp {
 pub struct LayerSpan {
     pub inputs: usize,
     pub outputs: usize,
-    /// Offset of W[0][0].
+    /// Offset of `W[0][0]`.
     pub weight_offset: usize,
-    /// Offset of b[0] (= weight_offset + outputs·inputs).
+    /// Offset of `b[0]` (= weight_offset + outputs·inputs).
     pub bias_offset: usize,
 }
 
