@@ -2,7 +2,7 @@
 // The CPU reference (src/nn/train.rs) is the specification: same layout, same operation order.
 //
 // Per epoch the host records two dispatches:
-//   forward_backward  one thread per sample of the batch: forward pass, loss gradient
+//   forward_backward  one thread per (sample, network): forward pass, loss gradient
 //                     2(y − t)/n, backward pass; stores each layer's outputs and deltas.
 //   gradient_adam     one thread per (parameter, network): lane t of GRAD_LANES sums samples
 //                     t, t + 64, … in order, a fixed binary tree adds the lanes, then Adam.
@@ -56,16 +56,17 @@ const BETA2: f32 = 0x1.ff7ceep-1f;           // 0.999
 const ONE_MINUS_BETA2: f32 = 0x1.0624dep-10f; // 0.001
 const EPSILON: f32 = 0x1.5798eep-27f;        // 1e-8
 
+// x = sample within network y (grid-stride), so a workgroup's weights are uniform.
 @compute @workgroup_size(64)
 fn forward_backward(@builtin(global_invocation_id) gid: vec3<u32>,
                     @builtin(num_workgroups) groups: vec3<u32>) {
-    let stride = groups.x * 64u;
-    for (var g = gid.x; g < dims.sample_count; g += stride) {
+    let k = gid.y;
+    let net = nets[k];
+    let n = net.sample_count;
+    let pbase = k * dims.param_count;
+    for (var s = gid.x; s < n; s += groups.x * 64u) {
+        let g = net.sample_offset + s;
         let sample = samples[g];
-        let net = nets[sample.net];
-        let n = net.sample_count;
-        let s = g - net.sample_offset;
-        let pbase = sample.net * dims.param_count;
         let abase = net.act_offset;
         let last = dims.layer_count - 1u;
         // Forward: z = b[i] + Σ_j W[i][j]·a[j], j ascending.

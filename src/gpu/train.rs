@@ -250,9 +250,9 @@ pub fn train_group(
     ctx.check("binding training buffers")?;
 
     let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1);
-    let forward_groups = (total as u32)
-        .div_ceil(FORWARD_WORKGROUP)
-        .clamp(1, max_groups);
+    // x: samples of the largest network, y: networks.
+    let largest = sets.iter().map(|s| s.len()).max().unwrap_or(1) as u32;
+    let forward_groups = largest.div_ceil(FORWARD_WORKGROUP).clamp(1, max_groups);
     let param_groups = (param_count as u32).div_ceil(64).clamp(1, max_groups);
     let loss_groups = (net_count as u32).clamp(1, max_groups);
     debug_assert_eq!(GRAD_LANES, 64);
@@ -285,7 +285,7 @@ pub fn train_group(
             for e in epoch..end {
                 pass.set_pipeline(&pipelines.forward_backward);
                 pass.set_bind_group(1, &step_group, &[((e - epoch) as u64 * align) as u32]);
-                pass.dispatch_workgroups(forward_groups, 1, 1);
+                pass.dispatch_workgroups(forward_groups, net_count as u32, 1);
                 pass.set_pipeline(&pipelines.gradient_adam);
                 pass.dispatch_workgroups(param_groups, net_count as u32, 1);
             }

@@ -23,9 +23,9 @@ pub struct Mlp {
 pub struct LayerSpan {
     pub inputs: usize,
     pub outputs: usize,
-    /// Offset of W[0][0].
+    /// Offset of `W[0][0]`.
     pub weight_offset: usize,
-    /// Offset of b[0] (= weight_offset + outputs·inputs).
+    /// Offset of `b[0]` (= weight_offset + outputs·inputs).
     pub bias_offset: usize,
 }
 
@@ -81,8 +81,13 @@ impl Mlp {
     }
 
     /// Network output for one scaled input. Sums run over inputs in ascending order,
-    /// starting from the bias, exactly as the shaders do.
+    /// starting from the bias, exactly as the shaders do. An inconsistent network (see
+    /// [`Mlp::is_consistent`], e.g. a hand-edited model file) gives NaN instead of panicking;
+    /// loaders should reject it up front with [`crate::nn::check_nets`].
     pub fn forward(&self, x: [f32; 2]) -> f32 {
+        if !self.is_consistent() {
+            return f32::NAN;
+        }
         let mut prev: Vec<f32> = x.to_vec();
         let mut next = Vec::new();
         let spans = layer_spans(&self.layer_sizes);

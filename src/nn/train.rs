@@ -129,34 +129,40 @@ pub fn check_batch(initial: &[Mlp], sets: &[TrainingSet], config: &ModelConfig) 
                 "start every network of a batch from the configured architecture",
             ));
         }
-        if set.is_empty() || set.inputs.len() != set.targets.len() {
-            return Err(Error::usage(
-                format!(
-                    "training set {k} has {} inputs and {} targets",
-                    set.inputs.len(),
-                    set.targets.len()
-                ),
-                "each training set needs at least one sample and one target per input",
-            ));
-        }
-        if set
-            .inputs
-            .iter()
-            .flatten()
-            .chain(&set.targets)
-            .any(|x| !x.is_finite())
-        {
-            return Err(Error::numeric(
-                format!("training set {k} contains NaN or infinite values"),
-                "scale inputs and targets with a Normalisation built from finite data",
-            ));
-        }
-        if set.len() > u32::MAX as usize / 2 {
-            return Err(Error::usage(
-                format!("training set {k} has {} samples", set.len()),
-                "use a coarser training-set spacing",
-            ));
-        }
+        check_set(k, set)?;
+    }
+    Ok(())
+}
+
+/// A training set must be non-empty, one target per input, finite, and of u32 size.
+fn check_set(k: usize, set: &TrainingSet) -> Result<()> {
+    if set.is_empty() || set.inputs.len() != set.targets.len() {
+        return Err(Error::usage(
+            format!(
+                "training set {k} has {} inputs and {} targets",
+                set.inputs.len(),
+                set.targets.len()
+            ),
+            "each training set needs at least one sample and one target per input",
+        ));
+    }
+    if set
+        .inputs
+        .iter()
+        .flatten()
+        .chain(&set.targets)
+        .any(|x| !x.is_finite())
+    {
+        return Err(Error::numeric(
+            format!("training set {k} contains NaN or infinite values"),
+            "scale inputs and targets with a Normalisation built from finite data",
+        ));
+    }
+    if set.len() > u32::MAX as usize / 2 {
+        return Err(Error::usage(
+            format!("training set {k} has {} samples", set.len()),
+            "use a coarser training-set spacing",
+        ));
     }
     Ok(())
 }
@@ -526,10 +532,12 @@ fn block_pass(
 
 /// Gradient of the mean squared error of `net` on `set` w.r.t. its parameters, summed
 /// exactly as one training step sums it; also returns the mean squared error.
-pub fn loss_gradient(net: &Mlp, set: &TrainingSet) -> (f64, Vec<f32>) {
+pub fn loss_gradient(net: &Mlp, set: &TrainingSet) -> Result<(f64, Vec<f32>)> {
+    check_nets(std::slice::from_ref(net))?;
+    check_set(0, set)?;
     let mut ws = GradientWorkspace::new(net);
     let loss = ws.gradient(&net.params, net.activation, set);
-    (loss, ws.lanes[..net.params.len()].to_vec())
+    Ok((loss, ws.lanes[..net.params.len()].to_vec()))
 }
 
 /// Full-batch Adam on one network: `config.epochs` steps of
@@ -541,6 +549,7 @@ pub fn train_network(
     config: &ModelConfig,
     k: usize,
 ) -> Result<()> {
+    check_batch(std::slice::from_ref(net), std::slice::from_ref(set), config)?;
     let mut ws = GradientWorkspace::new(net);
     let mut m = vec![0.0f32; net.params.len()];
     let mut v = vec![0.0f32; net.params.len()];
