@@ -757,3 +757,88 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         "{err}"
     );
 }
+
+/// Issue 3's end-to-end check on both backends: the same small job trained with the wgpu
+/// trainer (lavapipe where there is no GPU) and with the CPU reference gives the same maps,
+/// within the trainers' parity bound (0.05 µm). Skips without a Vulkan adapter unless
+/// ERRMAP_REQUIRE_GPU=1.
+#[test]
+fn the_family_job_gives_the_same_maps_on_the_gpu_and_the_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let synth = [
+        "synth",
+        "web-plate",
+        "--parts",
+        "2",
+        "--out",
+        "data",
+        "--epochs",
+        "60",
+    ];
+    run_expect(&synth, d, 0);
+    let gpu_args = [
+        "batch",
+        "data/job.toml",
+        "--backend",
+        "gpu",
+        "--out",
+        "gpu",
+        "--quiet",
+    ];
+    let gpu = errmap(&gpu_args, d);
+    if gpu.status.code() == Some(3) && std::env::var("ERRMAP_REQUIRE_GPU").as_deref() != Ok("1") {
+        eprintln!(
+            "skipping the GPU end-to-end test: no usable adapter ({})",
+            String::from_utf8_lossy(&gpu.stderr).trim()
+        );
+        return;
+    }
+    assert_eq!(
+        gpu.status.code(),
+        Some(0),
+        "{}",
+        describe(&gpu_args, &gpu, d)
+    );
+    run_expect(
+        &[
+            "batch",
+            "data/job.toml",
+            "--backend",
+            "cpu",
+            "--out",
+            "cpu",
+            "--quiet",
+        ],
+        d,
+        0,
+    );
+    let mut compared = 0;
+    for part in ["p01", "p02", "family"] {
+        let map_name = if part == "family" {
+            "mean.csv"
+        } else {
+            "map.csv"
+        };
+        let (gpu_header, gpu_rows) = read_csv(&d.join("gpu").join(part).join(map_name));
+        let (cpu_header, cpu_rows) = read_csv(&d.join("cpu").join(part).join(map_name));
+        assert_eq!(gpu_header, cpu_header);
+        assert_eq!(gpu_rows.len(), cpu_rows.len(), "{part}: grid sizes differ");
+        assert!(!gpu_rows.is_empty());
+        let differences: Vec<f64> = gpu_rows
+            .iter()
+            .zip(&cpu_rows)
+            .map(|(g, c)| {
+                assert_eq!(g[..2], c[..2], "{part}: grid nodes differ");
+                g[2] - c[2]
+            })
+            .collect();
+        let rms_difference_um = rms(&differences);
+        assert!(
+            rms_difference_um < 0.05,
+            "{part}: GPU and CPU maps differ by {rms_difference_um} µm RMS"
+        );
+        compared += 1;
+    }
+    assert_eq!(compared, 3);
+}
