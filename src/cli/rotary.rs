@@ -3,8 +3,8 @@
 use super::Globals;
 use errmap::error::Error;
 use errmap::rotary::{
-    analyze, build_table, chart::save_error_chart, read_measurement, render, Analysis,
-    AnalyzeOptions, RotaryAxis, TableFormat,
+    analyze, build_table, chart::save_error_chart, read_measurement, render, table::fixed,
+    Analysis, AnalyzeOptions, RotaryAxis, TableFormat,
 };
 use errmap::synth::rotary::{write_set, RotarySynthConfig};
 use errmap::Result;
@@ -166,20 +166,6 @@ fn print_stdout(text: &str) -> Result<()> {
 
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |v| fixed(v, digits))
-}
-
-/// Fixed-point text without "-0.00".
-fn fixed(v: f64, digits: usize) -> String {
-    let text = format!("{v:.digits$}");
-    if text
-        .trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        text.trim_start_matches('-').to_string()
-    } else {
-        text
-    }
 }
 
 /// The text report of `rotary analyze`.

@@ -166,7 +166,7 @@ fn deg(arcsec: f64) -> f64 {
 }
 
 /// Fixed-point text with `digits` decimals and no "-0.000".
-fn fixed(v: f64, digits: usize) -> String {
+pub fn fixed(v: f64, digits: usize) -> String {
     let text = format!("{v:.digits$}");
     if text
         .trim_start_matches('-')
