@@ -88,10 +88,3 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Synth(SynthCommand::Rotary(args)) => rotary::run_synth(args, globals),
     }
 }
-
-/// Placeholder result for a command whose area is still being built.
-fn not_built(what: &str) -> Result<i32> {
-    Err(errmap::Error::Internal(format!(
-        "'{what}' is not built yet"
-    )))
-}

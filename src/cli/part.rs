@@ -1,34 +1,235 @@
 //! CLI of part-family mapping: `batch`, `map` and `merge`.
 
 use super::Globals;
-use errmap::Result;
+use errmap::batch::{self, BatchOptions, BatchSummary, Job, PartInput, Plan, Settings, Shard};
+use errmap::geom::{Axis, Domain};
+use errmap::interp::Method;
+use errmap::nn::{Backend, ModelConfig};
+use errmap::{Error, Result};
+use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 pub struct BatchArgs {
-    /// The job manifest (TOML).
-    pub job: std::path::PathBuf,
+    /// The job manifest (TOML; every key in docs/job.md).
+    pub job: PathBuf,
+    /// Trainer: auto (a hardware GPU, else the CPU; see docs/gpu.md), gpu (fail without one) or cpu; overrides [model] backend.
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Map only shard INDEX of COUNT (0-based): the parts at positions INDEX, INDEX+COUNT, … of the sorted probe files.
+    #[arg(long, value_name = "INDEX/COUNT")]
+    pub shard: Option<String>,
+    /// Number of shards when the index comes from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
+    #[arg(long, value_name = "COUNT")]
+    pub shards: Option<usize>,
+    /// Output folder instead of the job's `output` (default out/<family>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print the summary as one JSON document instead of the table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct MapArgs {
-    /// The probe file (CSV).
-    pub probes: std::path::PathBuf,
+    /// The probe file (CSV: x_mm,y_mm,z_mm [,nx_mm,ny_mm,nz_mm] [,id]).
+    pub probes: PathBuf,
+    /// Output folder (map.csv, map.png, model.json, clean.csv, rejected.csv, summary.json).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Error direction: z maps E over x,y; x over y,z; y over z,x.
+    #[arg(long, default_value = "z", value_parser = parse_axis)]
+    pub normal: Axis,
+    /// Nominal coordinate along the normal for every point (when the file has no nominal columns).
+    #[arg(long, value_name = "MM", allow_hyphen_values = true)]
+    pub nominal_plane: Option<f64>,
+    /// Map domain UMIN,VMIN,UMAX,VMAX in mm (default: the probes' bounding box).
+    #[arg(long, value_parser = parse_domain, allow_hyphen_values = true)]
+    pub domain: Option<Domain>,
+    /// Step of the output grid, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    pub grid_step: f64,
+    /// Interpolation method of the training set.
+    #[arg(long, value_enum, default_value_t = Method::NaturalNeighbour)]
+    pub method: Method,
+    /// Spacing of the training set, mm.
+    #[arg(long, value_name = "MM", default_value_t = 10.0)]
+    pub spacing: f64,
+    /// Gross-error threshold k (reject |residual| > k·σ).
+    #[arg(long, default_value_t = 3.0)]
+    pub k_sigma: f64,
+    /// Training epochs (default: the [model] default).
+    #[arg(long)]
+    pub epochs: Option<u32>,
+    /// Seed of the network weights and the hold-out draw.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Trainer: auto, gpu or cpu.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Print the summary as one JSON document.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
-    /// Summaries of the shards.
-    pub summaries: Vec<std::path::PathBuf>,
+    /// Summaries of the shards (summary-shard-I-of-N.json).
+    #[arg(required = true)]
+    pub summaries: Vec<PathBuf>,
+    /// Merged summary file (default: summary.json beside the first shard's).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Print the merged summary as one JSON document instead of the table.
+    #[arg(long)]
+    pub json: bool,
 }
 
-pub fn run_batch(_args: BatchArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("batch")
+fn parse_axis(text: &str) -> std::result::Result<Axis, String> {
+    Axis::parse(text).ok_or_else(|| format!("'{text}' is not an axis: use x, y or z"))
 }
 
-pub fn run_map(_args: MapArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("map")
+fn parse_domain(text: &str) -> std::result::Result<Domain, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("'{p}' is not a number"))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    match v.as_slice() {
+        &[a, b, c, d] if [a, b, c, d].iter().all(|x| x.is_finite()) && a < c && b < d => {
+            Ok(Domain {
+                u_min_mm: a,
+                v_min_mm: b,
+                u_max_mm: c,
+                v_max_mm: d,
+            })
+        }
+        _ => Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".into()),
+    }
 }
 
-pub fn run_merge(_args: MergeArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("merge")
+fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: bool) -> Result<()> {
+    if json {
+        let text =
+            serde_json::to_string_pretty(summary).map_err(|e| Error::Internal(e.to_string()))?;
+        println!("{text}");
+    } else {
+        print!("{}", summary.table());
+        if !quiet {
+            println!("summary: {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
+    let file = Job::read(&args.job)?;
+    let shard = match &args.shard {
+        Some(text) => Some(Shard::parse(text)?),
+        None => Shard::from_env(args.shards, |k| std::env::var(k).ok())?,
+    };
+    let opts = BatchOptions {
+        backend: args.backend,
+        shard,
+        output: args.out,
+    };
+    let (plan, summary_path) = batch::plan_job(&file, &opts)?;
+    let trainer = errmap::gpu::select_trainer(plan.settings.model.backend, globals.quiet)?;
+    let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
+    errmap::io::write_json(&summary_path, &summary)?;
+    report(&summary, &summary_path, args.json, globals.quiet)?;
+    Ok(summary.exit_code())
+}
+
+pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
+    if let Some(z) = args.nominal_plane {
+        if !z.is_finite() {
+            return Err(Error::usage(
+                "--nominal-plane must be a finite number",
+                "e.g. --nominal-plane 5.0",
+            ));
+        }
+    }
+    let mut model = ModelConfig {
+        backend: args.backend,
+        ..ModelConfig::default()
+    };
+    if let Some(e) = args.epochs {
+        model.epochs = e;
+    }
+    if let Some(s) = args.seed {
+        model.seed = s;
+    }
+    model.validate()?;
+    for (flag, v) in [
+        ("--grid-step", args.grid_step),
+        ("--spacing", args.spacing),
+        ("--k-sigma", args.k_sigma),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(Error::usage(
+                format!("{flag} {v} must be a positive number"),
+                "see errmap map --help",
+            ));
+        }
+    }
+    let name = args
+        .probes
+        .file_stem()
+        .map_or("part".to_string(), |s| s.to_string_lossy().to_string());
+    let plan = Plan {
+        settings: Settings {
+            family: name.clone(),
+            normal: args.normal,
+            nominal_plane_mm: args.nominal_plane,
+            domain: args.domain,
+            grid_step_mm: args.grid_step,
+            k_sigma: args.k_sigma,
+            method: args.method,
+            spacing_mm: args.spacing,
+            model,
+        },
+        parts: vec![PartInput {
+            name,
+            probe_file: args.probes.clone(),
+            out_dir: args.out.clone(),
+        }],
+        family_dir: None,
+        toolpaths: None,
+        job: None,
+        shard: None,
+    };
+    let trainer = errmap::gpu::select_trainer(args.backend, globals.quiet)?;
+    let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
+    // A single part has no batch to finish: its failure is the command's error.
+    // A single part has no batch to finish: its failure is the command's error (the message
+    // already names file, line and column and the fix).
+    if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
+        return Err(Error::usage(err, ""));
+    }
+    let path = args.out.join("summary.json");
+    report(&summary, &path, args.json, globals.quiet)?;
+    Ok(0)
+}
+
+pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
+    let mut shards = Vec::new();
+    for p in &args.summaries {
+        shards.push((p.clone(), BatchSummary::read(p)?));
+    }
+    let mut merged = batch::merge(&shards)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| batch::merged_summary_path(&args.summaries[0]));
+    // Shards could not see each other's parts: the family mean and std maps are made here.
+    let family_dir = out
+        .parent()
+        .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
+    merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
+    errmap::io::write_json(&out, &merged)?;
+    report(&merged, &out, args.json, globals.quiet)?;
+    Ok(merged.exit_code())
 }

@@ -1,15 +1,125 @@
-//! CLI of `errmap synth web-plate`.
+//! CLI of `errmap synth web-plate`: write a sample web-plate family with its ground truth.
 
 use super::Globals;
-use errmap::Result;
+use errmap::synth::web_plate::{self, Layout, WebPlateSpec};
+use errmap::{Error, Result};
 
 #[derive(Debug, clap::Args)]
 pub struct SynthWebPlateArgs {
-    /// Output folder.
+    /// Output folder (probes/, job.toml, finish.ngc, truth.json, outliers.csv, README.md).
     #[arg(long)]
     pub out: std::path::PathBuf,
+    /// Number of parts in the family.
+    #[arg(long, default_value_t = 8)]
+    pub parts: usize,
+    /// Seed of every random choice (noise, part variation, outliers, layout).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Plate size XxY in mm.
+    #[arg(long, default_value = "600x300", value_parser = parse_pair_x)]
+    pub size: (f64, f64),
+    /// Lower-left corner of the plate X,Y in mm.
+    #[arg(long, default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
+    pub origin: (f64, f64),
+    /// Regular probe grid NXxNY (seed 001: 12x12).
+    #[arg(long, value_parser = parse_grid, conflicts_with = "irregular")]
+    pub grid: Option<(usize, usize)>,
+    /// Scattered probe layout of N points (plus the 4 corners of the probed rectangle) instead of a grid.
+    #[arg(long)]
+    pub irregular: Option<usize>,
+    /// Probe noise, 1σ, µm.
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_um: f64,
+    /// Gross outliers (+40 µm chips) planted per part.
+    #[arg(long, default_value_t = 3)]
+    pub outliers: usize,
+    /// Write per-point nominal columns nx_mm,ny_mm,nz_mm (the job then has no nominal plane).
+    #[arg(long)]
+    pub nominal_columns: bool,
+    /// Training epochs written into job.toml.
+    #[arg(long, default_value_t = WebPlateSpec::default().epochs)]
+    pub epochs: u32,
+    /// Family name written into job.toml.
+    #[arg(long, default_value = "web-plate")]
+    pub family: String,
 }
 
-pub fn run(_args: SynthWebPlateArgs, _globals: Globals) -> Result<i32> {
-    super::not_built("synth web-plate")
+fn parse_two(text: &str, sep: char) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = text
+        .split_once(sep)
+        .ok_or_else(|| format!("expected two numbers separated by '{sep}'"))?;
+    let a: f64 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a number"))?;
+    let b: f64 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a number"))?;
+    if !a.is_finite() || !b.is_finite() {
+        return Err("numbers must be finite".into());
+    }
+    Ok((a, b))
+}
+
+fn parse_pair_x(text: &str) -> std::result::Result<(f64, f64), String> {
+    parse_two(text, 'x')
+}
+
+fn parse_pair_comma(text: &str) -> std::result::Result<(f64, f64), String> {
+    parse_two(text, ',')
+}
+
+fn parse_grid(text: &str) -> std::result::Result<(usize, usize), String> {
+    let (a, b) = text.split_once('x').ok_or("expected NXxNY, e.g. 12x12")?;
+    let a = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a count"))?;
+    let b = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a count"))?;
+    Ok((a, b))
+}
+
+pub fn run(args: SynthWebPlateArgs, globals: Globals) -> Result<i32> {
+    if !(args.noise_um.is_finite() && args.noise_um >= 0.0) {
+        return Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1"));
+    }
+    let layout = match (args.grid, args.irregular) {
+        (_, Some(n)) => Layout::Irregular { n },
+        (Some((nx, ny)), None) => Layout::Grid { nx, ny },
+        (None, None) => Layout::Grid { nx: 12, ny: 12 },
+    };
+    let spec = WebPlateSpec {
+        family: args.family.clone(),
+        parts: args.parts,
+        seed: args.seed,
+        size_x_mm: args.size.0,
+        size_y_mm: args.size.1,
+        origin_x_mm: args.origin.0,
+        origin_y_mm: args.origin.1,
+        layout,
+        noise_um: args.noise_um,
+        outliers_per_part: args.outliers,
+        nominal_columns: args.nominal_columns,
+        epochs: args.epochs,
+        ..WebPlateSpec::default()
+    };
+    let command = std::iter::once("errmap".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let generated = web_plate::generate(&spec, &args.out, &command)?;
+    if !globals.quiet {
+        eprintln!(
+            "wrote {} parts × {} points, {} planted outliers, to {}",
+            spec.parts,
+            generated.points_per_part,
+            generated.truth.outliers.len(),
+            args.out.display()
+        );
+    }
+    Ok(0)
 }

@@ -1,1 +1,199 @@
 //! The wgpu path: adapter choice, device limits, buffers and pipelines for training and evaluating networks in WGSL compute shaders.
+//!
+//! One host file per shader family: [`train`] (`shaders/train.wgsl`), [`evaluate`]
+//! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; [`context`] picks the
+//! adapter and turns device failures into [`Error::device`].
+
+pub mod context;
+pub mod evaluate;
+pub mod layout;
+pub mod train;
+
+pub use context::{
+    auto_allows_software, list_adapters, AdapterSummary, GpuContext, LimitsSummary, SOFTWARE_ENV,
+};
+
+use crate::nn::{
+    check_batch, check_nets, Backend, CpuTrainer, Mlp, ModelConfig, Trainer, TrainingSet, MAX_WIDTH,
+};
+use crate::{Error, Result};
+
+/// Trains and evaluates networks in WGSL compute shaders on one device.
+pub struct GpuTrainer {
+    ctx: GpuContext,
+    /// Largest buffer a training group may use (the device limit unless lowered).
+    buffer_limit_bytes: u64,
+    train: train::TrainPipelines,
+    eval: evaluate::EvalPipeline,
+}
+
+impl GpuTrainer {
+    /// Opens the best adapter (hardware, else software Vulkan) and compiles the shaders.
+    pub fn new() -> Result<GpuTrainer> {
+        GpuTrainer::open(true)
+    }
+
+    /// Like [`GpuTrainer::new`]; `allow_software = false` refuses software adapters.
+    pub fn open(allow_software: bool) -> Result<GpuTrainer> {
+        let ctx = GpuContext::open(allow_software)?;
+        let train = train::TrainPipelines::new(&ctx)?;
+        let eval = evaluate::EvalPipeline::new(&ctx)?;
+        let buffer_limit_bytes = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        Ok(GpuTrainer {
+            ctx,
+            buffer_limit_bytes,
+            train,
+            eval,
+        })
+    }
+
+    /// Lowers the buffer size a training group may use, so a batch splits into more
+    /// groups (for tests of the splitting; results do not depend on it).
+    pub fn with_buffer_limit(mut self, bytes: u64) -> GpuTrainer {
+        self.buffer_limit_bytes = self.buffer_limit_bytes.min(bytes);
+        self
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+}
+
+/// The shaders hold one layer in private memory and the layer table in a uniform.
+fn check_gpu_shape(nets: &[Mlp]) -> Result<()> {
+    for (k, net) in nets.iter().enumerate() {
+        if net.layer_sizes.len() > layout::MAX_LAYERS + 1
+            || net.layer_sizes.iter().any(|&w| w > MAX_WIDTH)
+        {
+            return Err(Error::usage(
+                format!(
+                    "network {k} has layers {:?}; the GPU path takes at most {} hidden layers of width {MAX_WIDTH}",
+                    net.layer_sizes,
+                    layout::MAX_LAYERS - 1
+                ),
+                "use a smaller network or --backend cpu",
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl Trainer for GpuTrainer {
+    fn name(&self) -> String {
+        format!("gpu: {}", self.ctx.describe())
+    }
+
+    fn train_from(
+        &self,
+        initial: Vec<Mlp>,
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+    ) -> Result<Vec<Mlp>> {
+        check_batch(&initial, sets, config)?;
+        check_gpu_shape(&initial)?;
+        let Some(first) = initial.first() else {
+            return Ok(Vec::new());
+        };
+        let dims = layout::dims_for(first, 1, 0);
+        let groups = train::plan_groups(
+            self.buffer_limit_bytes,
+            self.ctx.limits.max_compute_workgroups_per_dimension as usize,
+            sets,
+            dims.unit_count as u64,
+            dims.param_count as u64,
+        )?;
+        let mut out = Vec::with_capacity(initial.len());
+        for range in groups {
+            out.extend(train::train_group(
+                &self.ctx,
+                &self.train,
+                &initial[range.clone()],
+                &sets[range.clone()],
+                config,
+                range.start,
+            )?);
+        }
+        Ok(out)
+    }
+
+    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
+        check_nets(nets)?;
+        check_gpu_shape(nets)?;
+        evaluate::evaluate(&self.ctx, &self.eval, nets, inputs)
+    }
+}
+
+/// `--backend auto` once a device is open: the GPU, and the CPU reference when the device
+/// fails (lost, out of memory) — with a one-line note.
+pub struct AutoTrainer {
+    gpu: GpuTrainer,
+    quiet: bool,
+}
+
+impl AutoTrainer {
+    fn fallback<T>(&self, what: &str, error: Error, cpu: impl FnOnce() -> Result<T>) -> Result<T> {
+        match error {
+            Error::Device { .. } => {
+                if !self.quiet {
+                    eprintln!("note: {error}; {what} on the CPU instead");
+                }
+                cpu()
+            }
+            other => Err(other),
+        }
+    }
+}
+
+impl Trainer for AutoTrainer {
+    fn name(&self) -> String {
+        self.gpu.name()
+    }
+
+    fn train_from(
+        &self,
+        initial: Vec<Mlp>,
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+    ) -> Result<Vec<Mlp>> {
+        match self.gpu.train_from(initial.clone(), sets, config) {
+            Ok(nets) => Ok(nets),
+            Err(e) => self.fallback("training", e, || {
+                CpuTrainer.train_from(initial, sets, config)
+            }),
+        }
+    }
+
+    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
+        match self.gpu.evaluate_batch(nets, inputs) {
+            Ok(out) => Ok(out),
+            Err(e) => self.fallback("evaluating", e, || CpuTrainer.evaluate_batch(nets, inputs)),
+        }
+    }
+}
+
+/// Picks the trainer for `backend`:
+/// - `auto`: a hardware GPU, else the CPU reference with a one-line note on stderr (unless
+///   `quiet`). A software Vulkan adapter (lavapipe) comes between the two only with
+///   `ERRMAP_SOFTWARE_GPU=1`: on a CPU it trains 10–20× slower than the CPU trainer
+///   (docs/performance.md), so by default auto skips it.
+/// - `gpu`: a hardware GPU, else a software adapter; fails with [`Error::device`] instead of
+///   falling back to the CPU.
+/// - `cpu`: the CPU reference.
+pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>> {
+    match backend {
+        Backend::Cpu => Ok(Box::new(CpuTrainer)),
+        Backend::Gpu => Ok(Box::new(GpuTrainer::new()?)),
+        Backend::Auto => match GpuTrainer::open(auto_allows_software()) {
+            Ok(gpu) => Ok(Box::new(AutoTrainer { gpu, quiet })),
+            Err(e) => {
+                if !quiet {
+                    eprintln!("note: no usable GPU ({e}); training on the CPU");
+                }
+                Ok(Box::new(CpuTrainer))
+            }
+        },
+    }
+}

@@ -1,13 +1,389 @@
 //! Error maps: one fitted part (grid + model), family aggregation, and the map file formats.
+//!
+//! - [`FittedModel`] is `model.json`: the network, its normalisation, the domain and the normal —
+//!   enough to evaluate the map anywhere without retraining ([`load_error_field`]).
+//! - [`ErrorMap`] is the network evaluated on the output grid: `map.csv` (`x_mm,y_mm,e_um` for
+//!   normal z; the plane's two axes otherwise).
+//! - [`family_stats`] gives the family mean and standard-deviation maps.
 
-use crate::error::Result;
-use crate::geom::ErrorField;
+use crate::error::{Error, Location, Result};
+use crate::geom::{Axis, Domain, ErrorField};
+use crate::interp::Grid;
+use crate::nn::{Mlp, Normalisation};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// Format tag written into every `model.json`.
+pub const MODEL_FORMAT: &str = "errmap-map-model/1";
+
+/// A fitted map: `E(u, v) = unscale(net(scale(u, v)))` µm over `domain` (the file `model.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FittedModel {
+    pub format: String,
+    /// Part (or `family`) the map belongs to.
+    pub name: String,
+    /// Error direction; the map spans [`Axis::plane_axes`] of it.
+    pub normal: Axis,
+    /// Where the map is defined (plane axes, mm); outside it [`ErrorField::error_mm`] is `None`.
+    pub domain: Domain,
+    pub normalisation: Normalisation,
+    pub network: Mlp,
+}
+
+impl FittedModel {
+    pub fn new(
+        name: &str,
+        normal: Axis,
+        domain: Domain,
+        normalisation: Normalisation,
+        network: Mlp,
+    ) -> Self {
+        FittedModel {
+            format: MODEL_FORMAT.into(),
+            name: name.into(),
+            normal,
+            domain,
+            normalisation,
+            network,
+        }
+    }
+
+    /// E at (u, v) in µm, evaluated anywhere (outside the domain the network extrapolates).
+    pub fn e_um(&self, u_mm: f64, v_mm: f64) -> f64 {
+        let x = self.normalisation.scale_input(u_mm, v_mm);
+        self.normalisation.unscale_output(self.network.forward(x))
+    }
+
+    /// Read and check a `model.json`.
+    pub fn read(path: &Path) -> Result<FittedModel> {
+        let text = crate::io::read_text(path)?;
+        let model: FittedModel = serde_json::from_str(&text).map_err(|e| {
+            Error::input(
+                Location::cell(path, e.line() as u64, e.column().to_string()),
+                format!("not an errmap model.json: {e}"),
+                "pass the model.json written by `errmap batch` or `errmap map`",
+            )
+        })?;
+        if model.format != MODEL_FORMAT {
+            return Err(Error::input(
+                Location::file(path),
+                format!("model format '{}' is not '{MODEL_FORMAT}'", model.format),
+                "refit the map with this version of errmap",
+            ));
+        }
+        let sizes = &model.network.layer_sizes;
+        let expected: usize = sizes.windows(2).map(|w| w[0] * w[1] + w[1]).sum();
+        if sizes.first() != Some(&2)
+            || sizes.last() != Some(&1)
+            || sizes.contains(&0)
+            || model.network.params.len() != expected
+            || !model.network.params.iter().all(|p| p.is_finite())
+        {
+            return Err(Error::input(
+                Location::file(path),
+                format!(
+                    "network layers {:?} do not match its {} parameters (or a parameter is not finite)",
+                    sizes,
+                    model.network.params.len()
+                ),
+                "the file is damaged: refit the map",
+            ));
+        }
+        let n = &model.normalisation;
+        let d = &model.domain;
+        let finite = [
+            n.u_min_mm,
+            n.u_max_mm,
+            n.v_min_mm,
+            n.v_max_mm,
+            n.e_mean_um,
+            n.e_std_um,
+            d.u_min_mm,
+            d.u_max_mm,
+            d.v_min_mm,
+            d.v_max_mm,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        if !finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
+            return Err(Error::input(
+                Location::file(path),
+                "the normalisation or domain holds a non-finite number or an empty range",
+                "the file is damaged: refit the map",
+            ));
+        }
+        Ok(model)
+    }
+}
+
+impl ErrorField for FittedModel {
+    fn normal(&self) -> Axis {
+        self.normal
+    }
+    fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
+        // A hair of tolerance so points on the domain's edge (rounded in a program) count as inside.
+        let tol = 1e-9 * (1.0 + self.domain.width_mm().abs() + self.domain.height_mm().abs());
+        let inside = u_mm >= self.domain.u_min_mm - tol
+            && u_mm <= self.domain.u_max_mm + tol
+            && v_mm >= self.domain.v_min_mm - tol
+            && v_mm <= self.domain.v_max_mm + tol;
+        inside.then(|| self.e_um(u_mm, v_mm) / 1000.0)
+    }
+}
 
 /// Load a fitted map (`model.json`) as an error field for toolpath compensation.
 pub fn load_error_field(model_json: &Path) -> Result<Box<dyn ErrorField>> {
-    Err(crate::Error::Internal(format!(
-        "loading {} is not built yet",
-        model_json.display()
-    )))
+    Ok(Box::new(FittedModel::read(model_json)?))
+}
+
+/// A map on a regular grid of the plane: one value per node (index `j·nu + i`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorMap {
+    pub grid: Grid,
+    pub normal: Axis,
+    pub values: Vec<f64>,
+}
+
+impl ErrorMap {
+    /// Peak-to-valley and RMS (about 0) of the values, µm.
+    pub fn pv_rms_um(&self) -> (f64, f64) {
+        let opts: Vec<Option<f64>> = self.values.iter().map(|&v| Some(v)).collect();
+        crate::report::heatmap::pv_rms_um(&opts)
+    }
+
+    /// Write as CSV `<u>_mm,<v>_mm,<value_column>` (e.g. `x_mm,y_mm,e_um`), atomically.
+    pub fn write_csv(&self, path: &Path, value_column: &str) -> Result<()> {
+        let (ua, va) = self.normal.plane_axes();
+        crate::io::write_atomic(path, |w| {
+            writeln!(w, "{}_mm,{}_mm,{value_column}", ua.name(), va.name())?;
+            for j in 0..self.grid.nv {
+                for i in 0..self.grid.nu {
+                    let (u, v) = self.grid.node(i, j);
+                    let e = self
+                        .values
+                        .get(j * self.grid.nu + i)
+                        .copied()
+                        .unwrap_or(f64::NAN);
+                    writeln!(w, "{},{},{:.4}", round_mm(u), round_mm(v), e)?;
+                }
+            }
+            Ok(())
+        })
+    }
+}
+
+impl ErrorMap {
+    /// Read a map file written by [`ErrorMap::write_csv`] (`<u>_mm,<v>_mm,<value>`, u fastest)
+    /// and recover its grid; rows that do not form a regular grid are an error naming the line.
+    pub fn read_csv(path: &Path, normal: Axis) -> Result<ErrorMap> {
+        let table = crate::io::CsvTable::read(path)?;
+        let (ua, va) = normal.plane_axes();
+        let cu = table.require(&format!("{}_mm", ua.name()))?;
+        let cv = table.require(&format!("{}_mm", va.name()))?;
+        let ce = table
+            .headers
+            .len()
+            .checked_sub(1)
+            .filter(|&c| c != cu && c != cv)
+            .ok_or_else(|| {
+                Error::input(
+                    Location::line(path, 1),
+                    "no value column after the coordinates",
+                    "write <u>_mm,<v>_mm,e_um",
+                )
+            })?;
+        let mut rows = Vec::with_capacity(table.rows.len());
+        for row in &table.rows {
+            rows.push((
+                table.f64(row, cu)?,
+                table.f64(row, cv)?,
+                table.f64(row, ce)?,
+                row.line,
+            ));
+        }
+        let first = rows.first().ok_or_else(|| {
+            Error::input(
+                Location::file(path),
+                "the map has no rows",
+                "map the part again",
+            )
+        })?;
+        let (u0, v0) = (first.0, first.1);
+        let nu = rows.iter().take_while(|r| r.1 == v0).count();
+        let step = if nu > 1 {
+            rows[1].0 - u0
+        } else if rows.len() > 1 {
+            rows[1].1 - v0
+        } else {
+            1.0
+        };
+        let nv = rows.len() / nu.max(1);
+        let grid = Grid {
+            u0_mm: u0,
+            v0_mm: v0,
+            step_mm: step,
+            nu,
+            nv,
+        };
+        let tol = 1e-5 * (1.0 + step.abs());
+        let step_ok = step.is_finite() && step > 0.0;
+        for (k, r) in rows.iter().enumerate() {
+            let (u, v) = grid.node(k % nu, k / nu);
+            if nu * nv != rows.len() || !step_ok || (r.0 - u).abs() > tol || (r.1 - v).abs() > tol {
+                return Err(Error::input(
+                    Location::line(path, r.3),
+                    format!(
+                        "({}, {}) is not node {k} of a regular grid ({u}, {v})",
+                        r.0, r.1
+                    ),
+                    "pass map files written by errmap",
+                ));
+            }
+        }
+        Ok(ErrorMap {
+            grid,
+            normal,
+            values: rows.iter().map(|r| r.2).collect(),
+        })
+    }
+}
+
+/// Coordinates to 1 nm, so 0.1 + 0.2 prints as 0.3.
+fn round_mm(x: f64) -> f64 {
+    let r = (x * 1e6).round() / 1e6;
+    if r == 0.0 {
+        0.0
+    } else {
+        r
+    }
+}
+
+/// Node-wise mean and (population) standard deviation of maps on the same grid, µm.
+pub fn family_stats(maps: &[&ErrorMap]) -> Option<(ErrorMap, ErrorMap)> {
+    let first = maps.first()?;
+    let n = maps.len() as f64;
+    let len = first.values.len();
+    if maps
+        .iter()
+        .any(|m| m.values.len() != len || m.grid != first.grid)
+    {
+        return None;
+    }
+    let mut mean = vec![0.0; len];
+    let mut std = vec![0.0; len];
+    for k in 0..len {
+        let mu = maps.iter().map(|m| m.values[k]).sum::<f64>() / n;
+        let var = maps.iter().map(|m| (m.values[k] - mu).powi(2)).sum::<f64>() / n;
+        mean[k] = mu;
+        std[k] = var.sqrt();
+    }
+    Some((
+        ErrorMap {
+            grid: first.grid,
+            normal: first.normal,
+            values: mean,
+        },
+        ErrorMap {
+            grid: first.grid,
+            normal: first.normal,
+            values: std,
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::Activation;
+
+    fn tiny_model() -> FittedModel {
+        // 2 → 1 → 1 tanh net: y = 2·tanh(0.5·x0 + 0) + 0.25.
+        let net = Mlp {
+            layer_sizes: vec![2, 1, 1],
+            activation: Activation::Tanh,
+            params: vec![0.5, 0.0, 0.0, 2.0, 0.25],
+        };
+        let domain = Domain {
+            u_min_mm: 0.0,
+            v_min_mm: 0.0,
+            u_max_mm: 100.0,
+            v_max_mm: 50.0,
+        };
+        let norm = Normalisation {
+            u_min_mm: 0.0,
+            u_max_mm: 100.0,
+            v_min_mm: 0.0,
+            v_max_mm: 50.0,
+            e_mean_um: 10.0,
+            e_std_um: 4.0,
+        };
+        FittedModel::new("p", Axis::Z, domain, norm, net)
+    }
+
+    #[test]
+    fn model_evaluates_by_hand_and_round_trips_through_json() {
+        let m = tiny_model();
+        // u = 100 → x0 = 1: y = 2·tanh(0.5) + 0.25; E = 10 + 4·y µm.
+        let y = 2.0 * 0.5f64.tanh() + 0.25;
+        let expect_um = 10.0 + 4.0 * y;
+        assert!((m.e_um(100.0, 20.0) - expect_um).abs() < 1e-5);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.json");
+        crate::io::write_json(&path, &m).unwrap();
+        let field = load_error_field(&path).unwrap();
+        assert_eq!(field.normal(), Axis::Z);
+        let e_mm = field.error_mm(100.0, 20.0).unwrap();
+        assert!((e_mm - expect_um / 1000.0).abs() < 1e-8);
+        assert!(field.error_mm(100.1, 20.0).is_none());
+    }
+
+    #[test]
+    fn damaged_model_is_refused_with_the_reason() {
+        let mut m = tiny_model();
+        m.network.params.pop();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.json");
+        crate::io::write_json(&path, &m).unwrap();
+        let err = load_error_field(&path).err().unwrap().to_string();
+        assert!(err.contains("do not match its 4 parameters"), "{err}");
+        std::fs::write(&path, "{\"format\": 3}").unwrap();
+        let err = load_error_field(&path).err().unwrap().to_string();
+        assert!(err.contains("not an errmap model.json"), "{err}");
+    }
+
+    #[test]
+    fn family_mean_and_std_by_hand() {
+        let grid = Grid {
+            u0_mm: 0.0,
+            v0_mm: 0.0,
+            step_mm: 1.0,
+            nu: 2,
+            nv: 1,
+        };
+        let a = ErrorMap {
+            grid,
+            normal: Axis::Z,
+            values: vec![1.0, 4.0],
+        };
+        let b = ErrorMap {
+            grid,
+            normal: Axis::Z,
+            values: vec![3.0, 4.0],
+        };
+        let (mean, std) = family_stats(&[&a, &b]).unwrap();
+        assert_eq!(mean.values, vec![2.0, 4.0]);
+        assert_eq!(std.values, vec![1.0, 0.0]);
+        // A map file reads back onto the same grid.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("mean.csv");
+        mean.write_csv(&path, "e_um").unwrap();
+        assert_eq!(ErrorMap::read_csv(&path, Axis::Z).unwrap(), mean);
+        std::fs::write(&path, "x_mm,y_mm,e_um\n0,0,1\n1,0,2\n3,0,2\n").unwrap();
+        let err = ErrorMap::read_csv(&path, Axis::Z).unwrap_err().to_string();
+        assert!(
+            err.contains("mean.csv:4") && err.contains("regular grid"),
+            "{err}"
+        );
+    }
 }

@@ -1,0 +1,399 @@
+//! The job manifest (`job.toml`) of a part-family batch: every key, its default, validation, and TOML errors located by line and column.
+//!
+//! Every key is documented in `docs/job.md`. Relative paths in the file (probe glob, toolpaths)
+//! are taken from the job file's folder; the output folder is taken from the current directory.
+
+use crate::error::{Error, Location, Result};
+use crate::geom::{Axis, Domain};
+use crate::interp::Method;
+use crate::nn::ModelConfig;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// A batch job over one part family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Job {
+    /// Family name: names the output folder `out/<family>` and the pictures.
+    pub family: String,
+    /// Error direction; the map spans the two other axes (z → x,y; x → y,z; y → z,x).
+    pub normal: Axis,
+    /// Nominal coordinate along the normal for every point, when the probe files have no
+    /// `nx_mm,ny_mm,nz_mm` columns (the columns win when both are given).
+    pub nominal_plane_mm: Option<f64>,
+    /// Glob of the probe files, relative to the job file; one file per part, sorted by path.
+    pub probes: String,
+    /// Map domain `[u_min, v_min, u_max, v_max]` in mm; default: bounding box of all probe points.
+    pub domain: Option<[f64; 4]>,
+    /// Step of the output map grid, mm.
+    pub grid_step_mm: f64,
+    /// Output folder, relative to the current directory; default `out/<family>`.
+    pub output: Option<PathBuf>,
+    pub clean: CleanConfig,
+    pub interp: InterpConfig,
+    pub model: ModelConfig,
+    pub toolpaths: ToolpathConfig,
+}
+
+impl Default for Job {
+    fn default() -> Self {
+        Job {
+            family: "family".into(),
+            normal: Axis::Z,
+            nominal_plane_mm: None,
+            probes: "probes/*.csv".into(),
+            domain: None,
+            grid_step_mm: 5.0,
+            output: None,
+            clean: CleanConfig::default(),
+            interp: InterpConfig::default(),
+            model: ModelConfig::default(),
+            toolpaths: ToolpathConfig::default(),
+        }
+    }
+}
+
+/// `[clean]`: gross-error rejection.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CleanConfig {
+    /// Reject a point whose leave-one-out residual exceeds k·σ (σ robust, from the MAD).
+    pub k_sigma: f64,
+}
+
+impl Default for CleanConfig {
+    fn default() -> Self {
+        CleanConfig { k_sigma: 3.0 }
+    }
+}
+
+/// `[interp]`: the training set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InterpConfig {
+    /// `natural-neighbour`, `sibson-c1` or `linear`.
+    pub method: Method,
+    /// Spacing of the training grid inside the probes' convex hull, mm.
+    pub spacing_mm: f64,
+}
+
+impl Default for InterpConfig {
+    fn default() -> Self {
+        InterpConfig {
+            method: Method::NaturalNeighbour,
+            spacing_mm: 10.0,
+        }
+    }
+}
+
+/// Which fitted map compensates the toolpaths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum MapChoice {
+    /// The family network (fitted to the mean of the parts): one program for the next part.
+    #[default]
+    Family,
+    /// Each part's own map: one program per part.
+    Part,
+}
+
+/// `[toolpaths]`: programs rewritten with P' = P − E.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ToolpathConfig {
+    /// G-code (`.ngc`, `.nc`, `.gcode`, `.tap`) or CSV (`.csv`) toolpaths, relative to the job file.
+    pub files: Vec<PathBuf>,
+    /// Band `[min, max]` along the normal axis, in the program's units, where moves are
+    /// compensated; default: everywhere.
+    pub zone: Option<[f64; 2]>,
+    /// Longest segment after splitting, mm (converted to inches for G20 programs).
+    pub max_segment_mm: f64,
+    /// Chord tolerance when arcs are linearised, mm.
+    pub chord_tol_mm: f64,
+    /// `family` or `part`.
+    pub map: MapChoice,
+}
+
+impl Default for ToolpathConfig {
+    fn default() -> Self {
+        ToolpathConfig {
+            files: Vec::new(),
+            zone: None,
+            max_segment_mm: 5.0,
+            chord_tol_mm: 0.005,
+            map: MapChoice::Family,
+        }
+    }
+}
+
+/// A job read from a file, with the folder its relative paths are taken from.
+#[derive(Debug, Clone)]
+pub struct JobFile {
+    pub path: PathBuf,
+    pub job: Job,
+}
+
+/// 1-based (line, column) of a byte offset.
+fn line_col(text: &str, byte: usize) -> (u64, u64) {
+    let end = byte.min(text.len());
+    let before = &text.as_bytes()[..end];
+    let line = 1 + before.iter().filter(|&&b| b == b'\n').count() as u64;
+    let line_start = before
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |p| p + 1);
+    let col = 1 + text.get(line_start..end).map_or(0, |s| s.chars().count()) as u64;
+    (line, col)
+}
+
+impl Job {
+    /// Parse job TOML; `path` is only used in messages. Errors name line and column.
+    pub fn parse(path: &Path, text: &str) -> Result<Job> {
+        let job: Job = toml::from_str(text).map_err(|e| {
+            let (line, col) = e.span().map_or((1, 1), |s| line_col(text, s.start));
+            Error::input(
+                Location::cell(path, line, col.to_string()),
+                e.message().trim().to_string(),
+                "see docs/job.md for every key and its type",
+            )
+        })?;
+        job.validate(path)?;
+        Ok(job)
+    }
+
+    /// Read and validate a job file.
+    pub fn read(path: &Path) -> Result<JobFile> {
+        let text = crate::io::read_text(path)?;
+        let job = Job::parse(path, &text)?;
+        Ok(JobFile {
+            path: path.to_path_buf(),
+            job,
+        })
+    }
+
+    /// The map domain, if the job fixes it.
+    pub fn domain(&self) -> Option<Domain> {
+        self.domain.map(|[a, b, c, d]| Domain {
+            u_min_mm: a,
+            v_min_mm: b,
+            u_max_mm: c,
+            v_max_mm: d,
+        })
+    }
+
+    /// Check values serde cannot: positive steps, ordered ranges, a usable family name.
+    pub fn validate(&self, path: &Path) -> Result<()> {
+        let bad = |key: &str, msg: String, hint: &str| {
+            Error::input(
+                Location::cell(path, 1, key.to_string()),
+                format!("{key}: {msg}"),
+                hint.to_string(),
+            )
+        };
+        if self.family.is_empty()
+            || self.family.starts_with('.')
+            || self
+                .family
+                .chars()
+                .any(|c| !(c.is_alphanumeric() || c == '-' || c == '_' || c == '.'))
+        {
+            return Err(bad(
+                "family",
+                format!("'{}' cannot name a folder", self.family),
+                "use letters, digits, '-', '_' or '.', e.g. family = \"web-plate\"",
+            ));
+        }
+        if let Some(z) = self.nominal_plane_mm {
+            if !z.is_finite() {
+                return Err(bad(
+                    "nominal_plane_mm",
+                    format!("{z} is not finite"),
+                    "give the nominal coordinate in mm",
+                ));
+            }
+        }
+        if let Some([a, b, c, d]) = self.domain {
+            let finite = [a, b, c, d].iter().all(|x| x.is_finite());
+            if !finite || a >= c || b >= d {
+                return Err(bad(
+                    "domain",
+                    format!("[{a}, {b}, {c}, {d}] is not a rectangle"),
+                    "write [u_min, v_min, u_max, v_max] in mm with min < max",
+                ));
+            }
+        }
+        let positive = [
+            ("grid_step_mm", self.grid_step_mm),
+            ("clean.k_sigma", self.clean.k_sigma),
+            ("interp.spacing_mm", self.interp.spacing_mm),
+            ("toolpaths.max_segment_mm", self.toolpaths.max_segment_mm),
+            ("toolpaths.chord_tol_mm", self.toolpaths.chord_tol_mm),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(
+                    key,
+                    format!("{v} must be a positive number"),
+                    "see docs/job.md for the default",
+                ));
+            }
+        }
+        if let Some([lo, hi]) = self.toolpaths.zone {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err(bad(
+                    "toolpaths.zone",
+                    format!("[{lo}, {hi}] is not a band"),
+                    "write [min, max] along the normal axis in the program's units",
+                ));
+            }
+        }
+        if !(0.0..0.5).contains(&self.model.holdout_fraction) {
+            return Err(bad(
+                "model.holdout_fraction",
+                format!("{} is outside 0 … 0.5", self.model.holdout_fraction),
+                "hold out a small share of points, e.g. 0.1 (0 turns the hold-out fit off)",
+            ));
+        }
+        self.model.validate().map_err(|e| {
+            Error::input(
+                Location::file(path),
+                format!("[model]: {e}"),
+                "see docs/job.md",
+            )
+        })
+    }
+}
+
+impl JobFile {
+    /// Folder relative paths in the job are taken from.
+    pub fn base_dir(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+
+    /// Probe files matching the glob, sorted by path; an error when none match.
+    pub fn probe_files(&self) -> Result<Vec<PathBuf>> {
+        let pattern = self.base_dir().join(&self.job.probes);
+        let pattern_text = pattern.to_string_lossy().to_string();
+        let paths = glob::glob(&pattern_text).map_err(|e| {
+            Error::input(
+                Location::cell(&self.path, 1, "probes"),
+                format!("probes: bad glob '{}': {e}", self.job.probes),
+                "write a glob such as \"probes/*.csv\"",
+            )
+        })?;
+        let mut files: Vec<PathBuf> = paths
+            .filter_map(|p| p.ok())
+            .filter(|p| p.is_file())
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            return Err(Error::input(
+                Location::cell(&self.path, 1, "probes"),
+                format!("probes: no file matches '{pattern_text}'"),
+                "the glob is relative to the job file's folder",
+            ));
+        }
+        Ok(files)
+    }
+
+    /// Toolpath files, resolved against the job's folder.
+    pub fn toolpath_files(&self) -> Vec<PathBuf> {
+        self.job
+            .toolpaths
+            .files
+            .iter()
+            .map(|f| self.base_dir().join(f))
+            .collect()
+    }
+
+    /// The output folder: `output`, or `out/<family>`.
+    pub fn output_dir(&self) -> PathBuf {
+        self.job
+            .output
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("out").join(&self.job.family))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_gives_every_default() {
+        let job = Job::parse(Path::new("j.toml"), "").unwrap();
+        assert_eq!(job, Job::default());
+        assert_eq!(job.clean.k_sigma, 3.0);
+        assert_eq!(job.model.holdout_fraction, 0.1);
+        assert_eq!(job.toolpaths.map, MapChoice::Family);
+    }
+
+    #[test]
+    fn full_example_parses() {
+        let text = r#"
+family = "web-plate"
+normal = "x"
+nominal_plane_mm = 5.0
+probes = "p/*.csv"
+domain = [10, 10, 590, 290]
+grid_step_mm = 10.0
+output = "elsewhere"
+[clean]
+k_sigma = 4.0
+[interp]
+method = "sibson-c1"
+spacing_mm = 7.5
+[model]
+hidden = [16, 16]
+epochs = 300
+seed = 9
+[toolpaths]
+files = ["a.ngc", "b.csv"]
+zone = [4, 6]
+max_segment_mm = 2.0
+chord_tol_mm = 0.01
+map = "part"
+"#;
+        let job = Job::parse(Path::new("j.toml"), text).unwrap();
+        assert_eq!(job.normal, Axis::X);
+        assert_eq!(job.interp.method, Method::SibsonC1);
+        assert_eq!(job.model.hidden, vec![16, 16]);
+        assert_eq!(job.model.epochs, 300);
+        assert_eq!(job.toolpaths.zone, Some([4.0, 6.0]));
+        assert_eq!(job.toolpaths.map, MapChoice::Part);
+        assert_eq!(job.domain().unwrap().u_max_mm, 590.0);
+    }
+
+    #[test]
+    fn errors_name_line_and_column() {
+        let err = Job::parse(
+            Path::new("j.toml"),
+            "family = \"a\"\n\n[clean]\nk_sigmaa = 3\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.starts_with("j.toml:4, column 1:"), "{err}");
+        assert!(err.contains("k_sigmaa"), "{err}");
+        let err = Job::parse(
+            Path::new("j.toml"),
+            "family = \"a\"\ngrid_step_mm = \"x\"\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.starts_with("j.toml:2, column 16:"), "{err}");
+        let err = Job::parse(Path::new("j.toml"), "normal = \"w\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:1, column 10:"), "{err}");
+        let err = Job::parse(Path::new("j.toml"), "grid_step_mm = -1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("grid_step_mm") && err.contains("positive"),
+            "{err}"
+        );
+    }
+}

@@ -1,0 +1,585 @@
+//! Training sets, the `Trainer` trait, full-batch Adam and the CPU reference trainer (the specification the shaders follow).
+
+use rayon::prelude::*;
+
+use super::config::{network_seed, Activation, ModelConfig};
+use super::mlp::{layer_spans, param_count, LayerSpan, Mlp};
+use crate::{Error, Result};
+
+/// Samples of one network: inputs scaled to [-1, 1]², targets standardised
+/// (see [`super::Normalisation`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrainingSet {
+    pub inputs: Vec<[f32; 2]>,
+    pub targets: Vec<f32>,
+}
+
+impl TrainingSet {
+    pub fn len(&self) -> usize {
+        self.targets.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.targets.is_empty()
+    }
+}
+
+/// Trains and evaluates a batch of networks (one per part). Implemented by [`CpuTrainer`]
+/// and by the wgpu trainer of [`crate::gpu`]; both do the same f32 arithmetic in the same order.
+pub trait Trainer: Send + Sync {
+    /// Backend name for notes and summaries, e.g. "cpu" or "gpu (llvmpipe, Vulkan)".
+    fn name(&self) -> String;
+
+    /// One network per set; network k starts from [`initial_networks`] (seeded from `(config.seed, k)`).
+    fn train_batch(&self, sets: &[TrainingSet], config: &ModelConfig) -> Result<Vec<Mlp>> {
+        config.validate()?;
+        self.train_from(initial_networks(sets.len(), config), sets, config)
+    }
+
+    /// Trains `initial[k]` on `sets[k]` for `config.epochs` full-batch Adam steps.
+    fn train_from(
+        &self,
+        initial: Vec<Mlp>,
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+    ) -> Result<Vec<Mlp>>;
+
+    /// Every network on the same inputs: result `[k][i]` = `nets[k].forward(inputs[i])`.
+    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>>;
+}
+
+/// The starting networks of a batch of `count`: Glorot-uniform, network k seeded with
+/// [`network_seed`]`(config.seed, k)`.
+pub fn initial_networks(count: usize, config: &ModelConfig) -> Vec<Mlp> {
+    let sizes = config.layer_sizes();
+    (0..count)
+        .map(|k| Mlp::init(&sizes, config.activation, network_seed(config.seed, k)))
+        .collect()
+}
+
+/// Gradient sums use this many lanes: sample s goes to lane s mod 64, each lane sums its
+/// samples in ascending order, then the lanes are added in a binary tree (32, 16, … 1).
+/// `shaders/train.wgsl` does the same in each parameter's thread, so both backends
+/// round identically in the reduction.
+pub const GRAD_LANES: usize = 64;
+
+/// Adam (Kingma & Ba 2015, Algorithm 1) constants. 1 − β is written out, not computed,
+/// so CPU and shader use the very same f32 values.
+/// The shader spells them as hex floats with these bits.
+pub const ADAM_BETA1: f32 = f32::from_bits(0x3f66_6666); // 0.9
+pub const ADAM_ONE_MINUS_BETA1: f32 = f32::from_bits(0x3dcc_cccd); // 0.1
+pub const ADAM_BETA2: f32 = f32::from_bits(0x3f7f_be77); // 0.999
+pub const ADAM_ONE_MINUS_BETA2: f32 = f32::from_bits(0x3a83_126f); // 0.001
+pub const ADAM_EPSILON: f32 = f32::from_bits(0x322b_cc77); // 1e-8
+
+/// Per-step Adam scalars, computed on the host in f64: learning rate and the bias
+/// corrections 1/(1 − β₁ᵗ), 1/(1 − β₂ᵗ) for step t = epoch + 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdamScalars {
+    pub learning_rate: f32,
+    pub correction1: f32,
+    pub correction2: f32,
+}
+
+impl AdamScalars {
+    pub fn at(config: &ModelConfig, epoch: u32) -> AdamScalars {
+        let t = epoch as f64 + 1.0;
+        AdamScalars {
+            learning_rate: config.learning_rate_at(epoch),
+            correction1: (1.0 / (1.0 - (ADAM_BETA1 as f64).powf(t))) as f32,
+            correction2: (1.0 / (1.0 - (ADAM_BETA2 as f64).powf(t))) as f32,
+        }
+    }
+}
+
+/// One Adam update of one parameter, in the shader's operation order.
+#[inline]
+pub fn adam_update(p: &mut f32, m: &mut f32, v: &mut f32, g: f32, s: &AdamScalars) {
+    *m = ADAM_BETA1 * *m + ADAM_ONE_MINUS_BETA1 * g;
+    *v = ADAM_BETA2 * *v + ADAM_ONE_MINUS_BETA2 * (g * g);
+    let m_hat = *m * s.correction1;
+    let v_hat = *v * s.correction2;
+    *p -= s.learning_rate * m_hat / (v_hat.sqrt() + ADAM_EPSILON);
+}
+
+/// Checks a batch before training: matching counts, the configured architecture,
+/// non-empty sets of finite numbers.
+pub fn check_batch(initial: &[Mlp], sets: &[TrainingSet], config: &ModelConfig) -> Result<()> {
+    config.validate()?;
+    if initial.len() != sets.len() {
+        return Err(Error::usage(
+            format!(
+                "{} initial networks for {} training sets",
+                initial.len(),
+                sets.len()
+            ),
+            "give one network per training set",
+        ));
+    }
+    let sizes = config.layer_sizes();
+    for (k, (net, set)) in initial.iter().zip(sets).enumerate() {
+        if !net.is_consistent() || net.layer_sizes != sizes || net.activation != config.activation {
+            return Err(Error::usage(
+                format!(
+                    "network {k} has layers {:?} ({}), the model config asks for {:?} ({})",
+                    net.layer_sizes,
+                    net.activation.name(),
+                    sizes,
+                    config.activation.name()
+                ),
+                "start every network of a batch from the configured architecture",
+            ));
+        }
+        if set.is_empty() || set.inputs.len() != set.targets.len() {
+            return Err(Error::usage(
+                format!(
+                    "training set {k} has {} inputs and {} targets",
+                    set.inputs.len(),
+                    set.targets.len()
+                ),
+                "each training set needs at least one sample and one target per input",
+            ));
+        }
+        if set
+            .inputs
+            .iter()
+            .flatten()
+            .chain(&set.targets)
+            .any(|x| !x.is_finite())
+        {
+            return Err(Error::numeric(
+                format!("training set {k} contains NaN or infinite values"),
+                "scale inputs and targets with a Normalisation built from finite data",
+            ));
+        }
+        if set.len() > u32::MAX as usize / 2 {
+            return Err(Error::usage(
+                format!("training set {k} has {} samples", set.len()),
+                "use a coarser training-set spacing",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The CPU reference trainer: plain Rust f32, networks in parallel with rayon.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CpuTrainer;
+
+impl Trainer for CpuTrainer {
+    fn name(&self) -> String {
+        "cpu".to_string()
+    }
+
+    fn train_from(
+        &self,
+        initial: Vec<Mlp>,
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+    ) -> Result<Vec<Mlp>> {
+        check_batch(&initial, sets, config)?;
+        initial
+            .into_par_iter()
+            .zip(sets.par_iter())
+            .enumerate()
+            .map(|(k, (mut net, set))| {
+                train_network(&mut net, set, config, k)?;
+                Ok(net)
+            })
+            .collect()
+    }
+
+    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
+        check_nets(nets)?;
+        Ok(nets
+            .iter()
+            .map(|net| {
+                let eval = Evaluator::new(net);
+                let mut out = vec![0.0f32; inputs.len()];
+                out.par_chunks_mut(4096)
+                    .zip(inputs.par_chunks(4096))
+                    .for_each(|(out, chunk)| {
+                        let mut scratch = eval.block_scratch();
+                        for (o, x) in out.chunks_mut(BLOCK).zip(chunk.chunks(BLOCK)) {
+                            let y = eval.forward_block(x, &mut scratch);
+                            o.copy_from_slice(&y[..o.len()]);
+                        }
+                    });
+                out
+            })
+            .collect())
+    }
+}
+
+/// Rejects networks whose sizes and parameters disagree (e.g. a hand-edited model.json).
+pub fn check_nets(nets: &[Mlp]) -> Result<()> {
+    for (k, net) in nets.iter().enumerate() {
+        if !net.is_consistent() {
+            return Err(Error::usage(
+                format!(
+                    "network {k}: layer sizes {:?} need {} parameters, it has {}",
+                    net.layer_sizes,
+                    param_count(&net.layer_sizes),
+                    net.params.len()
+                ),
+                "layer sizes must start with 2 inputs and end with 1 output; regenerate the model",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Forward pass with reusable scratch (same arithmetic as [`Mlp::forward`]).
+struct Evaluator<'a> {
+    net: &'a Mlp,
+    spans: Vec<LayerSpan>,
+    width: usize,
+}
+
+impl<'a> Evaluator<'a> {
+    fn new(net: &'a Mlp) -> Self {
+        let spans = layer_spans(&net.layer_sizes);
+        let width = net.layer_sizes.iter().copied().max().unwrap_or(2);
+        Evaluator { net, spans, width }
+    }
+    fn scratch(&self) -> (Vec<f32>, Vec<f32>) {
+        (vec![0.0; self.width], vec![0.0; self.width])
+    }
+    fn block_scratch(&self) -> (Vec<[f32; BLOCK]>, Vec<[f32; BLOCK]>) {
+        (
+            vec![[0.0; BLOCK]; self.width],
+            vec![[0.0; BLOCK]; self.width],
+        )
+    }
+    /// Up to BLOCK points at once (SIMD across points; each point's sums in the same order
+    /// as [`Evaluator::forward`], so the bits are the same).
+    fn forward_block(
+        &self,
+        x: &[[f32; 2]],
+        (prev, next): &mut (Vec<[f32; BLOCK]>, Vec<[f32; BLOCK]>),
+    ) -> [f32; BLOCK] {
+        prev[0] = [0.0; BLOCK];
+        prev[1] = [0.0; BLOCK];
+        for (b, p) in x.iter().take(BLOCK).enumerate() {
+            prev[0][b] = p[0];
+            prev[1][b] = p[1];
+        }
+        let last = self.spans.len() - 1;
+        let p = &self.net.params;
+        for (l, span) in self.spans.iter().enumerate() {
+            for (i, out) in next[..span.outputs].iter_mut().enumerate() {
+                let row = &p[span.weight_offset + i * span.inputs..][..span.inputs];
+                let mut z = [p[span.bias_offset + i]; BLOCK];
+                for (w, a) in row.iter().zip(prev.iter()) {
+                    for b in 0..BLOCK {
+                        z[b] += w * a[b];
+                    }
+                }
+                if l != last {
+                    for zb in &mut z {
+                        *zb = self.net.activation.apply(*zb);
+                    }
+                }
+                *out = z;
+            }
+            std::mem::swap(prev, next);
+        }
+        prev[0]
+    }
+    fn forward(&self, x: [f32; 2], (prev, next): &mut (Vec<f32>, Vec<f32>)) -> f32 {
+        prev[0] = x[0];
+        prev[1] = x[1];
+        let last = self.spans.len() - 1;
+        let p = &self.net.params;
+        for (l, span) in self.spans.iter().enumerate() {
+            for i in 0..span.outputs {
+                let row = &p[span.weight_offset + i * span.inputs..][..span.inputs];
+                let mut z = p[span.bias_offset + i];
+                for (w, a) in row.iter().zip(prev.iter()) {
+                    z += w * a;
+                }
+                next[i] = if l == last {
+                    z
+                } else {
+                    self.net.activation.apply(z)
+                };
+            }
+            std::mem::swap(prev, next);
+        }
+        prev[0]
+    }
+}
+
+/// Samples processed together in the CPU forward/backward pass (SIMD across samples; each
+/// sample keeps its own operation order, so blocking changes no bit).
+const BLOCK: usize = 8;
+/// Lane groups: the samples of block b go to lanes (8b mod 64)…(8b mod 64) + 7, so the
+/// 8 groups of 8 lanes are disjoint and run in parallel without changing any sum.
+const LANE_GROUPS: usize = GRAD_LANES / BLOCK;
+
+/// Per-thread scratch of the blocked pass: unit-major, BLOCK samples innermost.
+struct BlockScratch {
+    acts: Vec<[f32; BLOCK]>,
+    deltas: Vec<[f32; BLOCK]>,
+    back: Vec<[f32; BLOCK]>,
+    column: Vec<f32>,
+}
+
+/// Scratch of one network's gradient computation, reused across epochs.
+struct GradientWorkspace {
+    spans: Vec<LayerSpan>,
+    unit_offset: Vec<usize>,
+    scratch: Vec<BlockScratch>,
+    /// `GRAD_LANES` partial gradients; after [`GradientWorkspace::gradient`] lane 0 holds the sum.
+    lanes: Vec<f32>,
+}
+
+impl GradientWorkspace {
+    fn new(net: &Mlp) -> Self {
+        let spans = layer_spans(&net.layer_sizes);
+        let mut unit_offset = Vec::with_capacity(spans.len());
+        let mut units = 0;
+        for span in &spans {
+            unit_offset.push(units);
+            units += span.outputs;
+        }
+        let width = net.layer_sizes.iter().copied().max().unwrap_or(2);
+        let scratch = (0..LANE_GROUPS)
+            .map(|_| BlockScratch {
+                acts: vec![[0.0; BLOCK]; units],
+                deltas: vec![[0.0; BLOCK]; units],
+                back: vec![[0.0; BLOCK]; width],
+                column: vec![0.0; width],
+            })
+            .collect();
+        GradientWorkspace {
+            spans,
+            unit_offset,
+            scratch,
+            lanes: vec![0.0; GRAD_LANES * net.params.len()],
+        }
+    }
+
+    /// Gradient of the mean squared error over `set` w.r.t. `params` into `lanes[..P]`;
+    /// returns the mean squared error (f64, for progress only).
+    ///
+    /// Per sample: forward z = b[i] + Σ_j W[i][j]·a[j] (j ascending), δ_out = (y − t)·(2/n),
+    /// δ_prev[j] = (Σ_i W[i][j]·δ[i], i ascending)·f'(a[j]); sample s adds δ[i]·a[j] to lane
+    /// s mod 64, lanes sum their samples in ascending order, then a binary tree adds lanes.
+    fn gradient(&mut self, params: &[f32], activation: Activation, set: &TrainingSet) -> f64 {
+        let n_params = params.len();
+        let n = set.len();
+        let spans = &self.spans;
+        let unit_offset = &self.unit_offset;
+        let grad_scale = 2.0f32 / n as f32;
+        self.lanes.fill(0.0);
+        let losses: Vec<f64> = self
+            .lanes
+            .par_chunks_mut(BLOCK * n_params)
+            .zip(self.scratch.par_iter_mut())
+            .enumerate()
+            .map(|(group, (lanes, scratch))| {
+                let mut loss = 0.0f64;
+                // Blocks group, group + 8, … : samples 8·block … 8·block + 7.
+                let mut block = group;
+                while block * BLOCK < n {
+                    let s0 = block * BLOCK;
+                    let count = BLOCK.min(n - s0);
+                    loss += block_pass(
+                        params,
+                        activation,
+                        spans,
+                        unit_offset,
+                        set,
+                        s0,
+                        count,
+                        grad_scale,
+                        scratch,
+                        lanes,
+                    );
+                    block += LANE_GROUPS;
+                }
+                loss
+            })
+            .collect();
+        // Tree over lanes: lane l += lane l + stride, stride 32, 16, … 1.
+        let mut stride = GRAD_LANES / 2;
+        while stride > 0 {
+            let (low, high) = self.lanes.split_at_mut(stride * n_params);
+            for (a, b) in low.iter_mut().zip(&high[..stride * n_params]) {
+                *a += b;
+            }
+            stride /= 2;
+        }
+        losses.iter().sum::<f64>() / n.max(1) as f64
+    }
+}
+
+/// Forward and backward pass of samples s0 … s0 + count − 1 (count ≤ BLOCK), adding their
+/// gradient contributions to `lanes` (the 8 lanes of this block, each `P` long).
+#[allow(clippy::too_many_arguments)]
+fn block_pass(
+    params: &[f32],
+    activation: Activation,
+    spans: &[LayerSpan],
+    unit_offset: &[usize],
+    set: &TrainingSet,
+    s0: usize,
+    count: usize,
+    grad_scale: f32,
+    scratch: &mut BlockScratch,
+    lanes: &mut [f32],
+) -> f64 {
+    let n_params = params.len();
+    let last = spans.len() - 1;
+    let mut input = [[0.0f32; BLOCK]; 2];
+    for (b, x) in set.inputs[s0..s0 + count].iter().enumerate() {
+        input[0][b] = x[0];
+        input[1][b] = x[1];
+    }
+    let BlockScratch {
+        acts,
+        deltas,
+        back,
+        column,
+    } = scratch;
+    // Forward.
+    for (l, span) in spans.iter().enumerate() {
+        let (done, rest) = acts.split_at_mut(unit_offset[l]);
+        let prev: &[[f32; BLOCK]] = if l == 0 {
+            &input
+        } else {
+            &done[unit_offset[l - 1]..][..span.inputs]
+        };
+        for (i, out) in rest[..span.outputs].iter_mut().enumerate() {
+            let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+            let mut z = [params[span.bias_offset + i]; BLOCK];
+            for (w, a) in row.iter().zip(prev) {
+                for b in 0..BLOCK {
+                    z[b] += w * a[b];
+                }
+            }
+            if l != last {
+                for zb in &mut z {
+                    *zb = activation.apply(*zb);
+                }
+            }
+            *out = z;
+        }
+    }
+    let mut loss = 0.0f64;
+    let out = unit_offset[last];
+    for b in 0..BLOCK {
+        let err = if b < count {
+            acts[out][b] - set.targets[s0 + b]
+        } else {
+            0.0
+        };
+        loss += (err as f64) * (err as f64);
+        deltas[out][b] = err * grad_scale;
+    }
+    // Backward.
+    for l in (0..spans.len()).rev() {
+        let span = spans[l];
+        let (before, current) = deltas.split_at_mut(unit_offset[l]);
+        let delta = &current[..span.outputs];
+        let prev: &[[f32; BLOCK]] = if l == 0 {
+            &input
+        } else {
+            &acts[unit_offset[l - 1]..][..span.inputs]
+        };
+        for b in 0..count {
+            let lane = &mut lanes[((s0 + b) % BLOCK) * n_params..][..n_params];
+            let column = &mut column[..span.inputs];
+            for (c, a) in column.iter_mut().zip(prev) {
+                *c = a[b];
+            }
+            for (i, d) in delta.iter().enumerate() {
+                let d = d[b];
+                lane[span.bias_offset + i] += d;
+                let row = &mut lane[span.weight_offset + i * span.inputs..][..span.inputs];
+                for (g, a) in row.iter_mut().zip(column.iter()) {
+                    *g += d * a;
+                }
+            }
+        }
+        if l > 0 {
+            let back = &mut back[..span.inputs];
+            back.iter_mut().for_each(|v| *v = [0.0; BLOCK]);
+            for (i, d) in delta.iter().enumerate() {
+                let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+                for (bj, w) in back.iter_mut().zip(row) {
+                    for b in 0..BLOCK {
+                        bj[b] += w * d[b];
+                    }
+                }
+            }
+            let prev_delta = &mut before[unit_offset[l - 1]..][..span.inputs];
+            for ((pd, bj), a) in prev_delta.iter_mut().zip(back.iter()).zip(prev) {
+                for b in 0..BLOCK {
+                    pd[b] = bj[b] * activation.derivative_from_output(a[b]);
+                }
+            }
+        }
+    }
+    loss
+}
+
+/// Gradient of the mean squared error of `net` on `set` w.r.t. its parameters, summed
+/// exactly as one training step sums it; also returns the mean squared error.
+pub fn loss_gradient(net: &Mlp, set: &TrainingSet) -> (f64, Vec<f32>) {
+    let mut ws = GradientWorkspace::new(net);
+    let loss = ws.gradient(&net.params, net.activation, set);
+    (loss, ws.lanes[..net.params.len()].to_vec())
+}
+
+/// Full-batch Adam on one network: `config.epochs` steps of
+/// forward → loss gradient 2(y − t)/n → backprop → lane sums → tree → Adam.
+/// Fails with a numeric error if the loss stops being finite.
+pub fn train_network(
+    net: &mut Mlp,
+    set: &TrainingSet,
+    config: &ModelConfig,
+    k: usize,
+) -> Result<()> {
+    let mut ws = GradientWorkspace::new(net);
+    let mut m = vec![0.0f32; net.params.len()];
+    let mut v = vec![0.0f32; net.params.len()];
+    for epoch in 0..config.epochs {
+        let loss = ws.gradient(&net.params, net.activation, set);
+        if ((epoch + 1) % config.loss_every == 0 || epoch + 1 == config.epochs) && !loss.is_finite()
+        {
+            return Err(diverged(k, epoch));
+        }
+        let scalars = AdamScalars::at(config, epoch);
+        for (((p, mi), vi), &g) in net.params.iter_mut().zip(&mut m).zip(&mut v).zip(&ws.lanes) {
+            adam_update(p, mi, vi, g, &scalars);
+        }
+    }
+    if net.params.iter().any(|p| !p.is_finite()) {
+        return Err(diverged(k, config.epochs));
+    }
+    Ok(())
+}
+
+/// Mean squared error of a network on a set (f64 sum), for reports and tests.
+pub fn mse(net: &Mlp, set: &TrainingSet) -> f64 {
+    let eval = Evaluator::new(net);
+    let mut scratch = eval.scratch();
+    let sum: f64 = set
+        .inputs
+        .iter()
+        .zip(&set.targets)
+        .map(|(&x, &t)| {
+            let e = (eval.forward(x, &mut scratch) - t) as f64;
+            e * e
+        })
+        .sum();
+    sum / set.len().max(1) as f64
+}
+
+pub(crate) fn diverged(k: usize, epoch: u32) -> Error {
+    Error::numeric(
+        format!("training of network {k} diverged (loss not finite) by epoch {epoch}"),
+        "lower model.learning_rate",
+    )
+}

@@ -1,0 +1,376 @@
+//! GPU (wgpu, lavapipe on CI) against the CPU reference trainer: training parity, evaluation parity, batch splitting, struct layouts.
+//!
+//! Without an adapter these tests print why they skip, unless ERRMAP_REQUIRE_GPU=1, where they fail.
+
+use std::sync::OnceLock;
+
+use errmap::geom::Domain;
+use errmap::gpu::layout::{Dims, LayerInfo, NetInfo, Sample, Step};
+use errmap::gpu::GpuTrainer;
+use errmap::nn::*;
+
+fn gpu(test: &str) -> Option<&'static GpuTrainer> {
+    static TRAINER: OnceLock<Result<GpuTrainer, String>> = OnceLock::new();
+    match TRAINER.get_or_init(|| GpuTrainer::new().map_err(|e| e.to_string())) {
+        Ok(trainer) => Some(trainer),
+        Err(reason) => {
+            if std::env::var("ERRMAP_REQUIRE_GPU").as_deref() == Ok("1") {
+                panic!("{test}: ERRMAP_REQUIRE_GPU=1 but no GPU trainer: {reason}");
+            }
+            eprintln!("SKIPPED {test}: no GPU adapter ({reason})");
+            None
+        }
+    }
+}
+
+fn domain() -> Domain {
+    Domain {
+        u_min_mm: 0.0,
+        v_min_mm: 0.0,
+        u_max_mm: 600.0,
+        v_max_mm: 300.0,
+    }
+}
+
+/// A web-plate-like deflection field in µm (±40 µm), independent of errmap's synth module.
+fn field_um(u_mm: f64, v_mm: f64, k: usize) -> f64 {
+    use std::f64::consts::PI;
+    -40.0 * (PI * u_mm / 600.0).sin() * (PI * v_mm / 300.0).sin()
+        + 6.0 * (u_mm / 600.0 - 0.5)
+        + 0.5 * k as f64 * (v_mm / 300.0)
+}
+
+/// Training sets of different sizes on irregular grids, with the Normalisation of each.
+fn sets(sizes: &[(usize, usize)]) -> (Vec<TrainingSet>, Vec<Normalisation>) {
+    let mut out = Vec::new();
+    let mut norms = Vec::new();
+    for (k, &(nu, nv)) in sizes.iter().enumerate() {
+        let points: Vec<(f64, f64, f64)> = (0..nv)
+            .flat_map(|j| (0..nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let u = 600.0 * i as f64 / (nu - 1) as f64;
+                let v = 300.0 * j as f64 / (nv - 1) as f64;
+                (u, v, field_um(u, v, k))
+            })
+            .collect();
+        let e: Vec<f64> = points.iter().map(|p| p.2).collect();
+        let norm = Normalisation::new(&domain(), &e);
+        out.push(TrainingSet {
+            inputs: points.iter().map(|p| norm.scale_input(p.0, p.1)).collect(),
+            targets: points.iter().map(|p| norm.scale_target(p.2)).collect(),
+        });
+        norms.push(norm);
+    }
+    (out, norms)
+}
+
+fn grid_inputs(norm: &Normalisation, step_mm: f64) -> Vec<[f32; 2]> {
+    let (nu, nv) = (
+        (600.0 / step_mm) as usize + 1,
+        (300.0 / step_mm) as usize + 1,
+    );
+    (0..nv)
+        .flat_map(|j| (0..nu).map(move |i| (i, j)))
+        .map(|(i, j)| norm.scale_input(i as f64 * step_mm, j as f64 * step_mm))
+        .collect()
+}
+
+#[test]
+fn training_matches_cpu_after_200_adam_steps() {
+    let Some(gpu) = gpu("training_matches_cpu_after_200_adam_steps") else {
+        return;
+    };
+    // Four networks of 40 to 273 samples (none a multiple of the 64 gradient lanes).
+    let (sets, norms) = sets(&[(8, 5), (13, 10), (15, 9), (21, 13)]);
+    let config = ModelConfig {
+        hidden: vec![24, 16],
+        epochs: 200,
+        loss_every: 50,
+        ..Default::default()
+    };
+    let initial = initial_networks(sets.len(), &config);
+    let cpu = CpuTrainer
+        .train_from(initial.clone(), &sets, &config)
+        .unwrap();
+    let on_gpu = gpu.train_from(initial.clone(), &sets, &config).unwrap();
+    assert_eq!(on_gpu.len(), 4);
+    for (k, ((c, g), start)) in cpu.iter().zip(&on_gpu).zip(&initial).enumerate() {
+        assert_eq!(g.layer_sizes, c.layer_sizes);
+        // Training moved the parameters well beyond the tolerance.
+        let moved = c
+            .params
+            .iter()
+            .zip(&start.params)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(moved > 0.1, "network {k} barely trained ({moved})");
+        // Relative on the parameter vector: the largest difference against the largest
+        // parameter (∞-norm), and the Euclidean norms. A single parameter near zero has no
+        // meaningful relative error of its own.
+        let largest = c.params.iter().fold(0.0f32, |m, p| m.max(p.abs()));
+        let worst = c
+            .params
+            .iter()
+            .zip(&g.params)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        let norm =
+            |v: &mut dyn Iterator<Item = f32>| v.map(|x| (x as f64).powi(2)).sum::<f64>().sqrt();
+        let diff_norm = norm(&mut c.params.iter().zip(&g.params).map(|(a, b)| a - b));
+        let param_norm = norm(&mut c.params.iter().copied());
+        eprintln!(
+            "network {k} ({} samples): max |Δp| / max |p| = {:.2e}, ‖Δp‖ / ‖p‖ = {:.2e}",
+            sets[k].len(),
+            worst / largest,
+            diff_norm / param_norm
+        );
+        assert!(
+            worst <= 1e-3 * largest,
+            "network {k}: max |Δp| {worst} vs max |p| {largest}"
+        );
+        assert!(
+            diff_norm <= 1e-3 * param_norm,
+            "network {k}: ‖Δp‖ {diff_norm} vs ‖p‖ {param_norm}"
+        );
+        // Final maps, unscaled to µm on a 600 × 300 mm grid at 5 mm.
+        let inputs = grid_inputs(&norms[k], 5.0);
+        let map = |net: &Mlp| -> Vec<f64> {
+            inputs
+                .iter()
+                .map(|&x| norms[k].unscale_output(net.forward(x)))
+                .collect()
+        };
+        let (mc, mg) = (map(c), map(g));
+        let rms = (mc
+            .iter()
+            .zip(&mg)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / mc.len() as f64)
+            .sqrt();
+        eprintln!("network {k}: maps differ by {rms:.2e} µm RMS");
+        assert!(rms <= 0.05, "network {k}: maps differ by {rms} µm RMS");
+    }
+}
+
+#[test]
+fn gpu_training_is_bitwise_repeatable_and_split_invariant() {
+    let Some(gpu) = gpu("gpu_training_is_bitwise_repeatable_and_split_invariant") else {
+        return;
+    };
+    let (sets, _) = sets(&[(9, 7), (12, 6), (10, 10)]);
+    let config = ModelConfig {
+        hidden: vec![16, 8],
+        epochs: 30,
+        loss_every: 7,
+        ..Default::default()
+    };
+    let bits = |nets: &[Mlp]| -> Vec<u32> {
+        nets.iter()
+            .flat_map(|n| n.params.iter().map(|p| p.to_bits()))
+            .collect()
+    };
+    let a = gpu.train_batch(&sets, &config).unwrap();
+    let b = gpu.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&a), bits(&b));
+    // A buffer limit that admits one network at a time forces three groups.
+    let units = 16 + 8 + 1;
+    let tiny = GpuTrainer::new()
+        .unwrap()
+        .with_buffer_limit(120 * units as u64 * 4);
+    let split = tiny.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&split), bits(&a));
+}
+
+#[test]
+fn evaluation_matches_cpu_within_1e_4_um() {
+    let Some(gpu) = gpu("evaluation_matches_cpu_within_1e_4_um") else {
+        return;
+    };
+    let (sets, norms) = sets(&[(12, 8), (10, 6)]);
+    let config = ModelConfig {
+        epochs: 150,
+        ..Default::default()
+    };
+    let nets = CpuTrainer.train_batch(&sets, &config).unwrap();
+    // A mixed batch: two trained tanh networks, then a relu network of another shape.
+    let mut all = nets.clone();
+    all.push(Mlp::init(&[2, 7, 5, 1], Activation::Relu, 9));
+    let inputs = grid_inputs(&norms[0], 2.0);
+    let cpu = CpuTrainer.evaluate_batch(&all, &inputs).unwrap();
+    let on_gpu = gpu.evaluate_batch(&all, &inputs).unwrap();
+    assert_eq!(on_gpu.len(), 3);
+    for (k, (c, g)) in cpu.iter().zip(&on_gpu).enumerate() {
+        assert_eq!(g.len(), inputs.len());
+        let norm = &norms[k.min(1)];
+        let worst = c
+            .iter()
+            .zip(g)
+            .map(|(&a, &b)| (norm.unscale_output(a) - norm.unscale_output(b)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(
+            worst <= 1e-4,
+            "network {k}: GPU and CPU maps differ by {worst} µm"
+        );
+    }
+    assert!(gpu
+        .evaluate_batch(&all, &[])
+        .unwrap()
+        .iter()
+        .all(|v| v.is_empty()));
+}
+
+#[test]
+fn gpu_rejects_shapes_it_cannot_hold() {
+    let Some(gpu) = gpu("gpu_rejects_shapes_it_cannot_hold") else {
+        return;
+    };
+    let wide = Mlp::init(&[2, 300, 1], Activation::Tanh, 1);
+    let err = gpu.evaluate_batch(&[wide], &[[0.0, 0.0]]).unwrap_err();
+    assert!(err.to_string().contains("width"), "{err}");
+    let mut broken = Mlp::init(&[2, 4, 1], Activation::Tanh, 1);
+    broken.params.pop();
+    assert!(gpu.evaluate_batch(&[broken], &[[0.0, 0.0]]).is_err());
+}
+
+/// Struct layouts of the host mirrors against the WGSL declarations, as naga lays them out.
+#[test]
+fn host_structs_match_wgsl_layouts() {
+    use std::mem::{offset_of, size_of};
+    use wgpu::naga;
+    let mut checked = 0;
+    for source in [
+        errmap::gpu::train::TRAIN_WGSL,
+        errmap::gpu::evaluate::EVALUATE_WGSL,
+    ] {
+        let module = naga::front::wgsl::parse_str(source).expect("shader parses");
+        for (_, ty) in module.types.iter() {
+            let naga::TypeInner::Struct { members, span } = &ty.inner else {
+                continue;
+            };
+            let fields: Vec<(String, u32)> = members
+                .iter()
+                .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                .collect();
+            let expected: (usize, Vec<(&str, usize)>) = match ty.name.as_deref() {
+                Some("LayerInfo") => (
+                    size_of::<LayerInfo>(),
+                    vec![
+                        ("inputs", offset_of!(LayerInfo, inputs)),
+                        ("outputs", offset_of!(LayerInfo, outputs)),
+                        ("weight_offset", offset_of!(LayerInfo, weight_offset)),
+                        ("unit_offset", offset_of!(LayerInfo, unit_offset)),
+                    ],
+                ),
+                Some("Dims") => (
+                    size_of::<Dims>(),
+                    vec![
+                        ("net_count", offset_of!(Dims, net_count)),
+                        ("param_count", offset_of!(Dims, param_count)),
+                        ("layer_count", offset_of!(Dims, layer_count)),
+                        ("unit_count", offset_of!(Dims, unit_count)),
+                        ("sample_count", offset_of!(Dims, sample_count)),
+                        ("activation", offset_of!(Dims, activation)),
+                        ("_pad0", offset_of!(Dims, _pad0)),
+                        ("_pad1", offset_of!(Dims, _pad1)),
+                        ("layers", offset_of!(Dims, layers)),
+                    ],
+                ),
+                Some("NetInfo") => (
+                    size_of::<NetInfo>(),
+                    vec![
+                        ("sample_offset", offset_of!(NetInfo, sample_offset)),
+                        ("sample_count", offset_of!(NetInfo, sample_count)),
+                        ("act_offset", offset_of!(NetInfo, act_offset)),
+                        ("grad_scale", offset_of!(NetInfo, grad_scale)),
+                    ],
+                ),
+                Some("Sample") => (
+                    size_of::<Sample>(),
+                    vec![
+                        ("x", offset_of!(Sample, x)),
+                        ("y", offset_of!(Sample, y)),
+                        ("target_value", offset_of!(Sample, target_value)),
+                        ("net", offset_of!(Sample, net)),
+                    ],
+                ),
+                Some("Step") => (
+                    size_of::<Step>(),
+                    vec![
+                        ("learning_rate", offset_of!(Step, learning_rate)),
+                        ("correction1", offset_of!(Step, correction1)),
+                        ("correction2", offset_of!(Step, correction2)),
+                        ("_pad", offset_of!(Step, _pad)),
+                    ],
+                ),
+                other => panic!("WGSL struct {other:?} has no host mirror in this test"),
+            };
+            assert_eq!(*span as usize, expected.0, "size of {:?}", ty.name);
+            let expected: Vec<(String, u32)> = expected
+                .1
+                .into_iter()
+                .map(|(n, o)| (n.to_string(), o as u32))
+                .collect();
+            assert_eq!(fields, expected, "fields of {:?}", ty.name);
+            checked += 1;
+        }
+    }
+    // LayerInfo and Dims in both shaders, NetInfo, Sample, Step in train.wgsl.
+    assert_eq!(checked, 7);
+}
+
+#[test]
+fn backend_selection_follows_the_documented_order() {
+    use errmap::gpu::{auto_allows_software, select_trainer};
+    assert_eq!(select_trainer(Backend::Cpu, true).unwrap().name(), "cpu");
+    let Some(gpu) = gpu("backend_selection_follows_the_documented_order") else {
+        // Without any adapter, auto falls back to the CPU and gpu is a device error.
+        assert_eq!(select_trainer(Backend::Auto, true).unwrap().name(), "cpu");
+        let err = select_trainer(Backend::Gpu, true).err().unwrap();
+        assert_eq!(err.exit_code(), 3, "{err}");
+        return;
+    };
+    let forced = select_trainer(Backend::Gpu, true).unwrap();
+    assert_eq!(forced.name(), gpu.name());
+    assert!(forced.name().starts_with("gpu: "), "{}", forced.name());
+    let auto = select_trainer(Backend::Auto, true).unwrap().name();
+    let software = gpu.context().adapter.software;
+    if software && !auto_allows_software() {
+        assert_eq!(auto, "cpu");
+    } else {
+        assert_eq!(auto, gpu.name());
+    }
+}
+
+/// Batch splitting is planned from the limits alone (no device needed).
+#[test]
+fn batches_split_under_buffer_and_dispatch_limits() {
+    use errmap::gpu::train::plan_groups;
+    let set = |n: usize| TrainingSet {
+        inputs: vec![[0.0, 0.0]; n],
+        targets: vec![0.0; n],
+    };
+    let sets = vec![set(100), set(100), set(50), set(200)];
+    let units = 10u64;
+    // 9 000 bytes hold the activations of 225 samples (10 units × 4 bytes each):
+    // 100 + 100 fit, + 50 does not; 50 + 200 does not; 200 alone does.
+    let groups = plan_groups(9_000, 65_535, &sets, units, 20).unwrap();
+    assert_eq!(groups, vec![0..2, 2..3, 3..4]);
+    // Everything fits in one group when the limit allows it.
+    assert_eq!(
+        plan_groups(1 << 30, 65_535, &sets, units, 20).unwrap(),
+        vec![0..4]
+    );
+    // At most two networks per dispatch.
+    assert_eq!(
+        plan_groups(1 << 30, 2, &sets, units, 20).unwrap(),
+        vec![0..2, 2..4]
+    );
+    // A network that cannot fit alone is a device error naming it.
+    let err = plan_groups(3_999, 65_535, &sets, units, 20).unwrap_err();
+    assert_eq!(err.exit_code(), 3);
+    assert!(
+        err.to_string().contains("training set 0 (100 samples)"),
+        "{err}"
+    );
+}
