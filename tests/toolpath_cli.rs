@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{errmap, Run};
+use common::errmap;
 
 /// A model.json whose network is all zeros: E = e_mean_um = 20 µm everywhere in x, y ∈ [0, 100] mm.
 const MODEL: &str = r#"{
@@ -14,15 +14,6 @@ const MODEL: &str = r#"{
                     "e_mean_um": 20.0, "e_std_um": 1.0},
   "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]}
 }"#;
-
-/// The model loader lives in `errmap::map`; until it is built the end-to-end runs are skipped.
-fn loader_missing(out: &Run) -> bool {
-    let missing = out.stderr.contains("is not built yet");
-    if missing {
-        println!("skipping: errmap::map::load_error_field is not built on this branch");
-    }
-    missing
-}
 
 #[test]
 fn compensate_writes_the_program_and_reports() {
@@ -44,9 +35,6 @@ fn compensate_writes_the_program_and_reports() {
             "out.ngc",
         ],
     );
-    if loader_missing(&out) {
-        return;
-    }
     out.expect_code(0);
     // Zone z ∈ [-2, 0]: the plunge is split at z 0; E = 0.02 mm; X10 → X20 in 5 mm segments.
     let expected = "%\nG21 G90\nG0 X10 Y10 Z5\n\
