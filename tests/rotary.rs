@@ -343,6 +343,11 @@ fn every_rejection_names_the_place_and_exits_2() {
     run.expect_code(2);
     assert!(run.stderr.contains("gap"), "{}", run.stderr);
     assert!(!d.join("t.csv").exists());
+    // An infinite probe noise is refused, not generated as no noise.
+    let run = errmap(d, &["synth", "rotary", "--out", "inf", "--noise-um", "inf"]);
+    run.expect_code(2);
+    assert!(run.stderr.contains("--noise-um"), "{}", run.stderr);
+    assert!(!d.join("inf").exists());
 }
 
 /// The three table formats of the golden measurement, byte for byte. Regenerate on purpose

@@ -530,4 +530,11 @@ fn synth_is_deterministic_and_seeded() {
         read("c", "campaign-1-coolant-off/runs.csv"),
         "another seed must give other noise"
     );
+    // A noise level that is not a finite number ≥ 0 is refused, not generated as no noise.
+    for bad in ["nan", "inf", "-0.5"] {
+        let flag = format!("--laser-noise-um={bad}");
+        let msg = run(tmp.path(), &["synth", "thermal", "--out", "bad", &flag], 2).stderr;
+        assert!(msg.contains("--laser-noise-um"), "{msg}");
+        assert!(!tmp.path().join("bad").exists());
+    }
 }

@@ -278,9 +278,10 @@ pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
             "choose a step that divides 360, e.g. 10, 15, 30",
         ));
     }
-    if args.repeats == 0 || args.points < 4 || args.noise_um.is_nan() || args.noise_um < 0.0 {
+    if args.repeats == 0 || args.points < 4 || !(args.noise_um.is_finite() && args.noise_um >= 0.0)
+    {
         return Err(Error::usage(
-            "synth rotary needs --repeats ≥ 1, --points ≥ 4 and --noise-um ≥ 0",
+            "synth rotary needs --repeats ≥ 1, --points ≥ 4 and a finite --noise-um ≥ 0",
             "e.g. --repeats 3 --points 25 --noise-um 0.5",
         ));
     }
