@@ -456,6 +456,28 @@ fn golden_tables_in_every_format() {
     );
     run.expect_code(2);
     assert!(run.stderr.contains("does not divide"), "{}", run.stderr);
+    // An infinite or larger-than-a-turn step is refused too (one entry per turn is no table).
+    for step in ["inf", "720"] {
+        for args in [
+            vec![
+                "rotary",
+                "table",
+                meas,
+                "--format",
+                "csv",
+                "-o",
+                "x.csv",
+                "--step-deg",
+                step,
+            ],
+            vec!["synth", "rotary", "--out", "s", "--step-deg", step],
+        ] {
+            let run = errmap(d, &args);
+            run.expect_code(2);
+            assert!(run.stderr.contains("does not divide"), "{}", run.stderr);
+        }
+    }
+    assert!(!d.join("x.csv").exists() && !d.join("s").exists());
     // --machine-axis names the Sinumerik axis.
     errmap(
         d,

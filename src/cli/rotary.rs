@@ -269,8 +269,8 @@ fn human_report(a: &Analysis) -> String {
 }
 
 pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
-    if args.step_deg.is_nan()
-        || args.step_deg <= 0.0
+    if !(args.step_deg.is_finite() && args.step_deg > 0.0)
+        || (360.0 / args.step_deg).round() < 1.0
         || ((360.0 / args.step_deg) - (360.0 / args.step_deg).round()).abs() > 1e-9
     {
         return Err(Error::usage(
