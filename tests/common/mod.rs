@@ -5,7 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// One finished run of the binary, output decoded lossily as UTF-8.
+/// One finished run of the binary, output decoded lossily as UTF-8. Failures panic at the
+/// caller's line (`#[track_caller]`).
 pub struct Run {
     /// The command line as a user would type it, for failure messages.
     pub cmd: String,
@@ -39,6 +40,7 @@ pub fn errmap(dir: &Path, args: &[&str]) -> Run {
 }
 
 /// Run and require exit 0.
+#[track_caller]
 pub fn ok(dir: &Path, args: &[&str]) -> Run {
     let run = errmap(dir, args);
     run.expect_code(0);
@@ -47,6 +49,7 @@ pub fn ok(dir: &Path, args: &[&str]) -> Run {
 
 impl Run {
     /// Panic with the command, its output and the folder listing unless it exited with `code`.
+    #[track_caller]
     pub fn expect_code(&self, code: i32) -> &Self {
         if self.code != code {
             panic!("expected exit {code}\n{}", self.report());
@@ -69,9 +72,12 @@ impl Run {
 }
 
 /// Stdout parsed as exactly one JSON document.
+#[track_caller]
 pub fn json(run: &Run) -> serde_json::Value {
-    serde_json::from_str(&run.stdout)
-        .unwrap_or_else(|e| panic!("stdout is not one JSON document ({e})\n{}", run.report()))
+    match serde_json::from_str(&run.stdout) {
+        Ok(doc) => doc,
+        Err(e) => panic!("stdout is not one JSON document ({e})\n{}", run.report()),
+    }
 }
 
 /// Every file and folder below `dir`, relative and sorted (folders end in `/`).
