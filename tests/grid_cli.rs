@@ -1,23 +1,9 @@
 //! `errmap grid` end to end: the real binary on small probe files, values checked against the plane they were sampled from.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
-fn errmap(dir: &Path, args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_errmap"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("run errmap");
-    eprintln!(
-        "$ errmap {}\nexit {:?}\nstdout:\n{}\nstderr:\n{}",
-        args.join(" "),
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+use common::errmap;
+use std::path::Path;
 
 /// E in µm of the plane the probes are sampled from.
 fn plane_um(u: f64, v: f64) -> f64 {
@@ -75,8 +61,8 @@ fn grid_of_a_sampled_plane_matches_the_plane() {
                 "grid.csv",
             ],
         );
-        assert_eq!(out.status.code(), Some(0));
-        let stderr = String::from_utf8_lossy(&out.stderr);
+        out.expect_code(0);
+        let stderr = out.stderr.as_str();
         assert!(
             stderr.contains("9 probe points") && stderr.contains(method),
             "{stderr}"
@@ -144,7 +130,7 @@ fn wall_grid_uses_the_plane_axes_names_and_the_given_domain() {
             "out/wall_grid.csv",
         ],
     );
-    assert_eq!(out.status.code(), Some(0));
+    out.expect_code(0);
     assert!(out.stderr.is_empty(), "--quiet printed on stderr");
     let rows = read_grid(&dir.path().join("out/wall_grid.csv"), "y_mm,z_mm,e_um");
     // Domain −10..40 × 0..20 at 10 mm: 6 × 3 nodes, the y = −10 column outside the hull.
@@ -176,8 +162,8 @@ fn bad_input_exits_2_naming_file_and_line() {
             "grid.csv",
         ],
     );
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    out.expect_code(2);
+    let stderr = out.stderr.as_str();
     assert!(
         stderr.contains("bad.csv:4, column z_mm") && stderr.contains("'oops' is not a number"),
         "{stderr}"
@@ -206,8 +192,12 @@ fn bad_input_exits_2_naming_file_and_line() {
             "g.csv",
         ],
     );
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("more than the limit"));
+    out.expect_code(2);
+    assert!(
+        out.stderr.contains("more than the limit"),
+        "{}",
+        out.report()
+    );
     let out = errmap(
         dir.path(),
         &[
@@ -223,6 +213,10 @@ fn bad_input_exits_2_naming_file_and_line() {
             "g.csv",
         ],
     );
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("has 3 values, not 4"));
+    out.expect_code(2);
+    assert!(
+        out.stderr.contains("has 3 values, not 4"),
+        "{}",
+        out.report()
+    );
 }

@@ -1,46 +1,9 @@
 //! End-to-end tests of `errmap linear …` and `errmap synth linear` on the real binary: JSON shape and values, errors, golden controller tables, table round trips, corrections, synthetic data.
 
+mod common;
+
+use common::{errmap, json, ok};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-struct Out {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-fn errmap(dir: &Path, args: &[&str]) -> Out {
-    let out = Command::new(env!("CARGO_BIN_EXE_errmap"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run errmap");
-    Out {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Run and require exit 0, printing command and output otherwise.
-fn ok(dir: &Path, args: &[&str]) -> Out {
-    let out = errmap(dir, args);
-    if out.code != 0 {
-        let listing: Vec<_> = std::fs::read_dir(dir)
-            .map(|d| d.filter_map(|e| e.ok()).map(|e| e.file_name()).collect())
-            .unwrap_or_default();
-        panic!(
-            "errmap {args:?} exited {}\nstdout:\n{}\nstderr:\n{}\ndir: {listing:?}",
-            out.code, out.stdout, out.stderr
-        );
-    }
-    out
-}
-
-fn json(out: &Out) -> serde_json::Value {
-    serde_json::from_str(&out.stdout)
-        .unwrap_or_else(|e| panic!("not one JSON document ({e}):\n{}", out.stdout))
-}
 
 fn golden(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -217,7 +180,7 @@ fn bad_input_exits_2_naming_file_line_and_target() {
         dir.path(),
         &["linear", "analyze", "gap.csv", "--standard", "vdi3441"],
     );
-    assert_eq!(out.code, 2, "{}", out.stderr);
+    out.expect_code(2);
     assert!(
         out.stderr.contains("gap.csv:6")
             && out
@@ -235,7 +198,7 @@ fn bad_input_exits_2_naming_file_line_and_target() {
         dir.path(),
         &["linear", "analyze", "bad.csv", "--standard", "vdi3441"],
     );
-    assert_eq!(out.code, 2);
+    out.expect_code(2);
     assert!(
         out.stderr.contains("bad.csv:3, column direction"),
         "{}",
@@ -245,7 +208,7 @@ fn bad_input_exits_2_naming_file_line_and_target() {
         dir.path(),
         &["linear", "analyze", "bad.csv", "--standard", "iso9000"],
     );
-    assert_eq!(out.code, 2);
+    out.expect_code(2);
 }
 
 #[test]
@@ -303,7 +266,7 @@ fn air_index_command_prints_nist_values() {
             "633",
         ],
     );
-    assert_eq!(out.code, 2, "{}", out.stderr);
+    out.expect_code(2);
 }
 
 #[test]
@@ -335,7 +298,7 @@ fn budget_command_reports_terms_and_errors_with_lines() {
     )
     .unwrap();
     let out = errmap(dir.path(), &["linear", "budget", "typo.toml"]);
-    assert_eq!(out.code, 2);
+    out.expect_code(2);
     assert!(out.stderr.contains("typo.toml:4"), "{}", out.stderr);
 }
 
@@ -405,7 +368,7 @@ fn tables_match_hand_written_golden_files() {
             "big.comp",
         ],
     );
-    assert_eq!(out.code, 2);
+    out.expect_code(2);
     assert!(out.stderr.contains("at most 256"), "{}", out.stderr);
 }
 
@@ -694,5 +657,5 @@ fn fanuc_reference_point_elsewhere_than_the_first_target() {
             "g.txt",
         ],
     );
-    assert_eq!(out.code, 2, "{}", out.stderr);
+    out.expect_code(2);
 }

@@ -163,6 +163,19 @@ fn nan_and_infinity_are_refused() {
             "{bad}: {err}"
         );
     }
+    // Finite coordinates whose deviation overflows: 1e308 mm − (−1e308 mm) is beyond f64.
+    let err = err_of(
+        "x_mm,y_mm,z_mm,nx_mm,ny_mm,nz_mm
+0,0,0,0,0,0
+1,0,1e308,1,0,-1e308
+0,1,0,0,1,0
+",
+        &ProbeSpec::default(),
+    );
+    assert!(
+        err.contains("p.csv:3, column z_mm") && err.contains("too large"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -1,58 +1,9 @@
 //! End-to-end tests of `errmap rotary …` and `errmap synth rotary` on the real binary: recovery of planted errors, rejections, golden tables.
 
+mod common;
+
+use common::{errmap, json};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-struct Run {
-    cmd: String,
-    out: Output,
-}
-
-impl Run {
-    fn stdout(&self) -> String {
-        String::from_utf8_lossy(&self.out.stdout).into_owned()
-    }
-    fn stderr(&self) -> String {
-        String::from_utf8_lossy(&self.out.stderr).into_owned()
-    }
-    fn code(&self) -> i32 {
-        self.out.status.code().unwrap_or(-1)
-    }
-    /// Panic with the command and its output unless it exited with `code`.
-    fn expect_code(&self, code: i32) -> &Self {
-        assert_eq!(
-            self.code(),
-            code,
-            "command: {}\nstdout:\n{}\nstderr:\n{}",
-            self.cmd,
-            self.stdout(),
-            self.stderr()
-        );
-        self
-    }
-}
-
-fn errmap(dir: &Path, args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_errmap"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("the errmap binary runs");
-    Run {
-        cmd: format!("errmap {}", args.join(" ")),
-        out,
-    }
-}
-
-fn json(run: &Run) -> serde_json::Value {
-    serde_json::from_str(&run.stdout()).unwrap_or_else(|e| {
-        panic!(
-            "{}: stdout is not one JSON document ({e}):\n{}",
-            run.cmd,
-            run.stdout()
-        )
-    })
-}
 
 fn golden_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/rotary")
@@ -209,7 +160,7 @@ fn analyze_text_json_and_chart() {
 
     let text = errmap(d, &["rotary", "analyze", meas]);
     text.expect_code(0);
-    let out = text.stdout();
+    let out = &text.stdout;
     assert!(
         out.contains("C axis") && out.contains("err = α − β"),
         "{out}"
@@ -292,7 +243,7 @@ fn touch_points_are_fitted_with_stylus_radius() {
     // Without the stylus radius the fitted radius (14) is 1.5 mm off the sphere's 12.5.
     let run = errmap(d, &["rotary", "analyze", &f, "--sphere-diameter", "25"]);
     run.expect_code(2);
-    let e = run.stderr();
+    let e = &run.stderr;
     assert!(
         e.contains("touch.csv:2")
             && e.contains("sphere 1 at 0° (+) repeat 0")
@@ -329,7 +280,7 @@ fn every_rejection_names_the_place_and_exits_2() {
     let f = write(d, "few.csv", &text);
     let run = errmap(d, &["rotary", "analyze", &f]);
     run.expect_code(2);
-    let e = run.stderr();
+    let e = &run.stderr;
     assert!(
         e.contains(&format!("few.csv:{few_line}"))
             && e.contains("sphere 2 at 90° (+) repeat 0")
@@ -350,7 +301,7 @@ fn every_rejection_names_the_place_and_exits_2() {
     let f = write(d, "flat.csv", &text);
     let run = errmap(d, &["rotary", "analyze", &f]);
     run.expect_code(2);
-    let e = run.stderr();
+    let e = &run.stderr;
     assert!(
         e.contains(&format!("flat.csv:{ring_line}"))
             && e.contains("sphere 2 at 0° (+)")
@@ -367,9 +318,9 @@ fn every_rejection_names_the_place_and_exits_2() {
     let run = errmap(d, &["rotary", "analyze", &f]);
     run.expect_code(2);
     assert!(
-        run.stderr().contains("bad.csv:3, column y_mm"),
+        run.stderr.contains("bad.csv:3, column y_mm"),
         "{}",
-        run.stderr()
+        run.stderr
     );
 
     // --fit-axis with two angles only.
@@ -383,19 +334,20 @@ fn every_rejection_names_the_place_and_exits_2() {
     let f = write(d, "two.csv", &two);
     let run = errmap(d, &["rotary", "analyze", &f, "--fit-axis"]);
     run.expect_code(2);
-    assert!(
-        run.stderr().contains("2 distinct angles"),
-        "{}",
-        run.stderr()
-    );
+    assert!(run.stderr.contains("2 distinct angles"), "{}", run.stderr);
     // … and a table needs the whole turn.
     let run = errmap(
         d,
         &["rotary", "table", &f, "--format", "csv", "-o", "t.csv"],
     );
     run.expect_code(2);
-    assert!(run.stderr().contains("gap"), "{}", run.stderr());
+    assert!(run.stderr.contains("gap"), "{}", run.stderr);
     assert!(!d.join("t.csv").exists());
+    // An infinite probe noise is refused, not generated as no noise.
+    let run = errmap(d, &["synth", "rotary", "--out", "inf", "--noise-um", "inf"]);
+    run.expect_code(2);
+    assert!(run.stderr.contains("--noise-um"), "{}", run.stderr);
+    assert!(!d.join("inf").exists());
 }
 
 /// The three table formats of the golden measurement, byte for byte. Regenerate on purpose
@@ -487,7 +439,7 @@ fn golden_tables_in_every_format() {
         &["rotary", "table", meas, "--format", "csv", "-o", "auto.csv"],
     );
     run.expect_code(0);
-    assert!(run.stdout().starts_with("5 entries"), "{}", run.stdout());
+    assert!(run.stdout.starts_with("5 entries"), "{}", run.stdout);
     let run = errmap(
         d,
         &[
@@ -503,7 +455,29 @@ fn golden_tables_in_every_format() {
         ],
     );
     run.expect_code(2);
-    assert!(run.stderr().contains("does not divide"), "{}", run.stderr());
+    assert!(run.stderr.contains("does not divide"), "{}", run.stderr);
+    // An infinite or larger-than-a-turn step is refused too (one entry per turn is no table).
+    for step in ["inf", "720"] {
+        for args in [
+            vec![
+                "rotary",
+                "table",
+                meas,
+                "--format",
+                "csv",
+                "-o",
+                "x.csv",
+                "--step-deg",
+                step,
+            ],
+            vec!["synth", "rotary", "--out", "s", "--step-deg", step],
+        ] {
+            let run = errmap(d, &args);
+            run.expect_code(2);
+            assert!(run.stderr.contains("does not divide"), "{}", run.stderr);
+        }
+    }
+    assert!(!d.join("x.csv").exists() && !d.join("s").exists());
     // --machine-axis names the Sinumerik axis.
     errmap(
         d,

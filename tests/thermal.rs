@@ -4,42 +4,17 @@ use errmap::thermal::store::Store;
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::Stdio;
 
-fn errmap() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_errmap"))
-}
+mod common;
+
+use common::{json, Run};
 
 /// Run errmap in `dir`; on an unexpected exit code print the command, its output and the folder.
-fn run(dir: &Path, args: &[&str], expect: i32) -> Output {
-    let out = errmap().args(args).current_dir(dir).output().unwrap();
-    if out.status.code() != Some(expect) {
-        let listing: Vec<_> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
-        panic!(
-            "errmap {} exited {:?} (expected {expect})\nstdout:\n{}\nstderr:\n{}\nfolder: {listing:?}",
-            args.join(" "),
-            out.status.code(),
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    out
-}
-
-fn json(out: &Output) -> Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "stdout is not one JSON document ({e}):\n{}",
-            String::from_utf8_lossy(&out.stdout)
-        )
-    })
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
+fn run(dir: &Path, args: &[&str], expect: i32) -> Run {
+    let run = common::errmap(dir, args);
+    run.expect_code(expect);
+    run
 }
 
 fn campaigns(dir: &Path) -> Vec<String> {
@@ -148,12 +123,12 @@ fn store_round_trip_versions_and_interrupted_ingests() {
         &["thermal", "ingest", &second, "--fail-after-samples", "200"],
         3,
     );
-    assert!(stderr(&out).contains("injected"), "{}", stderr(&out));
+    assert!(out.stderr.contains("injected"), "{}", out.stderr);
     assert_eq!(Store::open(&db).unwrap().counts().unwrap(), before);
 
     // A process killed inside the transaction: it pauses after 300 samples (waiting on stdin),
     // the test kills it there, and the store is as it was.
-    let mut child = errmap()
+    let mut child = common::command()
         .args(["thermal", "ingest", &second, "--pause-after-samples", "300"])
         .current_dir(tmp.path())
         .stdin(Stdio::piped())
@@ -178,7 +153,7 @@ fn store_round_trip_versions_and_interrupted_ingests() {
     // Then a real ingest of the second campaign and two fits from the store.
     run(tmp.path(), &["thermal", "ingest", &second], 0);
     let again = run(tmp.path(), &["thermal", "ingest", &second], 2);
-    assert!(stderr(&again).contains("already in"), "{}", stderr(&again));
+    assert!(again.stderr.contains("already in"), "{}", again.stderr);
     let db_arg = db.to_string_lossy().into_owned();
     for out in ["m1.json", "m2.json"] {
         run(
@@ -308,7 +283,7 @@ fn bad_input_names_file_line_and_column() {
     let temps = "time_s,nut,room\n0,20,20\n60,20,abc\n";
     hand_campaign(tmp.path(), runs, temps);
     let out = run(tmp.path(), &["thermal", "difference", "hand"], 2);
-    let msg = stderr(&out);
+    let msg = out.stderr;
     assert!(
         msg.contains("temperatures.csv:3, column room") && msg.contains("'abc'"),
         "{msg}"
@@ -316,7 +291,7 @@ fn bad_input_names_file_line_and_column() {
     // A run row without time_s.
     let runs = "run,direction,target_mm,deviation_um,time_s\n1,+,0,1,0\n1,-,0,1,\n";
     hand_campaign(tmp.path(), runs, "time_s,nut,room\n0,20,20\n60,20,20\n");
-    let msg = stderr(&run(tmp.path(), &["thermal", "difference", "hand"], 2));
+    let msg = run(tmp.path(), &["thermal", "difference", "hand"], 2).stderr;
     assert!(msg.contains("runs.csv:3, column time_s"), "{msg}");
     // A misspelt key in campaign.toml names its line.
     std::fs::write(
@@ -324,11 +299,7 @@ fn bad_input_names_file_line_and_column() {
         "name = \"hand\"\ncoolent = \"on\"\n",
     )
     .unwrap();
-    let msg = stderr(&run(
-        tmp.path(),
-        &["thermal", "fit", "-o", "m.json", "hand"],
-        2,
-    ));
+    let msg = run(tmp.path(), &["thermal", "fit", "-o", "m.json", "hand"], 2).stderr;
     assert!(
         msg.contains("campaign.toml:2") && msg.contains("coolent"),
         "{msg}"
@@ -403,7 +374,7 @@ fn compensate_streams_the_values_of_the_model() {
         "time_s,position_mm,direction,nut,ambient_c,coolant\n0,1,+,20,20,off\n1,1,+,20,20,mist\n",
     )
     .unwrap();
-    let msg = stderr(&run(
+    let msg = run(
         tmp.path(),
         &[
             "thermal",
@@ -415,7 +386,8 @@ fn compensate_streams_the_values_of_the_model() {
             "bad_out.csv",
         ],
         2,
-    ));
+    )
+    .stderr;
     assert!(
         msg.contains("bad.csv:3, column coolant") && msg.contains("mist"),
         "{msg}"
@@ -453,7 +425,7 @@ fn compensate_streams_the_values_of_the_model() {
         r#""coolant_states": []"#,
     );
     std::fs::write(tmp.path().join("broken.json"), broken).unwrap();
-    let msg = stderr(&run(
+    let msg = run(
         tmp.path(),
         &[
             "thermal",
@@ -465,7 +437,8 @@ fn compensate_streams_the_values_of_the_model() {
             "x.csv",
         ],
         2,
-    ));
+    )
+    .stderr;
     assert!(
         msg.contains("broken.json") && msg.contains("coolant"),
         "{msg}"
@@ -557,4 +530,11 @@ fn synth_is_deterministic_and_seeded() {
         read("c", "campaign-1-coolant-off/runs.csv"),
         "another seed must give other noise"
     );
+    // A noise level that is not a finite number ≥ 0 is refused, not generated as no noise.
+    for bad in ["nan", "inf", "-0.5"] {
+        let flag = format!("--laser-noise-um={bad}");
+        let msg = run(tmp.path(), &["synth", "thermal", "--out", "bad", &flag], 2).stderr;
+        assert!(msg.contains("--laser-noise-um"), "{msg}");
+        assert!(!tmp.path().join("bad").exists());
+    }
 }

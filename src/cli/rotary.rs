@@ -3,8 +3,8 @@
 use super::Globals;
 use errmap::error::Error;
 use errmap::rotary::{
-    analyze, build_table, chart::save_error_chart, read_measurement, render, Analysis,
-    AnalyzeOptions, RotaryAxis, TableFormat,
+    analyze, build_table, chart::save_error_chart, read_measurement, render, table::fixed,
+    Analysis, AnalyzeOptions, RotaryAxis, TableFormat,
 };
 use errmap::synth::rotary::{write_set, RotarySynthConfig};
 use errmap::Result;
@@ -168,20 +168,6 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |v| fixed(v, digits))
 }
 
-/// Fixed-point text without "-0.00".
-fn fixed(v: f64, digits: usize) -> String {
-    let text = format!("{v:.digits$}");
-    if text
-        .trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        text.trim_start_matches('-').to_string()
-    } else {
-        text
-    }
-}
-
 /// The text report of `rotary analyze`.
 fn human_report(a: &Analysis) -> String {
     let mut s = String::new();
@@ -283,8 +269,8 @@ fn human_report(a: &Analysis) -> String {
 }
 
 pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
-    if args.step_deg.is_nan()
-        || args.step_deg <= 0.0
+    if !(args.step_deg.is_finite() && args.step_deg > 0.0)
+        || (360.0 / args.step_deg).round() < 1.0
         || ((360.0 / args.step_deg) - (360.0 / args.step_deg).round()).abs() > 1e-9
     {
         return Err(Error::usage(
@@ -292,9 +278,10 @@ pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
             "choose a step that divides 360, e.g. 10, 15, 30",
         ));
     }
-    if args.repeats == 0 || args.points < 4 || args.noise_um.is_nan() || args.noise_um < 0.0 {
+    if args.repeats == 0 || args.points < 4 || !(args.noise_um.is_finite() && args.noise_um >= 0.0)
+    {
         return Err(Error::usage(
-            "synth rotary needs --repeats ≥ 1, --points ≥ 4 and --noise-um ≥ 0",
+            "synth rotary needs --repeats ≥ 1, --points ≥ 4 and a finite --noise-um ≥ 0",
             "e.g. --repeats 3 --points 25 --noise-um 0.5",
         ));
     }

@@ -668,10 +668,16 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
 }
 
 pub fn run_synth(a: SynthThermalArgs, g: Globals) -> Result<i32> {
-    if a.campaigns == 0 || a.repeats == 0 || a.every_s.is_nan() || a.every_s <= 0.0 {
+    if a.campaigns == 0 || a.repeats == 0 || !(a.every_s.is_finite() && a.every_s > 0.0) {
         return Err(Error::usage(
             "campaigns, repeats and --every-s must be positive",
             "e.g. --campaigns 4 --repeats 2 --every-s 900",
+        ));
+    }
+    if !(a.laser_noise_um.is_finite() && a.laser_noise_um >= 0.0) {
+        return Err(Error::usage(
+            format!("--laser-noise-um {} is not a noise level", a.laser_noise_um),
+            "give one sigma in µm, 0 or more, e.g. --laser-noise-um 0.5",
         ));
     }
     let options = SynthThermalOptions {

@@ -166,12 +166,13 @@ pub struct Evaluation {
     pub axis: AxisFigures,
 }
 
-fn mean(v: &[f64]) -> f64 {
+/// Arithmetic mean; NaN for no values.
+pub fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
 /// Sample standard deviation (n − 1); `None` for n < 2.
-fn std_dev(v: &[f64]) -> Option<f64> {
+pub fn std_dev(v: &[f64]) -> Option<f64> {
     if v.len() < 2 {
         return None;
     }
@@ -348,4 +349,18 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
         targets,
         axis,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_std_dev_by_hand() {
+        assert_eq!(mean(&[1.0, 2.0, 6.0]), 3.0);
+        // Σ(x − 3)² = 4 + 1 + 9 = 14; s = √(14 / 2) = √7.
+        assert!((std_dev(&[1.0, 2.0, 6.0]).unwrap() - 7f64.sqrt()).abs() < 1e-15);
+        assert_eq!(mean(&[2.5]), 2.5);
+        assert_eq!(std_dev(&[2.5]), None);
+    }
 }

@@ -219,6 +219,20 @@ pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
                 nominal
             }
         };
+        // Two finite coordinates near ±f64::MAX can still differ by more than f64 holds.
+        if !((measured_mm[n] - nominal_mm[n]) * 1000.0).is_finite() {
+            return Err(table.error_at(
+                row,
+                Some(measured_cols[n]),
+                format!(
+                    "the deviation {} − {} mm along {} is too large to represent in µm",
+                    measured_mm[n],
+                    nominal_mm[n],
+                    spec.normal.name()
+                ),
+                "check the units: probe coordinates are in mm",
+            ));
+        }
         if let Some(domain) = &spec.domain {
             let (u, v) = (nominal_mm[ua.index()], nominal_mm[va.index()]);
             let grown = Domain {

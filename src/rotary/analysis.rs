@@ -405,12 +405,11 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
         .values()
         .map(|g| {
             let e: Vec<f64> = g.iter().map(|o| o.error_arcsec).collect();
-            let (mean, s) = mean_and_s(&e);
             TableRow {
                 angle_deg: g[0].angle_deg,
                 direction: g[0].direction,
-                error_arcsec: mean,
-                s_arcsec: s,
+                error_arcsec: linear::mean(&e),
+                s_arcsec: linear::std_dev(&e),
                 n: e.len(),
                 min_arcsec: e.iter().cloned().fold(f64::INFINITY, f64::min),
                 max_arcsec: e.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
@@ -483,20 +482,6 @@ fn iso_figures(observations: &[Observation]) -> (Option<Evaluation>, Option<Stri
         Ok(e) => (Some(e), None),
         Err(e) => (None, Some(e.to_string())),
     }
-}
-
-/// Mean and sample standard deviation (n − 1; `None` for one value).
-pub fn mean_and_s(values: &[f64]) -> (f64, Option<f64>) {
-    let n = values.len();
-    if n == 0 {
-        return (f64::NAN, None);
-    }
-    let mean = values.iter().sum::<f64>() / n as f64;
-    if n < 2 {
-        return (mean, None);
-    }
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    (mean, Some(var.sqrt()))
 }
 
 /// Angle folded into [0, 360): the table position of a modulo axis.
@@ -634,12 +619,7 @@ mod tests {
     }
 
     #[test]
-    fn mean_and_s_by_hand() {
-        let (m, s) = mean_and_s(&[1.0, 2.0, 6.0]);
-        assert_eq!(m, 3.0);
-        // Σ(x − 3)² = 4 + 1 + 9 = 14; s = √(14 / 2) = √7.
-        assert!((s.unwrap() - 7f64.sqrt()).abs() < 1e-15);
-        assert_eq!(mean_and_s(&[2.5]), (2.5, None));
+    fn modulo_folds_into_one_turn() {
         assert_eq!(modulo_deg(360.0), 0.0);
         assert_eq!(modulo_deg(-90.0), 270.0);
     }

@@ -64,7 +64,7 @@ pub fn build_table(analysis: &Analysis, step_deg: Option<f64>) -> Result<CompTab
     let step = match step_deg {
         Some(s) => {
             let n = 360.0 / s;
-            if s.is_nan() || s <= 0.0 || (n - n.round()).abs() > 1e-9 {
+            if !(s.is_finite() && s > 0.0) || n.round() < 1.0 || (n - n.round()).abs() > 1e-9 {
                 return Err(Error::usage(
                     format!("step {s}° does not divide the turn"),
                     "choose a step that divides 360, e.g. 1, 5, 7.5, 10, 15, 30",
@@ -166,7 +166,7 @@ fn deg(arcsec: f64) -> f64 {
 }
 
 /// Fixed-point text with `digits` decimals and no "-0.000".
-fn fixed(v: f64, digits: usize) -> String {
+pub fn fixed(v: f64, digits: usize) -> String {
     let text = format!("{v:.digits$}");
     if text
         .trim_start_matches('-')

@@ -131,10 +131,13 @@ fn number(
     })
 }
 
+/// Bytes that hold any finite f64 at 4 decimals: sign, 309 integer digits, point, 4 decimals.
+pub const FIXED4_BUF_LEN: usize = 320;
+
 /// Write `value` rounded to 4 decimals into `buf`, returning the used bytes (fast fixed-point;
 /// values beyond ±9e14 fall back to the standard formatter).
 #[inline]
-pub fn format_fixed4(value: f64, buf: &mut [u8; 40]) -> usize {
+pub fn format_fixed4(value: f64, buf: &mut [u8; FIXED4_BUF_LEN]) -> usize {
     let scaled = (value * 1e4).round();
     if scaled.is_nan() || scaled.abs() >= 9e18 {
         let mut cursor = std::io::Cursor::new(&mut buf[..]);
@@ -206,7 +209,7 @@ pub fn compensate_stream<R: Read, W: Write>(
         coolant: 0,
     };
     let mut summary = CompensateSummary::default();
-    let (mut e_buf, mut c_buf) = ([0u8; 40], [0u8; 40]);
+    let (mut e_buf, mut c_buf) = ([0u8; FIXED4_BUF_LEN], [0u8; FIXED4_BUF_LEN]);
     let mut last_coolant: Vec<u8> = Vec::new();
     let mut last_coolant_index = 0usize;
     loop {
@@ -363,8 +366,8 @@ mod tests {
 
     #[test]
     fn fixed_point_formatting() {
-        let mut buf = [0u8; 40];
-        let f = |v: f64, buf: &mut [u8; 40]| {
+        let mut buf = [0u8; FIXED4_BUF_LEN];
+        let f = |v: f64, buf: &mut [u8; FIXED4_BUF_LEN]| {
             let n = format_fixed4(v, buf);
             String::from_utf8(buf[..n].to_vec()).unwrap()
         };
@@ -375,5 +378,8 @@ mod tests {
         assert_eq!(f(0.05, &mut buf), "0.0500");
         assert_eq!(f(-12345.6789, &mut buf), "-12345.6789");
         assert_eq!(f(1e20, &mut buf), format!("{:.4}", 1e20));
+        // The widest values (absurd temperatures can produce them) are written whole.
+        assert_eq!(f(-f64::MAX, &mut buf), format!("{:.4}", -f64::MAX));
+        assert_eq!(f(1e45, &mut buf), format!("{:.4}", 1e45));
     }
 }

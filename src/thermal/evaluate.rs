@@ -4,7 +4,7 @@
 //! "After" is what the axis would read with the model's compensation applied:
 //! deviation − E_model(x, T) for every reading (P' = P − E moves the axis by −E).
 
-use super::campaign::Campaign;
+use super::campaign::{Campaign, LaserPoint};
 use super::model::ThermalModel;
 use crate::error::Result;
 use crate::linear::{evaluate, AxisFigures, Sample, Standard};
@@ -43,26 +43,20 @@ pub fn evaluate_campaigns(
     for c in campaigns {
         for m in &c.measurements {
             let state = model.state_of(c, m)?;
-            let before: Vec<Sample> = m
-                .points
-                .iter()
-                .map(|p| Sample {
-                    run: p.run,
-                    direction: p.direction,
-                    target: p.target_mm,
-                    deviation: p.deviation_um,
-                })
-                .collect();
-            let after: Vec<Sample> = m
-                .points
-                .iter()
-                .map(|p| Sample {
-                    run: p.run,
-                    direction: p.direction,
-                    target: p.target_mm,
-                    deviation: p.deviation_um - model.error_um(p.direction, p.target_mm, &state),
-                })
-                .collect();
+            // The measured deviations less `modelled_um` of each point.
+            let samples = |modelled_um: &dyn Fn(&LaserPoint) -> f64| -> Vec<Sample> {
+                m.points
+                    .iter()
+                    .map(|p| Sample {
+                        run: p.run,
+                        direction: p.direction,
+                        target: p.target_mm,
+                        deviation: p.deviation_um - modelled_um(p),
+                    })
+                    .collect()
+            };
+            let before = samples(&|_| 0.0);
+            let after = samples(&|p| model.error_um(p.direction, p.target_mm, &state));
             times.push(TimeFigures {
                 campaign: c.name.clone(),
                 time_s: m.time_s,

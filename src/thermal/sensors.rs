@@ -460,6 +460,12 @@ pub fn calibrate(
     to_s: f64,
     min_span_c: f64,
 ) -> Result<Vec<CalibrationFit>> {
+    if min_span_c.is_nan() || min_span_c < 0.0 {
+        return Err(Error::usage(
+            format!("minimum span {min_span_c} °C is not a temperature span"),
+            "give --min-span-c as 0 or more degrees, e.g. 1",
+        ));
+    }
     let reference = table.with_role(Role::Reference).ok_or_else(|| {
         Error::input(
             Location::file(&table.path),
@@ -640,6 +646,10 @@ mod tests {
         let room = fits.iter().find(|f| f.sensor == "room").unwrap();
         assert!(!room.scale_fitted && room.calibration.scale == 1.0);
         assert!((room.calibration.offset_c + 0.25).abs() < 1e-9);
+        // A minimum span that is not a span is refused rather than read as "offset only".
+        for bad in [f64::NAN, -1.0] {
+            assert!(calibrate(&log, &table, 0.0, 1000.0, bad).is_err());
+        }
     }
 
     #[test]

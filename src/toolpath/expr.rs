@@ -17,6 +17,7 @@ pub fn eval(text: &str, params: &Params) -> Option<f64> {
         toks,
         at: 0,
         params,
+        depth: 0,
     };
     let v = p.sum()?;
     if p.at == p.toks.len() && v.is_finite() {
@@ -106,10 +107,16 @@ fn tokenize(text: &str) -> Option<Vec<Tok>> {
     Some(out)
 }
 
+/// Deepest nesting of brackets, unary signs and powers evaluated; deeper is "unknown", so a
+/// hostile line cannot overflow the stack of the recursive descent.
+const MAX_NESTING: usize = 100;
+
 struct Parser<'a> {
     toks: Vec<Tok>,
     at: usize,
     params: &'a Params,
+    /// Current nesting (every recursion passes through [`Parser::nested`]).
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -153,16 +160,30 @@ impl Parser<'_> {
             }
         }
     }
+    /// `a ** b ** c` is right-associative: the exponent recurses.
     fn power(&mut self) -> Option<f64> {
         let v = self.unary()?;
         if let Some(Tok::Pow) = self.peek() {
             self.at += 1;
-            let e = self.power()?;
+            let e = self.nested(Self::power)?;
             return Some(v.powf(e));
         }
         Some(v)
     }
     fn unary(&mut self) -> Option<f64> {
+        self.nested(Self::signed)
+    }
+    /// Run `f` one level deeper; `None` beyond [`MAX_NESTING`].
+    fn nested(&mut self, f: fn(&mut Self) -> Option<f64>) -> Option<f64> {
+        if self.depth >= MAX_NESTING {
+            return None;
+        }
+        self.depth += 1;
+        let v = f(self);
+        self.depth -= 1;
+        v
+    }
+    fn signed(&mut self) -> Option<f64> {
         match self.peek().cloned()? {
             Tok::Op('-') => {
                 self.at += 1;
@@ -229,5 +250,15 @@ mod tests {
         assert_eq!(eval("[#4*2]", &p), None); // unknown parameter
         assert_eq!(eval("[#<level> EQ 0]", &p), None); // comparisons are not evaluated
         assert_eq!(eval("[1/0]", &p), None);
+    }
+
+    #[test]
+    fn deep_nesting_is_unknown_not_a_stack_overflow() {
+        let p = Params::new();
+        let nested = |n: usize| format!("{}1{}", "[".repeat(n), "]".repeat(n));
+        assert_eq!(eval(&nested(50), &p), Some(1.0));
+        assert_eq!(eval(&nested(200_000), &p), None);
+        assert_eq!(eval(&format!("[{}1]", "-".repeat(200_000)), &p), None);
+        assert_eq!(eval(&format!("[1{}]", "**1".repeat(200_000)), &p), None);
     }
 }
