@@ -96,7 +96,7 @@ impl CsvTable {
             return Err(Error::input(
                 Location::line(path, 1),
                 "the file has no header line",
-                "the first line must name the columns, e.g. x_mm,y_mm,z_mm",
+                "the first line must name the columns (see the file format in the docs)",
             ));
         }
         let mut index = HashMap::new();
