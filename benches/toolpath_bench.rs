@@ -43,6 +43,26 @@ fn circles(n: usize) -> String {
     s
 }
 
+/// A CAM-style finishing raster of `lines` short G1 moves (1.5 mm steps, 400 per row, Z varying
+/// a little as on a 3D surface): the shape of the 100k-line programs users compensate.
+fn raster(lines: usize) -> String {
+    let mut s = String::from("G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F1200\n");
+    for k in 0..lines {
+        let row = k / 400;
+        let step = k % 400;
+        let x = if row % 2 == 0 {
+            step as f64 * 1.5
+        } else {
+            600.0 - step as f64 * 1.5
+        };
+        let y = (row as f64 * 0.5) % 300.0;
+        let z = -1.0 + 0.01 * ((k % 37) as f64);
+        s.push_str(&format!("G1 X{x:.3} Y{y:.3} Z{z:.3}\n"));
+    }
+    s.push_str("G0 Z5\nM2\n");
+    s
+}
+
 pub fn toolpath_compensate(c: &mut Criterion) {
     let settings = CompensationSettings::default();
     let mut group = c.benchmark_group("toolpath/compensate");
@@ -65,4 +85,16 @@ pub fn toolpath_compensate(c: &mut Criterion) {
         });
     }
     group.finish();
+
+    // Issue 3's size: a 100k-line program, every move in the map and the zone.
+    let mut large = c.benchmark_group("toolpath/compensate_large");
+    large.sample_size(10);
+    let text = raster(100_000);
+    large.throughput(Throughput::Elements(100_000));
+    large.bench_with_input(BenchmarkId::new("raster_lines", 100_000), &text, |b, t| {
+        b.iter(|| {
+            compensate_gcode(black_box(t), Path::new("bench.ngc"), &Plane, &settings).unwrap()
+        })
+    });
+    large.finish();
 }
