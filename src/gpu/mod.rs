@@ -6,6 +6,7 @@
 
 pub mod context;
 pub mod evaluate;
+pub mod fixed;
 pub mod layout;
 pub mod train;
 
