@@ -36,6 +36,8 @@ pub struct TrainPipelines {
 pub struct FixedPipelines {
     gradient_adam: wgpu::ComputePipeline,
     rows: u32,
+    /// `forward_backward_rows`, where the layers are narrow enough.
+    forward_backward: Option<wgpu::ComputePipeline>,
 }
 
 fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
@@ -129,7 +131,11 @@ impl TrainPipelines {
         let built = match super::fixed::gradient_rows_source(&net.layer_sizes) {
             None => None,
             Some((gradient, rows)) => {
-                let source = format!("{TRAIN_WGSL}\n{gradient}");
+                let forward = super::fixed::forward_rows_source(&net.layer_sizes, net.activation);
+                let source = format!(
+                    "{TRAIN_WGSL}\n{gradient}\n{}",
+                    forward.as_deref().unwrap_or("")
+                );
                 let device = &ctx.device;
                 let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some("train.wgsl + gradient_adam_rows"),
@@ -148,6 +154,7 @@ impl TrainPipelines {
                 let fixed = FixedPipelines {
                     gradient_adam: pipeline("gradient_adam_rows"),
                     rows,
+                    forward_backward: forward.map(|_| pipeline("forward_backward_rows")),
                 };
                 ctx.wait("compiling the unrolled training shaders")?;
                 Some(Arc::new(fixed))
@@ -308,6 +315,10 @@ pub fn train_group(
     ctx.check("binding training buffers")?;
 
     let fixed = pipelines.fixed_for(ctx, first)?;
+    let forward_pipeline = fixed
+        .as_deref()
+        .and_then(|f| f.forward_backward.as_ref())
+        .unwrap_or(&pipelines.forward_backward);
     let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1);
     // x: samples of the largest network, y: networks.
     let largest = sets.iter().map(|s| s.len()).max().unwrap_or(1) as u32;
@@ -350,7 +361,7 @@ pub fn train_group(
             });
             pass.set_bind_group(0, &data_group, &[]);
             for e in epoch..end {
-                pass.set_pipeline(&pipelines.forward_backward);
+                pass.set_pipeline(forward_pipeline);
                 pass.set_bind_group(1, &step_group, &[((e - epoch) as u64 * align) as u32]);
                 pass.dispatch_workgroups(forward_groups, net_count as u32, 1);
                 pass.set_pipeline(gradient_pipeline);
