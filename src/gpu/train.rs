@@ -29,8 +29,11 @@ pub struct TrainPipelines {
     loss_reduce: wgpu::ComputePipeline,
     /// The row gradient kernel of one architecture (src/gpu/fixed.rs), compiled on first
     /// use; `None` where a layer is too wide for it.
-    fixed: Mutex<HashMap<(Vec<usize>, u32), Option<Arc<FixedPipelines>>>>,
+    fixed: Mutex<HashMap<ArchitectureKey, Option<Arc<FixedPipelines>>>>,
 }
+
+/// Layer sizes and activation shader code of an architecture.
+type ArchitectureKey = (Vec<usize>, u32);
 
 /// `gradient_adam_rows` of one architecture and its workgroups per network.
 pub struct FixedPipelines {
