@@ -153,6 +153,56 @@ fn training_matches_cpu_after_200_adam_steps() {
     }
 }
 
+/// Both kernel families: narrow layers train with the kernels generated per architecture
+/// (src/gpu/fixed.rs, tanh and relu), wider ones with the generic kernels of
+/// shaders/train.wgsl, and mixes. Each must follow the CPU reference within 1e-3 (∞-norm relative).
+#[test]
+fn generated_and_generic_kernels_match_cpu() {
+    let Some(gpu) = gpu("generated_and_generic_kernels_match_cpu") else {
+        return;
+    };
+    let (sets, _) = sets(&[(9, 7), (12, 11)]);
+    for (hidden, activation) in [
+        (vec![12, 8], Activation::Relu),
+        (vec![70], Activation::Tanh),
+        (vec![5, 66], Activation::Tanh),
+        // Generated forward kernel (64 wide), generic gradient kernel (64 inputs).
+        (vec![64], Activation::Tanh),
+    ] {
+        let config = ModelConfig {
+            hidden: hidden.clone(),
+            activation,
+            epochs: 60,
+            loss_every: 30,
+            ..Default::default()
+        };
+        let initial = initial_networks(sets.len(), &config);
+        let cpu = CpuTrainer
+            .train_from(initial.clone(), &sets, &config)
+            .unwrap();
+        let on_gpu = gpu.train_from(initial.clone(), &sets, &config).unwrap();
+        for (k, ((c, g), start)) in cpu.iter().zip(&on_gpu).zip(&initial).enumerate() {
+            let largest = c.params.iter().fold(0.0f32, |m, p| m.max(p.abs()));
+            let max_diff = |a: &[f32], b: &[f32]| {
+                a.iter()
+                    .zip(b)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0f32, f32::max)
+            };
+            let moved = max_diff(&c.params, &start.params);
+            let worst = max_diff(&c.params, &g.params);
+            assert!(
+                moved > 0.05,
+                "{hidden:?} network {k} barely trained ({moved})"
+            );
+            assert!(
+                worst <= 1e-3 * largest,
+                "{hidden:?} {activation:?} network {k}: max |Δp| {worst} vs max |p| {largest}"
+            );
+        }
+    }
+}
+
 #[test]
 fn gpu_training_is_bitwise_repeatable_and_split_invariant() {
     let Some(gpu) = gpu("gpu_training_is_bitwise_repeatable_and_split_invariant") else {

@@ -6,6 +6,7 @@
 
 pub mod context;
 pub mod evaluate;
+pub mod fixed;
 pub mod layout;
 pub mod train;
 
@@ -177,7 +178,7 @@ impl Trainer for AutoTrainer {
 /// Picks the trainer for `backend`:
 /// - `auto`: a hardware GPU, else the CPU reference with a one-line note on stderr (unless
 ///   `quiet`). A software Vulkan adapter (lavapipe) comes between the two only with
-///   `ERRMAP_SOFTWARE_GPU=1`: on a CPU it trains 10–20× slower than the CPU trainer
+///   `ERRMAP_SOFTWARE_GPU=1`: on a CPU it trains 8–20× slower than the CPU trainer
 ///   (docs/performance.md), so by default auto skips it.
 /// - `gpu`: a hardware GPU, else a software adapter; fails with [`Error::device`] instead of
 ///   falling back to the CPU.

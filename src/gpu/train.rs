@@ -1,5 +1,8 @@
 //! Host side of `shaders/train.wgsl`: buffers, pipelines and the epoch loop that trains every network of a batch in the same dispatches.
 
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
 use wgpu::util::DeviceExt;
 
 use super::context::GpuContext;
@@ -20,9 +23,24 @@ const FORWARD_WORKGROUP: u32 = 64;
 pub struct TrainPipelines {
     data_layout: wgpu::BindGroupLayout,
     step_layout: wgpu::BindGroupLayout,
+    layout: wgpu::PipelineLayout,
     forward_backward: wgpu::ComputePipeline,
     gradient_adam: wgpu::ComputePipeline,
     loss_reduce: wgpu::ComputePipeline,
+    /// The row gradient kernel of one architecture (src/gpu/fixed.rs), compiled on first
+    /// use; `None` where a layer is too wide for it.
+    fixed: Mutex<HashMap<ArchitectureKey, Option<Arc<FixedPipelines>>>>,
+}
+
+/// Layer sizes and activation shader code of an architecture.
+type ArchitectureKey = (Vec<usize>, u32);
+
+/// `gradient_adam_rows` of one architecture and its workgroups per network.
+pub struct FixedPipelines {
+    gradient_adam: wgpu::ComputePipeline,
+    rows: u32,
+    /// `forward_backward_rows`, where the layers are narrow enough.
+    forward_backward: Option<wgpu::ComputePipeline>,
 }
 
 fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
@@ -94,9 +112,59 @@ impl TrainPipelines {
             loss_reduce: pipeline("loss_reduce"),
             data_layout,
             step_layout,
+            layout,
+            fixed: Mutex::new(HashMap::new()),
         };
         ctx.wait("compiling the training shaders")?;
         Ok(pipelines)
+    }
+}
+
+impl TrainPipelines {
+    /// The row gradient kernel for `net`'s architecture, compiled once per architecture.
+    fn fixed_for(&self, ctx: &GpuContext, net: &Mlp) -> Result<Option<Arc<FixedPipelines>>> {
+        let key = (net.layer_sizes.clone(), net.activation.shader_code());
+        let mut cache = self
+            .fixed
+            .lock()
+            .map_err(|_| Error::Internal("training pipeline cache poisoned".into()))?;
+        if let Some(found) = cache.get(&key) {
+            return Ok(found.clone());
+        }
+        let built = match super::fixed::gradient_rows_source(&net.layer_sizes) {
+            None => None,
+            Some((gradient, rows)) => {
+                let forward = super::fixed::forward_rows_source(&net.layer_sizes, net.activation);
+                let source = format!(
+                    "{TRAIN_WGSL}\n{gradient}\n{}",
+                    forward.as_deref().unwrap_or("")
+                );
+                let device = &ctx.device;
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("train.wgsl + gradient_adam_rows"),
+                    source: wgpu::ShaderSource::Wgsl(source.into()),
+                });
+                let pipeline = |entry_point: &str| {
+                    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry_point),
+                        layout: Some(&self.layout),
+                        module: &module,
+                        entry_point: Some(entry_point),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+                };
+                let fixed = FixedPipelines {
+                    gradient_adam: pipeline("gradient_adam_rows"),
+                    rows,
+                    forward_backward: forward.map(|_| pipeline("forward_backward_rows")),
+                };
+                ctx.wait("compiling the unrolled training shaders")?;
+                Some(Arc::new(fixed))
+            }
+        };
+        cache.insert(key, built.clone());
+        Ok(built)
     }
 }
 
@@ -249,11 +317,24 @@ pub fn train_group(
     });
     ctx.check("binding training buffers")?;
 
+    let fixed = pipelines.fixed_for(ctx, first)?;
+    let forward_pipeline = fixed
+        .as_deref()
+        .and_then(|f| f.forward_backward.as_ref())
+        .unwrap_or(&pipelines.forward_backward);
     let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1);
     // x: samples of the largest network, y: networks.
     let largest = sets.iter().map(|s| s.len()).max().unwrap_or(1) as u32;
     let forward_groups = largest.div_ceil(FORWARD_WORKGROUP).clamp(1, max_groups);
-    let param_groups = (param_count as u32).div_ceil(64).clamp(1, max_groups);
+    // Gradient: the row kernel (one workgroup per weight row) where the architecture has
+    // one, else one thread per parameter.
+    let (gradient_pipeline, gradient_groups) = match fixed.as_deref() {
+        Some(f) if f.rows <= max_groups => (&f.gradient_adam, f.rows),
+        _ => (
+            &pipelines.gradient_adam,
+            (param_count as u32).div_ceil(64).clamp(1, max_groups),
+        ),
+    };
     let loss_groups = (net_count as u32).clamp(1, max_groups);
     debug_assert_eq!(GRAD_LANES, 64);
 
@@ -283,11 +364,11 @@ pub fn train_group(
             });
             pass.set_bind_group(0, &data_group, &[]);
             for e in epoch..end {
-                pass.set_pipeline(&pipelines.forward_backward);
+                pass.set_pipeline(forward_pipeline);
                 pass.set_bind_group(1, &step_group, &[((e - epoch) as u64 * align) as u32]);
                 pass.dispatch_workgroups(forward_groups, net_count as u32, 1);
-                pass.set_pipeline(&pipelines.gradient_adam);
-                pass.dispatch_workgroups(param_groups, net_count as u32, 1);
+                pass.set_pipeline(gradient_pipeline);
+                pass.dispatch_workgroups(gradient_groups, net_count as u32, 1);
             }
             if read_loss {
                 pass.set_pipeline(&pipelines.loss_reduce);
