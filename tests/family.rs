@@ -5,73 +5,61 @@
 //! truth inside the probed area, and re-machining with the compensated program must remove most
 //! of the error.
 
+mod common;
+
+use common::Run;
 use errmap::synth::web_plate::Truth;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn errmap(args: &[&str], cwd: &Path) -> Output {
-    errmap_env(args, cwd, &[])
-}
-
-/// Run errmap with extra environment variables; a scheduler's shard index in the test's own
-/// environment is removed so it cannot split these batches.
-fn errmap_env(args: &[&str], cwd: &Path, env: &[(&str, &str)]) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_errmap"));
-    cmd.args(args).current_dir(cwd);
-    for var in [
-        "SLURM_ARRAY_TASK_ID",
-        "SLURM_ARRAY_TASK_COUNT",
-        "JOB_COMPLETION_INDEX",
-    ] {
-        cmd.env_remove(var);
-    }
-    cmd.envs(env.iter().copied());
-    cmd.output().expect("run errmap")
-}
-
-fn describe(args: &[&str], out: &Output, cwd: &Path) -> String {
-    let listing: Vec<String> = walk(cwd)
-        .iter()
-        .map(|p| p.strip_prefix(cwd).unwrap_or(p).display().to_string())
-        .collect();
-    format!(
-        "errmap {}\nexit: {:?}\nstdout:\n{}\nstderr:\n{}\nfiles: {listing:?}",
-        args.join(" "),
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    )
+/// Run errmap in `cwd`; a scheduler's shard index in the test's own environment is removed so
+/// it cannot split these batches.
+fn errmap(args: &[&str], cwd: &Path) -> Run {
+    common::errmap_with(cwd, args, |cmd| {
+        for var in [
+            "SLURM_ARRAY_TASK_ID",
+            "SLURM_ARRAY_TASK_COUNT",
+            "JOB_COMPLETION_INDEX",
+        ] {
+            cmd.env_remove(var);
+        }
+    })
 }
 
 /// Run errmap and require an exit code.
-fn run_expect(args: &[&str], cwd: &Path, code: i32) -> Output {
-    let out = errmap(args, cwd);
-    assert_eq!(
-        out.status.code(),
-        Some(code),
-        "{}",
-        describe(args, &out, cwd)
-    );
-    out
+#[track_caller]
+fn run_expect(args: &[&str], cwd: &Path, code: i32) -> Run {
+    let run = errmap(args, cwd);
+    run.expect_code(code);
+    run
 }
 
-fn walk(dir: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        if let Ok(entries) = std::fs::read_dir(&d) {
-            for e in entries.flatten() {
-                let p = e.path();
-                if p.is_dir() {
-                    stack.push(p);
-                } else {
-                    files.push(p);
-                }
-            }
-        }
-    }
-    files.sort();
-    files
+/// `errmap synth web-plate --parts <parts> --out data <extra…>`, which must succeed.
+#[track_caller]
+fn synth_family(cwd: &Path, parts: &str, extra: &[&str]) {
+    let mut args = vec!["synth", "web-plate", "--parts", parts, "--out", "data"];
+    args.extend_from_slice(extra);
+    run_expect(&args, cwd, 0);
+}
+
+/// `errmap batch data/job.toml --backend <backend> --out <out> --quiet <extra…>`.
+fn batch_args<'a>(backend: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "batch",
+        "data/job.toml",
+        "--backend",
+        backend,
+        "--out",
+        out,
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+/// Run the batch of `batch_args` and require an exit code.
+#[track_caller]
+fn batch(cwd: &Path, backend: &str, out: &str, code: i32) -> Run {
+    run_expect(&batch_args(backend, out, &[]), cwd, code)
 }
 
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
@@ -304,8 +292,8 @@ fn committed_sample_is_what_its_readme_command_makes() {
     assert!(readme.contains(command), "{readme}");
     let args: Vec<&str> = command.split(' ').skip(1).collect();
     run_expect(&args, d, 0);
-    let made = walk(&d.join("data/web-plate"));
-    let committed = walk(&sample_dir());
+    let made = common::files(&d.join("data/web-plate"));
+    let committed = common::files(&sample_dir());
     assert_eq!(made.len(), committed.len(), "{made:?} vs {committed:?}");
     for (m, c) in made.iter().zip(&committed) {
         assert!(
@@ -327,7 +315,7 @@ fn sample_family_rejects_outliers_matches_truth_and_compensation_removes_the_err
         d,
         0,
     );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = out.stdout.as_str();
     assert!(
         stdout.contains("hold-out RMS µm") && stdout.contains("p08"),
         "{stdout}"
@@ -354,14 +342,10 @@ fn sample_family_rejects_outliers_matches_truth_and_compensation_removes_the_err
 fn unseen_plate_irregular_layout_nominal_columns_other_size_and_origin() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
+    synth_family(
+        d,
+        "1",
         &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "1",
-            "--out",
-            "data",
             "--size",
             "450x250",
             "--origin",
@@ -374,24 +358,10 @@ fn unseen_plate_irregular_layout_nominal_columns_other_size_and_origin() {
             "--epochs",
             "400",
         ],
-        d,
-        0,
     );
     let job = std::fs::read_to_string(d.join("data/job.toml")).unwrap();
     assert!(!job.contains("nominal_plane_mm"), "{job}");
-    run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "out",
-            "--quiet",
-        ],
-        d,
-        0,
-    );
+    batch(d, "cpu", "out", 0);
     let truth = Truth::read(&d.join("data/truth.json")).unwrap();
     check_family(&d.join("data"), &d.join("out"), &truth);
 }
@@ -400,20 +370,7 @@ fn unseen_plate_irregular_layout_nominal_columns_other_size_and_origin() {
 fn a_corrupt_part_is_reported_and_the_others_finish() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
-        &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "2",
-            "--out",
-            "data",
-            "--epochs",
-            "30",
-        ],
-        d,
-        0,
-    );
+    synth_family(d, "2", &["--epochs", "30"]);
     std::fs::write(
         d.join("data/probes/p00.csv"),
         "id,x_mm,y_mm,z_mm\nA,30,30,5.001\nB,60,30,5.002\nC,30,60,abc\n",
@@ -424,20 +381,8 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
     assert!(job.contains("map = \"family\""));
     let job = job.replace("map = \"family\"", "map = \"part\"");
     std::fs::write(d.join("data/job.toml"), job).unwrap();
-    let out = run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "out",
-            "--quiet",
-        ],
-        d,
-        1,
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let out = batch(d, "cpu", "out", 1);
+    let stdout = out.stdout.as_str();
     assert!(
         stdout.contains("p00") && stdout.contains("FAILED"),
         "{stdout}"
@@ -468,7 +413,7 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
     }
     assert!(!d.join("out/p00").exists());
     // No temporary file is left behind.
-    assert!(walk(d)
+    assert!(common::files(d)
         .iter()
         .all(|p| !p.to_string_lossy().contains(".errmap-")));
 }
@@ -477,51 +422,14 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
 fn the_same_job_gives_the_same_bytes_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
-        &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "2",
-            "--out",
-            "data",
-            "--epochs",
-            "40",
-        ],
-        d,
-        0,
-    );
-    run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "out",
-            "--quiet",
-        ],
-        d,
-        0,
-    );
-    let first: Vec<(PathBuf, Vec<u8>)> = walk(&d.join("out"))
+    synth_family(d, "2", &["--epochs", "40"]);
+    batch(d, "cpu", "out", 0);
+    let first: Vec<(PathBuf, Vec<u8>)> = common::files(&d.join("out"))
         .into_iter()
         .map(|p| (p.clone(), std::fs::read(&p).unwrap()))
         .collect();
     assert!(first.len() > 10);
-    run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "out",
-            "--quiet",
-        ],
-        d,
-        0,
-    );
+    batch(d, "cpu", "out", 0);
     for (path, bytes) in &first {
         assert!(
             std::fs::read(path).unwrap() == *bytes,
@@ -529,43 +437,16 @@ fn the_same_job_gives_the_same_bytes_on_the_cpu() {
             path.display()
         );
     }
-    assert_eq!(walk(&d.join("out")).len(), first.len());
+    assert_eq!(common::files(&d.join("out")).len(), first.len());
 }
 
 #[test]
 fn shards_map_their_parts_and_merge_joins_the_summaries() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
-        &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "3",
-            "--out",
-            "data",
-            "--epochs",
-            "20",
-        ],
-        d,
-        0,
-    );
+    synth_family(d, "3", &["--epochs", "20"]);
     for shard in ["0/2", "1/2"] {
-        run_expect(
-            &[
-                "batch",
-                "data/job.toml",
-                "--backend",
-                "cpu",
-                "--out",
-                "out",
-                "--shard",
-                shard,
-                "--quiet",
-            ],
-            d,
-            0,
-        );
+        run_expect(&batch_args("cpu", "out", &["--shard", shard]), d, 0);
     }
     assert!(
         d.join("out/p01/map.csv").is_file()
@@ -594,7 +475,7 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
         d,
         0,
     );
-    let merged: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let merged: serde_json::Value = serde_json::from_str(&out.stdout).unwrap();
     let names: Vec<&str> = merged["parts"]
         .as_array()
         .unwrap()
@@ -625,27 +506,14 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
     assert_eq!(merged["family_map"]["parts"], 3);
     // A missing shard is an error.
     let out = run_expect(&["merge", "out/summary-shard-1-of-2.json"], d, 2);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("shards [0] of 2 are missing"));
+    assert!(out.stderr.as_str().contains("shards [0] of 2 are missing"));
 }
 
 #[test]
 fn map_one_part_and_bad_inputs_name_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run_expect(
-        &[
-            "synth",
-            "web-plate",
-            "--parts",
-            "1",
-            "--out",
-            "data",
-            "--grid",
-            "9x7",
-        ],
-        d,
-        0,
-    );
+    synth_family(d, "1", &["--grid", "9x7"]);
     run_expect(
         &[
             "map",
@@ -739,7 +607,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         d,
         2,
     );
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = out.stderr.as_str();
     assert!(
         err.contains("bad.csv:1") && err.contains("missing column 'z_mm'"),
         "{err}"
@@ -751,7 +619,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
     )
     .unwrap();
     let out = run_expect(&["batch", "data/typo.toml"], d, 2);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = out.stderr.as_str();
     assert!(
         err.contains("typo.toml:3, column 1") && err.contains("k_sigm"),
         "{err}"
@@ -766,53 +634,17 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
 fn the_family_job_gives_the_same_maps_on_the_gpu_and_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let synth = [
-        "synth",
-        "web-plate",
-        "--parts",
-        "2",
-        "--out",
-        "data",
-        "--epochs",
-        "60",
-    ];
-    run_expect(&synth, d, 0);
-    let gpu_args = [
-        "batch",
-        "data/job.toml",
-        "--backend",
-        "gpu",
-        "--out",
-        "gpu",
-        "--quiet",
-    ];
-    let gpu = errmap(&gpu_args, d);
-    if gpu.status.code() == Some(3) && std::env::var("ERRMAP_REQUIRE_GPU").as_deref() != Ok("1") {
+    synth_family(d, "2", &["--epochs", "60"]);
+    let gpu = errmap(&batch_args("gpu", "gpu", &[]), d);
+    if gpu.code == 3 && std::env::var("ERRMAP_REQUIRE_GPU").as_deref() != Ok("1") {
         eprintln!(
             "skipping the GPU end-to-end test: no usable adapter ({})",
-            String::from_utf8_lossy(&gpu.stderr).trim()
+            gpu.stderr.trim()
         );
         return;
     }
-    assert_eq!(
-        gpu.status.code(),
-        Some(0),
-        "{}",
-        describe(&gpu_args, &gpu, d)
-    );
-    run_expect(
-        &[
-            "batch",
-            "data/job.toml",
-            "--backend",
-            "cpu",
-            "--out",
-            "cpu",
-            "--quiet",
-        ],
-        d,
-        0,
-    );
+    gpu.expect_code(0);
+    batch(d, "cpu", "cpu", 0);
     let mut compared = 0;
     for part in ["p01", "p02", "family"] {
         let map_name = if part == "family" {

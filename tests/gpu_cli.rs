@@ -1,30 +1,13 @@
 //! `errmap gpu-info` through the real binary: text and one JSON document.
 
-use std::process::Command;
-
-fn errmap(args: &[&str]) -> (i32, String, String) {
-    let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_errmap"))
-        .args(args)
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    let (stdout, stderr) = (
-        String::from_utf8_lossy(&out.stdout).to_string(),
-        String::from_utf8_lossy(&out.stderr).to_string(),
-    );
-    (out.status.code().unwrap_or(-1), stdout, stderr)
-}
+mod common;
 
 #[test]
 fn gpu_info_json_is_one_document_naming_the_choice() {
-    let (code, stdout, stderr) = errmap(&["gpu-info", "--json"]);
-    assert_eq!(
-        code, 0,
-        "errmap gpu-info --json\nstdout:\n{stdout}\nstderr:\n{stderr}"
-    );
-    let doc: serde_json::Value = serde_json::from_str(&stdout)
-        .unwrap_or_else(|e| panic!("not one JSON document ({e}):\n{stdout}"));
+    let dir = tempfile::tempdir().unwrap();
+    let run = common::ok(dir.path(), &["gpu-info", "--json"]);
+    let doc = common::json(&run);
+    let stdout = &run.stdout;
     let adapters = doc["adapters"].as_array().expect("adapters array");
     let software = doc["chosen"]["software"].as_bool() == Some(true);
     match doc["auto_backend"].as_str() {
@@ -66,11 +49,8 @@ fn gpu_info_json_is_one_document_naming_the_choice() {
 
 #[test]
 fn gpu_info_text_lists_adapters_and_the_backend_auto_uses() {
-    let (code, stdout, stderr) = errmap(&["gpu-info"]);
-    assert_eq!(
-        code, 0,
-        "errmap gpu-info\nstdout:\n{stdout}\nstderr:\n{stderr}"
-    );
+    let dir = tempfile::tempdir().unwrap();
+    let stdout = common::ok(dir.path(), &["gpu-info"]).stdout;
     assert!(stdout.contains("adapters"), "{stdout}");
     assert!(stdout.contains("--backend auto trains on the"), "{stdout}");
 }

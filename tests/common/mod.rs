@@ -25,9 +25,15 @@ pub fn command() -> Command {
 
 /// Run `errmap args…` in `dir` and wait for it.
 pub fn errmap(dir: &Path, args: &[&str]) -> Run {
-    let out = command()
-        .args(args)
-        .current_dir(dir)
+    errmap_with(dir, args, |_| {})
+}
+
+/// Run `errmap args…` in `dir` after `configure` has adjusted the command (environment, …).
+pub fn errmap_with(dir: &Path, args: &[&str], configure: impl FnOnce(&mut Command)) -> Run {
+    let mut cmd = command();
+    cmd.args(args).current_dir(dir);
+    configure(&mut cmd);
+    let out = cmd
         .output()
         .unwrap_or_else(|e| panic!("cannot run the errmap binary: {e}"));
     Run {
@@ -78,6 +84,27 @@ pub fn json(run: &Run) -> serde_json::Value {
         Ok(doc) => doc,
         Err(e) => panic!("stdout is not one JSON document ({e})\n{}", run.report()),
     }
+}
+
+/// Every file (not folder) below `dir`, as full paths, sorted.
+pub fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
 }
 
 /// Every file and folder below `dir`, relative and sorted (folders end in `/`).
