@@ -7,50 +7,20 @@
 use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput};
-use errmap::geom::Domain;
 use errmap::gpu::GpuTrainer;
 use errmap::nn::{CpuTrainer, ModelConfig, Normalisation, Trainer, TrainingSet};
+
+#[path = "../tests/common/plate_sets.rs"]
+mod plate_sets;
+use plate_sets::{domain, sets};
 
 pub const EPOCHS: u32 = 10;
 pub const GRID_U: usize = 48;
 pub const GRID_V: usize = 32;
 
-fn domain() -> Domain {
-    Domain {
-        u_min_mm: 0.0,
-        v_min_mm: 0.0,
-        u_max_mm: 600.0,
-        v_max_mm: 300.0,
-    }
-}
-
-/// e(u, v) of part k in µm (the same formula as peers.py).
-pub fn field_um(u_mm: f64, v_mm: f64, k: usize) -> f64 {
-    use std::f64::consts::PI;
-    -40.0 * (PI * u_mm / 600.0).sin() * (PI * v_mm / 300.0).sin()
-        + 6.0 * (u_mm / 600.0 - 0.5)
-        + 0.5 * k as f64 * (v_mm / 300.0)
-}
-
+/// Part k of the family is a GRID_U × GRID_V grid of the shared plate field.
 pub fn family(parts: usize) -> Vec<TrainingSet> {
-    (0..parts)
-        .map(|k| {
-            let points: Vec<(f64, f64, f64)> = (0..GRID_V)
-                .flat_map(|j| (0..GRID_U).map(move |i| (i, j)))
-                .map(|(i, j)| {
-                    let u = 600.0 * i as f64 / (GRID_U - 1) as f64;
-                    let v = 300.0 * j as f64 / (GRID_V - 1) as f64;
-                    (u, v, field_um(u, v, k))
-                })
-                .collect();
-            let e: Vec<f64> = points.iter().map(|p| p.2).collect();
-            let norm = Normalisation::new(&domain(), &e);
-            TrainingSet {
-                inputs: points.iter().map(|p| norm.scale_input(p.0, p.1)).collect(),
-                targets: points.iter().map(|p| norm.scale_target(p.2)).collect(),
-            }
-        })
-        .collect()
+    sets(&vec![(GRID_U, GRID_V); parts]).0
 }
 
 fn gpu_or_note() -> Option<GpuTrainer> {

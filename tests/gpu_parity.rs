@@ -2,12 +2,15 @@
 //!
 //! Without an adapter these tests print why they skip, unless ERRMAP_REQUIRE_GPU=1, where they fail.
 
+#[path = "common/plate_sets.rs"]
+mod plate_sets;
+
 use std::sync::OnceLock;
 
-use errmap::geom::Domain;
 use errmap::gpu::layout::{Dims, LayerInfo, NetInfo, Sample, Step};
 use errmap::gpu::GpuTrainer;
 use errmap::nn::*;
+use plate_sets::sets;
 
 fn gpu(test: &str) -> Option<&'static GpuTrainer> {
     static TRAINER: OnceLock<Result<GpuTrainer, String>> = OnceLock::new();
@@ -21,47 +24,6 @@ fn gpu(test: &str) -> Option<&'static GpuTrainer> {
             None
         }
     }
-}
-
-fn domain() -> Domain {
-    Domain {
-        u_min_mm: 0.0,
-        v_min_mm: 0.0,
-        u_max_mm: 600.0,
-        v_max_mm: 300.0,
-    }
-}
-
-/// A web-plate-like deflection field in µm (±40 µm), independent of errmap's synth module.
-fn field_um(u_mm: f64, v_mm: f64, k: usize) -> f64 {
-    use std::f64::consts::PI;
-    -40.0 * (PI * u_mm / 600.0).sin() * (PI * v_mm / 300.0).sin()
-        + 6.0 * (u_mm / 600.0 - 0.5)
-        + 0.5 * k as f64 * (v_mm / 300.0)
-}
-
-/// Training sets of different sizes on irregular grids, with the Normalisation of each.
-fn sets(sizes: &[(usize, usize)]) -> (Vec<TrainingSet>, Vec<Normalisation>) {
-    let mut out = Vec::new();
-    let mut norms = Vec::new();
-    for (k, &(nu, nv)) in sizes.iter().enumerate() {
-        let points: Vec<(f64, f64, f64)> = (0..nv)
-            .flat_map(|j| (0..nu).map(move |i| (i, j)))
-            .map(|(i, j)| {
-                let u = 600.0 * i as f64 / (nu - 1) as f64;
-                let v = 300.0 * j as f64 / (nv - 1) as f64;
-                (u, v, field_um(u, v, k))
-            })
-            .collect();
-        let e: Vec<f64> = points.iter().map(|p| p.2).collect();
-        let norm = Normalisation::new(&domain(), &e);
-        out.push(TrainingSet {
-            inputs: points.iter().map(|p| norm.scale_input(p.0, p.1)).collect(),
-            targets: points.iter().map(|p| norm.scale_target(p.2)).collect(),
-        });
-        norms.push(norm);
-    }
-    (out, norms)
 }
 
 fn grid_inputs(norm: &Normalisation, step_mm: f64) -> Vec<[f32; 2]> {
