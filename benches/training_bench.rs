@@ -10,8 +10,6 @@ use criterion::{BenchmarkId, Criterion, Throughput};
 use errmap::gpu::GpuTrainer;
 use errmap::nn::{CpuTrainer, ModelConfig, Normalisation, Trainer, TrainingSet};
 
-#[path = "../tests/common/headless_vulkan.rs"]
-mod headless_vulkan;
 #[path = "../tests/common/plate_sets.rs"]
 mod plate_sets;
 use plate_sets::{domain, sets};
@@ -27,7 +25,7 @@ pub fn family(parts: usize) -> Vec<TrainingSet> {
 
 fn gpu_or_note() -> Option<GpuTrainer> {
     // Benchmarks run one at a time on the main thread: no Vulkan thread exists yet.
-    headless_vulkan::quiet_headless_vulkan();
+    errmap::gpu::quiet_headless_vulkan();
     match GpuTrainer::new() {
         Ok(gpu) => {
             eprintln!("training bench on {}", gpu.name());

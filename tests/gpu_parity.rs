@@ -2,8 +2,6 @@
 //!
 //! Without an adapter these tests print why they skip, unless ERRMAP_REQUIRE_GPU=1, where they fail.
 
-#[path = "common/headless_vulkan.rs"]
-mod headless_vulkan;
 #[path = "common/plate_sets.rs"]
 mod plate_sets;
 
@@ -18,7 +16,7 @@ fn gpu(test: &str) -> Option<&'static GpuTrainer> {
     static TRAINER: OnceLock<Result<GpuTrainer, String>> = OnceLock::new();
     // Every test that opens Vulkan calls this first, so the variable is set before any does.
     match TRAINER.get_or_init(|| {
-        headless_vulkan::quiet_headless_vulkan();
+        errmap::gpu::quiet_headless_vulkan();
         GpuTrainer::new().map_err(|e| e.to_string())
     }) {
         Ok(trainer) => Some(trainer),

@@ -198,3 +198,30 @@ pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>>
         },
     }
 }
+
+/// Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid or not set" on headless machines
+/// (batch nodes, CI) where no login session sets it. When it is unset, point it at a private
+/// 0700 folder of ours, as the XDG spec requires. Call it before any thread starts or opens
+/// Vulkan (the binary does so first thing in `main`; in-process tests from their one shared
+/// set-up): changing the environment while other threads read it is a race.
+pub fn quiet_headless_vulkan() {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+        if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+            return;
+        }
+        let Ok(uid) = std::fs::metadata("/proc/self").map(|m| m.uid()) else {
+            return;
+        };
+        let dir = std::env::temp_dir().join(format!("errmap-runtime-{uid}"));
+        let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+        // Use it only if it is ours and private.
+        match std::fs::symlink_metadata(&dir) {
+            Ok(m) if m.is_dir() && m.uid() == uid && m.permissions().mode() & 0o777 == 0o700 => {
+                std::env::set_var("XDG_RUNTIME_DIR", &dir);
+            }
+            _ => {}
+        }
+    }
+}
