@@ -503,7 +503,7 @@ fn table(args: TableArgs, globals: Globals) -> Result<i32> {
         for n in &notes {
             eprintln!("{n}");
         }
-        if args.format == TableFormat::Fanuc {
+        if args.format == TableFormat::Fanuc && ev.unidirectional.is_none() {
             eprintln!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
         }
     }
