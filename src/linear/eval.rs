@@ -178,7 +178,9 @@ pub struct Evaluation {
     pub standard: Standard,
     /// Coverage factor of the band (2 or 3).
     pub k: f64,
-    /// `None` for a bidirectional test, else the only direction measured.
+    /// `None` for a bidirectional test, else the only direction measured (serialized only then,
+    /// so bidirectional documents keep their keys).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub unidirectional: Option<Direction>,
     /// Targets ascending.
     pub targets: Vec<TargetFigures>,
