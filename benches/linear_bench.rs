@@ -42,7 +42,7 @@ fn linear_bench(c: &mut Criterion) {
     });
     let ev = evaluate(&s, Standard::Iso230_2_2014).unwrap();
     let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
-    let es: Vec<f64> = ev.targets.iter().map(|t| t.mean).collect();
+    let es: Vec<f64> = ev.targets.iter().map(|t| t.mean_any()).collect();
     c.bench_function("linear/pitch_fit_201_targets", |b| {
         b.iter(|| fit_pitch(black_box(&xs), black_box(&es), 10.0).unwrap())
     });

@@ -659,3 +659,138 @@ fn fanuc_reference_point_elsewhere_than_the_first_target() {
     );
     out.expect_code(2);
 }
+
+/// Forward-only hand data (figures worked out in tests/linear_eval.rs):
+/// target 0: 1, 2, 3 → x̄ = 2, s = 1; target 10: 4, 6, 8 → x̄ = 6, s = 2; target 20: −1, 0, 1 → x̄ = 0, s = 1.
+const FORWARD_ONLY: &str = "run,direction,target_mm,deviation_um\n\
+1,+,0,1\n1,+,10,4\n1,+,20,-1\n\
+2,+,0,2\n2,+,10,6\n2,+,20,0\n\
+3,+,0,3\n3,+,10,8\n3,+,20,1\n";
+
+#[test]
+fn unidirectional_runs_analyze_to_json_nulls_text_chart_and_table() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("fwd.csv"), FORWARD_ONLY).unwrap();
+    let out = ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "fwd.csv",
+            "--standard",
+            "iso230-2:2014",
+            "--json",
+            "--chart",
+            "fwd.png",
+        ],
+    );
+    let doc = json(&out);
+    assert_eq!(doc["unidirectional"], "forward", "{}", out.report());
+    let t = &doc["targets"][1];
+    close(&t["mean_up"], 6.0, "x̄↑ = (4+6+8)/3");
+    close(&t["s_up"], 2.0, "s↑");
+    close(&t["repeatability_up"], 8.0, "R↑_i = 4·2");
+    for key in [
+        "mean_down",
+        "s_down",
+        "reversal",
+        "repeatability_down",
+        "repeatability",
+    ] {
+        assert!(t[key].is_null(), "{key} must be null: {}", out.stdout);
+    }
+    let a = &doc["axis"];
+    close(&a["E_up"], 6.0, "E↑ = 6 − 0");
+    close(&a["R_up"], 8.0, "R↑ = max(4, 8, 4)");
+    close(&a["A_up"], 12.0, "A↑ = 10 − (−2)");
+    for key in [
+        "B", "B_mean", "R", "E", "M", "A", "R_down", "E_down", "A_down",
+    ] {
+        assert!(
+            a.get(key).is_some_and(|v| v.is_null()),
+            "axis {key} must be null: {}",
+            out.stdout
+        );
+    }
+    let png = std::fs::read(dir.path().join("fwd.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG"), "chart is not a PNG");
+
+    // Human text: the measured figures and n/a for the rest.
+    let text = ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "fwd.csv",
+            "--standard",
+            "iso230-2:2014",
+        ],
+    );
+    assert!(
+        text.stdout.contains("E = n/a  E↑ = 6.000")
+            && text
+                .stdout
+                .contains("unidirectional test (direction + only)"),
+        "{}",
+        text.report()
+    );
+
+    // Table: the forward means resampled every 5 mm, the same values in both columns.
+    ok(
+        dir.path(),
+        &[
+            "linear",
+            "table",
+            "fwd.csv",
+            "--format",
+            "csv",
+            "--spacing",
+            "5",
+            "-o",
+            "t.csv",
+            "-q",
+        ],
+    );
+    let table = std::fs::read_to_string(dir.path().join("t.csv")).unwrap();
+    // 0 → 2, 5 → (2+6)/2 = 4, 10 → 6, 15 → (6+0)/2 = 3, 20 → 0.
+    for row in [
+        "0.000000,2.0000,2.0000",
+        "5.000000,4.0000,4.0000",
+        "10.000000,6.0000,6.0000",
+        "15.000000,3.0000,3.0000",
+        "20.000000,0.0000,0.0000",
+    ] {
+        assert!(table.contains(row), "missing {row} in\n{table}");
+    }
+}
+
+#[test]
+fn mixed_direction_run_file_names_file_and_line() {
+    // Targets 0 and 10 both ways, 20 from − only: its first reading is line 5.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("mixed.csv"),
+        "run,direction,target_mm,deviation_um\n\
+1,+,0,1\n1,+,10,2\n1,-,10,2\n1,-,20,0\n1,-,0,1\n",
+    )
+    .unwrap();
+    let out = errmap(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "mixed.csv",
+            "--standard",
+            "iso230-2:2014",
+            "--json",
+        ],
+    );
+    out.expect_code(2);
+    assert!(
+        out.stderr.contains("mixed.csv:5")
+            && out.stderr.contains("target 20")
+            && out.stderr.contains("direction - only"),
+        "{}",
+        out.report()
+    );
+}

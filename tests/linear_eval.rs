@@ -60,12 +60,12 @@ fn per_target_means_std_and_reversal() {
     ];
     for (f, (t, mu, md, su, sd, b, m)) in ev.targets.iter().zip(expect) {
         close(f.target, t, "target");
-        close(f.mean_up, mu, "mean_up");
-        close(f.mean_down, md, "mean_down");
+        some(f.mean_up, mu, "mean_up");
+        some(f.mean_down, md, "mean_down");
         some(f.s_up, su, "s_up");
         some(f.s_down, sd, "s_down");
-        close(f.reversal, b, "reversal");
-        close(f.mean, m, "mean bidirectional");
+        some(f.reversal, b, "reversal");
+        some(f.mean, m, "mean bidirectional");
         assert_eq!((f.n_up, f.n_down), (3, 3));
     }
 }
@@ -88,15 +88,15 @@ fn iso230_2_2014_and_1997_figures() {
             some(f.repeatability, r, "R_i");
         }
         let a = &ev.axis;
-        close(a.B, 4.0, "B = max|B_i| = max(2,3,4)");
-        close(a.B_mean, 3.0, "B̄ = (2+3+4)/3");
+        some(a.B, 4.0, "B = max|B_i| = max(2,3,4)");
+        some(a.B_mean, 3.0, "B̄ = (2+3+4)/3");
         some(a.R_up, 8.0, "R↑ = max(4,8,0)");
         some(a.R_down, 8.0, "R↓ = max(4,4,8)");
         some(a.R, 9.0, "R = max(6,9,8)");
-        close(a.E_up, 7.0, "E↑ = 6 − (−1)");
-        close(a.E_down, 8.0, "E↓ = 3 − (−5)");
-        close(a.E, 11.0, "E = max(2,0,6,3,−1,−5) − min(…) = 6 − (−5)");
-        close(a.M, 7.5, "M = 4.5 − (−3)");
+        some(a.E_up, 7.0, "E↑ = 6 − (−1)");
+        some(a.E_down, 8.0, "E↓ = 3 − (−5)");
+        some(a.E, 11.0, "E = max(2,0,6,3,−1,−5) − min(…) = 6 − (−5)");
+        some(a.M, 7.5, "M = 4.5 − (−3)");
         // A↑: x̄↑ + 2s↑ = 4, 10, −1 → 10; x̄↑ − 2s↑ = 0, 2, −1 → −1; A↑ = 11.
         some(a.A_up, 11.0, "A↑");
         // A↓: x̄↓ + 2s↓ = 2, 5, −1 → 5; x̄↓ − 2s↓ = −2, 1, −9 → −9; A↓ = 14.
@@ -124,15 +124,15 @@ fn gb10931_1989_figures() {
     some(a.R_up, 12.0, "R↑");
     some(a.R_down, 12.0, "R↓");
     some(a.R, 12.0, "R");
-    close(a.B, 4.0, "B");
+    some(a.B, 4.0, "B");
     // A↑ = (x̄ + 3S)max − (x̄ − 3S)min: 2+3, 6+6, −1+0 → 12; 2−3, 6−6, −1−0 → −1; 13.
     some(a.A_up, 13.0, "A↑");
     // A↓: 0+3, 3+3, −5+6 → 6; 0−3, 3−3, −5−6 → −11; 17.
     some(a.A_down, 17.0, "A↓");
     // A: 12 − (−11) = 23.
     some(a.A, 23.0, "A");
-    close(a.M, 7.5, "M");
-    close(a.E, 11.0, "E");
+    some(a.M, 7.5, "M");
+    some(a.E, 11.0, "E");
 }
 
 #[test]
@@ -145,8 +145,8 @@ fn vdi3441_figures() {
     }
     let a = &ev.axis;
     some(a.R, 9.0, "Ps = max Ps_j");
-    close(a.B, 4.0, "U = max|U_j|");
-    close(a.M, 7.5, "Pa = max x̄_j − min x̄_j");
+    some(a.B, 4.0, "U = max|U_j|");
+    some(a.M, 7.5, "Pa = max x̄_j − min x̄_j");
     // P: x̄_j + ½(|U_j| + Ps_j) = 1 + 4, 4.5 + 6, −3 + 5 = 5, 10.5, 2 → 10.5;
     //    x̄_j − ½(|U_j| + Ps_j) = −3, −1.5, −8 → −8;  P = 18.5.
     some(a.A, 18.5, "P");
@@ -183,12 +183,12 @@ fn single_approach_gives_not_applicable_not_zero() {
         assert_eq!((a.A_up, a.A_down, a.A), (None, None, None), "{std}");
         // B_i = 4, 5 → B = 5, B̄ = 4.5; E↑ = 3 − 1 = 2; E↓ = −1 − (−4) = 3; E = 3 − (−4) = 7;
         // x̄_i = 1, −1.5 → M = 2.5.
-        close(a.B, 5.0, "B");
-        close(a.B_mean, 4.5, "B̄");
-        close(a.E_up, 2.0, "E↑");
-        close(a.E_down, 3.0, "E↓");
-        close(a.E, 7.0, "E");
-        close(a.M, 2.5, "M");
+        some(a.B, 5.0, "B");
+        some(a.B_mean, 4.5, "B̄");
+        some(a.E_up, 2.0, "E↑");
+        some(a.E_down, 3.0, "E↓");
+        some(a.E, 7.0, "E");
+        some(a.M, 2.5, "M");
     }
 }
 
@@ -204,17 +204,23 @@ fn figures_are_unit_agnostic_and_scale_linearly() {
         .collect();
     let ev = evaluate(&scaled, Standard::Iso230_2_2014).unwrap();
     close(ev.axis.A.unwrap(), 19.0 * 3.6, "A scaled");
-    close(ev.axis.B, 4.0 * 3.6, "B scaled");
+    some(ev.axis.B, 4.0 * 3.6, "B scaled");
 }
 
 #[test]
-fn one_sided_target_is_an_error() {
-    let samples = [Sample {
+fn mixed_uni_and_bidirectional_targets_are_an_error() {
+    // Target 0 from both directions, target 10 from + only: neither test kind.
+    let sample = |direction, target| Sample {
         run: 1,
-        direction: Direction::Forward,
-        target: 10.0,
+        direction,
+        target,
         deviation: 1.0,
-    }];
+    };
+    let samples = [
+        sample(Direction::Forward, 0.0),
+        sample(Direction::Reverse, 0.0),
+        sample(Direction::Forward, 10.0),
+    ];
     let err = evaluate(&samples, Standard::Vdi3441)
         .unwrap_err()
         .to_string();
@@ -222,7 +228,125 @@ fn one_sided_target_is_an_error() {
         err.contains("target 10") && err.contains("direction -"),
         "{err}"
     );
+    // Targets each from a different single direction are mixed too.
+    let samples = [
+        sample(Direction::Forward, 0.0),
+        sample(Direction::Reverse, 10.0),
+    ];
+    assert!(evaluate(&samples, Standard::Iso230_2_2014).is_err());
     assert!(evaluate(&[], Standard::Vdi3441).is_err());
+}
+
+/// Unidirectional hand data: 3 targets × 3 runs, one direction only.
+///
+/// target 0:  1, 2, 3  → x̄ = 2, s = √((1 + 0 + 1)/2) = 1
+/// target 10: 4, 6, 8  → x̄ = 6, s = √((4 + 0 + 4)/2) = 2
+/// target 20: −1, 0, 1 → x̄ = 0, s = √((1 + 0 + 1)/2) = 1
+fn unidirectional(direction: Direction) -> Vec<Sample> {
+    let data = [
+        (0.0, [1.0, 2.0, 3.0]),
+        (10.0, [4.0, 6.0, 8.0]),
+        (20.0, [-1.0, 0.0, 1.0]),
+    ];
+    let mut out = Vec::new();
+    for (target, devs) in data {
+        for (j, deviation) in devs.into_iter().enumerate() {
+            out.push(Sample {
+                run: j as u32 + 1,
+                direction,
+                target,
+                deviation,
+            });
+        }
+    }
+    out
+}
+
+#[test]
+fn forward_only_runs_give_the_forward_figures_by_hand() {
+    let ev = evaluate(&unidirectional(Direction::Forward), Standard::Iso230_2_2014).unwrap();
+    assert_eq!(ev.unidirectional, Some(Direction::Forward));
+    let means = [2.0, 6.0, 0.0];
+    let sds = [1.0, 2.0, 1.0];
+    for (i, t) in ev.targets.iter().enumerate() {
+        assert_eq!((t.n_up, t.n_down), (3, 0));
+        some(t.mean_up, means[i], "x̄_i↑");
+        some(t.s_up, sds[i], "s_i↑");
+        // ISO 230-2:2014 3.14: R_i↑ = 4 s_i↑ → 4, 8, 4.
+        some(t.repeatability_up, 4.0 * sds[i], "R_i↑");
+        // The other direction and every bidirectional figure: not applicable, never 0.
+        assert_eq!(t.mean_down, None);
+        assert_eq!(t.s_down, None);
+        assert_eq!(t.repeatability_down, None);
+        assert_eq!(t.mean, None);
+        assert_eq!(t.reversal, None);
+        assert_eq!(t.repeatability, None);
+    }
+    let a = &ev.axis;
+    // R↑ = max(4, 8, 4) = 8.
+    some(a.R_up, 8.0, "R↑");
+    // E↑ = max x̄↑ − min x̄↑ = 6 − 0 = 6.
+    some(a.E_up, 6.0, "E↑");
+    // A↑ = max(x̄ + 2s) − min(x̄ − 2s) = max(4, 10, 2) − min(0, 2, −2) = 10 + 2 = 12.
+    some(a.A_up, 12.0, "A↑");
+    for (name, v) in [
+        ("R↓", a.R_down),
+        ("E↓", a.E_down),
+        ("A↓", a.A_down),
+        ("B", a.B),
+        ("B̄", a.B_mean),
+        ("R", a.R),
+        ("E", a.E),
+        ("M", a.M),
+        ("A", a.A),
+    ] {
+        assert_eq!(v, None, "{name} must be None in a forward-only test");
+    }
+}
+
+#[test]
+fn reverse_only_runs_by_gb10931_and_vdi3441() {
+    // GB 10931 (k = 3) on the same numbers from − only:
+    // R_i↓ = 6S → 6, 12, 6 → R↓ = 12; E↓ = 6;
+    // A↓ = max(x̄ + 3S) − min(x̄ − 3S) = max(5, 12, 3) − min(−1, 0, −3) = 12 + 3 = 15.
+    let ev = evaluate(&unidirectional(Direction::Reverse), Standard::Gb10931_1989).unwrap();
+    assert_eq!(ev.unidirectional, Some(Direction::Reverse));
+    some(ev.targets[1].mean_down, 6.0, "x̄_2↓");
+    some(ev.targets[1].repeatability_down, 12.0, "R_2↓ = 6·2");
+    assert_eq!(ev.targets[1].mean_up, None);
+    let a = &ev.axis;
+    some(a.R_down, 12.0, "R↓");
+    some(a.E_down, 6.0, "E↓");
+    some(a.A_down, 15.0, "A↓");
+    assert_eq!((a.R_up, a.E_up, a.A_up), (None, None, None));
+    assert_eq!(
+        (a.B, a.B_mean, a.R, a.E, a.M, a.A),
+        (None, None, None, None, None, None)
+    );
+    // VDI 3441: the one-direction scatter 6s gives the same R↓ = 12; Ps, U, P are bidirectional.
+    let ev = evaluate(&unidirectional(Direction::Reverse), Standard::Vdi3441).unwrap();
+    some(ev.axis.R_down, 12.0, "VDI R↓");
+    assert_eq!((ev.axis.R, ev.axis.A, ev.axis.B), (None, None, None));
+}
+
+#[test]
+fn mixed_run_file_names_the_file_and_the_target_line() {
+    // Targets 0 and 10 from both directions; target 20 from + only, first at line 4.
+    let text = "run,direction,target_mm,deviation_um\n\
+1,+,0,1\n1,+,10,2\n1,+,20,3\n1,-,10,2\n1,-,0,1\n\
+2,+,0,1\n2,+,10,2\n2,+,20,3\n2,-,10,2\n2,-,0,1\n";
+    let err = parse_runs(Path::new("mixed.csv"), text)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("mixed.csv:4") && err.contains("target 20") && err.contains("direction +"),
+        "{err}"
+    );
+    // Forward-only and reverse-only files are accepted.
+    let fwd = "run,direction,target_mm,deviation_um\n1,+,0,1\n1,+,10,2\n2,+,0,1\n2,+,10,2\n";
+    assert!(parse_runs(Path::new("f.csv"), fwd).is_ok());
+    let rev = fwd.replace(",+,", ",-,");
+    assert!(parse_runs(Path::new("r.csv"), &rev).is_ok());
 }
 
 #[test]

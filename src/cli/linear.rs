@@ -223,11 +223,11 @@ fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> T
 #[derive(serde::Serialize)]
 struct TargetJson {
     target_mm: f64,
-    mean_up: f64,
-    mean_down: f64,
+    mean_up: Option<f64>,
+    mean_down: Option<f64>,
     s_up: Option<f64>,
     s_down: Option<f64>,
-    reversal: f64,
+    reversal: Option<f64>,
     repeatability_up: Option<f64>,
     repeatability_down: Option<f64>,
     repeatability: Option<f64>,
@@ -262,6 +262,9 @@ struct AfterJson<'a> {
 struct AnalyzeJson<'a> {
     standard: &'static str,
     unit: &'static str,
+    /// Present only for a unidirectional test: the one direction measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    unidirectional: Option<errmap::linear::Direction>,
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -291,13 +294,13 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
     );
     for t in &ev.targets {
         println!(
-            "{:>10.3} {:9.3} {:9.3} {} {} {:9.3} {} {} {}",
+            "{:>10.3} {} {} {} {} {} {} {} {}",
             t.target,
-            t.mean_up,
-            t.mean_down,
+            fmt_opt(t.mean_up),
+            fmt_opt(t.mean_down),
             fmt_opt(t.s_up),
             fmt_opt(t.s_down),
-            t.reversal,
+            fmt_opt(t.reversal),
             fmt_opt(t.repeatability_up),
             fmt_opt(t.repeatability_down),
             fmt_opt(t.repeatability)
@@ -317,9 +320,20 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         fmt_opt(a.R_down).trim()
     );
     println!(
-        "      E = {:.3}  E↑ = {:.3}  E↓ = {:.3}  M = {:.3}  B = {:.3}  B̄ = {:.3}",
-        a.E, a.E_up, a.E_down, a.M, a.B, a.B_mean
+        "      E = {}  E↑ = {}  E↓ = {}  M = {}  B = {}  B̄ = {}",
+        fmt_opt(a.E).trim(),
+        fmt_opt(a.E_up).trim(),
+        fmt_opt(a.E_down).trim(),
+        fmt_opt(a.M).trim(),
+        fmt_opt(a.B).trim(),
+        fmt_opt(a.B_mean).trim()
     );
+    if let Some(d) = ev.unidirectional {
+        println!(
+            "      unidirectional test (direction {} only): bidirectional figures are n/a",
+            d.symbol()
+        );
+    }
 }
 
 fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
@@ -330,7 +344,7 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
     let fit = match args.fit_pitch {
         Some(lead) => {
             let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
-            let es: Vec<f64> = ev.targets.iter().map(|t| t.mean).collect();
+            let es: Vec<f64> = ev.targets.iter().map(|t| t.mean_any()).collect();
             Some(fit_pitch(&xs, &es, lead)?)
         }
         None => None,
@@ -373,6 +387,7 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
         print_json(&AnalyzeJson {
             standard: ev.standard.name(),
             unit: "um",
+            unidirectional: ev.unidirectional,
             targets: targets_json(&ev),
             axis: &ev.axis,
             pitch_fit: fit.as_ref(),
@@ -466,6 +481,12 @@ fn table(args: TableArgs, globals: Globals) -> Result<i32> {
     let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
     let table = CompTable::from_evaluation(&ev, args.spacing)?;
+    if let (Some(d), false) = (ev.unidirectional, globals.quiet) {
+        eprintln!(
+            "unidirectional runs (direction {} only): the table carries the same values for both directions",
+            d.symbol()
+        );
+    }
     let opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
     for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
         errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
@@ -482,7 +503,7 @@ fn table(args: TableArgs, globals: Globals) -> Result<i32> {
         for n in &notes {
             eprintln!("{n}");
         }
-        if args.format == TableFormat::Fanuc {
+        if args.format == TableFormat::Fanuc && ev.unidirectional.is_none() {
             eprintln!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
         }
     }

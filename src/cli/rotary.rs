@@ -246,17 +246,18 @@ fn human_report(a: &Analysis) -> String {
             let f = &e.axis;
             let _ = writeln!(
                 s,
-                "\nISO 230-2:2014 (arcsec, x = actual − target = −err): A {}  A↑ {}  A↓ {}  R {}  R↑ {}  R↓ {}  E {:.2}  M {:.2}  B {:.2}  B̄ {:+.2}",
+                "\nISO 230-2:2014 (arcsec, x = actual − target = −err): A {}  A↑ {}  A↓ {}  R {}  R↑ {}  R↓ {}  E {}  M {}  B {}  B̄ {}",
                 opt(f.A, 2),
                 opt(f.A_up, 2),
                 opt(f.A_down, 2),
                 opt(f.R, 2),
                 opt(f.R_up, 2),
                 opt(f.R_down, 2),
-                f.E,
-                f.M,
-                f.B,
+                opt(f.E, 2),
+                opt(f.M, 2),
+                opt(f.B, 2),
                 f.B_mean
+                    .map_or_else(|| "-".to_string(), |v| format!("{v:+.2}"))
             );
         }
         None => {

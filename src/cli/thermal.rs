@@ -621,17 +621,17 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
         for t in &report.times {
             writeln!(
                 w,
-                "{},{},{:.4},{:.4},{},{},{},{},{:.4},{:.4},{:.4},{:.4}",
+                "{},{},{},{},{},{},{},{},{},{},{:.4},{:.4}",
                 t.campaign,
                 t.time_s,
-                t.before.E,
-                t.after.E,
+                fmt(t.before.E),
+                fmt(t.after.E),
                 fmt(t.before.A),
                 fmt(t.after.A),
                 fmt(t.before.R),
                 fmt(t.after.R),
-                t.before.B,
-                t.after.B,
+                fmt(t.before.B),
+                fmt(t.after.B),
                 t.rms_before_um,
                 t.rms_after_um
             )?;
@@ -650,15 +650,15 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
     outln!("campaign                      time_s   E before → after   A before → after   B before → after");
     for t in &report.times {
         outln!(
-            "{:<28} {:>7} {:>8.3} → {:<7.3} {:>8} → {:<7} {:>7.3} → {:<7.3}",
+            "{:<28} {:>7} {:>8} → {:<7} {:>8} → {:<7} {:>7} → {:<7}",
             t.campaign,
             t.time_s,
-            t.before.E,
-            t.after.E,
+            opt(t.before.E),
+            opt(t.after.E),
             opt(t.before.A),
             opt(t.after.A),
-            t.before.B,
-            t.after.B
+            opt(t.before.B),
+            opt(t.after.B)
         );
     }
     if !g.quiet {

@@ -33,12 +33,12 @@ fn figure_rows(before: &Evaluation, after: Option<&Evaluation>) -> Vec<(String, 
             ("R (repeatability)", fmt_opt(a.R)),
             ("R↑", fmt_opt(a.R_up)),
             ("R↓", fmt_opt(a.R_down)),
-            ("E (systematic)", format!("{:.2}", a.E)),
-            ("E↑", format!("{:.2}", a.E_up)),
-            ("E↓", format!("{:.2}", a.E_down)),
-            ("M (mean range)", format!("{:.2}", a.M)),
-            ("B (reversal)", format!("{:.2}", a.B)),
-            ("B mean (signed)", format!("{:.2}", a.B_mean)),
+            ("E (systematic)", fmt_opt(a.E)),
+            ("E↑", fmt_opt(a.E_up)),
+            ("E↓", fmt_opt(a.E_down)),
+            ("M (mean range)", fmt_opt(a.M)),
+            ("B (reversal)", fmt_opt(a.B)),
+            ("B mean (signed)", fmt_opt(a.B_mean)),
         ]
     };
     let b = rows(before);
@@ -69,10 +69,13 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
     };
     for e in std::iter::once(ev).chain(input.after) {
         for t in &e.targets {
-            grow(t.mean_up + k * t.s_up.unwrap_or(0.0));
-            grow(t.mean_up - k * t.s_up.unwrap_or(0.0));
-            grow(t.mean_down + k * t.s_down.unwrap_or(0.0));
-            grow(t.mean_down - k * t.s_down.unwrap_or(0.0));
+            // A direction not measured (unidirectional test) adds nothing.
+            for (x, s) in [(t.mean_up, t.s_up), (t.mean_down, t.s_down)] {
+                if let Some(x) = x {
+                    grow(x + k * s.unwrap_or(0.0));
+                    grow(x - k * s.unwrap_or(0.0));
+                }
+            }
         }
     }
     if !(lo.is_finite() && hi.is_finite()) {
@@ -109,56 +112,69 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
         let series = |e: &Evaluation, up: bool| -> Vec<(f64, f64)> {
             e.targets
                 .iter()
-                .map(|t| (t.target, if up { t.mean_up } else { t.mean_down }))
+                .filter_map(|t| {
+                    let x = if up { t.mean_up } else { t.mean_down };
+                    x.map(|x| (t.target, x))
+                })
                 .collect()
         };
         // Bands ±k·s at each target (error bars), both directions.
         for t in &ev.targets {
-            if let Some(s) = t.s_up {
+            if let Some((x, s)) = t.mean_up.zip(t.s_up) {
                 chart.draw_series(std::iter::once(ErrorBar::new_vertical(
                     t.target,
-                    t.mean_up - k * s,
-                    t.mean_up,
-                    t.mean_up + k * s,
+                    x - k * s,
+                    x,
+                    x + k * s,
                     blue.stroke_width(1),
                     8,
                 )))?;
             }
-            if let Some(s) = t.s_down {
+            if let Some((x, s)) = t.mean_down.zip(t.s_down) {
                 chart.draw_series(std::iter::once(ErrorBar::new_vertical(
                     t.target,
-                    t.mean_down - k * s,
-                    t.mean_down,
-                    t.mean_down + k * s,
+                    x - k * s,
+                    x,
+                    x + k * s,
                     red.stroke_width(1),
                     8,
                 )))?;
             }
         }
-        chart
-            .draw_series(LineSeries::new(series(ev, true), blue.stroke_width(2)))?
-            .label(format!("mean ↑ (forward), {band}"))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2))
-            });
-        chart
-            .draw_series(LineSeries::new(series(ev, false), red.stroke_width(2)))?
-            .label(format!("mean ↓ (reverse), {band}"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red.stroke_width(2)));
-        // Reversal: mark the target with the largest |B_i|.
-        if let Some(t) = ev
+        // Only the measured directions are drawn (a unidirectional test has one line).
+        let up_pts = series(ev, true);
+        if !up_pts.is_empty() {
+            chart
+                .draw_series(LineSeries::new(up_pts, blue.stroke_width(2)))?
+                .label(format!("mean ↑ (forward), {band}"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2))
+                });
+        }
+        let down_pts = series(ev, false);
+        if !down_pts.is_empty() {
+            chart
+                .draw_series(LineSeries::new(down_pts, red.stroke_width(2)))?
+                .label(format!("mean ↓ (reverse), {band}"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], red.stroke_width(2))
+                });
+        }
+        // Reversal: mark the target with the largest |B_i| (none in a unidirectional test).
+        let widest = ev
             .targets
             .iter()
-            .max_by(|a, b| a.reversal.abs().total_cmp(&b.reversal.abs()))
-        {
+            .filter_map(|t| Some((t, t.reversal?, t.mean_up?, t.mean_down?)))
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+        if let Some((t, b_i, x_up, x_down)) = widest {
             let grey = RGBColor(90, 90, 90);
             chart.draw_series(std::iter::once(PathElement::new(
-                vec![(t.target, t.mean_up), (t.target, t.mean_down)],
+                vec![(t.target, x_up), (t.target, x_down)],
                 grey.stroke_width(3),
             )))?;
             chart.draw_series(std::iter::once(Text::new(
-                format!(" B = {:.2}", t.reversal.abs()),
-                (t.target, (t.mean_up + t.mean_down) / 2.0),
+                format!(" B = {:.2}", b_i.abs()),
+                (t.target, (x_up + x_down) / 2.0),
                 (FONT, 14).into_font().color(&grey),
             )))?;
         }

@@ -30,6 +30,12 @@
 //!
 //! With a single approach (n = 1) no standard deviation exists: every figure that needs one
 //! (s, repeatability, accuracy) is `None` ("not applicable"), never zero.
+//!
+//! Unidirectional tests (every target approached from one direction only, ISO 230-2 allows it):
+//! only the measured direction's figures exist — x̄_i↑, s_i↑, R_i↑ per target and E↑, R↑, A↑ for
+//! the axis (or the ↓ ones). Every figure the standard defines from both directions (x̄_i, B_i,
+//! R_i, B, B̄, R, E, M, A) and the other direction's figures are `None`, never zeros nor copies.
+//! A mix (some targets from both directions, some from one) is an error.
 
 use super::runs::{distinct_targets, target_index, Direction, Sample};
 use crate::error::{Error, Result};
@@ -121,35 +127,46 @@ pub struct TargetFigures {
     pub target: f64,
     pub n_up: usize,
     pub n_down: usize,
-    /// x̄_i↑, x̄_i↓: mean deviation of each direction.
-    pub mean_up: f64,
-    pub mean_down: f64,
-    /// x̄_i = (x̄_i↑ + x̄_i↓)/2.
-    pub mean: f64,
+    /// x̄_i↑, x̄_i↓: mean deviation of each direction; `None` for a direction not measured.
+    pub mean_up: Option<f64>,
+    pub mean_down: Option<f64>,
+    /// x̄_i = (x̄_i↑ + x̄_i↓)/2; `None` in a unidirectional test.
+    pub mean: Option<f64>,
     /// s_i↑, s_i↓ (n − 1 in the denominator); `None` when n = 1.
     pub s_up: Option<f64>,
     pub s_down: Option<f64>,
-    /// B_i = x̄_i↑ − x̄_i↓ (signed).
-    pub reversal: f64,
+    /// B_i = x̄_i↑ − x̄_i↓ (signed); `None` in a unidirectional test.
+    pub reversal: Option<f64>,
     pub repeatability_up: Option<f64>,
     pub repeatability_down: Option<f64>,
     /// Bidirectional repeatability at the target (ISO R_i, GB max(R↑, R↓), VDI Ps_j).
     pub repeatability: Option<f64>,
 }
 
-/// Figures of the whole axis. `None` = not applicable (n = 1).
+impl TargetFigures {
+    /// The target's systematic deviation: x̄_i when both directions exist, else the measured
+    /// direction's mean (a unidirectional test). Used for pitch fits and compensation tables.
+    pub fn mean_any(&self) -> f64 {
+        self.mean
+            .or(self.mean_up)
+            .or(self.mean_down)
+            .unwrap_or(f64::NAN)
+    }
+}
+
+/// Figures of the whole axis. `None` = not applicable (n = 1, or a unidirectional test).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 #[allow(non_snake_case)]
 pub struct AxisFigures {
-    pub B: f64,
-    pub B_mean: f64,
+    pub B: Option<f64>,
+    pub B_mean: Option<f64>,
     pub R_up: Option<f64>,
     pub R_down: Option<f64>,
     pub R: Option<f64>,
-    pub E_up: f64,
-    pub E_down: f64,
-    pub E: f64,
-    pub M: f64,
+    pub E_up: Option<f64>,
+    pub E_down: Option<f64>,
+    pub E: Option<f64>,
+    pub M: Option<f64>,
     pub A_up: Option<f64>,
     pub A_down: Option<f64>,
     pub A: Option<f64>,
@@ -161,6 +178,10 @@ pub struct Evaluation {
     pub standard: Standard,
     /// Coverage factor of the band (2 or 3).
     pub k: f64,
+    /// `None` for a bidirectional test, else the only direction measured (serialized only then,
+    /// so bidirectional documents keep their keys).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unidirectional: Option<Direction>,
     /// Targets ascending.
     pub targets: Vec<TargetFigures>,
     pub axis: AxisFigures,
@@ -189,6 +210,9 @@ fn min_of(it: impl Iterator<Item = f64>) -> f64 {
     it.fold(f64::INFINITY, f64::min)
 }
 
+/// Picks (x̄, s) of one direction at a target.
+type MeanAndS = dyn Fn(&TargetFigures) -> (Option<f64>, Option<f64>);
+
 /// Max over options: `None` if any is `None`.
 fn max_opt(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     let mut out = f64::NEG_INFINITY;
@@ -200,7 +224,9 @@ fn max_opt(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 
 /// Evaluate an axis by `standard` (see the module table for every formula and its clause).
 ///
-/// Every target needs at least one approach from each direction. Targets closer than
+/// Every target needs at least one approach from each direction (bidirectional test), or every
+/// target approaches from the same single direction (unidirectional test: the other direction's
+/// and the bidirectional figures are `None`). Targets closer than
 /// 1e-6 (in the samples' target unit) are one target.
 pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
     if samples.is_empty() {
@@ -233,29 +259,46 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             Direction::Reverse => down[i].push(s.deviation),
         }
     }
+    // Bidirectional: every target from both sides; unidirectional: every target from one side.
+    let all_up = up.iter().all(|v| !v.is_empty());
+    let all_down = down.iter().all(|v| !v.is_empty());
+    let unidirectional = match (all_up, all_down) {
+        (true, true) => None,
+        (true, false) if down.iter().all(|v| v.is_empty()) => Some(Direction::Forward),
+        (false, true) if up.iter().all(|v| v.is_empty()) => Some(Direction::Reverse),
+        _ => {
+            let i = (0..positions.len())
+                .find(|&i| up[i].is_empty() || down[i].is_empty())
+                .unwrap_or(0);
+            let missing = if up.get(i).is_some_and(|v| v.is_empty()) {
+                "+"
+            } else {
+                "-"
+            };
+            let target = positions.get(i).copied().unwrap_or(f64::NAN);
+            return Err(Error::numeric(
+                format!("target {target} has no approach in direction {missing} while other targets do (mixed uni/bidirectional samples)"),
+                "measure every target from both directions, or every target from the same one direction",
+            ));
+        }
+    };
     let k = standard.k();
     let mut targets = Vec::with_capacity(positions.len());
     for (i, &target) in positions.iter().enumerate() {
-        if up[i].is_empty() || down[i].is_empty() {
-            let missing = if up[i].is_empty() { "+" } else { "-" };
-            return Err(Error::numeric(
-                format!("target {target} has no approach in direction {missing}"),
-                "measure every target from both directions (bidirectional runs)",
-            ));
-        }
-        let mean_up = mean(&up[i]);
-        let mean_down = mean(&down[i]);
+        let nonempty = |v: &Vec<f64>| (!v.is_empty()).then(|| mean(v));
+        let mean_up = nonempty(&up[i]);
+        let mean_down = nonempty(&down[i]);
         let s_up = std_dev(&up[i]);
         let s_down = std_dev(&down[i]);
-        let reversal = mean_up - mean_down;
+        let reversal = mean_up.zip(mean_down).map(|(u, d)| u - d);
         // Unidirectional repeatability: 2k·s (ISO 4s, GB 6S, VDI 6s).
         let repeatability_up = s_up.map(|s| 2.0 * k * s);
         let repeatability_down = s_down.map(|s| 2.0 * k * s);
-        let repeatability = match (s_up, s_down) {
-            (Some(su), Some(sd)) => Some(match standard {
+        let repeatability = match (s_up, s_down, reversal) {
+            (Some(su), Some(sd), Some(b_i)) => Some(match standard {
                 // ISO 230-2:2014 3.15 (same in 1997): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
                 Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => {
-                    (2.0 * su + 2.0 * sd + reversal.abs())
+                    (2.0 * su + 2.0 * sd + b_i.abs())
                         .max(4.0 * su)
                         .max(4.0 * sd)
                 }
@@ -272,7 +315,7 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             n_down: down[i].len(),
             mean_up,
             mean_down,
-            mean: (mean_up + mean_down) / 2.0,
+            mean: mean_up.zip(mean_down).map(|(u, d)| (u + d) / 2.0),
             s_up,
             s_down,
             reversal,
@@ -283,47 +326,71 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
     }
 
     let t = &targets;
-    let b = max_of(t.iter().map(|f| f.reversal.abs()));
-    let b_mean = t.iter().map(|f| f.reversal).sum::<f64>() / t.len() as f64;
-    let e_up = max_of(t.iter().map(|f| f.mean_up)) - min_of(t.iter().map(|f| f.mean_up));
-    let e_down = max_of(t.iter().map(|f| f.mean_down)) - min_of(t.iter().map(|f| f.mean_down));
-    let e = max_of(t.iter().flat_map(|f| [f.mean_up, f.mean_down]))
-        - min_of(t.iter().flat_map(|f| [f.mean_up, f.mean_down]));
-    let m = max_of(t.iter().map(|f| f.mean)) - min_of(t.iter().map(|f| f.mean));
+    let bidirectional = unidirectional.is_none();
+    // Range of a per-target figure: None when any target lacks it.
+    let range = |pick: &dyn Fn(&TargetFigures) -> Option<f64>| -> Option<f64> {
+        let hi = max_opt(t.iter().map(pick))?;
+        let lo = max_opt(t.iter().map(|f| pick(f).map(|v| -v)))?;
+        Some(hi + lo)
+    };
+    let b = max_opt(t.iter().map(|f| f.reversal.map(f64::abs)));
+    let b_mean = t
+        .iter()
+        .map(|f| f.reversal)
+        .sum::<Option<f64>>()
+        .map(|sum| sum / t.len() as f64);
+    let e_up = range(&|f| f.mean_up);
+    let e_down = range(&|f| f.mean_down);
+    // ISO 230-2:2014 3.19: E over both directions; not defined for a unidirectional test.
+    let e = if bidirectional {
+        let all = || t.iter().flat_map(|f| [f.mean_up, f.mean_down]).flatten();
+        Some(max_of(all()) - min_of(all()))
+    } else {
+        None
+    };
+    let m = range(&|f| f.mean);
     // Unidirectional accuracy: max(x̄ + k·s) − min(x̄ − k·s) over the targets of one direction.
-    let accuracy_one = |pick: &dyn Fn(&TargetFigures) -> (f64, Option<f64>)| -> Option<f64> {
+    let accuracy_one = |pick: &MeanAndS| -> Option<f64> {
         let hi = max_opt(t.iter().map(|f| {
             let (x, s) = pick(f);
-            s.map(|s| x + k * s)
+            x.zip(s).map(|(x, s)| x + k * s)
         }))?;
         let lo = max_opt(t.iter().map(|f| {
             let (x, s) = pick(f);
-            s.map(|s| -(x - k * s))
+            x.zip(s).map(|(x, s)| -(x - k * s))
         }))?;
         Some(hi + lo)
     };
     let a_up = accuracy_one(&|f| (f.mean_up, f.s_up));
     let a_down = accuracy_one(&|f| (f.mean_down, f.s_down));
     let a = match standard {
+        _ if !bidirectional => None,
         // VDI/DGQ 3441: P = max(x̄_j + ½(|U_j| + Ps_j)) − min(x̄_j − ½(|U_j| + Ps_j)).
         Standard::Vdi3441 => {
-            let half = |f: &TargetFigures| f.repeatability.map(|ps| (f.reversal.abs() + ps) / 2.0);
-            let hi = max_opt(t.iter().map(|f| half(f).map(|h| f.mean + h)));
-            let lo = max_opt(t.iter().map(|f| half(f).map(|h| -(f.mean - h))));
+            let half = |f: &TargetFigures| {
+                f.reversal
+                    .zip(f.repeatability)
+                    .map(|(u, ps)| (u.abs() + ps) / 2.0)
+            };
+            let hi = max_opt(t.iter().map(|f| half(f).zip(f.mean).map(|(h, x)| x + h)));
+            let lo = max_opt(t.iter().map(|f| half(f).zip(f.mean).map(|(h, x)| -(x - h))));
             hi.zip(lo).map(|(h, l)| h + l)
         }
         // ISO 230-2:2014 3.22 (±2s), GB 10931-1989 (±3S): both directions together.
         _ => {
+            let band = |x: Option<f64>, s: Option<f64>, sign: f64| {
+                x.zip(s).map(|(x, s)| sign * (x + sign * k * s))
+            };
             let hi = max_opt(t.iter().flat_map(|f| {
                 [
-                    f.s_up.map(|s| f.mean_up + k * s),
-                    f.s_down.map(|s| f.mean_down + k * s),
+                    band(f.mean_up, f.s_up, 1.0),
+                    band(f.mean_down, f.s_down, 1.0),
                 ]
             }));
             let lo = max_opt(t.iter().flat_map(|f| {
                 [
-                    f.s_up.map(|s| -(f.mean_up - k * s)),
-                    f.s_down.map(|s| -(f.mean_down - k * s)),
+                    band(f.mean_up, f.s_up, -1.0),
+                    band(f.mean_down, f.s_down, -1.0),
                 ]
             }));
             hi.zip(lo).map(|(h, l)| h + l)
@@ -334,7 +401,11 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
         B_mean: b_mean,
         R_up: max_opt(t.iter().map(|f| f.repeatability_up)),
         R_down: max_opt(t.iter().map(|f| f.repeatability_down)),
-        R: max_opt(t.iter().map(|f| f.repeatability)),
+        R: if bidirectional {
+            max_opt(t.iter().map(|f| f.repeatability))
+        } else {
+            None
+        },
         E_up: e_up,
         E_down: e_down,
         E: e,
@@ -346,6 +417,7 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
     Ok(Evaluation {
         standard,
         k,
+        unidirectional,
         targets,
         axis,
     })

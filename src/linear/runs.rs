@@ -234,6 +234,9 @@ fn parse_table(table: &CsvTable) -> Result<RunFile> {
             line: row.line,
         });
     }
+    // Directions first: a target never measured in one direction is a mixed file, named at
+    // that target's first line, rather than a pass "missing" it.
+    check_directions(path, &rows)?;
     check_passes(path, &rows)?;
     Ok(RunFile {
         path: path.to_path_buf(),
@@ -291,6 +294,64 @@ fn check_passes(path: &Path, rows: &[RunRow]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Either every target is approached from both directions (bidirectional test) or every target
+/// from the same single direction (unidirectional test, ISO 230-2 allows n ≥ 1 runs per
+/// direction); a mix is an error naming the first line of the first target that lacks a direction.
+fn check_directions(path: &Path, rows: &[RunRow]) -> Result<()> {
+    let targets = distinct_targets(rows.iter().map(|r| r.target_mm));
+    // Per target: first line seen in each direction [forward, reverse].
+    let mut seen: Vec<[Option<u64>; 2]> = vec![[None, None]; targets.len()];
+    for r in rows {
+        let i = target_index(&targets, r.target_mm)
+            .ok_or_else(|| Error::Internal("target not in its own list".into()))?;
+        let slot = &mut seen[i][usize::from(r.direction == Direction::Reverse)];
+        if slot.is_none() {
+            *slot = Some(r.line);
+        }
+    }
+    let both = seen.iter().any(|s| s[0].is_some() && s[1].is_some());
+    let only = |d: usize| seen.iter().all(|s| s[d].is_some() && s[1 - d].is_none());
+    if !both && (only(0) || only(1)) {
+        return Ok(());
+    }
+    if seen.iter().all(|s| s[0].is_some() && s[1].is_some()) {
+        return Ok(());
+    }
+    // Mixed: report the single-direction target whose first reading comes first in the file.
+    let offending = seen
+        .iter()
+        .zip(&targets)
+        .filter_map(|(s, t)| match s {
+            [Some(l), None] => Some((*l, *t, Direction::Forward)),
+            [None, Some(l)] => Some((*l, *t, Direction::Reverse)),
+            _ => None,
+        })
+        .min_by_key(|(l, _, _)| *l);
+    let Some((line, target, dir)) = offending else {
+        return Ok(());
+    };
+    let other = match dir {
+        Direction::Forward => Direction::Reverse,
+        Direction::Reverse => Direction::Forward,
+    };
+    let why = if both {
+        "other targets are approached from both directions".to_string()
+    } else {
+        format!(
+            "other targets are approached in direction {} only",
+            other.symbol()
+        )
+    };
+    Err(Error::input(
+        Location::line(path, line),
+        format!(
+            "target {target} mm is approached in direction {} only but {why} (mixed uni/bidirectional file)",
+            dir.symbol()
+        ),
+        "measure every target from both directions, or every target from the same one direction (unidirectional test)",
+    ))
 }
 
 /// Sorted distinct targets, merging values closer than [`TARGET_TOLERANCE_MM`].

@@ -115,8 +115,11 @@ impl CompTable {
             ));
         }
         let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
-        let up: Vec<f64> = ev.targets.iter().map(|t| t.mean_up).collect();
-        let down: Vec<f64> = ev.targets.iter().map(|t| t.mean_down).collect();
+        // A unidirectional test gives one direction's means: the table then carries the same
+        // values in both columns (the controller compensates both directions alike).
+        let side = |t: &super::eval::TargetFigures, x: Option<f64>| x.unwrap_or(t.mean_any());
+        let up: Vec<f64> = ev.targets.iter().map(|t| side(t, t.mean_up)).collect();
+        let down: Vec<f64> = ev.targets.iter().map(|t| side(t, t.mean_down)).collect();
         let (first, last) = match (xs.first(), xs.last()) {
             (Some(&f), Some(&l)) => (f, l),
             _ => return Err(Error::numeric("no targets", "measure at least two targets")),

@@ -87,7 +87,7 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
     let hours = |t: f64| t / 3600.0;
     let (x0, x1) = span(report.times.iter().map(|t| hours(t.time_s)));
     let values = report.times.iter().flat_map(|t| {
-        [Some(t.before.E), Some(t.after.E), t.before.A, t.after.A]
+        [t.before.E, t.after.E, t.before.A, t.after.A]
             .into_iter()
             .flatten()
     });
@@ -115,8 +115,8 @@ pub fn evaluate_chart(path: &Path, report: &EvaluationReport) -> Result<()> {
             .axis_desc_style((FONT, 14))
             .draw()?;
         let series: [(&str, RGBColor, Figure); 4] = [
-            ("E before", RED, |t| Some(t.before.E)),
-            ("E after", BLUE, |t| Some(t.after.E)),
+            ("E before", RED, |t| t.before.E),
+            ("E after", BLUE, |t| t.after.E),
             ("A before", RGBColor(240, 150, 40), |t| t.before.A),
             ("A after", RGBColor(40, 160, 220), |t| t.after.A),
         ];
