@@ -11,7 +11,7 @@
 
 use std::fmt::Write;
 
-use crate::nn::{layer_spans, Activation, GRAD_LANES};
+use crate::nn::{layer_spans, Activation, LayerSpan, GRAD_LANES};
 
 /// Widest layer input the row kernel holds in registers and workgroup memory
 /// ((inputs + 1) · 64 floats of workgroup memory: 16 KiB at 63 inputs).
@@ -27,12 +27,8 @@ pub fn gradient_rows_source(layer_sizes: &[usize]) -> Option<(String, u32)> {
     if widest > MAX_ROW_INPUTS || GRAD_LANES != 64 || layer_sizes.first() != Some(&2) {
         return None;
     }
-    let mut unit_offset = Vec::with_capacity(spans.len());
-    let mut units = 0usize;
-    for span in &spans {
-        unit_offset.push(units);
-        units += span.outputs;
-    }
+    let unit_offset = unit_offsets(&spans);
+    let units: usize = spans.iter().map(|span| span.outputs).sum();
     let mut w = String::new();
     // `writeln!` into a String cannot fail.
     let mut line = |text: String| {
@@ -153,12 +149,7 @@ pub fn forward_rows_source(layer_sizes: &[usize], activation: Activation) -> Opt
         Activation::Relu => format!("select(0.0, 1.0, {a} > 0.0)"),
     };
     let last = spans.len() - 1;
-    let mut unit_offset = Vec::with_capacity(spans.len());
-    let mut units = 0usize;
-    for span in &spans {
-        unit_offset.push(units);
-        units += span.outputs;
-    }
+    let unit_offset = unit_offsets(&spans);
     let mut w = String::new();
     let mut line = |text: String| {
         let _ = writeln!(w, "{text}");
@@ -260,4 +251,17 @@ pub fn forward_rows_source(layer_sizes: &[usize], activation: Activation) -> Opt
     line("    }".into());
     line("}".into());
     Some(w)
+}
+
+/// First unit of each layer in the per-sample unit storage (`acts`, `deltas`): the running sum
+/// of the earlier layers' output counts.
+fn unit_offsets(spans: &[LayerSpan]) -> Vec<usize> {
+    spans
+        .iter()
+        .scan(0usize, |units, span| {
+            let first = *units;
+            *units += span.outputs;
+            Some(first)
+        })
+        .collect()
 }
