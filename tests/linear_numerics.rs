@@ -329,3 +329,94 @@ fn budget_terms_by_hand() {
     .sqrt();
     assert!((b.total_um - total).abs() < 1e-12);
 }
+
+/// Each condition is refused just outside the range the air-index equations are valid for
+/// (−40…100 °C, 10…140 kPa, 0…100 %, 300…1700 nm, 0…2000 µmol/mol) and accepted at its edge,
+/// with the quantity and its range named.
+#[test]
+fn air_index_refuses_conditions_outside_the_valid_range() {
+    let standard = AirConditions {
+        temp_c: 20.0,
+        pressure_kpa: 101.325,
+        humidity_pct: 50.0,
+        wavelength_nm: 633.0,
+        co2_ppm: 450.0,
+    };
+    type Field = fn(&mut AirConditions) -> &mut f64;
+    let cases: [(Field, f64, f64, &str); 10] = [
+        (
+            |c| &mut c.temp_c,
+            -40.0,
+            -40.01,
+            "air temperature -40.01 °C is outside −40…100 °C",
+        ),
+        (
+            |c| &mut c.temp_c,
+            100.0,
+            100.01,
+            "air temperature 100.01 °C is outside",
+        ),
+        (
+            |c| &mut c.pressure_kpa,
+            10.0,
+            9.99,
+            "pressure 9.99 kPa is outside 10…140 kPa",
+        ),
+        (
+            |c| &mut c.pressure_kpa,
+            140.0,
+            140.01,
+            "pressure 140.01 kPa is outside",
+        ),
+        (
+            |c| &mut c.humidity_pct,
+            0.0,
+            -0.01,
+            "relative humidity -0.01 % is outside 0…100 %",
+        ),
+        (
+            |c| &mut c.humidity_pct,
+            100.0,
+            100.01,
+            "relative humidity 100.01 % is outside",
+        ),
+        (
+            |c| &mut c.wavelength_nm,
+            300.0,
+            299.99,
+            "wavelength 299.99 nm is outside 300…1700 nm",
+        ),
+        (
+            |c| &mut c.wavelength_nm,
+            1700.0,
+            1700.01,
+            "wavelength 1700.01 nm is outside",
+        ),
+        (
+            |c| &mut c.co2_ppm,
+            0.0,
+            -0.01,
+            "CO2 content -0.01 µmol/mol is outside 0…2000",
+        ),
+        (
+            |c| &mut c.co2_ppm,
+            2000.0,
+            2000.01,
+            "CO2 content 2000.01 µmol/mol is outside",
+        ),
+    ];
+    for (field, edge, outside, message) in cases {
+        let mut at_edge = standard;
+        *field(&mut at_edge) = edge;
+        assert!(
+            refractive_index(&at_edge, AirFormula::Ciddor).is_ok(),
+            "{message}: the edge value {edge} must be accepted"
+        );
+        let mut beyond = standard;
+        *field(&mut beyond) = outside;
+        let err = refractive_index(&beyond, AirFormula::Ciddor)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(message), "expected '{message}' in: {err}");
+    }
+}

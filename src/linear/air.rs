@@ -115,35 +115,56 @@ fn check(c: &AirConditions, formula: AirFormula) -> Result<()> {
             "check the inputs",
         );
     }
-    if !(-40.0..=100.0).contains(&c.temp_c) {
-        return bad(
-            format!("air temperature {} °C is outside −40…100 °C", c.temp_c),
+    // (value, valid range, what it is, its unit, the range as the message says it, hint)
+    let ranges = [
+        (
+            c.temp_c,
+            -40.0..=100.0,
+            "air temperature",
+            "°C",
+            "−40…100 °C",
             "the equations are valid for −40…100 °C (NIST validates −40…50 °C)",
-        );
-    }
-    if !(10.0..=140.0).contains(&c.pressure_kpa) {
-        return bad(
-            format!("pressure {} kPa is outside 10…140 kPa", c.pressure_kpa),
+        ),
+        (
+            c.pressure_kpa,
+            10.0..=140.0,
+            "pressure",
+            "kPa",
+            "10…140 kPa",
             "give the absolute air pressure in kPa (standard: 101.325)",
-        );
-    }
-    if !(0.0..=100.0).contains(&c.humidity_pct) {
-        return bad(
-            format!("relative humidity {} % is outside 0…100 %", c.humidity_pct),
+        ),
+        (
+            c.humidity_pct,
+            0.0..=100.0,
+            "relative humidity",
+            "%",
+            "0…100 %",
             "give the relative humidity in percent",
-        );
-    }
-    if !(300.0..=1700.0).contains(&c.wavelength_nm) {
-        return bad(
-            format!("wavelength {} nm is outside 300…1700 nm", c.wavelength_nm),
+        ),
+        (
+            c.wavelength_nm,
+            300.0..=1700.0,
+            "wavelength",
+            "nm",
+            "300…1700 nm",
             "give the vacuum wavelength in nm (He-Ne: 632.991)",
-        );
-    }
-    if !(0.0..=2000.0).contains(&c.co2_ppm) {
-        return bad(
-            format!("CO2 content {} µmol/mol is outside 0…2000", c.co2_ppm),
+        ),
+        (
+            c.co2_ppm,
+            0.0..=2000.0,
+            "CO2 content",
+            "µmol/mol",
+            "0…2000",
             "typical laboratory air holds about 450 µmol/mol",
-        );
+        ),
+    ];
+    for (value, range, what, unit, range_text, hint) in ranges {
+        if !range.contains(&value) {
+            return bad(
+                format!("{what} {value} {unit} is outside {range_text}"),
+                hint,
+            );
+        }
     }
     if formula == AirFormula::Edlen && c.co2_ppm != DEFAULT_CO2_PPM {
         return bad(
