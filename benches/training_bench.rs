@@ -54,7 +54,7 @@ pub fn training(c: &mut Criterion) {
         let samples: usize = sets.iter().map(|s| s.len()).sum();
         group.throughput(Throughput::Elements(samples as u64 * EPOCHS as u64));
         group.bench_with_input(BenchmarkId::new("cpu", parts), &sets, |b, sets| {
-            b.iter(|| black_box(CpuTrainer.train_batch(sets, &config).unwrap()))
+            b.iter(|| black_box(CpuTrainer::reference().train_batch(sets, &config).unwrap()))
         });
         if let Some(gpu) = &gpu {
             group.bench_with_input(BenchmarkId::new("gpu", parts), &sets, |b, sets| {
@@ -81,7 +81,13 @@ pub fn grid_evaluation(c: &mut Criterion) {
     group.sample_size(10);
     group.throughput(Throughput::Elements(inputs.len() as u64));
     group.bench_function("cpu", |b| {
-        b.iter(|| black_box(CpuTrainer.evaluate_batch(&nets, &inputs).unwrap()))
+        b.iter(|| {
+            black_box(
+                CpuTrainer::reference()
+                    .evaluate_batch(&nets, &inputs)
+                    .unwrap(),
+            )
+        })
     });
     if let Some(gpu) = &gpu {
         group.bench_function("gpu", |b| {

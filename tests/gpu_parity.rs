@@ -55,7 +55,8 @@ fn training_matches_cpu_after_200_adam_steps() {
         ..Default::default()
     };
     let initial = initial_networks(sets.len(), &config);
-    let cpu = CpuTrainer
+    let cpu = CpuTrainer::with_lanes(GRAD_LANES)
+        .unwrap()
         .train_from(initial.clone(), &sets, &config)
         .unwrap();
     let on_gpu = gpu.train_from(initial.clone(), &sets, &config).unwrap();
@@ -143,7 +144,8 @@ fn generated_and_generic_kernels_match_cpu() {
             ..Default::default()
         };
         let initial = initial_networks(sets.len(), &config);
-        let cpu = CpuTrainer
+        let cpu = CpuTrainer::with_lanes(GRAD_LANES)
+            .unwrap()
             .train_from(initial.clone(), &sets, &config)
             .unwrap();
         let on_gpu = gpu.train_from(initial.clone(), &sets, &config).unwrap();
@@ -208,12 +210,18 @@ fn evaluation_matches_cpu_within_1e_4_um() {
         epochs: 150,
         ..Default::default()
     };
-    let nets = CpuTrainer.train_batch(&sets, &config).unwrap();
+    let nets = CpuTrainer::with_lanes(GRAD_LANES)
+        .unwrap()
+        .train_batch(&sets, &config)
+        .unwrap();
     // A mixed batch: two trained tanh networks, then a relu network of another shape.
     let mut all = nets.clone();
     all.push(Mlp::init(&[2, 7, 5, 1], Activation::Relu, 9));
     let inputs = grid_inputs(&norms[0], 2.0);
-    let cpu = CpuTrainer.evaluate_batch(&all, &inputs).unwrap();
+    let cpu = CpuTrainer::with_lanes(GRAD_LANES)
+        .unwrap()
+        .evaluate_batch(&all, &inputs)
+        .unwrap();
     let on_gpu = gpu.evaluate_batch(&all, &inputs).unwrap();
     assert_eq!(on_gpu.len(), 3);
     for (k, (c, g)) in cpu.iter().zip(&on_gpu).enumerate() {

@@ -200,7 +200,7 @@ fn training_fits_a_quadratic_bowl() {
         epochs: 600,
         ..Default::default()
     };
-    let nets = CpuTrainer
+    let nets = CpuTrainer::reference()
         .train_batch(std::slice::from_ref(&set), &config)
         .unwrap();
     let before = mse(&initial_networks(1, &config)[0], &set);
@@ -229,15 +229,17 @@ fn training_is_deterministic_and_independent_of_batch_company() {
         epochs: 50,
         ..Default::default()
     };
-    let a = CpuTrainer
+    let a = CpuTrainer::reference()
         .train_batch(&[set.clone(), other.clone()], &config)
         .unwrap();
-    let b = CpuTrainer
+    let b = CpuTrainer::reference()
         .train_batch(&[set.clone(), other], &config)
         .unwrap();
     assert_eq!(bits(&a), bits(&b));
     // Network 0 alone gets the same seed and therefore the same result.
-    let alone = CpuTrainer.train_batch(&[set], &config).unwrap();
+    let alone = CpuTrainer::reference()
+        .train_batch(&[set], &config)
+        .unwrap();
     assert_eq!(bits(&alone), bits(&a[..1]));
     assert_ne!(a[0].params, a[1].params);
 }
@@ -249,7 +251,9 @@ fn evaluate_batch_equals_forward() {
     let inputs: Vec<[f32; 2]> = (0..5000)
         .map(|i| [(i % 71) as f32 / 35.0 - 1.0, (i / 71) as f32 / 35.0 - 1.0])
         .collect();
-    let out = CpuTrainer.evaluate_batch(&nets, &inputs).unwrap();
+    let out = CpuTrainer::reference()
+        .evaluate_batch(&nets, &inputs)
+        .unwrap();
     assert_eq!(out.len(), 3);
     for (net, ys) in nets.iter().zip(&out) {
         assert_eq!(ys.len(), inputs.len());
@@ -355,23 +359,30 @@ fn bad_batches_are_errors_not_panics() {
         epochs: 2,
         ..Default::default()
     };
-    let empty = CpuTrainer
+    let empty = CpuTrainer::reference()
         .train_batch(&[TrainingSet::default()], &config)
         .unwrap_err();
     assert!(empty.to_string().contains("training set 0"), "{empty}");
     let mut nan = small_set();
     nan.targets[3] = f32::NAN;
-    let err = CpuTrainer.train_batch(&[nan], &config).unwrap_err();
+    let err = CpuTrainer::reference()
+        .train_batch(&[nan], &config)
+        .unwrap_err();
     assert!(err.to_string().contains("NaN"), "{err}");
     let mut broken = initial_networks(1, &config);
     broken[0].params.pop();
     assert!(broken[0].forward([0.0, 0.0]).is_nan());
     assert!(loss_gradient(&broken[0], &small_set()).is_err());
-    assert!(CpuTrainer.evaluate_batch(&broken, &[[0.0, 0.0]]).is_err());
-    assert!(CpuTrainer
+    assert!(CpuTrainer::reference()
+        .evaluate_batch(&broken, &[[0.0, 0.0]])
+        .is_err());
+    assert!(CpuTrainer::reference()
         .train_from(broken, &[small_set()], &config)
         .is_err());
-    assert!(CpuTrainer.train_batch(&[], &config).unwrap().is_empty());
+    assert!(CpuTrainer::reference()
+        .train_batch(&[], &config)
+        .unwrap()
+        .is_empty());
     let diverging = ModelConfig {
         learning_rate: 1.0,
         lr_decay: 1.0,
@@ -380,7 +391,9 @@ fn bad_batches_are_errors_not_panics() {
     };
     let mut huge = small_set();
     huge.targets.iter_mut().for_each(|t| *t = 3e38);
-    let err = CpuTrainer.train_batch(&[huge], &diverging).unwrap_err();
+    let err = CpuTrainer::reference()
+        .train_batch(&[huge], &diverging)
+        .unwrap_err();
     assert!(err.to_string().contains("diverged"), "{err}");
 }
 
@@ -422,7 +435,7 @@ fn default_model_fits_a_sample_like_family_within_1_percent() {
         });
         truth.push((norm, points));
     }
-    let nets = CpuTrainer
+    let nets = CpuTrainer::reference()
         .train_batch(&sets, &ModelConfig::default())
         .unwrap();
     for (k, (net, (norm, points))) in nets.iter().zip(&truth).enumerate() {

@@ -162,7 +162,7 @@ impl Trainer for AutoTrainer {
         match self.gpu.train_from(initial.clone(), sets, config) {
             Ok(nets) => Ok(nets),
             Err(e) => self.fallback("training", e, || {
-                CpuTrainer.train_from(initial, sets, config)
+                CpuTrainer::reference().train_from(initial, sets, config)
             }),
         }
     }
@@ -170,7 +170,9 @@ impl Trainer for AutoTrainer {
     fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
         match self.gpu.evaluate_batch(nets, inputs) {
             Ok(out) => Ok(out),
-            Err(e) => self.fallback("evaluating", e, || CpuTrainer.evaluate_batch(nets, inputs)),
+            Err(e) => self.fallback("evaluating", e, || {
+                CpuTrainer::reference().evaluate_batch(nets, inputs)
+            }),
         }
     }
 }
@@ -185,7 +187,7 @@ impl Trainer for AutoTrainer {
 /// - `cpu`: the CPU reference.
 pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>> {
     match backend {
-        Backend::Cpu => Ok(Box::new(CpuTrainer)),
+        Backend::Cpu => Ok(Box::new(CpuTrainer::reference())),
         Backend::Gpu => Ok(Box::new(GpuTrainer::new()?)),
         Backend::Auto => match GpuTrainer::open(auto_allows_software()) {
             Ok(gpu) => Ok(Box::new(AutoTrainer { gpu, quiet })),
@@ -193,7 +195,7 @@ pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>>
                 if !quiet {
                     eprintln!("note: no usable GPU ({e}); training on the CPU");
                 }
-                Ok(Box::new(CpuTrainer))
+                Ok(Box::new(CpuTrainer::reference()))
             }
         },
     }

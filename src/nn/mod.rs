@@ -19,5 +19,5 @@ pub(crate) use train::diverged;
 pub use train::{
     adam_update, check_batch, check_nets, initial_networks, loss_gradient, mse, train_network,
     AdamScalars, CpuTrainer, Trainer, TrainingSet, ADAM_BETA1, ADAM_BETA2, ADAM_EPSILON,
-    ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2, GRAD_LANES,
+    ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2, GRAD_LANES, REFERENCE_LANES,
 };

@@ -56,10 +56,15 @@ pub fn initial_networks(count: usize, config: &ModelConfig) -> Vec<Mlp> {
         .collect()
 }
 
-/// Gradient sums use this many lanes: sample s goes to lane s mod 64, each lane sums its
-/// samples in ascending order, then the lanes are added in a binary tree (32, 16, … 1).
-/// `shaders/train.wgsl` does the same in each parameter's thread, so both backends
-/// round identically in the reduction.
+/// Gradient lanes of the reference order: sample s goes to lane s mod 8, each lane sums its
+/// samples in ascending order, then the lanes are added in a binary tree (lane l += lane
+/// l + 4, then + 2, then + 1). The CPU-adapter kernels (`src/gpu/lavapipe.rs`: 8 invocations
+/// per network) and the fast CPU trainer sum in this order.
+pub const REFERENCE_LANES: usize = 8;
+
+/// Gradient lanes of the hardware-GPU kernels (`shaders/train.wgsl`, `src/gpu/fixed.rs`):
+/// the same rule with 64 lanes (tree 32, 16, … 1). [`CpuTrainer::with_lanes`]`(GRAD_LANES)`
+/// reproduces their order.
 pub const GRAD_LANES: usize = 64;
 
 /// Adam (Kingma & Ba 2015, Algorithm 1) constants. 1 − β is written out, not computed,
@@ -167,13 +172,48 @@ fn check_set(k: usize, set: &TrainingSet) -> Result<()> {
     Ok(())
 }
 
-/// The CPU reference trainer: plain Rust f32, networks in parallel with rayon.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct CpuTrainer;
+/// The CPU reference trainer: plain Rust f32, networks in parallel with rayon; the readable
+/// specification every other trainer is tested against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CpuTrainer {
+    /// Gradient lanes (a power of two, at least 8): [`REFERENCE_LANES`], or [`GRAD_LANES`]
+    /// to follow the hardware-GPU kernels' order.
+    lanes: usize,
+}
+
+impl Default for CpuTrainer {
+    fn default() -> Self {
+        CpuTrainer::reference()
+    }
+}
+
+impl CpuTrainer {
+    /// The reference order ([`REFERENCE_LANES`] lanes).
+    pub const fn reference() -> CpuTrainer {
+        CpuTrainer {
+            lanes: REFERENCE_LANES,
+        }
+    }
+
+    /// The reference arithmetic with `lanes` gradient lanes (a power of two, 8 to 1024).
+    pub fn with_lanes(lanes: usize) -> Result<CpuTrainer> {
+        if !lanes.is_power_of_two() || !(BLOCK..=1024).contains(&lanes) {
+            return Err(Error::usage(
+                format!("{lanes} gradient lanes"),
+                "use a power of two from 8 to 1024",
+            ));
+        }
+        Ok(CpuTrainer { lanes })
+    }
+
+    pub fn lanes(&self) -> usize {
+        self.lanes
+    }
+}
 
 impl Trainer for CpuTrainer {
     fn name(&self) -> String {
-        "cpu".to_string()
+        "cpu-reference".to_string()
     }
 
     fn train_from(
@@ -188,7 +228,7 @@ impl Trainer for CpuTrainer {
             .zip(sets.par_iter())
             .enumerate()
             .map(|(k, (mut net, set))| {
-                train_network(&mut net, set, config, k)?;
+                train_network_with_lanes(&mut net, set, config, k, self.lanes)?;
                 Ok(net)
             })
             .collect()
@@ -318,9 +358,6 @@ impl<'a> Evaluator<'a> {
 /// Samples processed together in the CPU forward/backward pass (SIMD across samples; each
 /// sample keeps its own operation order, so blocking changes no bit).
 const BLOCK: usize = 8;
-/// Lane groups: the samples of block b go to lanes (8b mod 64)…(8b mod 64) + 7, so the
-/// 8 groups of 8 lanes are disjoint and run in parallel without changing any sum.
-const LANE_GROUPS: usize = GRAD_LANES / BLOCK;
 
 /// Per-thread scratch of the blocked pass: unit-major, BLOCK samples innermost.
 struct BlockScratch {
@@ -334,13 +371,16 @@ struct BlockScratch {
 struct GradientWorkspace {
     spans: Vec<LayerSpan>,
     unit_offset: Vec<usize>,
+    /// One per lane group: the samples of block b go to lanes (8b mod L)…(8b mod L) + 7, so
+    /// the L/8 groups of 8 lanes are disjoint and run in parallel without changing any sum.
     scratch: Vec<BlockScratch>,
-    /// `GRAD_LANES` partial gradients; after [`GradientWorkspace::gradient`] lane 0 holds the sum.
+    /// L partial gradients; after [`GradientWorkspace::gradient`] lane 0 holds the sum.
     lanes: Vec<f32>,
+    lane_count: usize,
 }
 
 impl GradientWorkspace {
-    fn new(net: &Mlp) -> Self {
+    fn new(net: &Mlp, lane_count: usize) -> Self {
         let spans = layer_spans(&net.layer_sizes);
         let mut unit_offset = Vec::with_capacity(spans.len());
         let mut units = 0;
@@ -349,7 +389,7 @@ impl GradientWorkspace {
             units += span.outputs;
         }
         let width = net.layer_sizes.iter().copied().max().unwrap_or(2);
-        let scratch = (0..LANE_GROUPS)
+        let scratch = (0..lane_count / BLOCK)
             .map(|_| BlockScratch {
                 acts: vec![[0.0; BLOCK]; units],
                 deltas: vec![[0.0; BLOCK]; units],
@@ -361,7 +401,8 @@ impl GradientWorkspace {
             spans,
             unit_offset,
             scratch,
-            lanes: vec![0.0; GRAD_LANES * net.params.len()],
+            lanes: vec![0.0; lane_count * net.params.len()],
+            lane_count,
         }
     }
 
@@ -370,13 +411,14 @@ impl GradientWorkspace {
     ///
     /// Per sample: forward z = b[i] + Σ_j W[i][j]·a[j] (j ascending), δ_out = (y − t)·(2/n),
     /// δ_prev[j] = (Σ_i W[i][j]·δ[i], i ascending)·f'(a[j]); sample s adds δ[i]·a[j] to lane
-    /// s mod 64, lanes sum their samples in ascending order, then a binary tree adds lanes.
+    /// s mod L, lanes sum their samples in ascending order, then a binary tree adds lanes.
     fn gradient(&mut self, params: &[f32], activation: Activation, set: &TrainingSet) -> f64 {
         let n_params = params.len();
         let n = set.len();
         let spans = &self.spans;
         let unit_offset = &self.unit_offset;
         let grad_scale = 2.0f32 / n as f32;
+        let groups = self.lane_count / BLOCK;
         self.lanes.fill(0.0);
         let losses: Vec<f64> = self
             .lanes
@@ -402,13 +444,13 @@ impl GradientWorkspace {
                         scratch,
                         lanes,
                     );
-                    block += LANE_GROUPS;
+                    block += groups;
                 }
                 loss
             })
             .collect();
-        // Tree over lanes: lane l += lane l + stride, stride 32, 16, … 1.
-        let mut stride = GRAD_LANES / 2;
+        // Tree over lanes: lane l += lane l + stride, stride L/2, L/4, … 1.
+        let mut stride = self.lane_count / 2;
         while stride > 0 {
             let (low, high) = self.lanes.split_at_mut(stride * n_params);
             for (a, b) in low.iter_mut().zip(&high[..stride * n_params]) {
@@ -535,13 +577,14 @@ fn block_pass(
 pub fn loss_gradient(net: &Mlp, set: &TrainingSet) -> Result<(f64, Vec<f32>)> {
     check_nets(std::slice::from_ref(net))?;
     check_set(0, set)?;
-    let mut ws = GradientWorkspace::new(net);
+    let mut ws = GradientWorkspace::new(net, REFERENCE_LANES);
     let loss = ws.gradient(&net.params, net.activation, set);
     Ok((loss, ws.lanes[..net.params.len()].to_vec()))
 }
 
 /// Full-batch Adam on one network: `config.epochs` steps of
-/// forward → loss gradient 2(y − t)/n → backprop → lane sums → tree → Adam.
+/// forward → loss gradient 2(y − t)/n → backprop → lane sums → tree → Adam, in the
+/// reference order ([`REFERENCE_LANES`]).
 /// Fails with a numeric error if the loss stops being finite.
 pub fn train_network(
     net: &mut Mlp,
@@ -549,8 +592,19 @@ pub fn train_network(
     config: &ModelConfig,
     k: usize,
 ) -> Result<()> {
+    train_network_with_lanes(net, set, config, k, REFERENCE_LANES)
+}
+
+/// [`train_network`] with `lanes` gradient lanes.
+fn train_network_with_lanes(
+    net: &mut Mlp,
+    set: &TrainingSet,
+    config: &ModelConfig,
+    k: usize,
+    lanes: usize,
+) -> Result<()> {
     check_batch(std::slice::from_ref(net), std::slice::from_ref(set), config)?;
-    let mut ws = GradientWorkspace::new(net);
+    let mut ws = GradientWorkspace::new(net, lanes);
     let mut m = vec![0.0f32; net.params.len()];
     let mut v = vec![0.0f32; net.params.len()];
     for epoch in 0..config.epochs {
