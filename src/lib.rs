@@ -9,6 +9,7 @@
 #![forbid(unsafe_code)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
+pub mod backend;
 pub mod batch;
 pub mod error;
 pub mod geom;

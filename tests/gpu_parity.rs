@@ -345,25 +345,61 @@ fn host_structs_match_wgsl_layouts() {
 
 #[test]
 fn backend_selection_follows_the_documented_order() {
-    use errmap::gpu::{auto_allows_software, select_trainer};
-    assert_eq!(select_trainer(Backend::Cpu, true).unwrap().name(), "cpu");
+    use errmap::backend::probe::{probe_key, Measure, Verdict};
+    use errmap::backend::{select_trainer_cached_in, silent};
+    let config = ModelConfig::default();
+    let select = |backend, cache: Option<std::path::PathBuf>| {
+        select_trainer_cached_in(backend, &config, silent(), cache)
+    };
+    let cpu = select(Backend::Cpu, None).unwrap();
+    assert_eq!(cpu.backend, Backend::Cpu);
+    assert!(
+        cpu.trainer.name().starts_with("cpu ("),
+        "{}",
+        cpu.trainer.name()
+    );
+    let reference = select(Backend::CpuReference, None).unwrap();
+    assert_eq!(reference.trainer.name(), "cpu-reference");
     let Some(gpu) = gpu("backend_selection_follows_the_documented_order") else {
-        // Without any adapter, auto falls back to the CPU and gpu is a device error.
-        assert_eq!(select_trainer(Backend::Auto, true).unwrap().name(), "cpu");
-        let err = select_trainer(Backend::Gpu, true).err().unwrap();
+        // Without any adapter, auto takes the fast CPU trainer and gpu is a device error.
+        assert_eq!(select(Backend::Auto, None).unwrap().backend, Backend::Cpu);
+        let err = select(Backend::Gpu, None).err().unwrap();
         assert_eq!(err.exit_code(), 3, "{err}");
         return;
     };
-    let forced = select_trainer(Backend::Gpu, true).unwrap();
-    assert_eq!(forced.name(), gpu.name());
-    assert!(forced.name().starts_with("gpu: "), "{}", forced.name());
-    let auto = select_trainer(Backend::Auto, true).unwrap().name();
-    let software = gpu.context().adapter.software;
-    if software && !auto_allows_software() {
-        assert_eq!(auto, "cpu");
-    } else {
-        assert_eq!(auto, gpu.name());
+    let forced = select(Backend::Gpu, None).unwrap();
+    assert_eq!(forced.trainer.name(), gpu.name());
+    // auto follows the probe's figures: planted in its cache, either way round.
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("backend-probe.json");
+    let measure = |backend: &str, rate: f64| Measure {
+        backend: backend.into(),
+        device: "planted".into(),
+        sample_epochs_per_s: rate,
+        pipeline_build_s: 0.0,
+    };
+    for (cpu_rate, gpu_rate, expected) in [(1e6, 2e6, Backend::Gpu), (2e6, 1e6, Backend::Cpu)] {
+        let verdict = Verdict {
+            cpu: measure("cpu", cpu_rate),
+            gpu: measure("gpu", gpu_rate),
+            cached: false,
+        };
+        let planted = std::collections::BTreeMap::from([(probe_key(&gpu, &config), verdict)]);
+        std::fs::write(&cache, serde_json::to_string(&planted).unwrap()).unwrap();
+        let auto = select(Backend::Auto, Some(cache.clone())).unwrap();
+        assert_eq!(auto.backend, expected, "{}", auto.reason);
+        assert!(auto.reason.contains("measured earlier"), "{}", auto.reason);
     }
+    // With no cache entry, auto measures both and records what it measured.
+    std::fs::remove_file(&cache).unwrap();
+    let auto = select(Backend::Auto, Some(cache.clone())).unwrap();
+    assert!(auto.reason.contains("measured now"), "{}", auto.reason);
+    let recorded: std::collections::BTreeMap<String, Verdict> =
+        serde_json::from_str(&std::fs::read_to_string(&cache).unwrap()).unwrap();
+    let verdict = &recorded[&probe_key(&gpu, &config)];
+    assert!(verdict.cpu.sample_epochs_per_s > 0.0 && verdict.gpu.sample_epochs_per_s > 0.0);
+    let chose_gpu = verdict.gpu.sample_epochs_per_s > verdict.cpu.sample_epochs_per_s;
+    assert_eq!(auto.backend == Backend::Gpu, chose_gpu);
 }
 
 /// Batch splitting is planned from the limits alone (no device needed).

@@ -459,3 +459,103 @@ fn default_model_fits_a_sample_like_family_within_1_percent() {
         );
     }
 }
+
+/// A set whose size exercises every edge of the fast trainer's blocking: several chunks
+/// (512 samples each), a last chunk with an odd number of blocks, a partial last block.
+fn ragged_set(n: usize) -> TrainingSet {
+    let mut set = TrainingSet::default();
+    for s in 0..n {
+        let x = [
+            -1.0 + 2.0 * ((s * 37) % 101) as f32 / 100.0,
+            -1.0 + 2.0 * ((s * 53) % 89) as f32 / 88.0,
+        ];
+        set.inputs.push(x);
+        set.targets
+            .push((1.7 * x[0]).sin() * (0.9 * x[1]).cos() + 0.3 * x[1]);
+    }
+    set
+}
+
+fn max_relative_difference(a: &[f32], b: &[f32]) -> f64 {
+    let scale = b
+        .iter()
+        .map(|v| v.abs() as f64)
+        .fold(0.0, f64::max)
+        .max(1e-30);
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .fold(0.0, f64::max)
+        / scale
+}
+
+#[test]
+fn fast_gradient_equals_the_reference_gradient_within_rounding() {
+    // FMA changes only the rounding: the gradients agree to a few f32 ulps of their scale.
+    for n in [1, 7, 8, 9, 530, 1100] {
+        let set = ragged_set(n);
+        let net = Mlp::init(&[2, 16, 12, 1], Activation::Tanh, 11);
+        let (ref_loss, reference) = loss_gradient(&net, &set).unwrap();
+        let mut fast = FastGradient::new(&net, &set);
+        let loss = fast.compute(&net.params, &set);
+        assert!(
+            (loss - ref_loss).abs() <= 1e-6 * ref_loss.max(1e-12),
+            "n {n}: {loss} vs {ref_loss}"
+        );
+        let d = max_relative_difference(&fast.sum, &reference);
+        assert!(
+            d < 2e-6,
+            "n {n}: gradients differ by {d:e} of their largest entry"
+        );
+    }
+}
+
+#[test]
+fn fast_trainer_follows_the_reference_within_its_stated_tolerance() {
+    // Stated tolerance (docs/gpu.md): after 200 Adam steps, parameters within 1e-3 of the
+    // largest parameter and predictions within 1e-3 (standardised units) of the reference.
+    let sets = vec![
+        ragged_set(700),
+        ragged_set(1100),
+        ragged_set(64),
+        ragged_set(333),
+    ];
+    let config = ModelConfig {
+        hidden: vec![16, 16],
+        epochs: 200,
+        loss_every: 50,
+        ..Default::default()
+    };
+    let reference = CpuTrainer::reference().train_batch(&sets, &config).unwrap();
+    let fast = FastCpuTrainer.train_batch(&sets, &config).unwrap();
+    for (k, (f, r)) in fast.iter().zip(&reference).enumerate() {
+        let d = max_relative_difference(&f.params, &r.params);
+        assert!(d < 1e-3, "network {k}: parameters differ by {d:e}");
+        for x in &sets[k].inputs {
+            assert!((f.forward(*x) - r.forward(*x)).abs() < 1e-3);
+        }
+        // And both actually learned: the loss fell well below the targets' variance.
+        assert!(mse(f, &sets[k]) < 0.05, "network {k} did not fit");
+    }
+}
+
+#[test]
+fn fast_trainer_is_bitwise_repeatable_whatever_the_thread_count() {
+    let sets = vec![ragged_set(1100), ragged_set(530)];
+    let config = ModelConfig {
+        hidden: vec![8, 8],
+        epochs: 30,
+        loss_every: 30,
+        ..Default::default()
+    };
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| FastCpuTrainer.train_batch(&sets, &config).unwrap())
+    };
+    let one = on(1);
+    assert_eq!(bits(&one), bits(&on(2)));
+    assert_eq!(bits(&one), bits(&on(3)));
+}

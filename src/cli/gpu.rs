@@ -3,7 +3,9 @@
 use serde::Serialize;
 
 use super::Globals;
-use errmap::gpu::{auto_allows_software, list_adapters, AdapterSummary, GpuContext, LimitsSummary};
+use errmap::backend::probe::{self, Verdict};
+use errmap::gpu::{list_adapters, AdapterSummary, GpuTrainer, LimitsSummary};
+use errmap::nn::ModelConfig;
 use errmap::Result;
 
 /// List GPU adapters, the one `--backend auto|gpu` would use, and its limits.
@@ -20,32 +22,44 @@ struct GpuInfo {
     /// The adapter `--backend gpu` uses (hardware first, else software).
     chosen: Option<AdapterSummary>,
     limits: Option<LimitsSummary>,
-    /// What `--backend auto` trains on: "gpu" or "cpu" (auto skips software adapters
-    /// unless ERRMAP_SOFTWARE_GPU=1).
+    /// What `--backend auto` trains the default architecture on: "gpu" or "cpu".
     auto_backend: &'static str,
+    /// Why: the probe's figures (cached per machine, driver and architecture).
+    auto_reason: String,
+    auto_probe: Option<Verdict>,
+    /// Where the probe's figures are cached.
+    probe_cache: Option<String>,
     /// Why no device could be opened, when none could.
     error: Option<String>,
 }
 
 pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
     let adapters = list_adapters();
-    let info = match GpuContext::open(true) {
-        Ok(ctx) => GpuInfo {
-            adapters,
-            chosen: Some(ctx.adapter.clone()),
-            limits: Some(LimitsSummary::of(&ctx.limits)),
-            auto_backend: if ctx.adapter.software && !auto_allows_software() {
-                "cpu"
-            } else {
-                "gpu"
-            },
-            error: None,
-        },
+    let config = ModelConfig::default();
+    let cache = probe::cache_file().map(|p| p.display().to_string());
+    let info = match GpuTrainer::new() {
+        Ok(gpu) => {
+            let verdict = probe::compare(&gpu, &config)?;
+            let gpu_wins = verdict.gpu_is_faster();
+            GpuInfo {
+                adapters,
+                chosen: Some(gpu.context().adapter.clone()),
+                limits: Some(LimitsSummary::of(&gpu.context().limits)),
+                auto_backend: if gpu_wins { "gpu" } else { "cpu" },
+                auto_reason: verdict.describe(gpu_wins),
+                auto_probe: Some(verdict),
+                probe_cache: cache,
+                error: None,
+            }
+        }
         Err(e) => GpuInfo {
             adapters,
             chosen: None,
             limits: None,
             auto_backend: "cpu",
+            auto_reason: format!("no usable GPU ({e})"),
+            auto_probe: None,
+            probe_cache: cache,
             error: Some(e.to_string()),
         },
     };
@@ -99,13 +113,13 @@ pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
                 "  min_uniform_buffer_offset_alignment  {}",
                 limits.min_uniform_buffer_offset_alignment
             );
-            if info.auto_backend == "gpu" {
-                println!("--backend auto trains on the GPU");
-            } else {
-                println!(
-                    "--backend auto trains on the CPU (faster than a software adapter; ERRMAP_SOFTWARE_GPU=1 changes that); --backend gpu uses {}",
-                    chosen.name
-                );
+            println!(
+                "--backend auto trains on the {}: {}",
+                info.auto_backend.to_uppercase(),
+                info.auto_reason
+            );
+            if let Some(cache) = &info.probe_cache {
+                println!("probe cache: {cache} (delete it to measure again)");
             }
         }
         _ => {

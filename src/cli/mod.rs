@@ -1,5 +1,6 @@
 //! The command tree: one file per area, each with its clap arguments and a `run` that calls the library.
 
+mod bench;
 mod compensate;
 mod gpu;
 mod grid;
@@ -43,6 +44,9 @@ pub enum Command {
     Compensate(compensate::CompensateArgs),
     /// List GPU adapters, the one errmap would choose and its limits.
     GpuInfo(gpu::GpuInfoArgs),
+    /// Measure this machine: training throughput of a backend on synthetic work.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
     /// Linear axes measured by laser interferometer.
     #[command(subcommand)]
     Linear(linear::LinearCommand),
@@ -69,6 +73,30 @@ pub enum SynthCommand {
     Rotary(rotary::SynthRotaryArgs),
 }
 
+/// Prints one line on stdout; a closed pipe comes back as an IO error that `main` treats
+/// as a quiet exit.
+pub fn print_line(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}")
+        .and_then(|_| out.flush())
+        .map_err(|source| errmap::Error::Io {
+            action: "write",
+            path: "standard output".into(),
+            source,
+        })
+}
+
+/// Notes from the library go to stderr unless `--quiet`.
+pub fn notes(globals: Globals) -> errmap::backend::Notes {
+    let quiet = globals.quiet;
+    std::sync::Arc::new(move |line: &str| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    })
+}
+
 /// Run a parsed command line; the result is the process exit code.
 pub fn run(cli: Cli) -> Result<i32> {
     let globals = Globals { quiet: cli.quiet };
@@ -78,6 +106,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Merge(args) => part::run_merge(args, globals),
         Command::Grid(args) => grid::run(args, globals),
         Command::Compensate(args) => compensate::run(args, globals),
+        Command::Bench(cmd) => bench::run(cmd, globals),
         Command::GpuInfo(args) => gpu::run(args, globals),
         Command::Linear(cmd) => linear::run(cmd, globals),
         Command::Thermal(cmd) => thermal::run(cmd, globals),

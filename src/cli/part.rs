@@ -12,7 +12,7 @@ use std::path::PathBuf;
 pub struct BatchArgs {
     /// The job manifest (TOML; every key in docs/job.md).
     pub job: PathBuf,
-    /// Trainer: auto (a hardware GPU, else the CPU; see docs/gpu.md), gpu (fail without one) or cpu; overrides [model] backend.
+    /// Trainer: auto (the fastest this machine has, measured once; see docs/gpu.md), gpu (any adapter, software included; fails without one), cpu (fast CPU trainer) or cpu-reference; overrides [model] backend.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
     /// Map only shard INDEX of COUNT (0-based): the parts at positions INDEX, INDEX+COUNT, … of the sorted probe files.
@@ -63,7 +63,7 @@ pub struct MapArgs {
     /// Seed of the network weights and the hold-out draw.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Trainer: auto, gpu or cpu.
+    /// Trainer: auto, gpu, cpu or cpu-reference (see errmap batch --help).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Print the summary as one JSON document.
@@ -136,8 +136,12 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         output: args.out,
     };
     let (plan, summary_path) = batch::plan_job(&file, &opts)?;
-    let trainer = errmap::gpu::select_trainer(plan.settings.model.backend, globals.quiet)?;
-    let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
+    let selection = errmap::backend::select_trainer(
+        plan.settings.model.backend,
+        &plan.settings.model,
+        super::notes(globals),
+    )?;
+    let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
     errmap::io::write_json(&summary_path, &summary)?;
     report(&summary, &summary_path, args.json, globals.quiet)?;
     Ok(summary.exit_code())
@@ -201,8 +205,9 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         job: None,
         shard: None,
     };
-    let trainer = errmap::gpu::select_trainer(args.backend, globals.quiet)?;
-    let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
+    let selection =
+        errmap::backend::select_trainer(args.backend, &plan.settings.model, super::notes(globals))?;
+    let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
     // A single part has no batch to finish: its failure is the command's error.
     // A single part has no batch to finish: its failure is the command's error (the message
     // already names file, line and column and the fix).

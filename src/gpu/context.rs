@@ -6,14 +6,6 @@ use serde::Serialize;
 
 use crate::{Error, Result};
 
-/// With `1`, `--backend auto` also takes a software adapter (lavapipe) before the CPU trainer.
-pub const SOFTWARE_ENV: &str = "ERRMAP_SOFTWARE_GPU";
-
-/// Whether `--backend auto` may use a software adapter ([`SOFTWARE_ENV`] = 1).
-pub fn auto_allows_software() -> bool {
-    std::env::var(SOFTWARE_ENV).as_deref() == Ok("1")
-}
-
 /// What `errmap gpu-info` reports about one adapter.
 #[derive(Debug, Clone, Serialize)]
 pub struct AdapterSummary {
@@ -122,10 +114,10 @@ impl GpuContext {
             if candidates.is_empty() {
                 return Err(Error::device(
                     format!(
-                        "only a software adapter ({}), which trains slower than errmap's CPU trainer",
+                        "only a software adapter ({}), and a hardware GPU was asked for",
                         software.join(", ")
                     ),
-                    format!("use --backend gpu (or {SOFTWARE_ENV}=1 with auto) to train on it anyway"),
+                    "use --backend gpu or auto to train on it",
                 ));
             }
         }

@@ -10,13 +10,9 @@ pub mod fixed;
 pub mod layout;
 pub mod train;
 
-pub use context::{
-    auto_allows_software, list_adapters, AdapterSummary, GpuContext, LimitsSummary, SOFTWARE_ENV,
-};
+pub use context::{list_adapters, AdapterSummary, GpuContext, LimitsSummary};
 
-use crate::nn::{
-    check_batch, check_nets, Backend, CpuTrainer, Mlp, ModelConfig, Trainer, TrainingSet, MAX_WIDTH,
-};
+use crate::nn::{check_batch, check_nets, Mlp, ModelConfig, Trainer, TrainingSet, MAX_WIDTH};
 use crate::{Error, Result};
 
 /// Trains and evaluates networks in WGSL compute shaders on one device.
@@ -124,80 +120,6 @@ impl Trainer for GpuTrainer {
         check_nets(nets)?;
         check_gpu_shape(nets)?;
         evaluate::evaluate(&self.ctx, &self.eval, nets, inputs)
-    }
-}
-
-/// `--backend auto` once a device is open: the GPU, and the CPU reference when the device
-/// fails (lost, out of memory) — with a one-line note.
-pub struct AutoTrainer {
-    gpu: GpuTrainer,
-    quiet: bool,
-}
-
-impl AutoTrainer {
-    fn fallback<T>(&self, what: &str, error: Error, cpu: impl FnOnce() -> Result<T>) -> Result<T> {
-        match error {
-            Error::Device { .. } => {
-                if !self.quiet {
-                    eprintln!("note: {error}; {what} on the CPU instead");
-                }
-                cpu()
-            }
-            other => Err(other),
-        }
-    }
-}
-
-impl Trainer for AutoTrainer {
-    fn name(&self) -> String {
-        self.gpu.name()
-    }
-
-    fn train_from(
-        &self,
-        initial: Vec<Mlp>,
-        sets: &[TrainingSet],
-        config: &ModelConfig,
-    ) -> Result<Vec<Mlp>> {
-        match self.gpu.train_from(initial.clone(), sets, config) {
-            Ok(nets) => Ok(nets),
-            Err(e) => self.fallback("training", e, || {
-                CpuTrainer::reference().train_from(initial, sets, config)
-            }),
-        }
-    }
-
-    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
-        match self.gpu.evaluate_batch(nets, inputs) {
-            Ok(out) => Ok(out),
-            Err(e) => self.fallback("evaluating", e, || {
-                CpuTrainer::reference().evaluate_batch(nets, inputs)
-            }),
-        }
-    }
-}
-
-/// Picks the trainer for `backend`:
-/// - `auto`: a hardware GPU, else the CPU reference with a one-line note on stderr (unless
-///   `quiet`). A software Vulkan adapter (lavapipe) comes between the two only with
-///   `ERRMAP_SOFTWARE_GPU=1`: on a CPU it trains 8–20× slower than the CPU trainer
-///   (docs/performance.md), so by default auto skips it.
-/// - `gpu`: a hardware GPU, else a software adapter; fails with [`Error::device`] instead of
-///   falling back to the CPU.
-/// - `cpu`: the CPU reference.
-pub fn select_trainer(backend: Backend, quiet: bool) -> Result<Box<dyn Trainer>> {
-    match backend {
-        Backend::Cpu => Ok(Box::new(CpuTrainer::reference())),
-        Backend::Gpu => Ok(Box::new(GpuTrainer::new()?)),
-        Backend::Auto => match GpuTrainer::open(auto_allows_software()) {
-            Ok(gpu) => Ok(Box::new(AutoTrainer { gpu, quiet })),
-            Err(e) => {
-                if !quiet {
-                    eprintln!("note: no usable GPU ({e}); training on the CPU");
-                }
-                Ok(Box::new(CpuTrainer::reference()))
-            }
-        },
     }
 }
 

@@ -100,14 +100,21 @@ pub fn tanh_f32(x: f32) -> f32 {
     }
 }
 
-/// Where networks are trained: `auto` = hardware GPU → software Vulkan (lavapipe) → CPU.
+/// Where networks are trained.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, Default)]
-#[serde(rename_all = "lowercase")]
+#[serde(rename_all = "kebab-case")]
 pub enum Backend {
+    /// The fastest backend this machine has, by a short measurement cached per machine
+    /// (`errmap gpu-info` shows the choice and why).
     #[default]
     Auto,
+    /// Any wgpu adapter (a hardware GPU first, else software Vulkan such as lavapipe);
+    /// fails instead of falling back.
     Gpu,
+    /// The fast CPU trainer (SIMD, all cores).
     Cpu,
+    /// The CPU reference trainer: the readable specification, slow.
+    CpuReference,
 }
 
 impl Backend {
@@ -116,6 +123,7 @@ impl Backend {
             Backend::Auto => "auto",
             Backend::Gpu => "gpu",
             Backend::Cpu => "cpu",
+            Backend::CpuReference => "cpu-reference",
         }
     }
 }

@@ -5,6 +5,7 @@
 //! specification `shaders/train.wgsl` is tested against (`tests/gpu_parity.rs`).
 
 mod config;
+mod fast;
 mod mlp;
 mod norm;
 mod train;
@@ -13,6 +14,7 @@ pub use config::{
     network_seed, tanh_f32, Activation, Backend, ModelConfig, MAX_EPOCHS, MAX_HIDDEN_LAYERS,
     MAX_WIDTH,
 };
+pub use fast::{FastCpuTrainer, FastGradient, CHUNK_BLOCKS};
 pub use mlp::{layer_spans, param_count, LayerSpan, Mlp};
 pub use norm::Normalisation;
 pub(crate) use train::diverged;

@@ -3,4 +3,5 @@
 pub mod linear;
 pub mod rotary;
 pub mod thermal;
+pub mod training;
 pub mod web_plate;

@@ -1,0 +1,69 @@
+//! CLI of `errmap bench`: measure this machine (training throughput of a backend).
+
+use super::Globals;
+use errmap::backend::bench::{self, TrainingBench};
+use errmap::nn::Backend;
+use errmap::Result;
+
+#[derive(Debug, clap::Subcommand)]
+pub enum BenchCommand {
+    /// Train N networks of the default architecture on synthetic web-plate data for E
+    /// full-batch Adam epochs and print the throughput (sample·epochs/s, training only).
+    Training(TrainingArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TrainingArgs {
+    /// Networks trained together (one per part of a family).
+    #[arg(long, default_value_t = 8)]
+    pub parts: usize,
+    /// Samples per network.
+    #[arg(long, default_value_t = 1536)]
+    pub samples: usize,
+    /// Full-batch Adam epochs.
+    #[arg(long, default_value_t = 100)]
+    pub epochs: u32,
+    /// auto: the fastest this machine has; gpu: any wgpu adapter (software included);
+    /// cpu: the fast CPU trainer; cpu-reference: the reference trainer.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Hidden layer widths, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "32,32")]
+    pub hidden: Vec<usize>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: BenchCommand, _globals: Globals) -> Result<i32> {
+    match cmd {
+        BenchCommand::Training(args) => {
+            let report = bench::run(&TrainingBench {
+                parts: args.parts,
+                samples: args.samples,
+                epochs: args.epochs,
+                backend: args.backend,
+                hidden: args.hidden,
+            })?;
+            if args.json {
+                let text = serde_json::to_string_pretty(&report)
+                    .map_err(|e| errmap::Error::Internal(format!("bench JSON: {e}")))?;
+                super::print_line(&text)?;
+            } else {
+                super::print_line(&format!(
+                    "{} on {}: {:.3e} sample·epochs/s ({} × {} samples × {} epochs in {:.3} s; pipeline build {:.3} s)\n{}",
+                    report.backend,
+                    report.device,
+                    report.sample_epochs_per_s,
+                    report.parts,
+                    report.samples,
+                    report.epochs,
+                    report.train_s,
+                    report.pipeline_build_s,
+                    report.reason
+                ))?;
+            }
+            Ok(0)
+        }
+    }
+}
