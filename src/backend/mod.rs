@@ -76,6 +76,13 @@ fn select_auto(
     notes: Notes,
     cache_file: Option<std::path::PathBuf>,
 ) -> Result<Selection> {
+    if config.optimizer != crate::nn::Optimizer::Adam {
+        return Ok(Selection {
+            trainer: Box::new(FastCpuTrainer),
+            backend: Backend::Cpu,
+            reason: format!("auto: L-BFGS runs on the CPU; {}", FastCpuTrainer.name()),
+        });
+    }
     let gpu = match GpuTrainer::new() {
         Ok(gpu) => gpu,
         Err(e) => {

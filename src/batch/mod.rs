@@ -3,6 +3,7 @@
 pub mod job;
 pub mod run;
 pub mod summary;
+pub mod train_step;
 
 pub use job::{Job, JobFile, MapChoice};
 pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan};
@@ -143,6 +144,12 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
     let mut model = job.model.clone();
     if let Some(b) = opts.backend {
         model.backend = b;
+    }
+    if opts.shard.is_some() && model.warm_start == crate::nn::WarmStart::Family {
+        return Err(Error::usage(
+            "model.warm_start = \"family\" needs the whole family in one run, and this run is a shard",
+            "run the job unsharded, or set warm_start = \"none\" for sharded runs",
+        ));
     }
     let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
         files: file.toolpath_files(),

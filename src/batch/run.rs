@@ -6,6 +6,7 @@
 //! trainer in one call, so on a GPU a whole family trains in the same dispatches.
 
 use super::summary::{BatchSummary, FamilySummary, PartSummary, ToolpathSummary};
+use super::train_step::{train_all, Role};
 use crate::error::{Error, Result};
 use crate::geom::{Axis, Domain};
 use crate::interp::{self, Grid, Method, Surface};
@@ -81,16 +82,6 @@ struct Interpolated {
     holdout_nodes: Option<Vec<Option<f64>>>,
 }
 
-/// Stable 64-bit FNV-1a of a name, so a part's hold-out draw does not depend on its batch position.
-fn fnv1a(text: &str) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in text.bytes() {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
-
 /// Indices of points on the boundary of the convex hull (vertices and points on its edges).
 fn hull_boundary(points: &[ProbePoint]) -> Vec<bool> {
     let n = points.len();
@@ -161,7 +152,7 @@ fn choose_holdout(clean: &[ProbePoint], fraction: f64, seed: u64, name: &str) ->
     let want = want
         .min(candidates.len())
         .min(clean.len().saturating_sub(5));
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ fnv1a(name));
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ super::train_step::fnv1a(name));
     candidates.shuffle(&mut rng);
     let mut chosen: Vec<usize> = candidates.into_iter().take(want).collect();
     chosen.sort_unstable();
@@ -350,17 +341,21 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         // 3. All training sets: per part [hold-out fit], delivered fit; then the family.
         let mut sets = Vec::new();
         let mut norms = Vec::new();
+        let mut roles = Vec::new();
         let mut slots = Vec::new(); // (holdout slot, delivered slot) per part
         for p in &interpolated {
+            let name = &p.prep.input.name;
             let h = p.holdout_nodes.as_ref().map(|nodes| {
                 let (set, norm) = training_set(&train_grid, nodes, &domain);
                 sets.push(set);
                 norms.push(norm);
+                roles.push(Role::Holdout(name.clone()));
                 sets.len() - 1
             });
             let (set, norm) = training_set(&train_grid, &p.full_nodes, &domain);
             sets.push(set);
             norms.push(norm);
+            roles.push(Role::Delivered(name.clone()));
             slots.push((h, sets.len() - 1));
         }
         let family_slot = if plan.family_dir.is_some() && !interpolated.is_empty() {
@@ -375,6 +370,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 let (set, norm) = training_set(&train_grid, &mean, &domain);
                 sets.push(set);
                 norms.push(norm);
+                roles.push(Role::Family);
                 Some(sets.len() - 1)
             } else {
                 None
@@ -395,7 +391,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             // One call trains every network; the bar ticks so a terminal shows it is alive.
             let bar = crate::progress::bar(1, "train", quiet);
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
-            let nets = trainer.train_batch(&sets, &s.model);
+            let nets = train_all(trainer, &sets, &norms, &roles, &s.model);
             bar.finish_and_clear();
             let nets = nets?;
             if nets.len() != sets.len() {

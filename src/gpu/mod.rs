@@ -91,6 +91,12 @@ impl Trainer for GpuTrainer {
     ) -> Result<Vec<Mlp>> {
         check_batch(&initial, sets, config)?;
         check_gpu_shape(&initial)?;
+        if config.optimizer != crate::nn::Optimizer::Adam {
+            return Err(Error::usage(
+                "model.optimizer = \"lbfgs\" runs on the CPU trainers, not the GPU",
+                "use backend = \"cpu\" or \"auto\" with lbfgs, or optimizer = \"adam\" on the GPU",
+            ));
+        }
         let Some(first) = initial.first() else {
             return Ok(Vec::new());
         };

@@ -128,6 +128,29 @@ impl Backend {
     }
 }
 
+/// The optimiser of every network's fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Full-batch Adam, `epochs` steps (every backend).
+    #[default]
+    Adam,
+    /// Full-batch L-BFGS, at most `epochs` loss evaluations (the CPU trainers).
+    Lbfgs,
+}
+
+/// Where each part's networks start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WarmStart {
+    /// Seeded random weights, `epochs` steps.
+    #[default]
+    None,
+    /// The family network (trained first, `epochs` steps), rescaled to the part's targets,
+    /// then `warm_epochs` steps.
+    Family,
+}
+
 /// How networks are fitted. Every key has a default, so `[model]` may be empty.
 ///
 /// Training is full-batch Adam (β₁ 0.9, β₂ 0.999, ε 1e-8) on the mean squared error of the
@@ -152,6 +175,10 @@ pub struct ModelConfig {
     pub backend: Backend,
     /// The loss is read back (for progress and divergence checks) every this many epochs.
     pub loss_every: u32,
+    pub optimizer: Optimizer,
+    pub warm_start: WarmStart,
+    /// Steps of a part's fit when it starts from the family network.
+    pub warm_epochs: u32,
 }
 
 impl Default for ModelConfig {
@@ -166,6 +193,9 @@ impl Default for ModelConfig {
             holdout_fraction: 0.1,
             backend: Backend::Auto,
             loss_every: 250,
+            optimizer: Optimizer::Adam,
+            warm_start: WarmStart::None,
+            warm_epochs: 150,
         }
     }
 }
@@ -237,6 +267,15 @@ impl ModelConfig {
                     self.holdout_fraction
                 ),
                 "0.1 holds out 10 % of the probe points",
+            ));
+        }
+        if self.warm_epochs == 0 || self.warm_epochs > MAX_EPOCHS {
+            return Err(Error::usage(
+                format!(
+                    "model.warm_epochs = {} is out of range 1..={MAX_EPOCHS}",
+                    self.warm_epochs
+                ),
+                "150 steps from the family network match a fit from scratch on the sample plates",
             ));
         }
         if self.loss_every == 0 {

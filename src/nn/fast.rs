@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use super::config::{Activation, ModelConfig};
+use super::config::{Activation, ModelConfig, Optimizer};
 use super::mlp::{layer_spans, LayerSpan, Mlp};
 use super::train::{adam_update, check_batch, check_nets, diverged, AdamScalars, REFERENCE_LANES};
 use super::{CpuTrainer, Trainer, TrainingSet};
@@ -61,7 +61,19 @@ impl Trainer for FastCpuTrainer {
             .zip(sets.par_iter())
             .enumerate()
             .map(|(k, (mut net, set))| {
-                train_adam(&mut net, set, config, k)?;
+                match config.optimizer {
+                    Optimizer::Adam => train_adam(&mut net, set, config, k)?,
+                    Optimizer::Lbfgs => {
+                        let mut grad = FastGradient::new(&net, set);
+                        let (loss, _) = super::lbfgs::fit_network(&mut net, config.epochs, |p| {
+                            let loss = grad.compute(p, set);
+                            (loss, grad.sum.clone())
+                        });
+                        if !loss.is_finite() {
+                            return Err(diverged(k, config.epochs));
+                        }
+                    }
+                }
                 Ok(net)
             })
             .collect()
@@ -100,7 +112,6 @@ struct Shape {
     spans: Vec<LayerSpan>,
     /// First unit of each layer's outputs in the activation and delta arrays.
     unit_offset: Vec<usize>,
-    params: usize,
     activation: Activation,
 }
 
@@ -119,6 +130,8 @@ struct Chunk {
 pub struct FastGradient {
     shape: Shape,
     chunks: Vec<Chunk>,
+    /// Lanes of all chunks added, before the tree.
+    total: Vec<V>,
     /// The gradient after [`FastGradient::compute`].
     pub sum: Vec<f32>,
 }
@@ -148,10 +161,10 @@ impl FastGradient {
             shape: Shape {
                 spans,
                 unit_offset,
-                params,
                 activation: net.activation,
             },
             chunks,
+            total: vec![[0.0; W]; params],
             sum: vec![0.0; params],
         }
     }
@@ -177,8 +190,10 @@ impl FastGradient {
         });
         // Chunks in order, then the 8-lane tree: the order depends on the set's size only.
         let mut sq_err = 0.0;
-        let mut total = vec![[0.0f32; W]; shape.params];
-        for chunk in &self.chunks {
+        let total = &mut self.total;
+        total.copy_from_slice(&self.chunks[0].lanes);
+        sq_err += self.chunks[0].sq_err;
+        for chunk in &self.chunks[1..] {
             sq_err += chunk.sq_err;
             for (t, l) in total.iter_mut().zip(&chunk.lanes) {
                 for b in 0..W {
@@ -186,7 +201,7 @@ impl FastGradient {
                 }
             }
         }
-        for (g, l) in self.sum.iter_mut().zip(&total) {
+        for (g, l) in self.sum.iter_mut().zip(total.iter()) {
             let q = [l[0] + l[4], l[1] + l[5], l[2] + l[6], l[3] + l[7]];
             let h = [q[0] + q[2], q[1] + q[3]];
             *g = h[0] + h[1];

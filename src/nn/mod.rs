@@ -6,13 +6,14 @@
 
 mod config;
 mod fast;
+pub mod lbfgs;
 mod mlp;
 mod norm;
 mod train;
 
 pub use config::{
-    network_seed, tanh_f32, Activation, Backend, ModelConfig, MAX_EPOCHS, MAX_HIDDEN_LAYERS,
-    MAX_WIDTH,
+    network_seed, tanh_f32, Activation, Backend, ModelConfig, Optimizer, WarmStart, MAX_EPOCHS,
+    MAX_HIDDEN_LAYERS, MAX_WIDTH,
 };
 pub use fast::{FastCpuTrainer, FastGradient, CHUNK_BLOCKS};
 pub use mlp::{layer_spans, param_count, LayerSpan, Mlp};

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::config::{network_seed, Activation, ModelConfig};
+use super::config::{network_seed, Activation, ModelConfig, Optimizer};
 use super::mlp::{layer_spans, param_count, LayerSpan, Mlp};
 use crate::{Error, Result};
 
@@ -228,7 +228,22 @@ impl Trainer for CpuTrainer {
             .zip(sets.par_iter())
             .enumerate()
             .map(|(k, (mut net, set))| {
-                train_network_with_lanes(&mut net, set, config, k, self.lanes)?;
+                match config.optimizer {
+                    Optimizer::Adam => {
+                        train_network_with_lanes(&mut net, set, config, k, self.lanes)?
+                    }
+                    Optimizer::Lbfgs => {
+                        let mut ws = GradientWorkspace::new(&net, self.lanes);
+                        let activation = net.activation;
+                        let (loss, _) = super::lbfgs::fit_network(&mut net, config.epochs, |p| {
+                            let loss = ws.gradient(p, activation, set);
+                            (loss, ws.lanes[..p.len()].to_vec())
+                        });
+                        if !loss.is_finite() {
+                            return Err(diverged(k, config.epochs));
+                        }
+                    }
+                }
                 Ok(net)
             })
             .collect()

@@ -1,0 +1,104 @@
+//! The batch's training step: every network's starting weights (seeded from the job seed and the network's name, never its position), and the optional warm start of each part from the family network.
+
+use crate::nn::{network_seed, Mlp, ModelConfig, Normalisation, Trainer, TrainingSet, WarmStart};
+use crate::{Error, Result};
+
+/// Stable 64-bit FNV-1a of a name.
+pub fn fnv1a(text: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// The role of a network in a batch, which names its seed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Role {
+    /// A part's fit on all clean points.
+    Delivered(String),
+    /// A part's fit without its held-out points.
+    Holdout(String),
+    /// The family network (fit to the mean of the parts).
+    Family,
+}
+
+impl Role {
+    /// The name its seed derives from; the prefixes keep a part named "family" apart from
+    /// the family network.
+    pub fn seed_name(&self) -> String {
+        match self {
+            Role::Delivered(part) => format!("part:{part}"),
+            Role::Holdout(part) => format!("holdout:{part}"),
+            Role::Family => "family".into(),
+        }
+    }
+}
+
+/// The starting network of `role`: Glorot-uniform from (job seed, role name), so a part gets
+/// the same network in a sharded and an unsharded run.
+pub fn initial_network(config: &ModelConfig, role: &Role) -> Mlp {
+    Mlp::init(
+        &config.layer_sizes(),
+        config.activation,
+        network_seed(config.seed ^ fnv1a(&role.seed_name()), 0),
+    )
+}
+
+/// Trains every network of the batch. Without a warm start, all in one trainer call. With
+/// `warm_start = "family"`, the family network first (`epochs` steps), then every part's
+/// networks from it, rescaled to each part's targets, for `warm_epochs` steps.
+pub fn train_all(
+    trainer: &dyn Trainer,
+    sets: &[TrainingSet],
+    norms: &[Normalisation],
+    roles: &[Role],
+    config: &ModelConfig,
+) -> Result<Vec<Mlp>> {
+    let initial: Vec<Mlp> = roles.iter().map(|r| initial_network(config, r)).collect();
+    let family = roles.iter().position(|r| *r == Role::Family);
+    let (WarmStart::Family, Some(f)) = (config.warm_start, family) else {
+        return trainer.train_from(initial, sets, config);
+    };
+    let family_net = trainer
+        .train_from(vec![initial[f].clone()], &sets[f..=f], config)?
+        .pop()
+        .ok_or_else(|| Error::Internal("trainer returned no family network".into()))?;
+    let warm = ModelConfig {
+        epochs: config.warm_epochs,
+        loss_every: config.loss_every.min(config.warm_epochs),
+        ..config.clone()
+    };
+    let others: Vec<usize> = (0..sets.len()).filter(|&k| k != f).collect();
+    let starts: Vec<Mlp> = others
+        .iter()
+        .map(|&k| rescaled(&family_net, &norms[f], &norms[k]))
+        .collect();
+    let part_sets: Vec<TrainingSet> = others.iter().map(|&k| sets[k].clone()).collect();
+    let trained = trainer.train_from(starts, &part_sets, &warm)?;
+    let mut out = initial;
+    out[f] = family_net;
+    for (k, net) in others.into_iter().zip(trained) {
+        out[k] = net;
+    }
+    Ok(out)
+}
+
+/// The same function as `net` (trained for targets standardised by `from`), for targets
+/// standardised by `to`: e = mean_f + std_f·y = mean_t + std_t·y', so the linear output
+/// layer becomes W' = W·std_f/std_t, b' = (b·std_f + mean_f − mean_t)/std_t. Inputs are
+/// scaled over the same domain in every network of a batch.
+pub fn rescaled(net: &Mlp, from: &Normalisation, to: &Normalisation) -> Mlp {
+    let mut out = net.clone();
+    let spans = crate::nn::layer_spans(&net.layer_sizes);
+    if let Some(last) = spans.last() {
+        let ratio = from.e_std_um / to.e_std_um;
+        for w in &mut out.params[last.weight_offset..last.bias_offset] {
+            *w = (*w as f64 * ratio) as f32;
+        }
+        let b = &mut out.params[last.bias_offset];
+        *b = ((*b as f64 * from.e_std_um + from.e_mean_um - to.e_mean_um) / to.e_std_um) as f32;
+    }
+    out
+}
