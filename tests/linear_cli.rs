@@ -727,7 +727,8 @@ fn unidirectional_runs_analyze_to_json_nulls_text_chart_and_table() {
         ],
     );
     assert!(
-        text.stdout.contains("E = n/a  E↑ = 6.000")
+        text.stdout.contains("E  = n/a")
+            && text.stdout.contains("E↑ = 6.000")
             && text
                 .stdout
                 .contains("unidirectional test (direction + only)"),
