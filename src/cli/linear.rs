@@ -322,9 +322,11 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         }
         println!("{line}");
     }
-    let width = ev.figures().iter().map(|f| f.symbol.chars().count()).max().unwrap_or(1);
+    // Columns on screen: combining marks (the bar of B̄, P̄s, Ū) take none.
+    let columns = |s: &str| s.chars().filter(|c| !('\u{300}'..='\u{36f}').contains(c)).count();
+    let width = ev.figures().iter().map(|f| columns(f.symbol)).max().unwrap_or(1);
     for (i, f) in ev.figures().iter().enumerate() {
-        let pad = width - f.symbol.chars().count();
+        let pad = width - columns(f.symbol);
         println!(
             "{} {}{} = {}  {}: {}",
             if i == 0 { "axis:" } else { "     " },
