@@ -831,15 +831,31 @@ fn vdi_and_gb_text_use_their_own_symbols() {
         assert_eq!(text_figure(&vdi.stdout, symbol), want, "{symbol}");
     }
     let head = vdi.stdout.lines().nth(1).unwrap();
-    assert!(head.contains("U_j") && head.contains("Ps_j") && !head.contains("B_i"), "{head}");
+    assert!(
+        head.contains("U_j") && head.contains("Ps_j") && !head.contains("B_i"),
+        "{head}"
+    );
     let gb = ok(
         dir.path(),
-        &["linear", "analyze", "hand.csv", "--standard", "gb10931-1989"],
+        &[
+            "linear",
+            "analyze",
+            "hand.csv",
+            "--standard",
+            "gb10931-1989",
+        ],
     );
     let head = gb.stdout.lines().nth(1).unwrap();
-    assert!(head.contains("X̄_j↑") && head.contains("S_j↓") && !head.contains("s_i"), "{head}");
+    assert!(
+        head.contains("X̄_j↑") && head.contains("S_j↓") && !head.contains("s_i"),
+        "{head}"
+    );
     // A = (X̄ + 3S)max − (X̄ − 3S)min = 12 − (−11) = 23 (↑: 5, 12, −1; ↓: 3, 6, 1 | ↑: −1, 0, −1;
     // ↓: −3, 0, −11).
     assert_eq!(text_figure(&gb.stdout, "A"), "23.000");
-    assert!(gb.stdout.contains("反向差值") && !gb.stdout.contains("B̄"), "{}", gb.stdout);
+    assert!(
+        gb.stdout.contains("反向差值") && !gb.stdout.contains("B̄"),
+        "{}",
+        gb.stdout
+    );
 }

@@ -550,7 +550,12 @@ fn gb10931_every_figure_of_the_worked_example_by_hand() {
     assert_eq!(ev.figure("E"), None);
     assert_eq!(ev.figure("M"), None);
     let names: Vec<&str> = ev.figures().iter().map(|f| f.name).collect();
-    assert!(names.iter().all(|n| n.contains("精度") || n.contains("反向差值")), "{names:?}");
+    assert!(
+        names
+            .iter()
+            .all(|n| n.contains("精度") || n.contains("反向差值")),
+        "{names:?}"
+    );
     assert_eq!(
         errmap::linear::target_symbols(Standard::Gb10931_1989)[0],
         "X̄_j↑"

@@ -25,13 +25,33 @@ fn the_default_map_is_no_worse_than_kriging_on_an_unseen_plate() {
     common::ok(
         d,
         &[
-            "synth", "web-plate", "--parts", "1", "--out", "data", "--size", "450x250",
-            "--origin", "-120,35", "--irregular", "110", "--seed", "7",
+            "synth",
+            "web-plate",
+            "--parts",
+            "1",
+            "--out",
+            "data",
+            "--size",
+            "450x250",
+            "--origin",
+            "-120,35",
+            "--irregular",
+            "110",
+            "--seed",
+            "7",
         ],
     );
     common::errmap_with(
         d,
-        &["batch", "data/job.toml", "--backend", "cpu", "--out", "out", "--quiet"],
+        &[
+            "batch",
+            "data/job.toml",
+            "--backend",
+            "cpu",
+            "--out",
+            "out",
+            "--quiet",
+        ],
         |cmd| {
             cmd.env_remove("SLURM_ARRAY_TASK_ID")
                 .env_remove("JOB_COMPLETION_INDEX");
@@ -70,6 +90,10 @@ fn the_default_map_is_no_worse_than_kriging_on_an_unseen_plate() {
             .unwrap();
     let network = s["holdout_rmse_um"].as_f64().unwrap();
     let kriging = s["kriging_holdout_rmse_um"].as_f64().unwrap();
-    let better = if kriging < network { "kriging" } else { "network" };
+    let better = if kriging < network {
+        "kriging"
+    } else {
+        "network"
+    };
     assert_eq!(s["better_fit"], better);
 }

@@ -642,7 +642,10 @@ fn fits_from_the_store_and_from_folders_give_the_same_json() {
     let table = std::fs::read_to_string(syn.join("sensors.csv")).unwrap();
     let mut lines: Vec<&str> = table.lines().collect();
     let nut = lines.iter().position(|l| l.starts_with("nut,")).unwrap();
-    let bearing = lines.iter().position(|l| l.starts_with("bearing,")).unwrap();
+    let bearing = lines
+        .iter()
+        .position(|l| l.starts_with("bearing,"))
+        .unwrap();
     lines.swap(nut, bearing);
     std::fs::write(syn.join("sensors.csv"), lines.join("\n") + "\n").unwrap();
     let names = campaigns(&syn);
@@ -651,7 +654,15 @@ fn fits_from_the_store_and_from_folders_give_the_same_json() {
     ingest.extend(paths.iter().map(String::as_str));
     run(tmp.path(), &ingest, 0);
     let db = syn.join("thermal.sqlite").to_string_lossy().into_owned();
-    let from_store = ["thermal", "fit", "--from-store", "--db", &db, "-o", "s.json"];
+    let from_store = [
+        "thermal",
+        "fit",
+        "--from-store",
+        "--db",
+        &db,
+        "-o",
+        "s.json",
+    ];
     run(tmp.path(), &from_store, 0);
     let mut from_files = vec!["thermal", "fit", "-o", "f.json"];
     from_files.extend(paths.iter().map(String::as_str));

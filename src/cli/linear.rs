@@ -3,9 +3,10 @@
 use super::Globals;
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
-    read_runs, read_table, refractive_index, render_table, save_chart, AirConditions,
-    AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation, Figure, PitchFit, RunFile,
-    Sample, Standard, TableFormat, TableOptions, target_symbols, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+    read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
+    AirConditions, AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation,
+    Figure, PitchFit, RunFile, Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM,
+    HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -323,8 +324,17 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         println!("{line}");
     }
     // Columns on screen: combining marks (the bar of B̄, P̄s, Ū) take none.
-    let columns = |s: &str| s.chars().filter(|c| !('\u{300}'..='\u{36f}').contains(c)).count();
-    let width = ev.figures().iter().map(|f| columns(f.symbol)).max().unwrap_or(1);
+    let columns = |s: &str| {
+        s.chars()
+            .filter(|c| !('\u{300}'..='\u{36f}').contains(c))
+            .count()
+    };
+    let width = ev
+        .figures()
+        .iter()
+        .map(|f| columns(f.symbol))
+        .max()
+        .unwrap_or(1);
     for (i, f) in ev.figures().iter().enumerate() {
         let pad = width - columns(f.symbol);
         println!(

@@ -106,7 +106,9 @@ impl Kriging {
             ));
         }
         // Coarse grid: ℓ from 1 % to 200 % of the diagonal, g from 1e-6 to 1.
-        let lengths: Vec<f64> = (0..10).map(|k| diag * 0.01 * 200f64.powf(k as f64 / 9.0)).collect();
+        let lengths: Vec<f64> = (0..10)
+            .map(|k| diag * 0.01 * 200f64.powf(k as f64 / 9.0))
+            .collect();
         let nuggets = [1e-6, 1e-4, 1e-3, 1e-2, 0.03, 0.1, 0.3, 1.0];
         let mut best: Option<(f64, f64, f64)> = None; // (nll, l, g)
         let consider = |l: f64, g: f64, best: &mut Option<(f64, f64, f64)>| {
@@ -152,7 +154,12 @@ impl Kriging {
 
     /// Consistency of a model read from a file (the message says what is wrong).
     pub fn validate(&self) -> std::result::Result<(), String> {
-        let finite = self.sites.iter().flatten().chain(&self.weights).all(|v| v.is_finite())
+        let finite = self
+            .sites
+            .iter()
+            .flatten()
+            .chain(&self.weights)
+            .all(|v| v.is_finite())
             && [self.mean, self.length_mm, self.nugget_ratio, self.variance]
                 .iter()
                 .all(|v| v.is_finite());
@@ -209,7 +216,11 @@ mod tests {
             }
         }
         assert!(worst < 0.12, "worst {worst} µm, ℓ {} mm", k.length_mm);
-        assert!(k.nugget_ratio <= 1e-3, "noise-free data, nugget {}", k.nugget_ratio);
+        assert!(
+            k.nugget_ratio <= 1e-3,
+            "noise-free data, nugget {}",
+            k.nugget_ratio
+        );
     }
 
     #[test]

@@ -97,7 +97,11 @@ pub fn table_from_rows(
     let (step, start, grid_note) = match (step_deg, equal_spacing(&forward, &reverse)) {
         (None, Some((s, a))) => {
             let a = start_deg.unwrap_or(a);
-            (s, a, format!("grid {a} + {s}*k deg through the equally spaced measured angles"))
+            (
+                s,
+                a,
+                format!("grid {a} + {s}*k deg through the equally spaced measured angles"),
+            )
         }
         (Some(s), _) => {
             let a = start_deg.unwrap_or(0.0);
@@ -170,8 +174,8 @@ fn equal_spacing(forward: &[(f64, f64)], reverse: &[(f64, f64)]) -> Option<(f64,
     }
     let step = angles[1] - angles[0];
     let wrap = 360.0 - angles[angles.len() - 1] + angles[0];
-    let even = angles.windows(2).all(|w| (w[1] - w[0] - step).abs() < 1e-6)
-        && (wrap - step).abs() < 1e-6;
+    let even =
+        angles.windows(2).all(|w| (w[1] - w[0] - step).abs() < 1e-6) && (wrap - step).abs() < 1e-6;
     even.then(|| (step, angles[0] % step))
 }
 
@@ -396,7 +400,8 @@ mod tests {
     /// A run measured at 15° + 30°·k with errors that are far from linear between the angles
     /// (3″ sin 2α + 2″ cos 3α + 0.7″, reverse 1.5″ higher).
     fn run_15_plus_30k() -> Vec<TableRow> {
-        let e = |a: f64| 3.0 * (2.0 * a.to_radians()).sin() + 2.0 * (3.0 * a.to_radians()).cos() + 0.7;
+        let e =
+            |a: f64| 3.0 * (2.0 * a.to_radians()).sin() + 2.0 * (3.0 * a.to_radians()).cos() + 0.7;
         let mut rows = Vec::new();
         for k in 0..12 {
             let a = 15.0 + 30.0 * k as f64;
@@ -423,10 +428,16 @@ mod tests {
             };
             // … and the controller's reading there is the measured error within 0.01″.
             let v = controller_value(&t, values, r.angle_deg);
-            assert!((v - r.error_arcsec).abs() < 0.01, "{}: {v} vs {}", r.angle_deg, r.error_arcsec);
+            assert!(
+                (v - r.error_arcsec).abs() < 0.01,
+                "{}: {v} vs {}",
+                r.angle_deg,
+                r.error_arcsec
+            );
         }
         // Between measured angles the value is the straight line: at 0° the mean of 345° and 15°.
-        let e = |a: f64| 3.0 * (2.0 * a.to_radians()).sin() + 2.0 * (3.0 * a.to_radians()).cos() + 0.7;
+        let e =
+            |a: f64| 3.0 * (2.0 * a.to_radians()).sin() + 2.0 * (3.0 * a.to_radians()).cos() + 0.7;
         assert!((t.forward_arcsec[0] - 0.5 * (e(345.0) + e(15.0))).abs() < 1e-9);
     }
 
@@ -446,7 +457,11 @@ mod tests {
         let mut uneven = rows.clone();
         uneven.retain(|r| r.angle_deg != 75.0);
         let t = table_from_rows("C", &uneven, None, None).unwrap();
-        assert!(t.grid_note.contains("not equally spaced"), "{}", t.grid_note);
+        assert!(
+            t.grid_note.contains("not equally spaced"),
+            "{}",
+            t.grid_note
+        );
         assert!(table_from_rows("C", &rows, Some(7.0), None).is_err());
     }
 

@@ -566,7 +566,7 @@ struct Loco {
 struct Trial {
     reference: Reference,
     directions: Vec<DirectionModel>,
-    residual_sq: Vec<(f64, usize)>,
+    residual_sq: ResidualSums,
     loco: Vec<Loco>,
 }
 
@@ -618,7 +618,9 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
                 scores.push(ReferenceScore {
                     reference,
                     loco_rms_um: loco,
-                    note: loco.is_none().then(|| "no held-out campaign to score".into()),
+                    note: loco
+                        .is_none()
+                        .then(|| "no held-out campaign to score".into()),
                 });
                 trials.push(t);
             }
@@ -724,12 +726,15 @@ fn loco_of(
     }
 }
 
+/// (Σ residual², count) per campaign.
+type ResidualSums = Vec<(f64, usize)>;
+
 /// Fit both directions (orders by cross-validation unless given).
 fn fit_directions(
     setup: &Setup,
     ctx: &Context,
     offsets: &[usize],
-) -> Result<(Vec<DirectionModel>, Vec<(f64, usize)>)> {
+) -> Result<(Vec<DirectionModel>, ResidualSums)> {
     let prep = setup.prep;
     let all_states: Vec<usize> = (0..prep.coolant_states.len()).collect();
     let n_sensors = prep.gain_sensors.len();
@@ -769,7 +774,8 @@ fn fit_directions(
         if offsets.len() > 1 {
             let base = order + 1 + d.states.len() * n_sensors;
             let b = &f.beta[base..base + offsets.len() - 1];
-            campaign_offsets_um_per_m.insert(setup.names[offsets[0]].clone(), -b.iter().sum::<f64>());
+            campaign_offsets_um_per_m
+                .insert(setup.names[offsets[0]].clone(), -b.iter().sum::<f64>());
             for (k, v) in b.iter().enumerate() {
                 campaign_offsets_um_per_m.insert(setup.names[offsets[k + 1]].clone(), *v);
             }
@@ -1045,7 +1051,11 @@ impl ThermalModel {
         if self.ambient_sensor.is_some() != self.reference_ambient_c.is_some() {
             return Err("ambient_sensor and reference_ambient_c go together".into());
         }
-        if !self.gain_sensors.iter().all(|s| self.reference_rise_c.contains_key(s)) {
+        if !self
+            .gain_sensors
+            .iter()
+            .all(|s| self.reference_rise_c.contains_key(s))
+        {
             return Err("reference_rise_c needs a value for every gain sensor".into());
         }
         for d in &self.directions {
@@ -1056,7 +1066,10 @@ impl ThermalModel {
                 return Err("each direction needs gains for every coolant state".into());
             }
             for (g, state) in d.gains.iter().zip(&self.coolant_states) {
-                let all = self.gain_sensors.iter().all(|s| g.k_um_per_m_k.contains_key(s));
+                let all = self
+                    .gain_sensors
+                    .iter()
+                    .all(|s| g.k_um_per_m_k.contains_key(s));
                 if &g.coolant != state || !all {
                     return Err(format!(
                         "gains of coolant '{}' do not match the sensors",
