@@ -96,12 +96,20 @@ pub fn table_from_rows(
     }
     let (step, start, grid_note) = match (step_deg, equal_spacing(&forward, &reverse)) {
         (None, Some((s, a))) => {
-            let a = start_deg.unwrap_or(a);
-            (
-                s,
-                a,
-                format!("grid {a} + {s}*k deg through the equally spaced measured angles"),
-            )
+            let off = start_deg.map_or(0.0, |g| (g - a).rem_euclid(s));
+            match start_deg {
+                Some(given) if off.min(s - off) > 1e-6 => {
+                    let note = format!(
+                        "grid {given} + {s}*k deg as given: the entries between the measured angles are interpolated"
+                    );
+                    (s, given, note)
+                }
+                _ => (
+                    s,
+                    a,
+                    format!("grid {a} + {s}*k deg through the equally spaced measured angles"),
+                ),
+            }
         }
         (Some(s), _) => {
             let a = start_deg.unwrap_or(0.0);
@@ -463,6 +471,10 @@ mod tests {
             t.grid_note
         );
         assert!(table_from_rows("C", &rows, Some(7.0), None).is_err());
+        // A start off the measured angles is the user's grid, and the note says so.
+        let t = table_from_rows("C", &rows, None, Some(0.0)).unwrap();
+        assert!(t.grid_note.contains("as given"), "{}", t.grid_note);
+        assert_eq!(t.step_deg, 30.0);
     }
 
     #[test]
