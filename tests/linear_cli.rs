@@ -57,7 +57,9 @@ fn analyze_json_has_the_issue_shape_and_hand_values() {
         .keys()
         .map(String::as_str)
         .collect();
-    assert_eq!(keys.len(), 4, "{keys:?}");
+    // The four keys of the shape, plus `figures`: the axis figures in the standard's symbols.
+    assert_eq!(keys.len(), 5, "{keys:?}");
+    assert_eq!(doc["figures"][0]["symbol"], "A");
     let t = &doc["targets"][1];
     for key in [
         "target_mm",
@@ -134,7 +136,7 @@ fn analyze_json_has_the_issue_shape_and_hand_values() {
     )
     .stdout;
     assert!(
-        text.contains("A = 19.000") && text.contains("B = 4.000"),
+        text_figure(&text, "A") == "19.000" && text_figure(&text, "B") == "4.000",
         "{text}"
     );
 }
@@ -727,7 +729,8 @@ fn unidirectional_runs_analyze_to_json_nulls_text_chart_and_table() {
         ],
     );
     assert!(
-        text.stdout.contains("E = n/a  E↑ = 6.000")
+        text.stdout.contains("E  = n/a")
+            && text.stdout.contains("E↑ = 6.000")
             && text
                 .stdout
                 .contains("unidirectional test (direction + only)"),
@@ -792,5 +795,67 @@ fn mixed_direction_run_file_names_file_and_line() {
             && out.stderr.contains("direction - only"),
         "{}",
         out.report()
+    );
+}
+
+/// The value on the text line of axis figure `symbol` (lines `SYMBOL = value  name: definition`).
+fn text_figure(stdout: &str, symbol: &str) -> String {
+    stdout
+        .lines()
+        .map(|l| l.trim_start_matches("axis:").trim())
+        .find(|l| l.starts_with(symbol) && l[symbol.len()..].trim_start().starts_with('='))
+        .and_then(|l| l.split('=').nth(1))
+        .map(|v| v.split_whitespace().next().unwrap_or("").to_string())
+        .unwrap_or_else(|| panic!("no line for {symbol} in\n{stdout}"))
+}
+
+#[test]
+fn vdi_and_gb_text_use_their_own_symbols() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("hand.csv"), HAND).unwrap();
+    let vdi = ok(
+        dir.path(),
+        &["linear", "analyze", "hand.csv", "--standard", "vdi3441"],
+    );
+    // HAND by hand: U_j = 2, 3, 4 (U max 4, Ū 3); s̄_j = 1, 1.5, 1 → Ps_j = 6, 9, 6 (Ps max 9,
+    // P̄s 7); x̄_j = 1, 4.5, −3 (Pa 7.5); (U_j + Ps_j)/2 = 4, 6, 5 → max(x̄ + …) = 10.5,
+    // min(x̄ − …) = −8 → P = 18.5.
+    for (symbol, want) in [
+        ("Ps max", "9.000"),
+        ("P̄s", "7.000"),
+        ("U max", "4.000"),
+        ("Ū", "3.000"),
+        ("Pa", "7.500"),
+        ("P", "18.500"),
+    ] {
+        assert_eq!(text_figure(&vdi.stdout, symbol), want, "{symbol}");
+    }
+    let head = vdi.stdout.lines().nth(1).unwrap();
+    assert!(
+        head.contains("U_j") && head.contains("Ps_j") && !head.contains("B_i"),
+        "{head}"
+    );
+    let gb = ok(
+        dir.path(),
+        &[
+            "linear",
+            "analyze",
+            "hand.csv",
+            "--standard",
+            "gb10931-1989",
+        ],
+    );
+    let head = gb.stdout.lines().nth(1).unwrap();
+    assert!(
+        head.contains("X̄_j↑") && head.contains("S_j↓") && !head.contains("s_i"),
+        "{head}"
+    );
+    // A = (X̄ + 3S)max − (X̄ − 3S)min = 12 − (−11) = 23 (↑: 5, 12, −1; ↓: 3, 6, 1 | ↑: −1, 0, −1;
+    // ↓: −3, 0, −11).
+    assert_eq!(text_figure(&gb.stdout, "A"), "23.000");
+    assert!(
+        gb.stdout.contains("反向差值") && !gb.stdout.contains("B̄"),
+        "{}",
+        gb.stdout
     );
 }

@@ -464,3 +464,100 @@ fn malformed_tables_are_errors_not_panics() {
         );
     }
 }
+
+/// The worked example of the VDI/DGQ 3441 and GB 10931 golden tests: positions j = 1…3 at
+/// 0, 100, 200 mm, three approaches each way, readings a−d, a, a+d so that x̄ = a and s = d:
+///
+/// | j | pos | ↑ readings | x̄_j↑ | s_j↑ | ↓ readings | x̄_j↓ | s_j↓ |
+/// |---|-----|------------|------|------|------------|------|------|
+/// | 1 | 0   | 1, 2, 3    | 2    | 1    | −1, 0, 1   | 0    | 1    |
+/// | 2 | 100 | 3, 5, 7    | 5    | 2    | 2, 4, 6    | 4    | 2    |
+/// | 3 | 200 | −2, −1, 0  | −1   | 1    | −6, −4, −2 | −4   | 2    |
+fn worked_example() -> Vec<Sample> {
+    let table: [(f64, [f64; 3], [f64; 3]); 3] = [
+        (0.0, [1.0, 2.0, 3.0], [-1.0, 0.0, 1.0]),
+        (100.0, [3.0, 5.0, 7.0], [2.0, 4.0, 6.0]),
+        (200.0, [-2.0, -1.0, 0.0], [-6.0, -4.0, -2.0]),
+    ];
+    let mut out = Vec::new();
+    for (target, up, down) in table {
+        for run in 0..3 {
+            for (direction, deviation) in [
+                (Direction::Forward, up[run]),
+                (Direction::Reverse, down[run]),
+            ] {
+                out.push(Sample {
+                    run: run as u32 + 1,
+                    direction,
+                    target,
+                    deviation,
+                });
+            }
+        }
+    }
+    out
+}
+
+fn figure(ev: &errmap::linear::Evaluation, symbol: &str, want: f64) {
+    match ev.figure(symbol) {
+        Some(Some(v)) => close(v, want, symbol),
+        other => panic!("{}: {symbol} is {other:?}, expected {want}", ev.standard),
+    }
+}
+
+#[test]
+fn vdi3441_every_figure_of_the_worked_example_by_hand() {
+    // U_j = |x̄_j↑ − x̄_j↓| = 2, 1, 3 → U max = 3, Ū = (2 + 1 + 3)/3 = 2.
+    // s̄_j = (s_j↑ + s_j↓)/2 = 1, 2, 1.5 → Ps_j = 6·s̄_j = 6, 12, 9 → Ps max = 12,
+    //   P̄s = (6 + 12 + 9)/3 = 9.
+    // x̄_j = (x̄_j↑ + x̄_j↓)/2 = 1, 4.5, −2.5 → Pa = 4.5 − (−2.5) = 7.
+    // (U_j + Ps_j)/2 = 4, 6.5, 6 → x̄_j + … = 5, 11, 3.5 (max 11), x̄_j − … = −3, −2, −8.5
+    //   (min −8.5) → P = 19.5.
+    let ev = evaluate(&worked_example(), Standard::Vdi3441).unwrap();
+    figure(&ev, "P", 19.5);
+    figure(&ev, "Pa", 7.0);
+    figure(&ev, "Ps max", 12.0);
+    figure(&ev, "P̄s", 9.0);
+    figure(&ev, "U max", 3.0);
+    figure(&ev, "Ū", 2.0);
+    // Only VDI's own figures: no ISO symbols.
+    let symbols: Vec<&str> = ev.figures().iter().map(|f| f.symbol).collect();
+    assert_eq!(symbols, ["P", "Pa", "Ps max", "P̄s", "U max", "Ū"]);
+    assert!(ev.figures().iter().all(|f| !f.definition.is_empty()));
+}
+
+#[test]
+fn gb10931_every_figure_of_the_worked_example_by_hand() {
+    // R_j↑ = 6S_j↑ = 6, 12, 6 → R↑ = 12; R_j↓ = 6S_j↓ = 6, 12, 12 → R↓ = 12; R = 12.
+    // B_j = X̄_j↑ − X̄_j↓ = 2, 1, 3 → B = 3.
+    // A↑: X̄↑ + 3S↑ = 5, 11, 2 (max 11); X̄↑ − 3S↑ = −1, −1, −4 (min −4) → A↑ = 15.
+    // A↓: X̄↓ + 3S↓ = 3, 10, 2 (max 10); X̄↓ − 3S↓ = −3, −2, −10 (min −10) → A↓ = 20.
+    // A over both directions: max 11, min −10 → A = 21.
+    let ev = evaluate(&worked_example(), Standard::Gb10931_1989).unwrap();
+    for (symbol, want) in [
+        ("A", 21.0),
+        ("A↑", 15.0),
+        ("A↓", 20.0),
+        ("R", 12.0),
+        ("R↑", 12.0),
+        ("R↓", 12.0),
+        ("B", 3.0),
+    ] {
+        figure(&ev, symbol, want);
+    }
+    // GB's own figures only (ISO 230-2's E, M and B̄ are not GB 10931 figures), and GB's
+    // per-position symbols (position j, X̄ and S).
+    assert_eq!(ev.figure("E"), None);
+    assert_eq!(ev.figure("M"), None);
+    let names: Vec<&str> = ev.figures().iter().map(|f| f.name).collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| n.contains("精度") || n.contains("反向差值")),
+        "{names:?}"
+    );
+    assert_eq!(
+        errmap::linear::target_symbols(Standard::Gb10931_1989)[0],
+        "X̄_j↑"
+    );
+}

@@ -80,6 +80,10 @@ struct Interpolated {
     prep: Prepared,
     full_nodes: Vec<Option<f64>>,
     holdout_nodes: Option<Vec<Option<f64>>>,
+    /// Hold-out RMSE of the kriging baseline (fitted on the same kept points), µm.
+    kriging_holdout_rmse_um: Option<f64>,
+    /// The kriging of all clean points, delivered when it fits the hold-out better.
+    kriging_full: Option<interp::kriging::Kriging>,
 }
 
 /// Indices of points on the boundary of the convex hull (vertices and points on its edges).
@@ -200,9 +204,17 @@ fn interpolate(
     train_grid: &Grid,
 ) -> std::result::Result<Interpolated, Box<(PartInput, Error)>> {
     let full = match Surface::new(&probe::uve(&prep.clean)) {
-        Ok(surface) => interp::resample(&surface, s.method, train_grid),
+        Ok(surface) => {
+            if let (Method::Kriging, Err(e)) = (s.method, surface.kriging()) {
+                return Err(Box::new((prep.input, e)));
+            }
+            interp::resample(&surface, s.method, train_grid)
+        }
         Err(e) => return Err(Box::new((prep.input, e))),
     };
+    let kriging_holdout_rmse_um = kriging_holdout_rmse(&prep);
+    let kriging_full = kriging_holdout_rmse_um
+        .and_then(|_| interp::kriging::Kriging::fit(&probe::uve(&prep.clean)).ok());
     let holdout_nodes = if prep.holdout.is_empty() {
         None
     } else {
@@ -233,7 +245,35 @@ fn interpolate(
         prep,
         full_nodes: full,
         holdout_nodes,
+        kriging_holdout_rmse_um,
+        kriging_full,
     })
+}
+
+/// The kriging baseline a metrologist would compare the map with: fitted on the points the
+/// hold-out network saw, RMS of its misses at the held-out points (µm); `None` without a
+/// hold-out or when the points cannot be kriged.
+fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
+    if prep.holdout.is_empty() {
+        return None;
+    }
+    let kept: Vec<ProbePoint> = prep
+        .clean
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| prep.holdout.binary_search(i).is_err())
+        .map(|(_, p)| p.clone())
+        .collect();
+    let k = interp::kriging::Kriging::fit(&probe::uve(&kept)).ok()?;
+    let sq: f64 = prep
+        .holdout
+        .iter()
+        .map(|&i| {
+            let q = &prep.clean[i];
+            (q.e_um - k.predict(q.u_mm, q.v_mm)).powi(2)
+        })
+        .sum();
+    Some((sq / prep.holdout.len() as f64).sqrt())
 }
 
 /// A training set from node values: the nodes that have a value.
@@ -454,6 +494,25 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                             .sum();
                         (sq / p.prep.holdout.len() as f64).sqrt()
                     });
+                    // The delivered map: the kriging when it fits the held-out points better.
+                    let (map, model) = match (&p.kriging_full, better_fit(p, holdout_rmse_um)) {
+                        (Some(k), Some("kriging")) => {
+                            let values = (0..grid.nv)
+                                .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+                                .map(|(i, j)| {
+                                    let (u, v) = grid.node(i, j);
+                                    k.predict(u, v)
+                                })
+                                .collect();
+                            let map = ErrorMap {
+                                grid,
+                                normal: s.normal,
+                                values,
+                            };
+                            (map, model.with_kriging(k.clone()))
+                        }
+                        _ => (map, model),
+                    };
                     let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
                     bar.inc(1);
                     match r {
@@ -664,6 +723,14 @@ pub(crate) fn draw(
     )
 }
 
+/// `kriging` when its hold-out RMSE is below the network's (a tie keeps the network).
+fn better_fit(p: &Interpolated, network_holdout_rmse_um: Option<f64>) -> Option<&'static str> {
+    match (network_holdout_rmse_um, p.kriging_holdout_rmse_um) {
+        (Some(n), Some(k)) => Some(if k < n { "kriging" } else { "network" }),
+        _ => None,
+    }
+}
+
 /// Write every file of one part and return its summary.
 fn write_part(
     p: &Interpolated,
@@ -714,6 +781,8 @@ fn write_part(
         sigma_um: Some(p.prep.sigma_um),
         holdout_points: p.prep.holdout.len(),
         holdout_rmse_um,
+        kriging_holdout_rmse_um: p.kriging_holdout_rmse_um,
+        better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
         rms_um: Some(rms),
         pv_um: Some(pv),
         output_dir: Some(dir.clone()),

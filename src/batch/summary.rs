@@ -22,6 +22,13 @@ pub struct PartSummary {
     pub holdout_points: usize,
     /// RMS of (held-out probe value − hold-out network), µm: the honest accuracy of the map.
     pub holdout_rmse_um: Option<f64>,
+    /// The same for the kriging baseline (Gaussian process, Matérn 5/2 + nugget, maximum
+    /// likelihood) fitted on the same points, µm.
+    #[serde(default)]
+    pub kriging_holdout_rmse_um: Option<f64>,
+    /// `network` or `kriging`: the lower hold-out RMSE (a tie goes to the network).
+    #[serde(default)]
+    pub better_fit: Option<String>,
     /// RMS (about 0) and peak-to-valley of the map over the output grid, µm.
     pub rms_um: Option<f64>,
     pub pv_um: Option<f64>,
@@ -43,6 +50,8 @@ impl PartSummary {
             sigma_um: None,
             holdout_points: 0,
             holdout_rmse_um: None,
+            kriging_holdout_rmse_um: None,
+            better_fit: None,
             rms_um: None,
             pv_um: None,
             output_dir: None,

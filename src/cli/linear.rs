@@ -3,9 +3,10 @@
 use super::Globals;
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
-    read_runs, read_table, refractive_index, render_table, save_chart, AirConditions,
-    AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation, PitchFit, RunFile,
-    Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+    read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
+    AirConditions, AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation,
+    Figure, PitchFit, RunFile, Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM,
+    HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -267,6 +268,8 @@ struct AnalyzeJson<'a> {
     unidirectional: Option<errmap::linear::Direction>,
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
+    /// The axis figures in the standard's own symbols, with their definitions.
+    figures: Vec<Figure>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pitch_fit: Option<&'a PitchFit>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -288,46 +291,62 @@ fn fmt_opt(v: Option<f64>) -> String {
 
 fn print_evaluation(title: &str, ev: &Evaluation) {
     println!("{title} — {} (k = {}), µm", ev.standard, ev.k);
-    println!(
-        "{:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
-        "target_mm", "mean↑", "mean↓", "s↑", "s↓", "B_i", "R↑_i", "R↓_i", "R_i"
-    );
+    // Per-target columns in the standard's own symbols; a figure it does not define is left out.
+    let symbols = target_symbols(ev.standard);
+    let mut head = format!("{:>10}", "target_mm");
+    for s in symbols.iter().filter(|s| !s.is_empty()) {
+        head.push_str(&format!(" {s:>9}"));
+    }
+    println!("{head}");
     for t in &ev.targets {
+        let reversal = match ev.standard {
+            // VDI/DGQ 3441's reversal span U_j is a span: |x̄_j↑ − x̄_j↓|.
+            Standard::Vdi3441 => t.reversal.map(f64::abs),
+            _ => t.reversal,
+        };
+        let values = [
+            t.mean_up,
+            t.mean_down,
+            t.s_up,
+            t.s_down,
+            reversal,
+            t.repeatability_up,
+            t.repeatability_down,
+            t.repeatability,
+        ];
+        let mut line = format!("{:>10.3}", t.target);
+        for (s, v) in symbols.iter().zip(values) {
+            if !s.is_empty() {
+                line.push(' ');
+                line.push_str(&fmt_opt(v));
+            }
+        }
+        println!("{line}");
+    }
+    // Columns on screen: combining marks (the bar of B̄, P̄s, Ū) take none.
+    let columns = |s: &str| {
+        s.chars()
+            .filter(|c| !('\u{300}'..='\u{36f}').contains(c))
+            .count()
+    };
+    let width = ev
+        .figures()
+        .iter()
+        .map(|f| columns(f.symbol))
+        .max()
+        .unwrap_or(1);
+    for (i, f) in ev.figures().iter().enumerate() {
+        let pad = width - columns(f.symbol);
         println!(
-            "{:>10.3} {} {} {} {} {} {} {} {}",
-            t.target,
-            fmt_opt(t.mean_up),
-            fmt_opt(t.mean_down),
-            fmt_opt(t.s_up),
-            fmt_opt(t.s_down),
-            fmt_opt(t.reversal),
-            fmt_opt(t.repeatability_up),
-            fmt_opt(t.repeatability_down),
-            fmt_opt(t.repeatability)
+            "{} {}{} = {}  {}: {}",
+            if i == 0 { "axis:" } else { "     " },
+            f.symbol,
+            " ".repeat(pad),
+            fmt_opt(f.value).trim(),
+            f.name,
+            f.definition
         );
     }
-    let a = &ev.axis;
-    println!(
-        "axis: A = {}  A↑ = {}  A↓ = {}",
-        fmt_opt(a.A).trim(),
-        fmt_opt(a.A_up).trim(),
-        fmt_opt(a.A_down).trim()
-    );
-    println!(
-        "      R = {}  R↑ = {}  R↓ = {}",
-        fmt_opt(a.R).trim(),
-        fmt_opt(a.R_up).trim(),
-        fmt_opt(a.R_down).trim()
-    );
-    println!(
-        "      E = {}  E↑ = {}  E↓ = {}  M = {}  B = {}  B̄ = {}",
-        fmt_opt(a.E).trim(),
-        fmt_opt(a.E_up).trim(),
-        fmt_opt(a.E_down).trim(),
-        fmt_opt(a.M).trim(),
-        fmt_opt(a.B).trim(),
-        fmt_opt(a.B_mean).trim()
-    );
     if let Some(d) = ev.unidirectional {
         println!(
             "      unidirectional test (direction {} only): bidirectional figures are n/a",
@@ -390,6 +409,7 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
             unidirectional: ev.unidirectional,
             targets: targets_json(&ev),
             axis: &ev.axis,
+            figures: ev.figures(),
             pitch_fit: fit.as_ref(),
             after: after.as_ref().map(|(path, a)| AfterJson {
                 table: path.display().to_string(),

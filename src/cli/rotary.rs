@@ -84,6 +84,10 @@ pub struct TableArgs {
     /// Spacing of the table entries; must divide 360 (default: the measured spacing).
     #[arg(long, value_name = "DEG")]
     pub step_deg: Option<f64>,
+    /// Angle of one grid entry (default: the first measured angle when the measured angles
+    /// are equally spaced, else 0).
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub start_deg: Option<f64>,
     /// Sinumerik machine axis name used in $AA_ENC_COMP[0,N,<name>] (default: axis letter + 1, e.g. C1).
     #[arg(long, value_name = "NAME")]
     pub machine_axis: Option<String>,
@@ -136,7 +140,7 @@ pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
         }
         RotaryCommand::Table(args) => {
             let analysis = args.measurement.analyze()?;
-            let table = build_table(&analysis, args.step_deg)?;
+            let table = build_table(&analysis, args.step_deg, args.start_deg)?;
             let axis_name = args
                 .machine_axis
                 .clone()
@@ -144,10 +148,12 @@ pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
             let text = render(&table, args.format, &axis_name)?;
             errmap::io::write_atomic_bytes(&args.output, text.as_bytes())?;
             print_stdout(&format!(
-                "{} entries, 0° … 360° every {}°, written to {}\n",
+                "{} entries, 0° … 360° every {}°, written to {}\n{}\nvalues: {}\n",
                 table.angles_deg.len(),
                 table.step_deg,
-                args.output.display()
+                args.output.display(),
+                table.grid_note,
+                errmap::rotary::INTERPOLATION,
             ))?;
             Ok(0)
         }

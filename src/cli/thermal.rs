@@ -10,7 +10,7 @@ use errmap::thermal::charts::{evaluate_chart, fan_chart};
 use errmap::thermal::compensate::compensate_file;
 use errmap::thermal::difference::difference;
 use errmap::thermal::evaluate::evaluate_campaigns;
-use errmap::thermal::model::{fit, FitOptions, ThermalModel};
+use errmap::thermal::model::{fit, FitOptions, Reference, ThermalModel};
 use errmap::thermal::sensors::{calibrate, SensorTable, TemperatureLog};
 use errmap::thermal::store::{IngestHooks, Store, DEFAULT_STORE};
 use std::path::{Path, PathBuf};
@@ -133,6 +133,11 @@ pub struct FitArgs {
     /// Skip the leave-one-campaign-out cross-validation.
     #[arg(long)]
     pub no_loco: bool,
+    /// Where the rises are measured from: shared (one cold state for all campaigns),
+    /// own-start (each campaign's cold measurement), campaign-offset (shared plus a fitted
+    /// tanβ offset per campaign), or cv (the lowest leave-one-campaign-out RMS).
+    #[arg(long, default_value = "cv")]
+    pub reference: String,
     /// Print the model as one JSON document instead of the report.
     #[arg(long)]
     pub json: bool,
@@ -202,6 +207,10 @@ pub struct SynthThermalArgs {
     /// Laser noise, one sigma (µm).
     #[arg(long, default_value_t = 0.5)]
     pub laser_noise_um: f64,
+    /// Start the machine program during the cold measurement of each campaign (at a time
+    /// drawn from the seed), so the cold state already holds a small rise.
+    #[arg(long)]
+    pub warm_start: bool,
 }
 
 pub fn run(cmd: ThermalCommand, globals: Globals) -> Result<i32> {
@@ -353,7 +362,8 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
     Ok(0)
 }
 
-/// thermal.sqlite in the parent folder of a campaign folder (beside the campaign).
+/// thermal.sqlite in the parent folder of a campaign folder (beside the campaign), however
+/// the folder is spelled (`x`, `./x`, `/abs/x`, `.`): the folder is made absolute first.
 fn store_beside(campaign: &Path) -> PathBuf {
     let file = campaign_file_path(campaign);
     let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -362,10 +372,12 @@ fn store_beside(campaign: &Path) -> PathBuf {
     } else {
         dir
     };
+    let dir = std::fs::canonicalize(&dir)
+        .or_else(|_| std::path::absolute(&dir))
+        .unwrap_or(dir);
     dir.parent()
-        .filter(|p| !p.as_os_str().is_empty())
         .map(|p| p.join(DEFAULT_STORE))
-        .unwrap_or_else(|| PathBuf::from("..").join(DEFAULT_STORE))
+        .unwrap_or_else(|| dir.join(DEFAULT_STORE))
 }
 
 fn run_ingest(a: IngestArgs, g: Globals) -> Result<i32> {
@@ -438,7 +450,17 @@ fn run_fit(a: FitArgs, g: Globals) -> Result<i32> {
             "add campaigns with `errmap thermal ingest`",
         ));
     }
+    let reference = match a.reference.as_str() {
+        "cv" => None,
+        other => Some(Reference::parse(other).ok_or_else(|| {
+            Error::usage(
+                format!("--reference {other} is not a reference"),
+                "give shared, own-start, campaign-offset or cv",
+            )
+        })?),
+    };
     let options = FitOptions {
+        reference,
         sensors: a.sensors.clone(),
         max_order: a.max_order,
         order: a.order,
@@ -485,6 +507,17 @@ fn print_model(m: &ThermalModel) -> Result<()> {
             .map(|a| format!(", ambient {a}"))
             .unwrap_or_default()
     );
+    let scores: Vec<String> = m
+        .reference_cv
+        .iter()
+        .map(|r| format!("{} {}", r.reference.name(), opt(r.loco_rms_um)))
+        .collect();
+    outln!(
+        "rises from: {} ({}); held-out RMS µm by reference: {}",
+        m.reference.name(),
+        m.reference_chosen_by,
+        scores.join(", ")
+    );
     for d in &m.directions {
         outln!(
             "{}: Er(x) order {} ({}), residual RMS {:.3} µm over {} readings",
@@ -502,11 +535,13 @@ fn print_model(m: &ThermalModel) -> Result<()> {
             .collect();
         outln!("  Er Legendre coefficients (µm): {}", coeffs.join("  "));
         for gset in &d.gains {
-            let ks: Vec<String> = m
-                .gain_sensors
+            let ks: Vec<String> = gset
+                .k_um_per_m_k
                 .iter()
-                .zip(gset.k_um_per_m_k.iter().zip(&gset.k_se_um_per_m_k))
-                .map(|(s, (k, se))| format!("k_{s} = {k:.3}±{} µm/m/K", opt(*se)))
+                .map(|(s, k)| {
+                    let se = gset.k_se_um_per_m_k.get(s).copied().flatten();
+                    format!("k_{s} = {k:.3}±{} µm/m/K", opt(se))
+                })
                 .collect();
             outln!("  coolant {}: {}", gset.coolant, ks.join(", "));
         }
@@ -686,6 +721,7 @@ pub fn run_synth(a: SynthThermalArgs, g: Globals) -> Result<i32> {
         repeats: a.repeats,
         every_s: a.every_s,
         laser_noise_um: a.laser_noise_um,
+        warm_start: a.warm_start,
         ..Default::default()
     };
     let truth = write_campaigns(&a.out, &options)?;

@@ -9,12 +9,15 @@
 //!   with the linear extrapolations `e_j + ∇e_j·(p − p_j)` of the neighbours (Sibson 1981,
 //!   flatness 0.5; spade's `interpolate_gradient`).
 //! - [`Method::Linear`]: barycentric interpolation on the Delaunay triangle.
+//! - [`Method::Kriging`]: the posterior mean of a Gaussian process (Matérn 5/2 with a nugget,
+//!   hyper-parameters by maximum likelihood; see [`kriging`]) of all sites, inside the hull.
 //!
 //! All three reproduce a plane exactly (linear precision). [`resample`] evaluates a surface on
 //! a regular [`Grid`] in parallel (rayon over blocks of rows, each block with its own copy of the
 //! triangulation so spade's walk hint and interpolation buffers stay local to one thread).
 
 mod gradient;
+pub mod kriging;
 mod sweep;
 
 use crate::error::{Error, Result};
@@ -48,6 +51,9 @@ pub enum Method {
     SibsonC1,
     /// Barycentric interpolation on the Delaunay triangles: fastest, creased along triangle edges.
     Linear,
+    /// Ordinary kriging (Gaussian process, Matérn 5/2 + nugget, maximum likelihood): smooths
+    /// through probe noise; an O(n³) solve, at most 4000 points.
+    Kriging,
 }
 
 impl Method {
@@ -57,6 +63,7 @@ impl Method {
             Method::NaturalNeighbour => "natural-neighbour",
             Method::SibsonC1 => "sibson-c1",
             Method::Linear => "linear",
+            Method::Kriging => "kriging",
         }
     }
 }
@@ -96,6 +103,8 @@ pub struct Surface {
     tri: Tri,
     /// Bounding box of the sites, a cheap first test before locating a point.
     bbox: Domain,
+    /// The kriging of the sites, fitted on first use (`Err`: why it could not be).
+    kriging: std::sync::OnceLock<std::result::Result<kriging::Kriging, String>>,
 }
 
 impl Surface {
@@ -181,7 +190,11 @@ impl Surface {
                 "measure points off that line so they span an area",
             ));
         }
-        Ok(Surface { tri, bbox })
+        Ok(Surface {
+            tri,
+            bbox,
+            kriging: std::sync::OnceLock::new(),
+        })
     }
 
     /// Number of distinct sites.
@@ -194,9 +207,32 @@ impl Surface {
         self.bbox
     }
 
-    /// Interpolated value at `(u_mm, v_mm)`; `None` outside the convex hull of the sites.
+    /// Interpolated value at `(u_mm, v_mm)`; `None` outside the convex hull of the sites
+    /// (and for kriging, when the sites cannot be kriged: see [`Surface::kriging`]).
     pub fn sample(&self, method: Method, u_mm: f64, v_mm: f64) -> Option<f64> {
-        Sampler::new(&self.tri).sample(method, &self.bbox, u_mm, v_mm)
+        let k = match method {
+            Method::Kriging => Some(self.kriging().ok()?),
+            _ => None,
+        };
+        Sampler::new(&self.tri, k).sample(method, &self.bbox, u_mm, v_mm)
+    }
+
+    /// The kriging of the (merged) sites, fitted once on first use.
+    pub fn kriging(&self) -> Result<&kriging::Kriging> {
+        self.kriging
+            .get_or_init(|| {
+                let sites: Vec<[f64; 3]> = self
+                    .tri
+                    .vertices()
+                    .map(|v| {
+                        let d = v.data();
+                        [d.position.x, d.position.y, d.e]
+                    })
+                    .collect();
+                kriging::Kriging::fit(&sites).map_err(|e| e.to_string())
+            })
+            .as_ref()
+            .map_err(|m| Error::numeric(format!("kriging: {m}"), "choose another [interp] method"))
     }
 }
 
@@ -204,13 +240,15 @@ impl Surface {
 struct Sampler<'a> {
     nn: spade::NaturalNeighbor<'a, Tri>,
     bary: spade::Barycentric<'a, Tri>,
+    kriging: Option<&'a kriging::Kriging>,
 }
 
 impl<'a> Sampler<'a> {
-    fn new(tri: &'a Tri) -> Self {
+    fn new(tri: &'a Tri, kriging: Option<&'a kriging::Kriging>) -> Self {
         Sampler {
             nn: tri.natural_neighbor(),
             bary: tri.barycentric(),
+            kriging,
         }
     }
 
@@ -226,6 +264,13 @@ impl<'a> Sampler<'a> {
                     .interpolate_gradient(|v| v.data().e, |v| v.data().grad, SIBSON_FLATNESS, p)
             }
             Method::Linear => self.bary.interpolate(|v| v.data().e, p),
+            // Inside the hull only, like the others: the hull test is the barycentric one.
+            Method::Kriging => {
+                let k = self.kriging?;
+                self.bary
+                    .interpolate(|_| 0.0, p)
+                    .map(|_| k.predict(u_mm, v_mm))
+            }
         }
     }
 }
@@ -361,6 +406,13 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
     if grid.is_empty() {
         return out;
     }
+    let krig = match method {
+        Method::Kriging => match surface.kriging() {
+            Ok(k) => Some(k),
+            Err(_) => return out,
+        },
+        _ => None,
+    };
     let sweep = sweep::Sweep::new(&surface.tri);
     out.par_chunks_mut(grid.nu * ROWS_PER_BLOCK)
         .enumerate()
@@ -368,7 +420,7 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
             // A private copy: spade's walk hint lives in the triangulation, and sharing it
             // between threads would make every walk start from another thread's last point.
             let tri = surface.tri.clone();
-            let sampler = Sampler::new(&tri);
+            let sampler = Sampler::new(&tri, krig);
             let mut buf = sweep::RowBuffers::default();
             for (k, row) in chunk.chunks_mut(grid.nu).enumerate() {
                 let j = block * ROWS_PER_BLOCK + k;
@@ -377,7 +429,7 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
                     continue;
                 }
                 let span = match method {
-                    Method::Linear => Some(None),
+                    Method::Linear | Method::Kriging => Some(None),
                     _ => sweep.start_row(v_mm, &mut buf),
                 };
                 let Some(span) = span else {

@@ -187,6 +187,202 @@ pub struct Evaluation {
     pub axis: AxisFigures,
 }
 
+/// One axis figure as its standard names and defines it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Figure {
+    /// The standard's own symbol (e.g. `Ps max`, `P̄s`, `Ū`, `A↑`).
+    pub symbol: &'static str,
+    /// The standard's name of the figure.
+    pub name: &'static str,
+    /// Its definition in the standard's notation (position j, approach ↑ ↓).
+    pub definition: &'static str,
+    /// `None` where not applicable (n = 1, unidirectional test).
+    pub value: Option<f64>,
+}
+
+/// Per-target column headings in the standard's own symbols: mean ↑, mean ↓, s ↑, s ↓,
+/// reversal, repeatability ↑, repeatability ↓, repeatability (an empty heading = not defined).
+pub fn target_symbols(standard: Standard) -> [&'static str; 8] {
+    match standard {
+        Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => {
+            ["x̄_i↑", "x̄_i↓", "s_i↑", "s_i↓", "B_i", "R_i↑", "R_i↓", "R_i"]
+        }
+        Standard::Gb10931_1989 => ["X̄_j↑", "X̄_j↓", "S_j↑", "S_j↓", "B_j", "R_j↑", "R_j↓", "R_j"],
+        Standard::Vdi3441 => ["x̄_j↑", "x̄_j↓", "s_j↑", "s_j↓", "U_j", "", "", "Ps_j"],
+    }
+}
+
+impl Evaluation {
+    /// The axis figures the standard defines, in its own symbols, with their definitions.
+    /// ISO 230-2 and GB 10931 take their values from [`AxisFigures`]; VDI/DGQ 3441 adds the
+    /// means over the positions, Ū = Σ|U_j|/m and P̄s = Σ Ps_j/m.
+    pub fn figures(&self) -> Vec<Figure> {
+        let a = &self.axis;
+        let f = |symbol, name, definition, value| Figure {
+            symbol,
+            name,
+            definition,
+            value,
+        };
+        let t = &self.targets;
+        let m = t.len() as f64;
+        let mean_of = |pick: &dyn Fn(&TargetFigures) -> Option<f64>| {
+            t.iter().map(pick).sum::<Option<f64>>().map(|s| s / m)
+        };
+        match self.standard {
+            Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => vec![
+                f(
+                    "A",
+                    "accuracy, bidirectional",
+                    "max(x̄_i↑ + 2s_i↑, x̄_i↓ + 2s_i↓) − min(x̄_i↑ − 2s_i↑, x̄_i↓ − 2s_i↓)",
+                    a.A,
+                ),
+                f(
+                    "A↑",
+                    "accuracy, unidirectional ↑",
+                    "max(x̄_i↑ + 2s_i↑) − min(x̄_i↑ − 2s_i↑)",
+                    a.A_up,
+                ),
+                f(
+                    "A↓",
+                    "accuracy, unidirectional ↓",
+                    "max(x̄_i↓ + 2s_i↓) − min(x̄_i↓ − 2s_i↓)",
+                    a.A_down,
+                ),
+                f(
+                    "R",
+                    "repeatability, bidirectional",
+                    "max R_i, R_i = max(2s_i↑ + 2s_i↓ + |B_i|, R_i↑, R_i↓)",
+                    a.R,
+                ),
+                f(
+                    "R↑",
+                    "repeatability, unidirectional ↑",
+                    "max R_i↑, R_i↑ = 4s_i↑",
+                    a.R_up,
+                ),
+                f(
+                    "R↓",
+                    "repeatability, unidirectional ↓",
+                    "max R_i↓, R_i↓ = 4s_i↓",
+                    a.R_down,
+                ),
+                f(
+                    "E",
+                    "systematic positioning error, bidirectional",
+                    "max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓)",
+                    a.E,
+                ),
+                f(
+                    "E↑",
+                    "systematic positioning error, unidirectional ↑",
+                    "max x̄_i↑ − min x̄_i↑",
+                    a.E_up,
+                ),
+                f(
+                    "E↓",
+                    "systematic positioning error, unidirectional ↓",
+                    "max x̄_i↓ − min x̄_i↓",
+                    a.E_down,
+                ),
+                f(
+                    "M",
+                    "mean bidirectional positioning error",
+                    "max x̄_i − min x̄_i, x̄_i = (x̄_i↑ + x̄_i↓)/2",
+                    a.M,
+                ),
+                f("B", "reversal value", "max |B_i|, B_i = x̄_i↑ − x̄_i↓", a.B),
+                f("B̄", "mean reversal value", "Σ B_i / m", a.B_mean),
+            ],
+            Standard::Gb10931_1989 => vec![
+                f(
+                    "A",
+                    "定位精度 positioning accuracy",
+                    "(X̄_j + 3S_j)max − (X̄_j − 3S_j)min over both directions",
+                    a.A,
+                ),
+                f(
+                    "A↑",
+                    "定位精度 positioning accuracy ↑",
+                    "(X̄_j↑ + 3S_j↑)max − (X̄_j↑ − 3S_j↑)min",
+                    a.A_up,
+                ),
+                f(
+                    "A↓",
+                    "定位精度 positioning accuracy ↓",
+                    "(X̄_j↓ + 3S_j↓)max − (X̄_j↓ − 3S_j↓)min",
+                    a.A_down,
+                ),
+                f("R", "重复定位精度 repeatability", "max(R↑, R↓)", a.R),
+                f(
+                    "R↑",
+                    "重复定位精度 repeatability ↑",
+                    "max R_j↑, R_j↑ = 6S_j↑",
+                    a.R_up,
+                ),
+                f(
+                    "R↓",
+                    "重复定位精度 repeatability ↓",
+                    "max R_j↓, R_j↓ = 6S_j↓",
+                    a.R_down,
+                ),
+                f(
+                    "B",
+                    "反向差值 reversal value",
+                    "max |B_j|, B_j = X̄_j↑ − X̄_j↓",
+                    a.B,
+                ),
+            ],
+            Standard::Vdi3441 => vec![
+                f(
+                    "P",
+                    "Positionsunsicherheit, position uncertainty",
+                    "max(x̄_j + (U_j + Ps_j)/2) − min(x̄_j − (U_j + Ps_j)/2)",
+                    a.A,
+                ),
+                f(
+                    "Pa",
+                    "Positionsabweichung, position deviation",
+                    "max x̄_j − min x̄_j, x̄_j = (x̄_j↑ + x̄_j↓)/2",
+                    a.M,
+                ),
+                f(
+                    "Ps max",
+                    "größte Positionsstreubreite, largest position scatter",
+                    "max Ps_j, Ps_j = 6·s̄_j, s̄_j = (s_j↑ + s_j↓)/2",
+                    a.R,
+                ),
+                f(
+                    "P̄s",
+                    "mittlere Positionsstreubreite, mean position scatter",
+                    "Σ Ps_j / m",
+                    mean_of(&|x| x.repeatability),
+                ),
+                f(
+                    "U max",
+                    "größte Umkehrspanne, largest reversal span",
+                    "max U_j, U_j = |x̄_j↑ − x̄_j↓|",
+                    a.B,
+                ),
+                f(
+                    "Ū",
+                    "mittlere Umkehrspanne, mean reversal span",
+                    "Σ U_j / m",
+                    mean_of(&|x| x.reversal.map(f64::abs)),
+                ),
+            ],
+        }
+    }
+
+    /// The value of the figure with `symbol` (`None` if the standard has no such figure).
+    pub fn figure(&self, symbol: &str) -> Option<Option<f64>> {
+        self.figures()
+            .into_iter()
+            .find(|f| f.symbol == symbol)
+            .map(|f| f.value)
+    }
+}
+
 /// Arithmetic mean; NaN for no values.
 pub fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64

@@ -19,7 +19,10 @@ pub use budget::{
 };
 pub use chart::{save_chart, ChartInput};
 pub use correct::{correct_air, normalise_material, AirCorrection, REFERENCE_TEMP_C};
-pub use eval::{evaluate, mean, std_dev, AxisFigures, Evaluation, Standard, TargetFigures};
+pub use eval::{
+    evaluate, mean, std_dev, target_symbols, AxisFigures, Evaluation, Figure, Standard,
+    TargetFigures,
+};
 pub use pitch::{fit_pitch, PitchFit};
 pub use runs::{
     parse_runs, read_runs, Direction, Env, RunFile, RunRow, Sample, RUN_COLUMNS,

@@ -29,6 +29,10 @@ pub struct FittedModel {
     pub domain: Domain,
     pub normalisation: Normalisation,
     pub network: Mlp,
+    /// When present, the delivered map is this kriging of the probe points (it fitted the
+    /// held-out points better than the network), and [`FittedModel::e_um`] evaluates it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kriging: Option<crate::interp::kriging::Kriging>,
 }
 
 impl FittedModel {
@@ -46,11 +50,22 @@ impl FittedModel {
             domain,
             normalisation,
             network,
+            kriging: None,
         }
     }
 
-    /// E at (u, v) in µm, evaluated anywhere (outside the domain the network extrapolates).
+    /// The same model delivering `kriging` instead of the network.
+    pub fn with_kriging(mut self, kriging: crate::interp::kriging::Kriging) -> Self {
+        self.kriging = Some(kriging);
+        self
+    }
+
+    /// E at (u, v) in µm, evaluated anywhere (outside the domain the network extrapolates,
+    /// the kriging returns towards its mean).
     pub fn e_um(&self, u_mm: f64, v_mm: f64) -> f64 {
+        if let Some(k) = &self.kriging {
+            return k.predict(u_mm, v_mm);
+        }
         let x = self.normalisation.scale_input(u_mm, v_mm);
         self.normalisation.unscale_output(self.network.forward(x))
     }
@@ -87,6 +102,13 @@ impl FittedModel {
                     sizes,
                     model.network.params.len()
                 ),
+                "the file is damaged: refit the map",
+            ));
+        }
+        if let Some(Err(m)) = model.kriging.as_ref().map(|k| k.validate()) {
+            return Err(Error::input(
+                Location::file(path),
+                m,
                 "the file is damaged: refit the map",
             ));
         }

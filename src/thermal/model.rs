@@ -14,19 +14,79 @@
 //!   Without an ambient sensor ΔT_j = T_j − T_j,ref and there is no ρ term.
 //! - The compensation value sent to the controller is −E (P' = P − E).
 //!
+//! The reference state is taken one of four ways ([`Reference`]), chosen by
+//! leave-one-campaign-out cross-validation unless given: the room itself (rises above the
+//! ambient, calibrated sensors reading alike at rest), one cold state shared by all campaigns
+//! (the mean of their cold measurements), each campaign's own cold measurement (seed 000's
+//! thermal difference), or the shared state plus an explicit per-campaign offset of tanβ (sum
+//! zero over the campaigns), which absorbs whatever a campaign's cold state holds.
+//!
 //! All coefficients of one direction are fitted in one linear least-squares problem over every
 //! reading of every campaign (the multiple linear regression of tanβ on the rises, with the
 //! pitch polynomial fitted jointly), giving standard errors for each. The polynomial order is
 //! chosen by leave-one-target-out cross-validation, capped, or given.
+//!
+//! Gains and reference rises are JSON maps keyed by sensor name, and the gain sensors are kept
+//! in name order, so the same campaigns give the same JSON whichever route they were read by.
 
 use super::campaign::{direction_name, Campaign, Direction, Measurement, DIRECTIONS};
 use super::lsq::{legendre_into, legendre_sum, lstsq};
 use super::sensors::{Role, Sensor};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// File format tag of model.json.
-pub const MODEL_FORMAT: &str = "errmap-thermal-model/1";
+pub const MODEL_FORMAT: &str = "errmap-thermal-model/2";
+
+/// Where the rises ΔT are measured from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Reference {
+    /// The room itself: ΔT_j = T_j − T_amb (calibrated sensors read alike at rest); needs an
+    /// ambient sensor.
+    Room,
+    /// One cold state for all campaigns: the mean of their first measurements.
+    #[default]
+    Shared,
+    /// Each campaign's own first (cold) measurement (the rises; the room keeps the shared one).
+    OwnStart,
+    /// The shared cold state plus a fitted tanβ offset per campaign (sum zero).
+    CampaignOffset,
+}
+
+impl Reference {
+    /// Fewest fitted quantities first: a near tie in cross-validation keeps the earlier one.
+    pub const ALL: [Reference; 4] = [
+        Reference::Room,
+        Reference::Shared,
+        Reference::OwnStart,
+        Reference::CampaignOffset,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Reference::Room => "room",
+            Reference::Shared => "shared",
+            Reference::OwnStart => "own-start",
+            Reference::CampaignOffset => "campaign-offset",
+        }
+    }
+
+    pub fn parse(text: &str) -> Option<Reference> {
+        Reference::ALL.into_iter().find(|r| r.name() == text)
+    }
+}
+
+/// Cross-validation score of one reference.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceScore {
+    pub reference: Reference,
+    /// Pooled leave-one-campaign-out RMS (µm) of the measurements after each cold one.
+    pub loco_rms_um: Option<f64>,
+    /// Why there is no score, if there is none.
+    pub note: Option<String>,
+}
 
 /// How to fit.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +103,8 @@ pub struct FitOptions {
     pub reference_point_mm: Option<f64>,
     /// Leave-one-campaign-out cross-validation of the residual.
     pub leave_one_out: bool,
+    /// The rises' reference; `None` = chosen by leave-one-campaign-out cross-validation.
+    pub reference: Option<Reference>,
 }
 
 impl Default for FitOptions {
@@ -54,6 +116,7 @@ impl Default for FitOptions {
             rho_um_per_m_k: None,
             reference_point_mm: None,
             leave_one_out: true,
+            reference: None,
         }
     }
 }
@@ -62,9 +125,9 @@ impl Default for FitOptions {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CoolantGains {
     pub coolant: String,
-    /// k_j in µm/m/K, in the order of `ThermalModel::gain_sensors`.
-    pub k_um_per_m_k: Vec<f64>,
-    pub k_se_um_per_m_k: Vec<Option<f64>>,
+    /// k_j in µm/m/K, keyed by sensor name.
+    pub k_um_per_m_k: BTreeMap<String, f64>,
+    pub k_se_um_per_m_k: BTreeMap<String, Option<f64>>,
 }
 
 /// The model of one direction.
@@ -83,6 +146,9 @@ pub struct DirectionModel {
     pub rho_um_per_m_k: f64,
     pub rho_se_um_per_m_k: Option<f64>,
     pub rho_fitted: bool,
+    /// With reference "campaign-offset": each campaign's tanβ offset (µm/m, sum zero).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub campaign_offsets_um_per_m: BTreeMap<String, f64>,
     pub residual_rms_um: f64,
     pub points: usize,
 }
@@ -118,8 +184,18 @@ pub struct ThermalModel {
     pub ambient_sensor: Option<String>,
     /// Sensor definitions (unit, calibration) used to read machine logs.
     pub sensors: Vec<Sensor>,
-    /// (T_j − T_amb) (or T_j without ambient) in the cold reference state, °C.
-    pub reference_rise_c: Vec<f64>,
+    /// How the rises were referenced in the fit (see [`Reference`]).
+    #[serde(default)]
+    pub reference: Reference,
+    /// "cross-validation", "given" or a default.
+    #[serde(default)]
+    pub reference_chosen_by: String,
+    /// Leave-one-campaign-out score of each reference tried.
+    #[serde(default)]
+    pub reference_cv: Vec<ReferenceScore>,
+    /// (T_j − T_amb) (or T_j without ambient) in the cold reference state, °C, by sensor:
+    /// the mean of the campaigns' cold measurements.
+    pub reference_rise_c: BTreeMap<String, f64>,
     /// Ambient temperature of the cold reference state, °C.
     pub reference_ambient_c: Option<f64>,
     pub coolant_states: Vec<String>,
@@ -128,6 +204,14 @@ pub struct ThermalModel {
     pub campaigns: Vec<CampaignReport>,
     /// Pooled leave-one-campaign-out RMS (µm) over campaigns that have one.
     pub loco_rms_um: Option<f64>,
+}
+
+/// The k_j of a coolant state in gain-sensor order (0 for a sensor missing from the map).
+pub fn gains_in_order(g: &CoolantGains, sensors: &[String]) -> Vec<f64> {
+    sensors
+        .iter()
+        .map(|s| g.k_um_per_m_k.get(s).copied().unwrap_or(0.0))
+        .collect()
 }
 
 /// Temperatures of one thermal state, as the model needs them.
@@ -185,6 +269,9 @@ fn choose_sensors(campaigns: &[Campaign], options: &FitOptions) -> Result<Vec<St
             .map(|s| s.name.clone())
             .collect(),
     };
+    let mut names = names;
+    names.sort();
+    names.dedup();
     if names.is_empty() {
         return Err(Error::usage(
             "no sensors to fit the gains on",
@@ -319,8 +406,11 @@ fn measurement_rises(
     })
 }
 
-/// The references (cold state) from the first measurement of each included campaign.
-fn references(prep: &Prepared, include: &[bool]) -> (Vec<f64>, Option<f64>) {
+/// A cold state: rises above the ambient per gain sensor, and the ambient.
+type Cold = (Vec<f64>, Option<f64>);
+
+/// The mean cold state (first measurement) of the included campaigns.
+fn shared_cold(prep: &Prepared, include: &[bool]) -> Cold {
     let n = prep.gain_sensors.len();
     let mut rise = vec![0.0; n];
     let mut amb = 0.0;
@@ -346,25 +436,44 @@ fn references(prep: &Prepared, include: &[bool]) -> (Vec<f64>, Option<f64>) {
     (rise, prep.ambient.as_ref().map(|_| amb))
 }
 
+/// The cold state each campaign's rises are measured from (the shared one over `include`).
+fn campaign_refs(prep: &Prepared, include: &[bool], reference: Reference) -> Vec<Cold> {
+    let shared = shared_cold(prep, include);
+    prep.rises
+        .iter()
+        .map(|per_m| match (reference, per_m.first()) {
+            (Reference::OwnStart, Some(cold)) => (cold.above_c.clone(), shared.1),
+            (Reference::Room, _) => (vec![0.0; shared.0.len()], shared.1),
+            _ => shared.clone(),
+        })
+        .collect()
+}
+
 /// Design of one direction's regression.
 struct Design {
     order: usize,
     /// Coolant states that get gain columns (those present in the training set).
     states: Vec<usize>,
+    /// Campaigns with a tanβ offset (sum zero: one column fewer than campaigns).
+    offsets: Vec<usize>,
     fit_rho: bool,
     rho_given: f64,
 }
 
 impl Design {
     fn width(&self, n_sensors: usize) -> usize {
-        self.order + 1 + self.states.len() * n_sensors + usize::from(self.fit_rho)
+        self.order
+            + 1
+            + self.states.len() * n_sensors
+            + self.offsets.len().saturating_sub(1)
+            + usize::from(self.fit_rho)
     }
 }
 
 struct Context<'a> {
     prep: &'a Prepared,
-    ref_rise: Vec<f64>,
-    ref_amb: Option<f64>,
+    /// Cold state of each campaign.
+    refs: Vec<Cold>,
 }
 
 impl Context<'_> {
@@ -372,23 +481,37 @@ impl Context<'_> {
         (2.0 * x_mm - self.prep.x_min_mm - self.prep.x_max_mm)
             / (self.prep.x_max_mm - self.prep.x_min_mm)
     }
+    fn lever_m(&self, o: &Obs) -> f64 {
+        (o.x_mm - self.prep.reference_point_mm) / 1000.0
+    }
     /// Append the row of `o` to `rows` and return the response (ρ given: moved to the left).
     fn row(&self, o: &Obs, d: &Design, rows: &mut Vec<f64>, poly: &mut [f64]) -> f64 {
         let r = &self.prep.rises[o.campaign][o.measurement];
-        let lever_m = (o.x_mm - self.prep.reference_point_mm) / 1000.0;
+        let (ref_rise, ref_amb) = &self.refs[o.campaign];
+        let lever_m = self.lever_m(o);
         legendre_into(self.s(o.x_mm), d.order, poly);
         rows.extend_from_slice(&poly[..=d.order]);
         for &st in &d.states {
             for (j, above) in r.above_c.iter().enumerate() {
                 let value = if r.coolant == st {
-                    (above - self.ref_rise[j]) * lever_m
+                    (above - ref_rise[j]) * lever_m
                 } else {
                     0.0
                 };
                 rows.push(value);
             }
         }
-        let d_env = match (r.ambient_c, self.ref_amb) {
+        // Sum-zero coding: the first offset campaign carries minus the sum of the others;
+        // a campaign outside the list (held out) has the mean offset, 0.
+        let pos = d.offsets.iter().position(|&c| c == o.campaign);
+        for k in 1..d.offsets.len() {
+            rows.push(match pos {
+                Some(0) => -lever_m,
+                Some(p) if p == k => lever_m,
+                _ => 0.0,
+            });
+        }
+        let d_env = match (r.ambient_c, ref_amb) {
             (Some(a), Some(r0)) => a - r0,
             _ => 0.0,
         };
@@ -423,26 +546,200 @@ impl Context<'_> {
     }
 }
 
+/// Shared settings of the fits of one model.
+struct Setup<'a> {
+    prep: &'a Prepared,
+    options: &'a FitOptions,
+    names: Vec<String>,
+    fit_rho: bool,
+    rho_given: f64,
+}
+
+/// Leave-one-campaign-out result of one campaign.
+struct Loco {
+    sq: f64,
+    n: usize,
+    note: Option<String>,
+}
+
+/// One reference's fit: both directions, in-sample residuals and held-out scores per campaign.
+struct Trial {
+    reference: Reference,
+    directions: Vec<DirectionModel>,
+    residual_sq: ResidualSums,
+    loco: Vec<Loco>,
+}
+
+impl Trial {
+    fn pooled_loco_um(&self) -> Option<f64> {
+        let (sq, n) = self
+            .loco
+            .iter()
+            .fold((0.0, 0usize), |(s, n), l| (s + l.sq, n + l.n));
+        (n > 0).then(|| (sq / n as f64).sqrt())
+    }
+}
+
 /// Fit the composite model to campaigns.
 pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel> {
     let prep = prepare(campaigns, options)?;
-    let all = vec![true; campaigns.len()];
-    let (ref_rise, ref_amb) = references(&prep, &all);
-    let ctx = Context {
+    let setup = Setup {
         prep: &prep,
-        ref_rise: ref_rise.clone(),
-        ref_amb,
+        options,
+        names: campaigns.iter().map(|c| c.name.clone()).collect(),
+        fit_rho: prep.ambient.is_some() && options.rho_um_per_m_k.is_none(),
+        rho_given: if prep.ambient.is_some() {
+            options.rho_um_per_m_k.unwrap_or(0.0)
+        } else {
+            0.0
+        },
     };
-    let fit_rho = prep.ambient.is_some() && options.rho_um_per_m_k.is_none();
-    let rho_given = if prep.ambient.is_some() {
-        options.rho_um_per_m_k.unwrap_or(0.0)
+    if options.reference == Some(Reference::Room) && prep.ambient.is_none() {
+        return Err(Error::usage(
+            "rises from the room need an ambient sensor",
+            "give a sensor the role ambient in the sensor table, or choose another --reference",
+        ));
+    }
+    let candidates: Vec<Reference> = match options.reference {
+        Some(r) => vec![r],
+        None if options.leave_one_out && campaigns.len() > 1 => Reference::ALL
+            .into_iter()
+            .filter(|r| *r != Reference::Room || prep.ambient.is_some())
+            .collect(),
+        None => vec![Reference::Shared],
+    };
+    let mut trials = Vec::new();
+    let mut scores = Vec::new();
+    let mut first_err = None;
+    for reference in candidates.iter().copied() {
+        match try_reference(&setup, campaigns, reference) {
+            Ok(t) => {
+                let loco = t.pooled_loco_um();
+                scores.push(ReferenceScore {
+                    reference,
+                    loco_rms_um: loco,
+                    note: loco
+                        .is_none()
+                        .then(|| "no held-out campaign to score".into()),
+                });
+                trials.push(t);
+            }
+            Err(e) => {
+                scores.push(ReferenceScore {
+                    reference,
+                    loco_rms_um: None,
+                    note: Some(e.to_string()),
+                });
+                first_err.get_or_insert(e);
+            }
+        }
+    }
+    // The first (fewest fitted quantities) within 1 % of the lowest held-out RMS; without any
+    // score, the first reference that fits.
+    let lowest = trials
+        .iter()
+        .filter_map(Trial::pooled_loco_um)
+        .fold(f64::INFINITY, f64::min);
+    let best = trials
+        .iter()
+        .position(|t| t.pooled_loco_um().is_some_and(|v| v <= lowest * 1.01))
+        .unwrap_or(0);
+    if trials.is_empty() {
+        return Err(first_err.unwrap_or_else(|| Error::Internal("no reference tried".into())));
+    }
+    let chosen_by = if options.reference.is_some() {
+        "given"
+    } else if candidates.len() > 1 && trials[best].pooled_loco_um().is_some() {
+        "cross-validation"
     } else {
-        0.0
+        "default (no held-out campaign to choose by)"
     };
+    let trial = trials.swap_remove(best);
+    Ok(assemble(&setup, campaigns, trial, chosen_by, scores))
+}
+
+/// Fit both directions with one reference and score it campaign by campaign.
+fn try_reference(setup: &Setup, campaigns: &[Campaign], reference: Reference) -> Result<Trial> {
+    let prep = setup.prep;
+    let all = vec![true; campaigns.len()];
+    let ctx = Context {
+        prep,
+        refs: campaign_refs(prep, &all, reference),
+    };
+    let offsets: Vec<usize> = if reference == Reference::CampaignOffset {
+        (0..campaigns.len()).collect()
+    } else {
+        Vec::new()
+    };
+    let (directions, residual_sq) = fit_directions(setup, &ctx, &offsets)?;
+    let loco = campaigns
+        .iter()
+        .enumerate()
+        .map(|(ci, c)| loco_of(setup, campaigns, ci, c, reference, &directions))
+        .collect();
+    Ok(Trial {
+        reference,
+        directions,
+        residual_sq,
+        loco,
+    })
+}
+
+fn loco_of(
+    setup: &Setup,
+    campaigns: &[Campaign],
+    ci: usize,
+    c: &Campaign,
+    reference: Reference,
+    directions: &[DirectionModel],
+) -> Loco {
+    let none = |note: String| Loco {
+        sq: 0.0,
+        n: 0,
+        note: Some(note),
+    };
+    let others_same_state = campaigns
+        .iter()
+        .enumerate()
+        .any(|(k, o)| k != ci && o.coolant == c.coolant);
+    if !setup.options.leave_one_out {
+        return none("not computed".into());
+    }
+    if campaigns.len() < 2 {
+        return none("one campaign only".into());
+    }
+    if !others_same_state {
+        return none(format!("no other campaign with coolant '{}'", c.coolant));
+    }
+    if c.measurements.len() < 2 {
+        return none("only a cold measurement".into());
+    }
+    let coolant = setup
+        .prep
+        .coolant_states
+        .iter()
+        .position(|s| s == &c.coolant)
+        .unwrap_or(0);
+    match leave_one_out(setup, ci, coolant, directions, reference) {
+        Ok((sq, n)) => Loco { sq, n, note: None },
+        Err(e) => none(e.to_string()),
+    }
+}
+
+/// (Σ residual², count) per campaign.
+type ResidualSums = Vec<(f64, usize)>;
+
+/// Fit both directions (orders by cross-validation unless given).
+fn fit_directions(
+    setup: &Setup,
+    ctx: &Context,
+    offsets: &[usize],
+) -> Result<(Vec<DirectionModel>, ResidualSums)> {
+    let prep = setup.prep;
     let all_states: Vec<usize> = (0..prep.coolant_states.len()).collect();
     let n_sensors = prep.gain_sensors.len();
     let mut directions = Vec::new();
-    let mut residual_sq = vec![(0.0, 0usize); campaigns.len()];
+    let mut residual_sq = vec![(0.0, 0usize); prep.rises.len()];
     for dir in DIRECTIONS {
         let obs: Vec<&Obs> = prep.obs.iter().filter(|o| o.direction == dir).collect();
         if obs.is_empty() {
@@ -451,77 +748,43 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
                 "measure both directions (bidirectional runs)",
             ));
         }
-        let mut targets: Vec<i64> = obs.iter().map(|o| o.target_key).collect();
-        targets.sort_unstable();
-        targets.dedup();
-        let (order, chosen_by, cv) = match options.order {
-            Some(o) => {
-                if o + 1 > targets.len() {
-                    return Err(Error::usage(
-                        format!(
-                            "order {o} needs {} target positions, the {} readings have {}",
-                            o + 1,
-                            direction_name(dir),
-                            targets.len()
-                        ),
-                        "give a lower --order",
-                    ));
-                }
-                (o, "given".to_string(), Vec::new())
-            }
-            None => {
-                let cap = options.max_order.min(targets.len().saturating_sub(2));
-                let mut cv = Vec::new();
-                for order in 0..=cap {
-                    let d = Design {
-                        order,
-                        states: all_states.clone(),
-                        fit_rho,
-                        rho_given,
-                    };
-                    cv.push(cross_validate_targets(&ctx, &obs, &targets, &d).ok());
-                }
-                let best = cv.iter().flatten().cloned().fold(f64::INFINITY, f64::min);
-                if !best.is_finite() {
-                    return Err(Error::numeric(
-                        format!(
-                            "no polynomial order could be cross-validated for {}",
-                            direction_name(dir)
-                        ),
-                        "measure more target positions or give --order",
-                    ));
-                }
-                // The lowest order within 2 % of the best: extra terms must earn their place.
-                let order = cv
-                    .iter()
-                    .position(|v| v.is_some_and(|v| v <= best * 1.02))
-                    .unwrap_or(0);
-                (order, "cross-validation".to_string(), cv)
-            }
-        };
-        let d = Design {
+        let design = |order| Design {
             order,
             states: all_states.clone(),
-            fit_rho,
-            rho_given,
+            offsets: offsets.to_vec(),
+            fit_rho: setup.fit_rho,
+            rho_given: setup.rho_given,
         };
+        let (order, chosen_by, cv) = choose_order(setup.options, ctx, dir, &obs, &design)?;
+        let d = design(order);
         let what = format!("the {} model", direction_name(dir));
         let f = ctx.fit(&obs, &d, &what)?;
         let se_at = |i: usize| f.se.as_ref().map(|se| se[i]);
         let mut gains = Vec::new();
         for (si, &st) in d.states.iter().enumerate() {
             let base = order + 1 + si * n_sensors;
+            let names = prep.gain_sensors.iter().cloned();
             gains.push(CoolantGains {
                 coolant: prep.coolant_states[st].clone(),
-                k_um_per_m_k: f.beta[base..base + n_sensors].to_vec(),
-                k_se_um_per_m_k: (base..base + n_sensors).map(se_at).collect(),
+                k_um_per_m_k: names.clone().zip(f.beta[base..].iter().copied()).collect(),
+                k_se_um_per_m_k: names.zip((base..base + n_sensors).map(se_at)).collect(),
             });
         }
-        let (rho, rho_se) = if fit_rho {
+        let mut campaign_offsets_um_per_m = BTreeMap::new();
+        if offsets.len() > 1 {
+            let base = order + 1 + d.states.len() * n_sensors;
+            let b = &f.beta[base..base + offsets.len() - 1];
+            campaign_offsets_um_per_m
+                .insert(setup.names[offsets[0]].clone(), -b.iter().sum::<f64>());
+            for (k, v) in b.iter().enumerate() {
+                campaign_offsets_um_per_m.insert(setup.names[offsets[k + 1]].clone(), *v);
+            }
+        }
+        let (rho, rho_se) = if setup.fit_rho {
             let i = d.width(n_sensors) - 1;
             (f.beta[i], se_at(i))
         } else {
-            (rho_given, None)
+            (setup.rho_given, None)
         };
         for o in &obs {
             let r = o.y_um - ctx.predict(o, &d, &f.beta);
@@ -538,63 +801,96 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
             gains,
             rho_um_per_m_k: rho,
             rho_se_um_per_m_k: rho_se,
-            rho_fitted: fit_rho,
+            rho_fitted: setup.fit_rho,
+            campaign_offsets_um_per_m,
             residual_rms_um: (f.rss / f.n as f64).sqrt(),
             points: f.n,
         });
     }
+    Ok((directions, residual_sq))
+}
 
-    // Leave-one-campaign-out: refit without campaign c (same orders), predict c.
+/// The polynomial order of one direction: given, or by leave-one-target-out cross-validation.
+fn choose_order(
+    options: &FitOptions,
+    ctx: &Context,
+    dir: Direction,
+    obs: &[&Obs],
+    design: &dyn Fn(usize) -> Design,
+) -> Result<(usize, String, Vec<Option<f64>>)> {
+    let mut targets: Vec<i64> = obs.iter().map(|o| o.target_key).collect();
+    targets.sort_unstable();
+    targets.dedup();
+    if let Some(o) = options.order {
+        if o + 1 > targets.len() {
+            return Err(Error::usage(
+                format!(
+                    "order {o} needs {} target positions, the {} readings have {}",
+                    o + 1,
+                    direction_name(dir),
+                    targets.len()
+                ),
+                "give a lower --order",
+            ));
+        }
+        return Ok((o, "given".to_string(), Vec::new()));
+    }
+    let cap = options.max_order.min(targets.len().saturating_sub(2));
+    let cv: Vec<Option<f64>> = (0..=cap)
+        .map(|order| cross_validate_targets(ctx, obs, &targets, &design(order)).ok())
+        .collect();
+    let best = cv.iter().flatten().cloned().fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return Err(Error::numeric(
+            format!(
+                "no polynomial order could be cross-validated for {}",
+                direction_name(dir)
+            ),
+            "measure more target positions or give --order",
+        ));
+    }
+    // The lowest order within 2 % of the best: extra terms must earn their place.
+    let order = cv
+        .iter()
+        .position(|v| v.is_some_and(|v| v <= best * 1.02))
+        .unwrap_or(0);
+    Ok((order, "cross-validation".to_string(), cv))
+}
+
+/// The model of the chosen trial.
+fn assemble(
+    setup: &Setup,
+    campaigns: &[Campaign],
+    trial: Trial,
+    chosen_by: &str,
+    scores: Vec<ReferenceScore>,
+) -> ThermalModel {
+    let prep = setup.prep;
     let mut reports = Vec::new();
-    let (mut loco_sq, mut loco_n) = (0.0, 0usize);
     for (ci, c) in campaigns.iter().enumerate() {
-        let coolant = prep
-            .coolant_states
-            .iter()
-            .position(|s| s == &c.coolant)
-            .unwrap_or(0);
-        let others_same_state = campaigns
-            .iter()
-            .enumerate()
-            .any(|(k, o)| k != ci && o.coolant == c.coolant);
-        let (loco_rms_um, loco_note) = if !options.leave_one_out {
-            (None, Some("not computed".to_string()))
-        } else if campaigns.len() < 2 {
-            (None, Some("one campaign only".to_string()))
-        } else if !others_same_state {
-            (
-                None,
-                Some(format!("no other campaign with coolant '{}'", c.coolant)),
-            )
-        } else {
-            match leave_one_out(&prep, ci, coolant, &directions, fit_rho, rho_given) {
-                Ok((sq, n)) => {
-                    loco_sq += sq;
-                    loco_n += n;
-                    (Some((sq / n.max(1) as f64).sqrt()), None)
-                }
-                Err(e) => (None, Some(e.to_string())),
-            }
-        };
-        let (sq, n) = residual_sq[ci];
+        let l = &trial.loco[ci];
+        let (sq, n) = trial.residual_sq[ci];
         reports.push(CampaignReport {
             name: c.name.clone(),
             coolant: c.coolant.clone(),
             measurements: c.measurements.len(),
             points: n,
             residual_rms_um: (sq / n.max(1) as f64).sqrt(),
-            loco_rms_um,
-            loco_note,
+            loco_rms_um: (l.n > 0).then(|| (l.sq / l.n as f64).sqrt()),
+            loco_note: l.note.clone(),
         });
     }
-
     let mut sensors: Vec<Sensor> = Vec::new();
     for name in prep.gain_sensors.iter().chain(prep.ambient.iter()) {
         if let Some(s) = campaigns[0].sensors.get(name) {
             sensors.push(s.clone());
         }
     }
-    Ok(ThermalModel {
+    let (mut ref_rise, ref_amb) = shared_cold(prep, &vec![true; campaigns.len()]);
+    if trial.reference == Reference::Room {
+        ref_rise.iter_mut().for_each(|r| *r = 0.0);
+    }
+    ThermalModel {
         format: MODEL_FORMAT.to_string(),
         axis: campaigns[0].axis.clone(),
         reference_point_mm: prep.reference_point_mm,
@@ -603,13 +899,16 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
         gain_sensors: prep.gain_sensors.clone(),
         ambient_sensor: prep.ambient.clone(),
         sensors,
-        reference_rise_c: ref_rise,
+        reference: trial.reference,
+        reference_chosen_by: chosen_by.to_string(),
+        reference_cv: scores,
+        reference_rise_c: prep.gain_sensors.iter().cloned().zip(ref_rise).collect(),
         reference_ambient_c: ref_amb,
         coolant_states: prep.coolant_states.clone(),
-        directions,
+        loco_rms_um: trial.pooled_loco_um(),
+        directions: trial.directions,
         campaigns: reports,
-        loco_rms_um: (loco_n > 0).then(|| (loco_sq / loco_n as f64).sqrt()),
-    })
+    }
 }
 
 /// Leave-one-target-out RMS of a design: every target position is predicted by a fit
@@ -628,20 +927,21 @@ fn cross_validate_targets(ctx: &Context, obs: &[&Obs], targets: &[i64], d: &Desi
     Ok((sq / n.max(1) as f64).sqrt())
 }
 
+/// Squared residuals of campaign `held` predicted by a fit without it (same orders), over its
+/// measurements after the cold one. Own-start takes the held campaign's rises from its cold
+/// measurement; campaign-offset estimates its offset from that measurement.
 fn leave_one_out(
-    prep: &Prepared,
+    setup: &Setup,
     held: usize,
     held_coolant: usize,
     directions: &[DirectionModel],
-    fit_rho: bool,
-    rho_given: f64,
+    reference: Reference,
 ) -> Result<(f64, usize)> {
+    let prep = setup.prep;
     let include: Vec<bool> = (0..prep.rises.len()).map(|k| k != held).collect();
-    let (ref_rise, ref_amb) = references(prep, &include);
     let ctx = Context {
         prep,
-        ref_rise,
-        ref_amb,
+        refs: campaign_refs(prep, &include, reference),
     };
     let mut states: Vec<usize> = prep
         .obs
@@ -654,13 +954,18 @@ fn leave_one_out(
     if !states.contains(&held_coolant) {
         return Err(Error::numeric("coolant state not in the training set", ""));
     }
+    let offsets: Vec<usize> = match reference {
+        Reference::CampaignOffset => (0..prep.rises.len()).filter(|&k| k != held).collect(),
+        _ => Vec::new(),
+    };
     let (mut sq, mut n) = (0.0, 0usize);
     for dm in directions {
         let d = Design {
             order: dm.order,
             states: states.clone(),
-            fit_rho,
-            rho_given,
+            offsets: offsets.clone(),
+            fit_rho: setup.fit_rho,
+            rho_given: setup.rho_given,
         };
         let train: Vec<&Obs> = prep
             .obs
@@ -668,12 +973,28 @@ fn leave_one_out(
             .filter(|o| o.campaign != held && o.direction == dm.direction)
             .collect();
         let f = ctx.fit(&train, &d, "leave-one-campaign-out")?;
-        for o in prep
+        let held_obs: Vec<&Obs> = prep
             .obs
             .iter()
             .filter(|o| o.campaign == held && o.direction == dm.direction)
-        {
-            let r = o.y_um - ctx.predict(o, &d, &f.beta);
+            .collect();
+        let offset = if reference == Reference::CampaignOffset {
+            let (mut num, mut den) = (0.0, 0.0);
+            for o in held_obs.iter().filter(|o| o.measurement == 0) {
+                let lever = ctx.lever_m(o);
+                num += (o.y_um - ctx.predict(o, &d, &f.beta)) * lever;
+                den += lever * lever;
+            }
+            if den > 0.0 {
+                num / den
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+        for o in held_obs.iter().filter(|o| o.measurement > 0) {
+            let r = o.y_um - ctx.predict(o, &d, &f.beta) - offset * ctx.lever_m(o);
             sq += r * r;
             n += 1;
         }
@@ -730,8 +1051,12 @@ impl ThermalModel {
         if self.ambient_sensor.is_some() != self.reference_ambient_c.is_some() {
             return Err("ambient_sensor and reference_ambient_c go together".into());
         }
-        if self.reference_rise_c.len() != self.gain_sensors.len() {
-            return Err("reference_rise_c needs one value per gain sensor".into());
+        if !self
+            .gain_sensors
+            .iter()
+            .all(|s| self.reference_rise_c.contains_key(s))
+        {
+            return Err("reference_rise_c needs a value for every gain sensor".into());
         }
         for d in &self.directions {
             if d.legendre_um.len() != d.order + 1 {
@@ -741,7 +1066,11 @@ impl ThermalModel {
                 return Err("each direction needs gains for every coolant state".into());
             }
             for (g, state) in d.gains.iter().zip(&self.coolant_states) {
-                if &g.coolant != state || g.k_um_per_m_k.len() != self.gain_sensors.len() {
+                let all = self
+                    .gain_sensors
+                    .iter()
+                    .all(|s| g.k_um_per_m_k.contains_key(s));
+                if &g.coolant != state || !all {
                     return Err(format!(
                         "gains of coolant '{}' do not match the sensors",
                         g.coolant
@@ -782,11 +1111,9 @@ impl ThermalModel {
         let gains = &dm.gains[state.coolant.min(dm.gains.len() - 1)].k_um_per_m_k;
         let amb = state.ambient_c.unwrap_or(0.0);
         let mut slope = 0.0;
-        for ((k, t), r0) in gains
-            .iter()
-            .zip(&state.sensors_c)
-            .zip(&self.reference_rise_c)
-        {
+        for (name, t) in self.gain_sensors.iter().zip(&state.sensors_c) {
+            let k = gains.get(name).copied().unwrap_or(0.0);
+            let r0 = self.reference_rise_c.get(name).copied().unwrap_or(0.0);
             let above = if self.ambient_sensor.is_some() {
                 t - amb
             } else {
@@ -875,18 +1202,17 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (truth, campaigns) = synthetic(dir.path(), &SynthThermalOptions::default());
         let model = fit(&campaigns, &FitOptions::default()).unwrap();
-        assert_eq!(model.gain_sensors, ["nut", "bearing"]);
+        assert_eq!(model.gain_sensors, ["bearing", "nut"]);
         assert_eq!(model.coolant_states, ["off", "on"]);
         for (di, dm) in model.directions.iter().enumerate() {
             // The truth is a cubic: cross-validation must find order 3.
             assert_eq!(dm.order, 3, "{:?}", dm.cv_rms_um_by_order);
             for g in &dm.gains {
                 let t = truth.gains(di, &g.coolant).unwrap();
-                for (k, want) in g
-                    .k_um_per_m_k
-                    .iter()
-                    .zip([t.k_nut_um_per_m_k, t.k_bearing_um_per_m_k])
-                {
+                for (k, want) in [
+                    (g.k_um_per_m_k["nut"], t.k_nut_um_per_m_k),
+                    (g.k_um_per_m_k["bearing"], t.k_bearing_um_per_m_k),
+                ] {
                     assert!(
                         (k / want - 1.0).abs() < 0.05,
                         "{} {}: k = {k}, truth {want}",
@@ -945,14 +1271,15 @@ mod tests {
         let d = Direction::Forward;
         let amb = model.reference_ambient_c.unwrap();
         let state = ThermalState {
+            // Gain-sensor order is name order: bearing, nut.
             sensors_c: vec![
-                amb + model.reference_rise_c[0] + 3.0,
-                amb + model.reference_rise_c[1],
+                amb + model.reference_rise_c["bearing"],
+                amb + model.reference_rise_c["nut"] + 3.0,
             ],
             ambient_c: Some(amb),
             coolant: 0,
         };
-        let k = model.direction(d).gains[0].k_um_per_m_k[0];
+        let k = model.direction(d).gains[0].k_um_per_m_k["nut"];
         let x = 400.0;
         let thermal = model.error_um(d, x, &state) - model.geometric_um(d, x);
         assert!((thermal - k * 3.0 * (x - model.reference_point_mm) / 1000.0).abs() < 1e-9);

@@ -838,7 +838,8 @@ mod tests {
             for (x, y) in a.legendre_um.iter().zip(&b.legendre_um) {
                 assert!((x - y).abs() <= 1e-12 * y.abs().max(1.0));
             }
-            for (x, y) in a.gains[0].k_um_per_m_k.iter().zip(&b.gains[0].k_um_per_m_k) {
+            for ((sx, x), (sy, y)) in a.gains[0].k_um_per_m_k.iter().zip(&b.gains[0].k_um_per_m_k) {
+                assert_eq!(sx, sy);
                 assert!((x - y).abs() <= 1e-12 * y.abs().max(1.0));
             }
         }
