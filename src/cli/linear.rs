@@ -277,7 +277,7 @@ struct AnalyzeJson<'a> {
 
 fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
-    println!("{text}");
+    outln!("{text}");
     Ok(())
 }
 
@@ -286,14 +286,22 @@ fn fmt_opt(v: Option<f64>) -> String {
         .unwrap_or_else(|| format!("{:>9}", "n/a"))
 }
 
-fn print_evaluation(title: &str, ev: &Evaluation) {
-    println!("{title} — {} (k = {}), µm", ev.standard, ev.k);
-    println!(
+fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
+    outln!("{title} — {} (k = {}), µm", ev.standard, ev.k);
+    outln!(
         "{:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
-        "target_mm", "mean↑", "mean↓", "s↑", "s↓", "B_i", "R↑_i", "R↓_i", "R_i"
+        "target_mm",
+        "mean↑",
+        "mean↓",
+        "s↑",
+        "s↓",
+        "B_i",
+        "R↑_i",
+        "R↓_i",
+        "R_i"
     );
     for t in &ev.targets {
-        println!(
+        outln!(
             "{:>10.3} {} {} {} {} {} {} {} {}",
             t.target,
             fmt_opt(t.mean_up),
@@ -307,19 +315,19 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         );
     }
     let a = &ev.axis;
-    println!(
+    outln!(
         "axis: A = {}  A↑ = {}  A↓ = {}",
         fmt_opt(a.A).trim(),
         fmt_opt(a.A_up).trim(),
         fmt_opt(a.A_down).trim()
     );
-    println!(
+    outln!(
         "      R = {}  R↑ = {}  R↓ = {}",
         fmt_opt(a.R).trim(),
         fmt_opt(a.R_up).trim(),
         fmt_opt(a.R_down).trim()
     );
-    println!(
+    outln!(
         "      E = {}  E↑ = {}  E↓ = {}  M = {}  B = {}  B̄ = {}",
         fmt_opt(a.E).trim(),
         fmt_opt(a.E_up).trim(),
@@ -329,11 +337,12 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         fmt_opt(a.B_mean).trim()
     );
     if let Some(d) = ev.unidirectional {
-        println!(
+        outln!(
             "      unidirectional test (direction {} only): bidirectional figures are n/a",
             d.symbol()
         );
     }
+    Ok(())
 }
 
 fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
@@ -400,17 +409,17 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
         })?;
     } else {
         for n in &notes {
-            println!("{n}");
+            outln!("{n}");
         }
-        print_evaluation(&args.runs.display().to_string(), &ev);
+        print_evaluation(&args.runs.display().to_string(), &ev)?;
         if let Some(f) = &fit {
-            println!(
+            outln!(
                 "pitch fit (P = {} mm, {} targets): a = {:.3} µm, k = {:.3} µm/m, d = {:.3} µm, φ = {:.4} rad, residual RMS = {:.3} µm",
                 f.lead_mm, f.points, f.a_um, f.k_um_per_m, f.d_um, f.phi_rad, f.residual_rms_um
             );
         }
         if let Some((path, after_ev)) = &after {
-            print_evaluation(&format!("after applying {}", path.display()), after_ev);
+            print_evaluation(&format!("after applying {}", path.display()), after_ev)?;
         }
     }
     if let (Some(png), false) = (&args.chart, globals.quiet || args.json) {
@@ -455,8 +464,8 @@ fn air_index(args: AirIndexArgs) -> Result<i32> {
             conditions: cond,
         })?;
     } else {
-        println!("n = {n:.9} ({})", args.formula.name());
-        println!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
+        outln!("n = {n:.9} ({})", args.formula.name());
+        outln!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
     }
     Ok(0)
 }
@@ -467,11 +476,11 @@ fn budget(args: BudgetArgs) -> Result<i32> {
     if args.json {
         print_json(&b)?;
     } else {
-        println!("error budget over {} mm (µm):", b.length_mm);
+        outln!("error budget over {} mm (µm):", b.length_mm);
         for t in &b.terms {
-            println!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
+            outln!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
         }
-        println!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
+        outln!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
     }
     Ok(0)
 }

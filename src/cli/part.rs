@@ -66,6 +66,10 @@ pub struct MapArgs {
     /// Trainer: auto, gpu or cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Plausibility bound, mm: a probe deviation or map value beyond it is an error naming the
+    /// likely unit slip.
+    #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
+    pub max_deviation_mm: f64,
     /// Print the summary as one JSON document.
     #[arg(long)]
     pub json: bool,
@@ -114,11 +118,11 @@ fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: boo
     if json {
         let text =
             serde_json::to_string_pretty(summary).map_err(|e| Error::Internal(e.to_string()))?;
-        println!("{text}");
+        outln!("{text}");
     } else {
-        print!("{}", summary.table());
+        out!("{}", summary.table());
         if !quiet {
-            println!("summary: {}", path.display());
+            outln!("summary: {}", path.display());
         }
     }
     Ok(())
@@ -136,11 +140,35 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         output: args.out,
     };
     let (plan, summary_path) = batch::plan_job(&file, &opts)?;
+    protect_plan(&plan);
+    if let Some(out) = summary_path.parent() {
+        errmap::io::safety::confine_to(out)?;
+    }
+    if !globals.quiet {
+        for note in batch::renamed_parts(&file.probe_files()?) {
+            eprintln!("note: {note}");
+        }
+    }
     let trainer = errmap::gpu::select_trainer(plan.settings.model.backend, globals.quiet)?;
     let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
     errmap::io::write_json(&summary_path, &summary)?;
     report(&summary, &summary_path, args.json, globals.quiet)?;
     Ok(summary.exit_code())
+}
+
+/// Every file a plan reads is an input no output may replace: protect them all before the
+/// first output is written (parts are written while others are still being read).
+fn protect_plan(plan: &Plan) {
+    use errmap::io::safety::protect;
+    for part in &plan.parts {
+        protect(&part.probe_file);
+    }
+    if let Some(job) = &plan.job {
+        protect(job);
+    }
+    for f in plan.toolpaths.iter().flat_map(|t| &t.files) {
+        protect(f);
+    }
 }
 
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
@@ -163,6 +191,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         model.seed = s;
     }
     model.validate()?;
+    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     for (flag, v) in [
         ("--grid-step", args.grid_step),
         ("--spacing", args.spacing),
@@ -190,6 +219,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
             method: args.method,
             spacing_mm: args.spacing,
             model,
+            max_deviation_mm: args.max_deviation_mm,
         },
         parts: vec![PartInput {
             name,
@@ -201,13 +231,14 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         job: None,
         shard: None,
     };
+    protect_plan(&plan);
+    errmap::io::safety::confine_to(&args.out)?;
     let trainer = errmap::gpu::select_trainer(args.backend, globals.quiet)?;
     let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
-    // A single part has no batch to finish: its failure is the command's error.
-    // A single part has no batch to finish: its failure is the command's error (the message
-    // already names file, line and column and the fix).
+    // A single part has no batch to finish: its failure is the command's error, with its
+    // kind (and exit code), place and fix.
     if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
-        return Err(Error::usage(err, ""));
+        return Err(err.into_error());
     }
     let path = args.out.join("summary.json");
     report(&summary, &path, args.json, globals.quiet)?;
