@@ -5,7 +5,7 @@ pub mod run;
 pub mod summary;
 
 pub use job::{Job, JobFile, MapChoice};
-pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan};
+pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use summary::{merge, BatchSummary, PartSummary};
 
 use crate::error::{Error, Result};

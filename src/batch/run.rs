@@ -688,6 +688,16 @@ fn check_map_plausible(map: &ErrorMap, max_deviation_mm: f64, probe_file: &Path)
     ))
 }
 
+/// The files [`write_part`] writes into a part's folder.
+pub const PART_OUTPUTS: [&str; 6] = [
+    "map.csv",
+    "model.json",
+    "clean.csv",
+    "rejected.csv",
+    "map.png",
+    "summary.json",
+];
+
 /// Write every file of one part and return its summary.
 fn write_part(
     p: &Interpolated,

@@ -140,10 +140,10 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         output: args.out,
     };
     let (plan, summary_path) = batch::plan_job(&file, &opts)?;
-    protect_plan(&plan);
     if let Some(out) = summary_path.parent() {
         errmap::io::safety::confine_to(out)?;
     }
+    protect_plan(&plan)?;
     if !globals.quiet {
         for note in batch::renamed_parts(&file.probe_files()?) {
             eprintln!("note: {note}");
@@ -156,10 +156,10 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     Ok(summary.exit_code())
 }
 
-/// Every file a plan reads is an input no output may replace: protect them all before the
-/// first output is written (parts are written while others are still being read).
-fn protect_plan(plan: &Plan) {
-    use errmap::io::safety::protect;
+/// Every file a plan reads is an input no output may replace: protect them all, then check
+/// every part's outputs before the first is written, so a refused plan writes nothing.
+fn protect_plan(plan: &Plan) -> Result<()> {
+    use errmap::io::safety::{check_output, protect};
     for part in &plan.parts {
         protect(&part.probe_file);
     }
@@ -169,6 +169,12 @@ fn protect_plan(plan: &Plan) {
     for f in plan.toolpaths.iter().flat_map(|t| &t.files) {
         protect(f);
     }
+    for part in &plan.parts {
+        for name in batch::PART_OUTPUTS {
+            check_output(&part.out_dir.join(name))?;
+        }
+    }
+    Ok(())
 }
 
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
@@ -231,8 +237,8 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         job: None,
         shard: None,
     };
-    protect_plan(&plan);
     errmap::io::safety::confine_to(&args.out)?;
+    protect_plan(&plan)?;
     let trainer = errmap::gpu::select_trainer(args.backend, globals.quiet)?;
     let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
     // A single part has no batch to finish: its failure is the command's error, with its

@@ -278,7 +278,7 @@ pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
     if !(args.step_deg.is_finite() && args.step_deg >= MIN_SYNTH_STEP_DEG) {
         return Err(Error::usage(
             format!(
-                "--step-deg {} is below the smallest step of {MIN_SYNTH_STEP_DEG}°",
+                "--step-deg {:?} is below the smallest step of {MIN_SYNTH_STEP_DEG}°",
                 args.step_deg
             ),
             "choose a step that divides 360, e.g. 10, 15, 30",

@@ -129,7 +129,7 @@ impl CompTable {
         if !(count_f <= 100_000.0) {
             return Err(Error::usage(
                 format!(
-                    "spacing {spacing_mm} mm over {} mm gives {count_f:.3e} table points, more than 100000",
+                    "spacing {spacing_mm:?} mm over {} mm gives {count_f:.3e} table points, more than 100000",
                     last - first
                 ),
                 "choose a coarser spacing",
