@@ -117,18 +117,36 @@ pub fn confine_to(root: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The canonical form of a path that may not exist yet: its canonical parent joined with its
-/// file name. `None` when the parent does not exist or the path has no file name.
+/// The canonical form of a path that may not exist yet: its deepest existing ancestor,
+/// canonicalised, with the rest of the path appended (`..` taken lexically there: folders that
+/// do not exist cannot be symlinks). `None` when no ancestor resolves.
 fn resolve(path: &Path) -> Option<PathBuf> {
-    if let Ok(c) = std::fs::canonicalize(path) {
-        return Some(c);
+    let mut base = path.to_path_buf();
+    let mut rest: Vec<std::ffi::OsString> = Vec::new();
+    loop {
+        let probe = if base.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            base.as_path()
+        };
+        if let Ok(mut out) = std::fs::canonicalize(probe) {
+            for part in rest.iter().rev() {
+                match part.to_str() {
+                    Some("..") => {
+                        out.pop();
+                    }
+                    Some(".") => {}
+                    _ => out.push(part),
+                }
+            }
+            return Some(out);
+        }
+        let last = base.components().next_back()?;
+        rest.push(last.as_os_str().to_owned());
+        if !base.pop() {
+            return None;
+        }
     }
-    let name = path.file_name()?;
-    let parent = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    Some(std::fs::canonicalize(parent).ok()?.join(name))
 }
 
 /// Refuse `output` when it is, or resolves to, a protected input, or lies outside the output
