@@ -17,6 +17,7 @@ fn plane_spec(z_mm: f64) -> ProbeSpec {
         normal: Axis::Z,
         nominal_plane_mm: Some(z_mm),
         domain: None,
+        ..ProbeSpec::default()
     }
 }
 
@@ -58,6 +59,7 @@ fn nominal_columns_and_a_wall_normal() {
         normal: Axis::X,
         nominal_plane_mm: Some(99.0), // ignored: the columns win
         domain: None,
+        ..ProbeSpec::default()
     };
     let set = read_probes(&path, &spec).unwrap();
     let p: Vec<_> = set.points.iter().map(|p| (p.u_mm, p.v_mm)).collect();
