@@ -346,7 +346,7 @@ impl ErrorField for Tilt {
         Axis::Z
     }
     fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
-        (u_mm.abs() <= 1000.0 && v_mm.abs() <= 1000.0).then(|| 0.01 + 1e-5 * u_mm - 2e-5 * v_mm)
+        (u_mm.abs() <= 1000.0 && v_mm.abs() <= 1000.0).then_some(0.01 + 1e-5 * u_mm - 2e-5 * v_mm)
     }
 }
 

@@ -245,7 +245,7 @@ impl Sweep {
             *w /= total;
         }
         // Sibson weights are never negative: a negative one is cancellation, not geometry.
-        if buf.weights.iter().any(|&(_, w)| !(w >= -1e-9)) {
+        if buf.weights.iter().any(|&(_, w)| w.is_nan() || w < -1e-9) {
             return Node::Fallback;
         }
         Node::Weights

@@ -126,7 +126,7 @@ impl CompTable {
         };
         // Count in f64 first: a tiny spacing must not wrap a usize.
         let count_f = ((last - first) / spacing_mm + 1e-9).floor() + 1.0;
-        if !(count_f <= 100_000.0) {
+        if count_f.is_nan() || count_f > 100_000.0 {
             return Err(Error::usage(
                 format!(
                     "spacing {spacing_mm:?} mm over {} mm gives {count_f:.3e} table points, more than 100000",
