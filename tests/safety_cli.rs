@@ -349,6 +349,12 @@ fn part_names_stay_in_the_output_folder_and_never_collide() {
 /// Run with stdout a pipe whose reading end is already closed: every write fails with EPIPE.
 #[track_caller]
 fn closed_pipe(dir: &Path, args: &[&str]) {
+    closed_pipe_code(dir, args, 0)
+}
+
+/// [`closed_pipe`], requiring exit `code`.
+#[track_caller]
+fn closed_pipe_code(dir: &Path, args: &[&str], code: i32) {
     let (reader, writer) = std::io::pipe().unwrap();
     drop(reader);
     let out = common::command()

@@ -101,6 +101,18 @@ pub fn emit(text: &str) -> Result<()> {
         .map_err(|e| errmap::Error::write("<stdout>", e))
 }
 
+/// Treat a closed stdout as done: for commands whose exit code says more than "printed".
+pub fn ignore_closed_pipe(result: Result<()>) -> Result<()> {
+    match result {
+        Err(errmap::Error::Io { source, .. })
+            if source.kind() == std::io::ErrorKind::BrokenPipe =>
+        {
+            Ok(())
+        }
+        other => other,
+    }
+}
+
 /// Run a parsed command line; the result is the process exit code.
 pub fn run(cli: Cli) -> Result<i32> {
     // Every output of this process obeys the safety rules: never over an input, never

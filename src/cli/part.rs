@@ -152,7 +152,8 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     let trainer = errmap::gpu::select_trainer(plan.settings.model.backend, globals.quiet)?;
     let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
     errmap::io::write_json(&summary_path, &summary)?;
-    report(&summary, &summary_path, args.json, globals.quiet)?;
+    // A closed stdout must not turn "some parts failed" (exit 1) into success.
+    super::ignore_closed_pipe(report(&summary, &summary_path, args.json, globals.quiet))?;
     Ok(summary.exit_code())
 }
 
@@ -267,6 +268,6 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
         .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
     merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
     errmap::io::write_json(&out, &merged)?;
-    report(&merged, &out, args.json, globals.quiet)?;
+    super::ignore_closed_pipe(report(&merged, &out, args.json, globals.quiet))?;
     Ok(merged.exit_code())
 }

@@ -275,7 +275,7 @@ const MIN_SYNTH_STEP_DEG: f64 = 0.01;
 const MAX_SYNTH_SAMPLES: f64 = 1e7;
 
 pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
-    if !(args.step_deg.is_finite() && args.step_deg >= MIN_SYNTH_STEP_DEG) {
+    if args.step_deg > 0.0 && args.step_deg < MIN_SYNTH_STEP_DEG {
         return Err(Error::usage(
             format!(
                 "--step-deg {:?} is below the smallest step of {MIN_SYNTH_STEP_DEG}°",
