@@ -345,6 +345,28 @@ mod tests {
     }
 
     #[test]
+    fn line_numbers_count_comments_crlf_and_quoted_newlines() {
+        let text = "# head\r\na,b\r\n1,2\r\n\r\n# note\r\n3,\"x\r\ny\"\r\n\r\n5,6";
+        let t = CsvTable::parse(Path::new("p.csv"), text).unwrap();
+        let lines: Vec<u64> = t.rows.iter().map(|r| r.line).collect();
+        assert_eq!(lines, vec![3, 6, 9]);
+        assert_eq!(&t.rows[1].fields[1], "x\r\ny");
+        // The same from a reader that hands out one byte at a time.
+        struct OneByte<'a>(&'a [u8]);
+        impl std::io::Read for OneByte<'_> {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                let n = self.0.len().min(1).min(buf.len());
+                buf[..n].copy_from_slice(&self.0[..n]);
+                self.0 = &self.0[n..];
+                Ok(n)
+            }
+        }
+        let t = CsvTable::from_reader(Path::new("p.csv"), OneByte(text.as_bytes())).unwrap();
+        let again: Vec<u64> = t.rows.iter().map(|r| r.line).collect();
+        assert_eq!(again, lines);
+    }
+
+    #[test]
     fn atomic_write_replaces_whole_file_and_leaves_no_temp() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sub/out.txt");
