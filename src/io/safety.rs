@@ -9,28 +9,26 @@
 //! never call [`activate`] see none of this.
 
 use crate::error::{Error, Result};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
-/// One protected input: its canonical path and, where the platform has them, device and inode.
-#[derive(Debug, Clone)]
-struct Input {
-    canonical: PathBuf,
-    shown: PathBuf,
-    id: Option<(u64, u64)>,
-}
-
+/// The protected inputs, by canonical path and, where the platform has them, by device and
+/// inode, each with the path as the command was given it (for messages). Ordered maps: a batch
+/// of many parts checks every output in logarithmic time.
 #[derive(Debug, Default)]
 struct Rules {
     active: bool,
-    inputs: Vec<Input>,
+    by_path: BTreeMap<PathBuf, PathBuf>,
+    by_id: BTreeMap<(u64, u64), PathBuf>,
     roots: Vec<PathBuf>,
 }
 
 static RULES: Mutex<Rules> = Mutex::new(Rules {
     active: false,
-    inputs: Vec::new(),
+    by_path: BTreeMap::new(),
+    by_id: BTreeMap::new(),
     roots: Vec::new(),
 });
 
@@ -82,15 +80,13 @@ pub fn protect(path: &Path) {
     let Ok(canonical) = std::fs::canonicalize(path) else {
         return;
     };
-    if r.inputs.iter().any(|i| i.canonical == canonical) {
+    if r.by_path.contains_key(&canonical) {
         return;
     }
-    let id = std::fs::metadata(&canonical).ok().and_then(|m| file_id(&m));
-    r.inputs.push(Input {
-        canonical,
-        shown: path.to_path_buf(),
-        id,
-    });
+    if let Some(id) = std::fs::metadata(&canonical).ok().and_then(|m| file_id(&m)) {
+        r.by_id.insert(id, path.to_path_buf());
+    }
+    r.by_path.insert(canonical, path.to_path_buf());
 }
 
 /// Let one protected input be replaced after all: a command whose documented purpose is to
@@ -98,7 +94,10 @@ pub fn protect(path: &Path) {
 pub fn allow_replacing(path: &Path) {
     let mut r = rules();
     if let Ok(canonical) = std::fs::canonicalize(path) {
-        r.inputs.retain(|i| i.canonical != canonical);
+        if let Some(id) = std::fs::metadata(&canonical).ok().and_then(|m| file_id(&m)) {
+            r.by_id.remove(&id);
+        }
+        r.by_path.remove(&canonical);
     }
 }
 
@@ -159,19 +158,17 @@ pub fn check_output(output: &Path) -> Result<()> {
     }
     let resolved = resolve(output);
     let id = std::fs::metadata(output).ok().and_then(|m| file_id(&m));
-    for input in &r.inputs {
-        let same_file = id.is_some() && id == input.id;
-        let same_path = resolved.as_deref() == Some(input.canonical.as_path());
-        if same_file || same_path {
-            return Err(Error::usage(
-                format!(
-                    "refusing to write {}: it is the input {}",
-                    output.display(),
-                    input.shown.display()
-                ),
-                "choose an output path that is not one of the command's input files",
-            ));
-        }
+    let same_file = id.and_then(|id| r.by_id.get(&id));
+    let same_path = resolved.as_ref().and_then(|p| r.by_path.get(p));
+    if let Some(input) = same_file.or(same_path) {
+        return Err(Error::usage(
+            format!(
+                "refusing to write {}: it is the input {}",
+                output.display(),
+                input.display()
+            ),
+            "choose an output path that is not one of the command's input files",
+        ));
     }
     if !r.roots.is_empty() {
         let inside = resolved
