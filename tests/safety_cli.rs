@@ -367,7 +367,7 @@ fn closed_pipe_code(dir: &Path, args: &[&str], code: i32) {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(
         out.status.code(),
-        Some(0),
+        Some(code),
         "errmap {}: {stderr}",
         args.join(" ")
     );
