@@ -3,6 +3,7 @@
 mod family_bench;
 mod interp_bench;
 mod linear_bench;
+mod reader_bench;
 mod rotary_bench;
 mod thermal_bench;
 mod toolpath_bench;
@@ -25,7 +26,7 @@ fn csv_table_parse(c: &mut Criterion) {
     });
 }
 
-criterion_group!(io_benches, csv_table_parse);
+criterion_group!(io_benches, csv_table_parse, reader_bench::reader_benches);
 criterion_group!(interp_benches, interp_bench::interp_benches);
 criterion_group!(family_benches, family_bench::family_benches);
 criterion_group!(

@@ -17,6 +17,7 @@ fn plate() -> ProbeSet {
         normal: Axis::Z,
         nominal_plane_mm: Some(30.0),
         domain: None,
+        ..ProbeSpec::default()
     };
     read_probes(&path, &spec).expect("benches/peers/plate_144.csv")
 }

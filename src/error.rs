@@ -49,6 +49,77 @@ impl fmt::Display for Location {
     }
 }
 
+/// An [`Error`] as a record for files and scripts (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ErrorReport {
+    /// `input`, `io`, `device` or `internal` (see [`Error::kind`]).
+    pub kind: String,
+    pub message: String,
+    pub file: Option<PathBuf>,
+    pub line: Option<u64>,
+    pub column: Option<String>,
+    pub hint: Option<String>,
+}
+
+impl fmt::Display for ErrorReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(file) = &self.file {
+            let location = Location {
+                file: file.clone(),
+                line: self.line,
+                column: self.column.clone(),
+            };
+            write!(f, "{location}: ")?;
+        }
+        write!(f, "{}", self.message)?;
+        if let Some(hint) = &self.hint {
+            write!(f, " (hint: {hint})")?;
+        }
+        Ok(())
+    }
+}
+
+impl ErrorReport {
+    /// The error again, for a command that reports one part's failure as its own: the kind
+    /// (and so the exit code), place, message and hint are kept.
+    pub fn into_error(self) -> Error {
+        let hint = self.hint.unwrap_or_default();
+        match (self.kind.as_str(), self.file) {
+            ("input", Some(file)) => Error::Input {
+                location: Location {
+                    file,
+                    line: self.line,
+                    column: self.column,
+                },
+                message: self.message,
+                hint,
+            },
+            ("input", None) => Error::Usage {
+                message: self.message,
+                hint,
+            },
+            ("io", file) => Error::Io {
+                action: if self.message.starts_with("cannot read") {
+                    "read"
+                } else {
+                    "write"
+                },
+                path: file.unwrap_or_default(),
+                source: std::io::Error::other(
+                    self.message
+                        .split_once(": ")
+                        .map_or(self.message.clone(), |(_, cause)| cause.to_string()),
+                ),
+            },
+            ("device", _) => Error::Device {
+                message: self.message,
+                hint,
+            },
+            _ => Error::Internal(self.message),
+        }
+    }
+}
+
 /// Everything that can go wrong in errmap. The CLI maps each kind to an exit code
 /// (see [`Error::exit_code`]).
 #[derive(Debug, thiserror::Error)]
@@ -137,6 +208,69 @@ impl Error {
             action: "write",
             path: path.as_ref().to_path_buf(),
             source,
+        }
+    }
+    /// An operation other than a plain read or write ("create folder", "rename …").
+    pub fn io(action: &'static str, path: impl AsRef<Path>, source: std::io::Error) -> Self {
+        Error::Io {
+            action,
+            path: path.as_ref().to_path_buf(),
+            source,
+        }
+    }
+
+    /// The kind a script can act on: `input` (bad file content, options or data a method cannot
+    /// use: fix the input), `io` (a file could not be read or written), `device` (the GPU) or
+    /// `internal` (a bug in errmap).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Error::Input { .. } | Error::Usage { .. } | Error::Numeric { .. } => "input",
+            Error::Io { .. } => "io",
+            Error::Device { .. } => "device",
+            Error::Internal(_) => "internal",
+        }
+    }
+
+    /// The error as data: kind, message, location and hint (what `summary.json` records for a
+    /// failed part).
+    pub fn report(&self) -> ErrorReport {
+        let (message, location, hint) = match self {
+            Error::Input {
+                location,
+                message,
+                hint,
+            } => (message.clone(), Some(location.clone()), hint.clone()),
+            Error::Usage { message, hint }
+            | Error::Device { message, hint }
+            | Error::Numeric { message, hint } => (message.clone(), None, hint.clone()),
+            Error::Io {
+                action,
+                path,
+                source,
+            } => (
+                format!("cannot {action}: {source}"),
+                Some(Location::file(path)),
+                match *action {
+                    "read" => "check that the file exists and is readable".to_string(),
+                    _ => format!(
+                        "check that {} is writable and the disk has room",
+                        path.display()
+                    ),
+                },
+            ),
+            Error::Internal(m) => (
+                m.clone(),
+                None,
+                "this is a bug in errmap: please report it with the input".to_string(),
+            ),
+        };
+        ErrorReport {
+            kind: self.kind().to_string(),
+            message,
+            file: location.as_ref().map(|l| l.file.clone()),
+            line: location.as_ref().and_then(|l| l.line),
+            column: location.and_then(|l| l.column),
+            hint: (!hint.is_empty()).then_some(hint),
         }
     }
 

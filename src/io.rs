@@ -1,4 +1,7 @@
-//! File plumbing shared by every module: atomic writes and a CSV table reader that keeps line numbers for error messages.
+//! File plumbing shared by every module: atomic writes that obey the output safety rules, and a streaming CSV table reader that keeps line numbers for error messages.
+
+pub mod lines;
+pub mod safety;
 
 use crate::error::{Error, Location, Result};
 use std::collections::HashMap;
@@ -7,7 +10,9 @@ use std::path::{Path, PathBuf};
 
 /// Write a file atomically: the content goes to a temporary file beside `path`, which is
 /// flushed and then renamed over the target, so an interrupted run never leaves a
-/// half-written file that looks complete.
+/// half-written file that looks complete. The file is created with mode 0666 less the umask,
+/// like every Unix tool's output, and [`safety::check_output`] refuses a path that is one of
+/// the command's inputs or lies outside its output folder.
 pub fn write_atomic(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
@@ -16,22 +21,65 @@ pub fn write_atomic(
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    std::fs::create_dir_all(&dir).map_err(|e| Error::write(&dir, e))?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".errmap-")
-        .suffix(".tmp")
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io("create folder", &dir, e))?;
+    safety::check_output(path)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".errmap-").suffix(".tmp");
+    // tempfile's default is 0600; the kernel applies the umask to the mode asked for here.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let mut tmp = builder
         .tempfile_in(&dir)
-        .map_err(|e| Error::write(path, e))?;
+        .map_err(|e| Error::io("create a temporary file in", &dir, e))?;
     {
-        let mut buffered = std::io::BufWriter::new(tmp.as_file_mut());
-        fill(&mut buffered).map_err(|e| Error::write(path, e))?;
-        buffered.flush().map_err(|e| Error::write(path, e))?;
+        let limit = safety::max_output_bytes();
+        let mut limited = Limited {
+            inner: std::io::BufWriter::new(tmp.as_file_mut()),
+            left: limit,
+            tripped: false,
+        };
+        let filled = fill(&mut limited).and_then(|()| limited.inner.flush());
+        if limited.tripped {
+            return Err(Error::usage(
+                format!(
+                    "{} would exceed the output limit of {} MB",
+                    path.display(),
+                    limit / 1_000_000
+                ),
+                "choose coarser steps or spacings, or raise --max-output-mb",
+            ));
+        }
+        filled.map_err(|e| Error::write(path, e))?;
     }
     tmp.as_file()
         .sync_all()
         .map_err(|e| Error::write(path, e))?;
-    tmp.persist(path).map_err(|e| Error::write(path, e.error))?;
+    tmp.persist(path)
+        .map_err(|e| Error::io("rename the finished file to", path, e.error))?;
     Ok(())
+}
+
+/// A writer that refuses to grow a file past a limit (outputs whose size follows from user
+/// numbers: grid steps, segment lengths, table spacings).
+struct Limited<W: Write> {
+    inner: W,
+    left: u64,
+    tripped: bool,
+}
+
+impl<W: Write> Write for Limited<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if buf.len() as u64 > self.left {
+            self.tripped = true;
+            return Err(std::io::Error::other("output size limit reached"));
+        }
+        let n = self.inner.write(buf)?;
+        self.left -= n as u64;
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 /// [`write_atomic`] for content already in memory.
@@ -47,9 +95,17 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
     write_atomic_bytes(path, text.as_bytes())
 }
 
-/// Read a whole file as UTF-8 text, with the error naming the file.
+/// Read a whole file as UTF-8 text, with the error naming the file. The file becomes a
+/// protected input ([`safety::protect`]).
 pub fn read_text(path: &Path) -> Result<String> {
+    safety::protect(path);
     std::fs::read_to_string(path).map_err(|e| Error::read(path, e))
+}
+
+/// Open a file for reading, with the error naming the file; it becomes a protected input.
+pub fn open(path: &Path) -> Result<std::fs::File> {
+    safety::protect(path);
+    std::fs::File::open(path).map_err(|e| Error::read(path, e))
 }
 
 /// A CSV file read whole: its header and its records, each with its 1-based line number.
@@ -66,26 +122,36 @@ pub struct CsvTable {
 #[derive(Debug, Clone)]
 pub struct CsvRow {
     pub line: u64,
-    pub fields: Vec<String>,
+    pub fields: csv::StringRecord,
 }
+
+/// Comment character of errmap's CSV files.
+const CSV_COMMENT: u8 = b'#';
 
 impl CsvTable {
     /// Read a CSV file with a header line. Blank lines and lines starting with `#` are skipped;
     /// headers and fields are trimmed. A record with a different number of fields from the
-    /// header is an error naming its line.
+    /// header is an error naming its line. The file is streamed: line numbers are tracked as
+    /// it is read (linear in its size), and memory holds the records, not the file twice.
     pub fn read(path: &Path) -> Result<CsvTable> {
-        let text = read_text(path)?;
-        Self::parse(path, &text)
+        let file = open(path)?;
+        Self::from_reader(path, std::io::BufReader::with_capacity(1 << 16, file))
     }
 
     /// Parse CSV text; `path` is only used in messages.
     pub fn parse(path: &Path, text: &str) -> Result<CsvTable> {
+        Self::from_reader(path, text.as_bytes())
+    }
+
+    /// Parse CSV from a reader; `path` is only used in messages.
+    pub fn from_reader(path: &Path, source: impl std::io::Read) -> Result<CsvTable> {
+        let (tracked, lines) = lines::track(source);
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
-            .comment(Some(b'#'))
+            .comment(Some(CSV_COMMENT))
             .trim(csv::Trim::All)
             .flexible(true)
-            .from_reader(text.as_bytes());
+            .from_reader(tracked);
         let headers: Vec<String> = reader
             .headers()
             .map_err(|e| csv_error(path, e))?
@@ -110,12 +176,18 @@ impl CsvTable {
             }
         }
         let mut rows = Vec::new();
-        for record in reader.records() {
-            let record = record.map_err(|e| csv_error(path, e))?;
-            // Count lines from the byte offset: the csv crate's own line count skips blank lines.
+        let mut record = csv::StringRecord::new();
+        loop {
+            match reader.read_record(&mut record) {
+                Ok(true) => {}
+                Ok(false) => break,
+                Err(e) => return Err(csv_error(path, e)),
+            }
+            // The csv crate's own line count includes the blank and comment lines it skipped
+            // before the record: step over them from the record's byte offset.
             let line = record
                 .position()
-                .map(|p| line_of_byte(text, p.byte()))
+                .map(|p| lines.line_of_record(p.byte(), Some(CSV_COMMENT)))
                 .unwrap_or(0);
             if record.iter().all(|f| f.is_empty()) {
                 continue;
@@ -131,10 +203,9 @@ impl CsvTable {
                     "give every row one value per header column",
                 ));
             }
-            rows.push(CsvRow {
-                line,
-                fields: record.iter().map(str::to_string).collect(),
-            });
+            let mut fields = record.clone();
+            fields.set_position(None);
+            rows.push(CsvRow { line, fields });
         }
         Ok(CsvTable {
             path: path.to_path_buf(),
@@ -228,19 +299,6 @@ impl CsvTable {
     }
 }
 
-/// 1-based line number of a byte offset in `text`.
-fn line_of_byte(text: &str, byte: u64) -> u64 {
-    let mut end = (byte as usize).min(text.len());
-    // A record's position can point at blank lines before it; step over them.
-    while end < text.len() && matches!(text.as_bytes()[end], b'\n' | b'\r') {
-        end += 1;
-    }
-    1 + text.as_bytes()[..end]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count() as u64
-}
-
 fn csv_error(path: &Path, e: csv::Error) -> Error {
     let line = e.position().map(|p| p.line());
     let location = Location {
@@ -284,6 +342,28 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("not a finite number"));
+    }
+
+    #[test]
+    fn line_numbers_count_comments_crlf_and_quoted_newlines() {
+        let text = "# head\r\na,b\r\n1,2\r\n\r\n# note\r\n3,\"x\r\ny\"\r\n\r\n5,6";
+        let t = CsvTable::parse(Path::new("p.csv"), text).unwrap();
+        let lines: Vec<u64> = t.rows.iter().map(|r| r.line).collect();
+        assert_eq!(lines, vec![3, 6, 9]);
+        assert_eq!(&t.rows[1].fields[1], "x\r\ny");
+        // The same from a reader that hands out one byte at a time.
+        struct OneByte<'a>(&'a [u8]);
+        impl std::io::Read for OneByte<'_> {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                let n = self.0.len().min(1).min(buf.len());
+                buf[..n].copy_from_slice(&self.0[..n]);
+                self.0 = &self.0[n..];
+                Ok(n)
+            }
+        }
+        let t = CsvTable::from_reader(Path::new("p.csv"), OneByte(text.as_bytes())).unwrap();
+        let again: Vec<u64> = t.rows.iter().map(|r| r.line).collect();
+        assert_eq!(again, lines);
     }
 
     #[test]

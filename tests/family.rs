@@ -401,11 +401,20 @@ fn a_corrupt_part_is_reported_and_the_others_finish() {
     let bad = &parts[0];
     assert_eq!(bad["part"], "p00");
     assert_eq!(bad["ok"], false);
-    let err = bad["error"].as_str().unwrap();
+    // The error is data a script can act on: kind, place, message and fix.
+    let err = &bad["error"];
+    assert_eq!(err["kind"], "input", "{err}");
+    assert!(err["file"].as_str().unwrap().ends_with("p00.csv"), "{err}");
+    assert_eq!(err["line"], 4, "{err}");
+    assert_eq!(err["column"], "z_mm", "{err}");
     assert!(
-        err.contains("p00.csv:4, column z_mm") && err.contains("'abc' is not a number"),
+        err["message"]
+            .as_str()
+            .unwrap()
+            .contains("'abc' is not a number"),
         "{err}"
     );
+    assert!(err["hint"].is_string(), "{err}");
     for p in &parts[1..] {
         assert_eq!(p["ok"], true, "{p}");
         let dir = d.join("out").join(p["part"].as_str().unwrap());

@@ -12,12 +12,50 @@ fn file(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
     (dir, path)
 }
 
+/// A nominal plane, with the plausibility bound out of the way: these tests use round numbers
+/// millimetres off the plane (the bound has its own test).
 fn plane_spec(z_mm: f64) -> ProbeSpec {
     ProbeSpec {
         normal: Axis::Z,
         nominal_plane_mm: Some(z_mm),
         domain: None,
+        max_deviation_mm: 1e6,
     }
+}
+
+#[test]
+fn deviations_beyond_the_bound_name_the_row_and_the_likely_slip() {
+    let spec = ProbeSpec {
+        nominal_plane_mm: Some(5.0),
+        ..ProbeSpec::default()
+    };
+    // µm written as mm on line 3.
+    let err = err_of("x_mm,y_mm,z_mm\n0,0,5.001\n1,0,5002\n0,1,5\n", &spec);
+    assert!(
+        err.contains("p.csv:3, column z_mm") && err.contains("µm written as mm"),
+        "{err}"
+    );
+    // Inches written as mm: 0.19685 in = 5.0 mm.
+    let err = err_of("x_mm,y_mm,z_mm\n0,0,0.19685\n1,0,5\n0,1,5\n", &spec);
+    assert!(err.contains("inches written as mm"), "{err}");
+    // 15 mm off: no unit explains it.
+    let err = err_of("x_mm,y_mm,z_mm\n0,0,5\n1,0,-10\n0,1,5\n", &spec);
+    assert!(
+        err.contains("p.csv:3") && err.contains("bound of 1 mm") && err.contains("nominal plane"),
+        "{err}"
+    );
+    // Just inside the bound is fine; the bound is a setting.
+    let ok = "x_mm,y_mm,z_mm\n0,0,5.999\n1,0,4.001\n0,1,5\n";
+    assert!(read_probes(&file("p.csv", ok).1, &spec).is_ok());
+    let far = ProbeSpec {
+        max_deviation_mm: 20.0,
+        ..spec.clone()
+    };
+    assert!(read_probes(
+        &file("p.csv", "x_mm,y_mm,z_mm\n0,0,5\n1,0,-10\n0,1,5\n").1,
+        &far
+    )
+    .is_ok());
 }
 
 fn err_of(text: &str, spec: &ProbeSpec) -> String {
@@ -58,6 +96,7 @@ fn nominal_columns_and_a_wall_normal() {
         normal: Axis::X,
         nominal_plane_mm: Some(99.0), // ignored: the columns win
         domain: None,
+        ..ProbeSpec::default()
     };
     let set = read_probes(&path, &spec).unwrap();
     let p: Vec<_> = set.points.iter().map(|p| (p.u_mm, p.v_mm)).collect();
@@ -282,8 +321,15 @@ fn absurd_but_finite_coordinates_do_not_panic() {
     let set = read_probes(&path, &plane_spec(1.0)).unwrap();
     assert_eq!(set.points.len(), 3);
     assert_eq!(set.points[0].repeats, 2);
+    // Two sites 1e-300 apart are one site (positions are snapped to 1e-12 of the extent), so
+    // two distinct sites remain and the surface is refused.
     let err = errmap::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1.0, 1.0]])
         .unwrap_err()
         .to_string();
+    assert!(err.contains("2 distinct site(s)"), "{err}");
+    let err =
+        errmap::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1e-300, 1.0]])
+            .unwrap_err()
+            .to_string();
     assert!(err.contains("cannot triangulate"), "{err}");
 }

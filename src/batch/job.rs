@@ -29,6 +29,9 @@ pub struct Job {
     pub grid_step_mm: f64,
     /// Output folder, relative to the current directory; default `out/<family>`.
     pub output: Option<PathBuf>,
+    /// Plausibility bound, mm: a probe deviation or map value beyond it is an error that
+    /// names the likely unit slip.
+    pub max_deviation_mm: f64,
     pub clean: CleanConfig,
     pub interp: InterpConfig,
     pub model: ModelConfig,
@@ -45,6 +48,7 @@ impl Default for Job {
             domain: None,
             grid_step_mm: 5.0,
             output: None,
+            max_deviation_mm: crate::probe::DEFAULT_MAX_DEVIATION_MM,
             clean: CleanConfig::default(),
             interp: InterpConfig::default(),
             model: ModelConfig::default(),
@@ -146,8 +150,33 @@ fn line_col(text: &str, byte: usize) -> (u64, u64) {
     (line, col)
 }
 
+/// 1-based (line, column) of the value of a dotted key (`clean.k_sigma`) in job TOML, from the
+/// spans the `toml` crate keeps; `None` when the key is not in the text (a default).
+fn key_line_col(text: &str, key: &str) -> Option<(u64, u64)> {
+    let doc = toml::de::DeTable::parse(text).ok()?;
+    let mut value = toml::de::DeValue::Table(doc.into_inner());
+    let mut span = None;
+    for part in key.split('.') {
+        let next = value.get(part)?;
+        span = Some(next.span());
+        value = next.get_ref().clone();
+    }
+    span.map(|s| line_col(text, s.start))
+}
+
+/// The job key a validation message is about: `model.epochs = 0 …` names `model.epochs`.
+fn key_of_message(message: &str) -> Option<&str> {
+    let start = message.find("model.")?;
+    let rest = &message[start..];
+    let end = rest
+        .find(|c: char| !(c.is_alphanumeric() || c == '_' || c == '.'))
+        .unwrap_or(rest.len());
+    Some(rest[..end].trim_end_matches('.'))
+}
+
 impl Job {
-    /// Parse job TOML; `path` is only used in messages. Errors name line and column.
+    /// Parse job TOML; `path` is only used in messages. Errors (syntax, types, unknown keys and
+    /// values out of range) name the line and column of the offending value.
     pub fn parse(path: &Path, text: &str) -> Result<Job> {
         let job: Job = toml::from_str(text).map_err(|e| {
             let (line, col) = e.span().map_or((1, 1), |s| line_col(text, s.start));
@@ -157,7 +186,26 @@ impl Job {
                 "see docs/job.md for every key and its type",
             )
         })?;
-        job.validate(path)?;
+        job.validate(path).map_err(|e| match e {
+            Error::Input {
+                location,
+                message,
+                hint,
+            } => {
+                // Validation names the key in the location's column: find its span.
+                let key = location.column.clone().unwrap_or_default();
+                let location = match key_line_col(text, &key) {
+                    Some((line, col)) => Location::cell(path, line, col.to_string()),
+                    None => location,
+                };
+                Error::Input {
+                    location,
+                    message,
+                    hint,
+                }
+            }
+            other => other,
+        })?;
         Ok(job)
     }
 
@@ -183,9 +231,14 @@ impl Job {
 
     /// Check values serde cannot: positive steps, ordered ranges, a usable family name.
     pub fn validate(&self, path: &Path) -> Result<()> {
+        // The key travels in the column; `parse` replaces it with the value's line and column.
         let bad = |key: &str, msg: String, hint: &str| {
             Error::input(
-                Location::cell(path, 1, key.to_string()),
+                Location {
+                    file: path.to_path_buf(),
+                    line: None,
+                    column: Some(key.to_string()),
+                },
                 format!("{key}: {msg}"),
                 hint.to_string(),
             )
@@ -224,6 +277,7 @@ impl Job {
         }
         let positive = [
             ("grid_step_mm", self.grid_step_mm),
+            ("max_deviation_mm", self.max_deviation_mm),
             ("clean.k_sigma", self.clean.k_sigma),
             ("interp.spacing_mm", self.interp.spacing_mm),
             ("toolpaths.max_segment_mm", self.toolpaths.max_segment_mm),
@@ -254,11 +308,31 @@ impl Job {
                 "hold out a small share of points, e.g. 0.1 (0 turns the hold-out fit off)",
             ));
         }
+        if self.toolpaths.max_segment_mm < crate::toolpath::MIN_SEGMENT_MM {
+            return Err(bad(
+                "toolpaths.max_segment_mm",
+                format!(
+                    "{} is below the smallest segment of {} mm",
+                    self.toolpaths.max_segment_mm,
+                    crate::toolpath::MIN_SEGMENT_MM
+                ),
+                "see docs/job.md for the default",
+            ));
+        }
         self.model.validate().map_err(|e| {
+            let (message, hint) = match &e {
+                Error::Usage { message, hint } => (message.clone(), hint.clone()),
+                other => (other.to_string(), "see docs/job.md".to_string()),
+            };
+            let key = key_of_message(&message).unwrap_or("model").to_string();
             Error::input(
-                Location::file(path),
-                format!("[model]: {e}"),
-                "see docs/job.md",
+                Location {
+                    file: path.to_path_buf(),
+                    line: None,
+                    column: Some(key),
+                },
+                format!("[model]: {message}"),
+                hint,
             )
         })
     }
@@ -395,5 +469,41 @@ map = "part"
             err.contains("grid_step_mm") && err.contains("positive"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn range_errors_name_the_line_and_column_of_the_value() {
+        // k_sigma = -3.0 on line 7, column 11 (where the value starts).
+        let text =
+            "family = \"a\"\n\n# comment\n[interp]\nspacing_mm = 5\n[clean]\nk_sigma = -3.0\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:7, column 11:"), "{err}");
+        assert!(err.contains("clean.k_sigma"), "{err}");
+        // epochs = 0 in [model] on line 4.
+        let text = "family = \"a\"\n[model]\nseed = 3\n  epochs = 0\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:4, column 12:"), "{err}");
+        assert!(err.contains("model.epochs"), "{err}");
+        // A dotted key and an inline table are found too.
+        let text = "family = \"a\"\nclean.k_sigma = 0\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:2, column 17:"), "{err}");
+        let text = "family = \"a\"\ntoolpaths = { max_segment_mm = 0.001 }\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:2, column 32:"), "{err}");
+        assert!(err.contains("0.01"), "{err}");
+        let text = "family = \"..\"\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:1, column 10:"), "{err}");
     }
 }

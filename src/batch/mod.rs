@@ -6,7 +6,7 @@ pub mod summary;
 pub mod train_step;
 
 pub use job::{Job, JobFile, MapChoice};
-pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan};
+pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use summary::{merge, BatchSummary, PartSummary};
 
 use crate::error::{Error, Result};
@@ -93,25 +93,24 @@ impl Shard {
     }
 }
 
-/// Part names from probe file stems; a repeated stem gets its position appended so each
-/// part has its own folder.
+/// Part names from probe file stems, safe as folder names and distinct
+/// ([`crate::io::safety::part_names`]): a repeated stem gets a number, `family` and other
+/// reserved names get a suffix, and `..` cannot escape the output folder.
 pub fn part_names(files: &[PathBuf]) -> Vec<String> {
-    let stems: Vec<String> = files
+    crate::io::safety::part_names(&stems(files)).0
+}
+
+/// One line per part whose folder name differs from its probe file's stem.
+pub fn renamed_parts(files: &[PathBuf]) -> Vec<String> {
+    crate::io::safety::part_names(&stems(files)).1
+}
+
+fn stems(files: &[PathBuf]) -> Vec<String> {
+    files
         .iter()
         .map(|f| {
             f.file_stem()
                 .map_or("part".into(), |s| s.to_string_lossy().to_string())
-        })
-        .collect();
-    stems
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            if stems.iter().filter(|t| *t == s).count() > 1 {
-                format!("{s}-{}", i + 1)
-            } else {
-                s.clone()
-            }
         })
         .collect()
 }
@@ -178,6 +177,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
             method: job.interp.method,
             spacing_mm: job.interp.spacing_mm,
             model,
+            max_deviation_mm: job.max_deviation_mm,
         },
         parts,
         family_dir,
@@ -299,5 +299,16 @@ mod tests {
             PathBuf::from("b/p2.csv"),
         ];
         assert_eq!(part_names(&files), vec!["p1-1", "p1-2", "p2"]);
+        // `c/p1-1.csv` keeps its name; the repeated stems go round it.
+        let files = vec![
+            PathBuf::from("a/p1.csv"),
+            PathBuf::from("b/p1.csv"),
+            PathBuf::from("c/p1-1.csv"),
+            PathBuf::from("d/....csv"),
+            PathBuf::from("e/family.csv"),
+        ];
+        let names = part_names(&files);
+        assert_eq!(names, vec!["p1-2", "p1-3", "p1-1", "part", "family-part"]);
+        assert_eq!(renamed_parts(&files).len(), 4);
     }
 }

@@ -33,6 +33,8 @@ pub struct Settings {
     pub method: Method,
     pub spacing_mm: f64,
     pub model: ModelConfig,
+    /// Plausibility bound of probe deviations and map values, mm.
+    pub max_deviation_mm: f64,
 }
 
 /// One part to map and where its files go.
@@ -171,6 +173,7 @@ fn prepare(
         normal: s.normal,
         nominal_plane_mm: s.nominal_plane_mm,
         domain: s.domain,
+        max_deviation_mm: s.max_deviation_mm,
     };
     let set = match probe::read_probes(&input.probe_file, &spec) {
         Ok(set) => set,
@@ -323,9 +326,8 @@ fn union_box(parts: &[Prepared]) -> Option<Domain> {
 pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchSummary> {
     let s = &plan.settings;
     let mut failed: Vec<PartSummary> = Vec::new();
-    let fail = |input: &PartInput, e: &Error| {
-        PartSummary::failed(&input.name, &input.probe_file, e.to_string())
-    };
+    let fail =
+        |input: &PartInput, e: &Error| PartSummary::failed(&input.name, &input.probe_file, e);
 
     // 1. Read and clean every part (rayon).
     let bar = crate::progress::bar(plan.parts.len() as u64, "clean", quiet);
@@ -539,6 +541,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             if let (Some(dir), Some(fslot)) = (&plan.family_dir, family_slot) {
                 let maps: Vec<&ErrorMap> = part_maps.iter().map(|(_, _, m, _)| m).collect();
                 if let Some((mean, std)) = family_stats(&maps) {
+                    let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
+                    check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
                     let model = FittedModel::new(
                         "family",
                         s.normal,
@@ -686,7 +690,7 @@ fn compensate_one(
             output,
             map: map_name.into(),
             report: None,
-            error: Some(e.to_string()),
+            error: Some(e.report()),
         },
     }
 }
@@ -731,6 +735,32 @@ fn better_fit(p: &Interpolated, network_holdout_rmse_um: Option<f64>) -> Option<
     }
 }
 
+/// A fitted map whose value anywhere exceeds the plausibility bound is not delivered: the
+/// network extrapolated wildly or the probe data hide a unit slip.
+fn check_map_plausible(map: &ErrorMap, max_deviation_mm: f64, probe_file: &Path) -> Result<()> {
+    let worst_um = map.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if worst_um.is_finite() && worst_um <= max_deviation_mm * 1000.0 {
+        return Ok(());
+    }
+    Err(Error::input(
+        crate::Location::file(probe_file),
+        format!(
+            "the fitted map reaches |E| = {worst_um:.1} µm, beyond the plausibility bound of {max_deviation_mm} mm",
+        ),
+        "check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm (--max-deviation-mm)",
+    ))
+}
+
+/// The files [`write_part`] writes into a part's folder.
+pub const PART_OUTPUTS: [&str; 6] = [
+    "map.csv",
+    "model.json",
+    "clean.csv",
+    "rejected.csv",
+    "map.png",
+    "summary.json",
+];
+
 /// Write every file of one part and return its summary.
 fn write_part(
     p: &Interpolated,
@@ -742,6 +772,7 @@ fn write_part(
 ) -> Result<PartSummary> {
     let dir = &p.prep.input.out_dir;
     let name = &p.prep.input.name;
+    check_map_plausible(map, s.max_deviation_mm, &p.prep.input.probe_file)?;
     map.write_csv(&dir.join("map.csv"), "e_um")?;
     crate::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;

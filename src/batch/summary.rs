@@ -1,6 +1,6 @@
 //! `summary.json` of a batch (and of one part), the printed table, and `merge` of shard summaries.
 
-use crate::error::{Error, Location, Result};
+use crate::error::{Error, ErrorReport, Location, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -34,12 +34,13 @@ pub struct PartSummary {
     pub pv_um: Option<f64>,
     /// Folder of the part's files.
     pub output_dir: Option<PathBuf>,
-    /// Why the part failed.
-    pub error: Option<String>,
+    /// Why the part failed: `{kind, message, file, line, column, hint}` (kind `input`, `io`,
+    /// `device` or `internal`).
+    pub error: Option<ErrorReport>,
 }
 
 impl PartSummary {
-    pub fn failed(part: &str, probe_file: &Path, error: String) -> PartSummary {
+    pub fn failed(part: &str, probe_file: &Path, error: &Error) -> PartSummary {
         PartSummary {
             part: part.into(),
             probe_file: probe_file.to_path_buf(),
@@ -55,7 +56,7 @@ impl PartSummary {
             rms_um: None,
             pv_um: None,
             output_dir: None,
-            error: Some(error),
+            error: Some(error.report()),
         }
     }
 }
@@ -69,7 +70,8 @@ pub struct ToolpathSummary {
     pub map: String,
     /// The compensation report (moves changed, split, max |E| …), when it succeeded.
     pub report: Option<serde_json::Value>,
-    pub error: Option<String>,
+    /// Why it failed, as for a part.
+    pub error: Option<ErrorReport>,
 }
 
 /// The family maps.
@@ -145,7 +147,9 @@ impl BatchSummary {
                 s.push_str(&format!(
                     "{:<12} FAILED: {}\n",
                     p.part,
-                    p.error.as_deref().unwrap_or("unknown error")
+                    p.error
+                        .as_ref()
+                        .map_or("unknown error".to_string(), |e| e.to_string())
                 ));
             }
         }

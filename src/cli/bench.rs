@@ -48,9 +48,9 @@ pub fn run(cmd: BenchCommand, _globals: Globals) -> Result<i32> {
             if args.json {
                 let text = serde_json::to_string_pretty(&report)
                     .map_err(|e| errmap::Error::Internal(format!("bench JSON: {e}")))?;
-                super::print_line(&text)?;
+                outln!("{text}");
             } else {
-                super::print_line(&format!(
+                outln!(
                     "{} on {}: {:.3e} sample·epochs/s ({} × {} samples × {} epochs in {:.3} s; pipeline build {:.3} s)\n{}",
                     report.backend,
                     report.device,
@@ -61,7 +61,7 @@ pub fn run(cmd: BenchCommand, _globals: Globals) -> Result<i32> {
                     report.train_s,
                     report.pipeline_build_s,
                     report.reason
-                ))?;
+                );
             }
             Ok(0)
         }

@@ -38,6 +38,10 @@ pub struct CompensateArgs {
     /// Print the report as one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Plausibility bound, mm: a map reaching |E| beyond it anywhere in its domain is refused
+    /// (it would move the tool by that much; almost always a unit slip).
+    #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
+    pub max_deviation_mm: f64,
 }
 
 /// Parse `MIN,MAX`.
@@ -61,17 +65,20 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
         chord_tol: args.chord_tol,
     };
     settings.validate()?;
-    let field = errmap::map::load_error_field(&args.model)?;
-    let report = compensate_file(&args.input, &args.output, field.as_ref(), &settings)?;
+    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
+    let model = errmap::map::FittedModel::read(&args.model)?;
+    model.check_plausible(args.max_deviation_mm, &args.model)?;
+    errmap::io::safety::protect(&args.input);
+    let report = compensate_file(&args.input, &args.output, &model, &settings)?;
     if args.json {
         let doc = serde_json::json!({
             "input": args.input,
             "output": args.output,
             "report": report,
         });
-        println!("{doc}");
+        outln!("{doc}");
     } else {
-        println!("{}: {}", args.output.display(), report.summary_line());
+        outln!("{}: {}", args.output.display(), report.summary_line());
     }
     Ok(0)
 }

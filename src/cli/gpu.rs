@@ -66,15 +66,15 @@ pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
     if args.json {
         let text = serde_json::to_string_pretty(&info)
             .map_err(|e| errmap::Error::Internal(format!("gpu-info JSON: {e}")))?;
-        println!("{text}");
+        outln!("{text}");
         return Ok(0);
     }
     if info.adapters.is_empty() {
-        println!("adapters: none");
+        outln!("adapters: none");
     } else {
-        println!("adapters (best first):");
+        outln!("adapters (best first):");
         for a in &info.adapters {
-            println!(
+            outln!(
                 "  {} — {} {}{}, driver {} {}",
                 a.name,
                 a.backend,
@@ -87,47 +87,47 @@ pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
     }
     match (&info.chosen, &info.limits) {
         (Some(chosen), Some(limits)) => {
-            println!("chosen: {} ({})", chosen.name, chosen.backend);
-            println!("limits:");
-            println!(
+            outln!("chosen: {} ({})", chosen.name, chosen.backend);
+            outln!("limits:");
+            outln!(
                 "  max_buffer_size                      {}",
                 limits.max_buffer_size
             );
-            println!(
+            outln!(
                 "  max_storage_buffer_binding_size      {}",
                 limits.max_storage_buffer_binding_size
             );
-            println!(
+            outln!(
                 "  max_storage_buffers_per_shader_stage {}",
                 limits.max_storage_buffers_per_shader_stage
             );
-            println!(
+            outln!(
                 "  max_compute_workgroups_per_dimension {}",
                 limits.max_compute_workgroups_per_dimension
             );
-            println!(
+            outln!(
                 "  max_compute_invocations_per_workgroup {}",
                 limits.max_compute_invocations_per_workgroup
             );
-            println!(
+            outln!(
                 "  min_uniform_buffer_offset_alignment  {}",
                 limits.min_uniform_buffer_offset_alignment
             );
-            println!(
+            outln!(
                 "--backend auto trains on the {}: {}",
                 info.auto_backend.to_uppercase(),
                 info.auto_reason
             );
             if let Some(cache) = &info.probe_cache {
-                println!("probe cache: {cache} (delete it to measure again)");
+                outln!("probe cache: {cache} (delete it to measure again)");
             }
         }
         _ => {
-            println!(
+            outln!(
                 "chosen: none ({})",
                 info.error.as_deref().unwrap_or("no adapter")
             );
-            println!("--backend auto trains on the CPU; --backend gpu fails");
+            outln!("--backend auto trains on the CPU; --backend gpu fails");
         }
     }
     Ok(0)

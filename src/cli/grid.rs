@@ -33,6 +33,10 @@ pub struct GridArgs {
     /// hull are left out).
     #[arg(short, long, value_name = "GRID.csv")]
     pub output: PathBuf,
+    /// Plausibility bound, mm: a probe deviation beyond it is an error naming the likely unit
+    /// slip (µm or inches written as mm).
+    #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
+    pub max_deviation_mm: f64,
 }
 
 fn parse_axis(text: &str) -> std::result::Result<Axis, String> {
@@ -51,10 +55,12 @@ fn rounded(x: f64, scale: f64) -> f64 {
 
 pub fn run(args: GridArgs, globals: Globals) -> Result<i32> {
     let domain = args.domain.as_deref().map(parse_domain).transpose()?;
+    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     let spec = ProbeSpec {
         normal: args.normal,
         nominal_plane_mm: args.nominal_plane,
         domain,
+        max_deviation_mm: args.max_deviation_mm,
     };
     let set = read_probes(&args.probes, &spec)?;
     let domain = match domain.or_else(|| set.bounding_box()) {

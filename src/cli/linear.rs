@@ -280,7 +280,7 @@ struct AnalyzeJson<'a> {
 
 fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
-    println!("{text}");
+    outln!("{text}");
     Ok(())
 }
 
@@ -289,15 +289,15 @@ fn fmt_opt(v: Option<f64>) -> String {
         .unwrap_or_else(|| format!("{:>9}", "n/a"))
 }
 
-fn print_evaluation(title: &str, ev: &Evaluation) {
-    println!("{title} — {} (k = {}), µm", ev.standard, ev.k);
+fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
+    outln!("{title} — {} (k = {}), µm", ev.standard, ev.k);
     // Per-target columns in the standard's own symbols; a figure it does not define is left out.
     let symbols = target_symbols(ev.standard);
     let mut head = format!("{:>10}", "target_mm");
     for s in symbols.iter().filter(|s| !s.is_empty()) {
         head.push_str(&format!(" {s:>9}"));
     }
-    println!("{head}");
+    outln!("{head}");
     for t in &ev.targets {
         let reversal = match ev.standard {
             // VDI/DGQ 3441's reversal span U_j is a span: |x̄_j↑ − x̄_j↓|.
@@ -321,7 +321,7 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
                 line.push_str(&fmt_opt(v));
             }
         }
-        println!("{line}");
+        outln!("{line}");
     }
     // Columns on screen: combining marks (the bar of B̄, P̄s, Ū) take none.
     let columns = |s: &str| {
@@ -337,7 +337,7 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         .unwrap_or(1);
     for (i, f) in ev.figures().iter().enumerate() {
         let pad = width - columns(f.symbol);
-        println!(
+        outln!(
             "{} {}{} = {}  {}: {}",
             if i == 0 { "axis:" } else { "     " },
             f.symbol,
@@ -348,11 +348,12 @@ fn print_evaluation(title: &str, ev: &Evaluation) {
         );
     }
     if let Some(d) = ev.unidirectional {
-        println!(
+        outln!(
             "      unidirectional test (direction {} only): bidirectional figures are n/a",
             d.symbol()
         );
     }
+    Ok(())
 }
 
 fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
@@ -420,17 +421,17 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
         })?;
     } else {
         for n in &notes {
-            println!("{n}");
+            outln!("{n}");
         }
-        print_evaluation(&args.runs.display().to_string(), &ev);
+        print_evaluation(&args.runs.display().to_string(), &ev)?;
         if let Some(f) = &fit {
-            println!(
+            outln!(
                 "pitch fit (P = {} mm, {} targets): a = {:.3} µm, k = {:.3} µm/m, d = {:.3} µm, φ = {:.4} rad, residual RMS = {:.3} µm",
                 f.lead_mm, f.points, f.a_um, f.k_um_per_m, f.d_um, f.phi_rad, f.residual_rms_um
             );
         }
         if let Some((path, after_ev)) = &after {
-            print_evaluation(&format!("after applying {}", path.display()), after_ev);
+            print_evaluation(&format!("after applying {}", path.display()), after_ev)?;
         }
     }
     if let (Some(png), false) = (&args.chart, globals.quiet || args.json) {
@@ -475,8 +476,8 @@ fn air_index(args: AirIndexArgs) -> Result<i32> {
             conditions: cond,
         })?;
     } else {
-        println!("n = {n:.9} ({})", args.formula.name());
-        println!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
+        outln!("n = {n:.9} ({})", args.formula.name());
+        outln!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
     }
     Ok(0)
 }
@@ -487,11 +488,11 @@ fn budget(args: BudgetArgs) -> Result<i32> {
     if args.json {
         print_json(&b)?;
     } else {
-        println!("error budget over {} mm (µm):", b.length_mm);
+        outln!("error budget over {} mm (µm):", b.length_mm);
         for t in &b.terms {
-            println!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
+            outln!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
         }
-        println!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
+        outln!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
     }
     Ok(0)
 }

@@ -1,5 +1,24 @@
 //! The command tree: one file per area, each with its clap arguments and a `run` that calls the library.
 
+/// A line on stdout, like `println!`, but a closed pipe (`errmap … | head`) becomes an error
+/// that `main` turns into a quiet exit 0 instead of a panic. Use inside a function returning
+/// `errmap::Result`.
+macro_rules! outln {
+    () => {
+        $crate::cli::emit("\n")?
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::emit(&format!("{}\n", format_args!($($arg)*)))?
+    };
+}
+
+/// `print!` with the same handling of a closed pipe as [`outln!`].
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::emit(&format!($($arg)*))?
+    };
+}
+
 mod bench;
 mod compensate;
 mod gpu;
@@ -20,6 +39,10 @@ pub struct Cli {
     /// No progress bars or informational lines on stderr.
     #[arg(long, short, global = true)]
     pub quiet: bool,
+    /// Largest file any one output may grow to, MB; outputs whose size follows from your
+    /// numbers (grid steps, segment lengths, spacings) stop with exit 2 beyond it.
+    #[arg(long, global = true, value_name = "MB", default_value_t = errmap::io::safety::DEFAULT_MAX_OUTPUT_MB)]
+    pub max_output_mb: u64,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -73,20 +96,6 @@ pub enum SynthCommand {
     Rotary(rotary::SynthRotaryArgs),
 }
 
-/// Prints one line on stdout; a closed pipe comes back as an IO error that `main` treats
-/// as a quiet exit.
-pub fn print_line(text: &str) -> Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{text}")
-        .and_then(|_| out.flush())
-        .map_err(|source| errmap::Error::Io {
-            action: "write",
-            path: "standard output".into(),
-            source,
-        })
-}
-
 /// Notes from the library go to stderr unless `--quiet`.
 pub fn notes(globals: Globals) -> errmap::backend::Notes {
     let quiet = globals.quiet;
@@ -97,8 +106,39 @@ pub fn notes(globals: Globals) -> errmap::backend::Notes {
     })
 }
 
+/// Write text to stdout and flush it; an error (a closed pipe) is returned, never a panic.
+pub fn emit(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(|e| errmap::Error::write("<stdout>", e))
+}
+
+/// Treat a closed stdout as done: for commands whose exit code says more than "printed".
+pub fn ignore_closed_pipe(result: Result<()>) -> Result<()> {
+    match result {
+        Err(errmap::Error::Io { source, .. })
+            if source.kind() == std::io::ErrorKind::BrokenPipe =>
+        {
+            Ok(())
+        }
+        other => other,
+    }
+}
+
 /// Run a parsed command line; the result is the process exit code.
 pub fn run(cli: Cli) -> Result<i32> {
+    // Every output of this process obeys the safety rules: never over an input, never
+    // outside the folder a command writes into.
+    errmap::io::safety::activate();
+    if cli.max_output_mb == 0 {
+        return Err(errmap::Error::usage(
+            "--max-output-mb 0 allows no output at all",
+            "give a size in MB, e.g. --max-output-mb 2000",
+        ));
+    }
+    errmap::io::safety::set_max_output_mb(cli.max_output_mb);
     let globals = Globals { quiet: cli.quiet };
     match cli.command {
         Command::Batch(args) => part::run_batch(args, globals),

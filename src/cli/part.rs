@@ -66,6 +66,10 @@ pub struct MapArgs {
     /// Trainer: auto, gpu, cpu or cpu-reference (see errmap batch --help).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Plausibility bound, mm: a probe deviation or map value beyond it is an error naming the
+    /// likely unit slip.
+    #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
+    pub max_deviation_mm: f64,
     /// Print the summary as one JSON document.
     #[arg(long)]
     pub json: bool,
@@ -114,11 +118,11 @@ fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: boo
     if json {
         let text =
             serde_json::to_string_pretty(summary).map_err(|e| Error::Internal(e.to_string()))?;
-        println!("{text}");
+        outln!("{text}");
     } else {
-        print!("{}", summary.table());
+        out!("{}", summary.table());
         if !quiet {
-            println!("summary: {}", path.display());
+            outln!("summary: {}", path.display());
         }
     }
     Ok(())
@@ -136,6 +140,15 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         output: args.out,
     };
     let (plan, summary_path) = batch::plan_job(&file, &opts)?;
+    if let Some(out) = summary_path.parent() {
+        errmap::io::safety::confine_to(out)?;
+    }
+    protect_plan(&plan)?;
+    if !globals.quiet {
+        for note in batch::renamed_parts(&file.probe_files()?) {
+            eprintln!("note: {note}");
+        }
+    }
     let selection = errmap::backend::select_trainer(
         plan.settings.model.backend,
         &plan.settings.model,
@@ -143,8 +156,30 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     )?;
     let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
     errmap::io::write_json(&summary_path, &summary)?;
-    report(&summary, &summary_path, args.json, globals.quiet)?;
+    // A closed stdout must not turn "some parts failed" (exit 1) into success.
+    super::ignore_closed_pipe(report(&summary, &summary_path, args.json, globals.quiet))?;
     Ok(summary.exit_code())
+}
+
+/// Every file a plan reads is an input no output may replace: protect them all, then check
+/// every part's outputs before the first is written, so a refused plan writes nothing.
+fn protect_plan(plan: &Plan) -> Result<()> {
+    use errmap::io::safety::{check_output, protect};
+    for part in &plan.parts {
+        protect(&part.probe_file);
+    }
+    if let Some(job) = &plan.job {
+        protect(job);
+    }
+    for f in plan.toolpaths.iter().flat_map(|t| &t.files) {
+        protect(f);
+    }
+    for part in &plan.parts {
+        for name in batch::PART_OUTPUTS {
+            check_output(&part.out_dir.join(name))?;
+        }
+    }
+    Ok(())
 }
 
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
@@ -167,6 +202,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         model.seed = s;
     }
     model.validate()?;
+    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     for (flag, v) in [
         ("--grid-step", args.grid_step),
         ("--spacing", args.spacing),
@@ -194,6 +230,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
             method: args.method,
             spacing_mm: args.spacing,
             model,
+            max_deviation_mm: args.max_deviation_mm,
         },
         parts: vec![PartInput {
             name,
@@ -205,14 +242,15 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         job: None,
         shard: None,
     };
+    errmap::io::safety::confine_to(&args.out)?;
+    protect_plan(&plan)?;
     let selection =
         errmap::backend::select_trainer(args.backend, &plan.settings.model, super::notes(globals))?;
     let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
-    // A single part has no batch to finish: its failure is the command's error.
-    // A single part has no batch to finish: its failure is the command's error (the message
-    // already names file, line and column and the fix).
+    // A single part has no batch to finish: its failure is the command's error, with its
+    // kind (and exit code), place and fix.
     if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
-        return Err(Error::usage(err, ""));
+        return Err(err.into_error());
     }
     let path = args.out.join("summary.json");
     report(&summary, &path, args.json, globals.quiet)?;
@@ -235,6 +273,6 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
         .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
     merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
     errmap::io::write_json(&out, &merged)?;
-    report(&merged, &out, args.json, globals.quiet)?;
+    super::ignore_closed_pipe(report(&merged, &out, args.json, globals.quiet))?;
     Ok(merged.exit_code())
 }

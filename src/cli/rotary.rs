@@ -275,9 +275,31 @@ fn human_report(a: &Analysis) -> String {
     s
 }
 
+/// Smallest angle step `synth rotary` takes: 36 000 positions a turn.
+const MIN_SYNTH_STEP_DEG: f64 = 0.01;
+/// Most probe points `synth rotary` generates (positions × repeats × 2 spheres × points).
+const MAX_SYNTH_SAMPLES: f64 = 1e7;
+
 pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
-    if !(args.step_deg.is_finite() && args.step_deg > 0.0)
-        || (360.0 / args.step_deg).round() < 1.0
+    if args.step_deg > 0.0 && args.step_deg < MIN_SYNTH_STEP_DEG {
+        return Err(Error::usage(
+            format!(
+                "--step-deg {:?} is below the smallest step of {MIN_SYNTH_STEP_DEG}°",
+                args.step_deg
+            ),
+            "choose a step that divides 360, e.g. 10, 15, 30",
+        ));
+    }
+    let samples = 360.0 / args.step_deg * args.repeats as f64 * 2.0 * args.points as f64;
+    if samples > MAX_SYNTH_SAMPLES {
+        return Err(Error::usage(
+            format!(
+                "{samples:.3e} probe points would be generated, more than {MAX_SYNTH_SAMPLES:.0e}"
+            ),
+            "use a larger --step-deg or fewer --repeats or --points",
+        ));
+    }
+    if (360.0 / args.step_deg).round() < 1.0
         || ((360.0 / args.step_deg) - (360.0 / args.step_deg).round()).abs() > 1e-9
     {
         return Err(Error::usage(

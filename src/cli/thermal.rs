@@ -225,19 +225,6 @@ pub fn run(cmd: ThermalCommand, globals: Globals) -> Result<i32> {
     }
 }
 
-/// A line on stdout; a closed pipe becomes an error that main turns into a quiet exit.
-macro_rules! outln {
-    ($($arg:tt)*) => {
-        emit(&format!($($arg)*))?
-    };
-}
-
-fn emit(line: &str) -> Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{line}").map_err(|e| Error::write("<stdout>", e))
-}
-
 fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| Error::Internal(format!("JSON output: {e}")))?;
@@ -256,7 +243,15 @@ fn run_calibrate(a: CalibrateArgs, g: Globals) -> Result<i32> {
     let to = a.to.unwrap_or(f64::INFINITY);
     let fits = calibrate(&log, &table, from, to, a.min_span_c)?;
     table.apply_calibrations(&fits);
-    let out = a.output.unwrap_or(a.sensors);
+    // Without -o the table is updated in place (atomically): the one documented output that
+    // replaces an input. With -o, the output must not be an input.
+    let out = match a.output {
+        Some(out) => out,
+        None => {
+            errmap::io::safety::allow_replacing(&a.sensors);
+            a.sensors
+        }
+    };
     table.write(&out)?;
     if a.json {
         print_json(&fits)?;

@@ -105,6 +105,20 @@ pub struct Surface {
     bbox: Domain,
     /// The kriging of the sites, fitted on first use (`Err`: why it could not be).
     kriging: std::sync::OnceLock<std::result::Result<kriging::Kriging, String>>,
+    /// The hull's edges with the values at their ends: the answer for points on the hull,
+    /// where spade's exact path can give no value or NaN.
+    hull: Vec<HullEdge>,
+    /// Distances below this (1e-9 of the sites' extent) count as on the hull.
+    hull_eps: f64,
+}
+
+/// One edge of the convex hull: its ends and their values.
+#[derive(Debug, Clone, Copy)]
+struct HullEdge {
+    a: [f64; 2],
+    b: [f64; 2],
+    ea: f64,
+    eb: f64,
 }
 
 impl Surface {
@@ -135,8 +149,23 @@ impl Surface {
                 ));
             }
         }
-        // Merge exact duplicates so a site's value is not decided by insertion order.
-        let mut sorted: Vec<(usize, [f64; 3])> = points_uve.iter().copied().enumerate().collect();
+        // Snap positions to a lattice of 1e-12 of the sites' extent, then merge duplicates, so a
+        // site's value is not decided by insertion order and two sites a rounding error apart
+        // (a corner written twice, `3` and `3.0000000000000004`) cannot make a sliver triangle
+        // that breaks every interpolant near it.
+        let quantum = snap_quantum(points_uve);
+        let snap = |x: f64| {
+            if quantum > 0.0 {
+                (x / quantum).round() * quantum
+            } else {
+                x
+            }
+        };
+        let mut sorted: Vec<(usize, [f64; 3])> = points_uve
+            .iter()
+            .map(|p| [snap(p[0]), snap(p[1]), p[2]])
+            .enumerate()
+            .collect();
         sorted.sort_by(|(_, a), (_, b)| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
         let mut sites: Vec<Site> = Vec::with_capacity(sorted.len());
         let mut count = 0.0;
@@ -190,11 +219,67 @@ impl Surface {
                 "measure points off that line so they span an area",
             ));
         }
+        let hull = tri
+            .convex_hull()
+            .map(|e| {
+                let [a, b] = e.positions();
+                HullEdge {
+                    a: [a.x, a.y],
+                    b: [b.x, b.y],
+                    ea: e.from().data().e,
+                    eb: e.to().data().e,
+                }
+            })
+            .collect();
+        let extent = bbox.width_mm().max(bbox.height_mm());
         Ok(Surface {
             tri,
             bbox,
             kriging: std::sync::OnceLock::new(),
+            hull,
+            hull_eps: 1e-9 * extent,
         })
+    }
+
+    /// The value on the hull at a point within [`Surface::hull_eps`] of it: linear between the
+    /// ends of the nearest edge, which is what every method gives on the hull (a point on a
+    /// hull edge has only the edge's two ends as natural neighbours). `None` further out.
+    fn hull_value(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
+        let eps = self.hull_eps;
+        if u_mm < self.bbox.u_min_mm - eps
+            || u_mm > self.bbox.u_max_mm + eps
+            || v_mm < self.bbox.v_min_mm - eps
+            || v_mm > self.bbox.v_max_mm + eps
+        {
+            return None;
+        }
+        let mut best: Option<(f64, f64)> = None;
+        for h in &self.hull {
+            let (du, dv) = (h.b[0] - h.a[0], h.b[1] - h.a[1]);
+            let len2 = du * du + dv * dv;
+            if len2 == 0.0 {
+                continue;
+            }
+            let t = (((u_mm - h.a[0]) * du + (v_mm - h.a[1]) * dv) / len2).clamp(0.0, 1.0);
+            let dist = (u_mm - (h.a[0] + t * du)).hypot(v_mm - (h.a[1] + t * dv));
+            if dist <= eps && best.is_none_or(|(d, _)| dist < d) {
+                best = Some((dist, h.ea + t * (h.eb - h.ea)));
+            }
+        }
+        best.map(|(_, e)| e).filter(|e| e.is_finite())
+    }
+
+    /// On the hull (within [`Surface::hull_eps`]) the hull's value, else `compute()` when it is
+    /// finite. spade's exact path gives None, NaN or a value off the edge's line for points a
+    /// rounding error puts on the hull.
+    fn hull_first(
+        &self,
+        u_mm: f64,
+        v_mm: f64,
+        compute: impl FnOnce() -> Option<f64>,
+    ) -> Option<f64> {
+        self.hull_value(u_mm, v_mm)
+            .or_else(|| compute().filter(|e| e.is_finite()))
     }
 
     /// Number of distinct sites.
@@ -214,7 +299,9 @@ impl Surface {
             Method::Kriging => Some(self.kriging().ok()?),
             _ => None,
         };
-        Sampler::new(&self.tri, k).sample(method, &self.bbox, u_mm, v_mm)
+        self.hull_first(u_mm, v_mm, || {
+            Sampler::new(&self.tri, k).sample(method, &self.bbox, u_mm, v_mm)
+        })
     }
 
     /// The kriging of the (merged) sites, fitted once on first use.
@@ -233,6 +320,23 @@ impl Surface {
             })
             .as_ref()
             .map_err(|m| Error::numeric(format!("kriging: {m}"), "choose another [interp] method"))
+    }
+}
+
+/// The lattice sites are snapped to: 1e-12 of the larger extent of the points (0 for none).
+fn snap_quantum(points_uve: &[[f64; 3]]) -> f64 {
+    let (mut u0, mut u1, mut v0, mut v1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for p in points_uve {
+        u0 = u0.min(p[0]);
+        u1 = u1.max(p[0]);
+        v0 = v0.min(p[1]);
+        v1 = v1.max(p[1]);
+    }
+    let extent = (u1 - u0).max(v1 - v0);
+    if extent.is_finite() && extent > 0.0 {
+        1e-12 * extent
+    } else {
+        0.0
     }
 }
 
@@ -425,7 +529,8 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
             for (k, row) in chunk.chunks_mut(grid.nu).enumerate() {
                 let j = block * ROWS_PER_BLOCK + k;
                 let v_mm = grid.v0_mm + j as f64 * grid.step_mm;
-                if v_mm < surface.bbox.v_min_mm || v_mm > surface.bbox.v_max_mm {
+                let eps = surface.hull_eps;
+                if v_mm < surface.bbox.v_min_mm - eps || v_mm > surface.bbox.v_max_mm + eps {
                     continue;
                 }
                 let span = match method {
@@ -438,12 +543,16 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
                 for (i, cell) in row.iter_mut().enumerate() {
                     let u_mm = grid.u0_mm + i as f64 * grid.step_mm;
                     let Some(span) = span else {
-                        *cell = sampler.sample(method, &surface.bbox, u_mm, v_mm);
+                        *cell = surface.hull_first(u_mm, v_mm, || {
+                            sampler.sample(method, &surface.bbox, u_mm, v_mm)
+                        });
                         continue;
                     };
                     *cell = match sweep.node(u_mm, v_mm, span, &mut buf) {
                         sweep::Node::Outside => None,
-                        sweep::Node::Fallback => sampler.sample(method, &surface.bbox, u_mm, v_mm),
+                        sweep::Node::Fallback => surface.hull_first(u_mm, v_mm, || {
+                            sampler.sample(method, &surface.bbox, u_mm, v_mm)
+                        }),
                         sweep::Node::Weights => {
                             let weights = buf.weights.iter().map(|&(k, w)| (sweep.site(k), w));
                             match method {
@@ -457,6 +566,7 @@ pub fn resample(surface: &Surface, method: Method, grid: &Grid) -> Vec<Option<f6
                             }
                         }
                     };
+                    *cell = cell.filter(|e| e.is_finite());
                 }
             }
         });

@@ -206,7 +206,10 @@ impl Sweep {
             let t = &self.triangles[span.triangle as usize];
             let du = u - t.center[0];
             let dv = v - t.center[1];
-            if du * du + dv * dv >= t.radius2 {
+            // A node on the circle (four cocircular sites of a lattice put it there, give or
+            // take a rounding) is no conflict: the triangle would add two huge areas that
+            // cancel. Exactly on the circle its share is zero.
+            if du * du + dv * dv >= t.radius2 * (1.0 - 1e-10) {
                 continue;
             }
             let rel = |i: usize| {
@@ -240,6 +243,10 @@ impl Sweep {
         }
         for (_, w) in buf.weights.iter_mut() {
             *w /= total;
+        }
+        // Sibson weights are never negative: a negative one is cancellation, not geometry.
+        if buf.weights.iter().any(|&(_, w)| w.is_nan() || w < -1e-9) {
+            return Node::Fallback;
         }
         Node::Weights
     }

@@ -124,13 +124,18 @@ impl CompTable {
             (Some(&f), Some(&l)) => (f, l),
             _ => return Err(Error::numeric("no targets", "measure at least two targets")),
         };
-        let count = ((last - first) / spacing_mm + 1e-9).floor() as usize + 1;
-        if count > 100_000 {
+        // Count in f64 first: a tiny spacing must not wrap a usize.
+        let count_f = ((last - first) / spacing_mm + 1e-9).floor() + 1.0;
+        if count_f.is_nan() || count_f > 100_000.0 {
             return Err(Error::usage(
-                format!("spacing {spacing_mm} mm gives {count} table points"),
+                format!(
+                    "spacing {spacing_mm:?} mm over {} mm gives {count_f:.3e} table points, more than 100000",
+                    last - first
+                ),
                 "choose a coarser spacing",
             ));
         }
+        let count = count_f as usize;
         let positions_mm: Vec<f64> = (0..count).map(|k| first + k as f64 * spacing_mm).collect();
         Ok(CompTable {
             forward_um: positions_mm.iter().map(|&x| interp(&xs, &up, x)).collect(),

@@ -70,6 +70,44 @@ impl FittedModel {
         self.normalisation.unscale_output(self.network.forward(x))
     }
 
+    /// Largest |E| of the map over its domain, µm, sampled on a 129 × 129 grid of the
+    /// domain (corners and edges included): what a compensation with it can move a point by.
+    pub fn max_abs_e_um(&self) -> f64 {
+        const N: usize = 129;
+        let d = &self.domain;
+        let mut worst = 0.0_f64;
+        for j in 0..N {
+            let v = d.v_min_mm + d.height_mm() * j as f64 / (N - 1) as f64;
+            for i in 0..N {
+                let u = d.u_min_mm + d.width_mm() * i as f64 / (N - 1) as f64;
+                let e = self.e_um(u, v).abs();
+                // NaN is the worst value of all.
+                worst = if e.is_nan() {
+                    f64::INFINITY
+                } else {
+                    worst.max(e)
+                };
+            }
+        }
+        worst
+    }
+
+    /// Refuse a map that would move a point by more than `max_mm` (a unit slip in the data it
+    /// was fitted to, or a network that went wild), naming the file it came from.
+    pub fn check_plausible(&self, max_mm: f64, path: &Path) -> Result<()> {
+        let worst_um = self.max_abs_e_um();
+        if worst_um <= max_mm * 1000.0 {
+            return Ok(());
+        }
+        Err(Error::input(
+            Location::file(path),
+            format!(
+                "the map reaches |E| = {worst_um:.1} µm over its domain, beyond the plausibility bound of {max_mm} mm",
+            ),
+            "a compensation that large is almost always a unit slip in the probe data (µm or inches written as mm); refit the map from corrected data, or raise --max-deviation-mm if the part really is this far off",
+        ))
+    }
+
     /// Read and check a `model.json`.
     pub fn read(path: &Path) -> Result<FittedModel> {
         let text = crate::io::read_text(path)?;

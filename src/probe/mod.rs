@@ -28,6 +28,9 @@ pub struct ProbeSpec {
     pub nominal_plane_mm: Option<f64>,
     /// Map domain in the plane axes; a point outside it is an error naming its line.
     pub domain: Option<Domain>,
+    /// Plausibility bound: a deviation |measured − nominal| along the normal above this is an
+    /// error that names the likely unit slip (default [`DEFAULT_MAX_DEVIATION_MM`]).
+    pub max_deviation_mm: f64,
 }
 
 impl Default for ProbeSpec {
@@ -36,8 +39,44 @@ impl Default for ProbeSpec {
             normal: Axis::Z,
             nominal_plane_mm: None,
             domain: None,
+            max_deviation_mm: DEFAULT_MAX_DEVIATION_MM,
         }
     }
+}
+
+/// Largest believable deviation of a machined surface from its nominal, mm. A finished part
+/// is off by microns to tenths of a millimetre; a millimetre or more is almost always a unit
+/// slip (µm or inches written as mm), a wrong nominal plane or a wrong normal axis.
+pub const DEFAULT_MAX_DEVIATION_MM: f64 = 1.0;
+
+/// Check a plausibility bound given on the command line or in a job file.
+pub fn validate_max_deviation(max_mm: f64, flag: &str) -> Result<()> {
+    if max_mm.is_finite() && max_mm > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::usage(
+            format!("{flag} {max_mm} must be a positive number of mm"),
+            format!("the default is {DEFAULT_MAX_DEVIATION_MM} mm; raise it only for parts that really are that far off"),
+        ))
+    }
+}
+
+/// What a deviation of `deviation_mm` between `measured_mm` and `nominal_mm` most likely means.
+pub fn unit_slip_hint(measured_mm: f64, nominal_mm: f64, max_mm: f64, key: &str) -> String {
+    let near = |x: f64| (x - nominal_mm).abs() <= max_mm;
+    let likely = if near(measured_mm / 1000.0) {
+        format!(
+            "{measured_mm} / 1000 = {} is near the nominal {nominal_mm}: the file looks like µm written as mm",
+            measured_mm / 1000.0
+        )
+    } else if near(measured_mm * 1000.0) {
+        format!("{measured_mm} × 1000 is near the nominal {nominal_mm}: the file looks like m written as mm")
+    } else if near(measured_mm * 25.4) {
+        format!("{measured_mm} × 25.4 is near the nominal {nominal_mm}: the file looks like inches written as mm")
+    } else {
+        "check the units (mm), the nominal plane and the normal axis".to_string()
+    };
+    format!("{likely}; if the part really is this far off, raise the bound ({key})")
 }
 
 /// One probed point (repeats of the same nominal point already averaged).
@@ -231,6 +270,26 @@ pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
                     spec.normal.name()
                 ),
                 "check the units: probe coordinates are in mm",
+            ));
+        }
+        let deviation_mm = measured_mm[n] - nominal_mm[n];
+        if deviation_mm.abs() > spec.max_deviation_mm {
+            return Err(table.error_at(
+                row,
+                Some(measured_cols[n]),
+                format!(
+                    "the deviation {deviation_mm} mm along {} (measured {} − nominal {}) is beyond the plausibility bound of {} mm",
+                    spec.normal.name(),
+                    measured_mm[n],
+                    nominal_mm[n],
+                    spec.max_deviation_mm
+                ),
+                unit_slip_hint(
+                    measured_mm[n],
+                    nominal_mm[n],
+                    spec.max_deviation_mm,
+                    "--max-deviation-mm, or max_deviation_mm in the job",
+                ),
             ));
         }
         if let Some(domain) = &spec.domain {

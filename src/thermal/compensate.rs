@@ -320,7 +320,7 @@ pub fn compensate_file(
     input: &Path,
     output: &Path,
 ) -> Result<CompensateSummary> {
-    let file = std::fs::File::open(input).map_err(|e| Error::read(input, e))?;
+    let file = crate::io::open(input)?;
     let mut failure: Option<Error> = None;
     let mut summary = CompensateSummary::default();
     let written = crate::io::write_atomic(output, |w| {

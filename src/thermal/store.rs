@@ -143,6 +143,8 @@ impl Store {
             std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
         }
         let conn = Connection::open(path).map_err(|e| read_err(path, e))?;
+        // The store is an input of the command: no output file may replace it.
+        crate::io::safety::protect(path);
         let mode: String = conn
             .query_row("PRAGMA journal_mode=WAL", [], |r| r.get(0))
             .map_err(|e| read_err(path, e))?;

@@ -47,16 +47,20 @@ impl Default for CompensationSettings {
     }
 }
 
+/// Shortest `max_segment` accepted, mm (docs/toolpath.md): below it a program grows without
+/// bound for no measurable gain.
+pub const MIN_SEGMENT_MM: f64 = 0.01;
+
 impl CompensationSettings {
     /// Reject settings that would loop forever or mean nothing.
     pub fn validate(&self) -> Result<()> {
-        if !(self.max_segment.is_finite() && self.max_segment > 0.0) {
+        if !(self.max_segment.is_finite() && self.max_segment >= MIN_SEGMENT_MM) {
             return Err(Error::usage(
                 format!(
-                    "maximum segment length must be a positive number of mm, got {}",
+                    "maximum segment length must be at least {MIN_SEGMENT_MM} mm, got {}",
                     self.max_segment
                 ),
-                "use e.g. --max-segment 5",
+                "use e.g. --max-segment 5 (shorter segments only grow the program)",
             ));
         }
         if !(self.chord_tol.is_finite() && self.chord_tol > 0.0) {
