@@ -224,7 +224,7 @@ struct Ranges {
 fn ranges(c: &Centred, radius_mm: f64) -> Ranges {
     let mut steps = Vec::new();
     for d in [super::Direction::Ccw, super::Direction::Cw] {
-        let mut a: Vec<f64> = c.of(d).iter().map(|&i| c.angle_rad[i]).collect();
+        let mut a: Vec<f64> = c.of(d).iter().map(|&i| c.nominal_angle_rad[i]).collect();
         a.sort_by(f64::total_cmp);
         steps.extend(a.windows(2).map(|w| w[1] - w[0]));
     }
@@ -359,19 +359,43 @@ fn search_shape(data: &Data, shape: &mut Shape, rg: &Ranges) {
         for axis in 0..2 {
             shape.spike_decay_mm[axis] = best_decay(data, shape, axis, rg.decay_mm);
         }
-        update_play(data, shape);
+        update_play(data, shape, rg);
     }
 }
 
-/// Set the play of each axis to its positive backlash estimate (µm → mm), 0 for a negative one.
-fn update_play(data: &Data, shape: &mut Shape) {
-    let cols = shape.columns();
-    if let Some(fit) = lstsq(&design(data, shape, &cols), data.y) {
-        for (axis, col) in [(0, Column::BacklashFirst), (1, Column::BacklashSecond)] {
-            if let Some(j) = cols.iter().position(|&c| c == col) {
-                shape.backlash_play_mm[axis] = (fit.beta[j] * 1e-3).max(0.0);
+/// Shape each axis' backlash from the data: an ideal step (play 0), or lost motion whose
+/// play is the current positive estimate, whichever leaves the smaller residual.
+fn update_play(data: &Data, shape: &mut Shape, rg: &Ranges) {
+    for (axis, col) in [(0, Column::BacklashFirst), (1, Column::BacklashSecond)] {
+        let cols = shape.columns();
+        let Some(j) = cols.iter().position(|&c| c == col) else {
+            continue;
+        };
+        let Some(fit) = lstsq(&design(data, shape, &cols), data.y) else {
+            continue;
+        };
+        let play_mm = (fit.beta[j] * 1e-3).max(0.0);
+        // Each candidate with the spike decay of the same axis found again: a spike can mimic
+        // part of the ramp, so the two are judged together.
+        let candidate = |play: f64| {
+            let mut s = *shape;
+            s.backlash_play_mm[axis] = play;
+            s.spike_decay_mm[axis] = best_decay(data, &s, axis, rg.decay_mm);
+            let cols = s.columns();
+            let rss = lstsq(&design(data, &s, &cols), data.y).map_or(f64::INFINITY, |f| f.rss);
+            (rss, s)
+        };
+        let step = candidate(0.0);
+        *shape = if play_mm > 0.0 {
+            let ramp = candidate(play_mm);
+            if ramp.0 < step.0 {
+                ramp.1
+            } else {
+                step.1
             }
-        }
+        } else {
+            step.1
+        };
     }
 }
 
@@ -386,7 +410,7 @@ pub fn diagnose(
     g_ref_um: f64,
 ) -> Result<Diagnosis> {
     let data = Data {
-        psi: &c.angle_rad,
+        psi: &c.nominal_angle_rad,
         sigma: c.direction.iter().map(|d| d.sense()).collect(),
         y: &c.dev_um,
     };

@@ -73,6 +73,9 @@ pub struct Centred {
     pub direction: Vec<Direction>,
     /// Angle about the least-squares centre, [0, 2π).
     pub angle_rad: Vec<f64>,
+    /// Angle about the nominal centre, [0, 2π): the machine's (commanded) angle, at which
+    /// the axes reverse whatever the set-up offset; the diagnosis model uses it.
+    pub nominal_angle_rad: Vec<f64>,
     /// Distance from the least-squares centre minus nominal radius, µm.
     pub dev_um: Vec<f64>,
     pub line: Vec<u64>,
@@ -198,6 +201,7 @@ pub fn evaluate(run: &CircularRun) -> Result<(Figures, Centred)> {
     let centred = Centred {
         direction: run.readings.iter().map(|r| r.direction).collect(),
         angle_rad: angle,
+        nominal_angle_rad: run.readings.iter().map(|r| r.angle_rad).collect(),
         dev_um: dev,
         line: run.readings.iter().map(|r| r.line).collect(),
     };

@@ -185,12 +185,11 @@ pub fn generate(config: &CircularSynthConfig) -> Vec<SynthRow> {
         let _ = wanted;
         let mut axes = [Axis { play_mm: None }, Axis { play_mm: None }];
         for k in -n_over..(n_turn + n_over) {
-            // ccw: −overshoot … 360 + overshoot; cw: 360 + overshoot … −overshoot.
-            let angle_deg = if sigma > 0.0 {
-                k as f64 * step
-            } else {
-                360.0 - k as f64 * step
-            };
+            // ccw: −overshoot … 360 + overshoot; cw: 360 + overshoot … −overshoot. Readings
+            // fall half a step off the axis reversals (0°, 90°, …), as a sampled run does: a
+            // reading exactly at a reversal would land inside the servo lag's delay of it.
+            let offset = (k as f64 + 0.5) * step;
+            let angle_deg = if sigma > 0.0 { offset } else { 360.0 - offset };
             let theta = angle_deg.to_radians();
             let in_turn = (0..n_turn).contains(&k);
             let x = config.axis_position(0, theta, sigma, &mut axes[0]);
