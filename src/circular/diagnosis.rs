@@ -399,6 +399,51 @@ fn update_play(data: &Data, shape: &mut Shape, rg: &Ranges) {
     }
 }
 
+/// Replace the covariance of a fit by the one of the whole nonlinear problem: the Jacobian
+/// gets one more column per searched setting (spike decays, the play of a ramped backlash, cyclic periods), the derivative of
+/// the modelled deviation by central differences, so that the standard errors of the
+/// coefficients include what the uncertainty of a decay or period does to them.
+fn with_nonlinear_covariance(data: &Data, shape: &Shape, cols: &[Column], fit: Fit) -> Fit {
+    let beta = DVector::from_column_slice(&fit.beta);
+    let predict = |s: &Shape| design(data, s, cols) * &beta;
+    let mut extra: Vec<DVector<f64>> = Vec::new();
+    for axis in 0..2 {
+        let lambda = shape.spike_decay_mm[axis];
+        let (mut lo, mut hi) = (*shape, *shape);
+        lo.spike_decay_mm[axis] = lambda * (1.0 - 1e-4);
+        hi.spike_decay_mm[axis] = lambda * (1.0 + 1e-4);
+        extra.push((predict(&hi) - predict(&lo)) / (2e-4 * lambda));
+        let play = shape.backlash_play_mm[axis];
+        if play > 0.0 {
+            let (mut lo, mut hi) = (*shape, *shape);
+            lo.backlash_play_mm[axis] = play * (1.0 - 1e-4);
+            hi.backlash_play_mm[axis] = play * (1.0 + 1e-4);
+            extra.push((predict(&hi) - predict(&lo)) / (2e-4 * play));
+        }
+        if let Some(p) = shape.cyclic_period_mm[axis] {
+            let (mut lo, mut hi) = (*shape, *shape);
+            lo.cyclic_period_mm[axis] = Some(p * (1.0 - 1e-6));
+            hi.cyclic_period_mm[axis] = Some(p * (1.0 + 1e-6));
+            extra.push((predict(&hi) - predict(&lo)) / (2e-6 * p));
+        }
+    }
+    let a = design(data, shape, cols);
+    let p = cols.len();
+    let mut aug = DMatrix::zeros(a.nrows(), p + extra.len());
+    aug.columns_mut(0, p).copy_from(&a);
+    for (k, col) in extra.iter().enumerate() {
+        aug.set_column(p + k, col);
+    }
+    match lstsq(&aug, data.y) {
+        Some(full) => Fit {
+            cov: full.cov.view((0, 0), (p, p)).into_owned(),
+            ..fit
+        },
+        // A setting with no effect (a zero spike leaves its decay free): keep the linear covariance.
+        None => fit,
+    }
+}
+
 /// Fit the diagnosis model to deviations about the least-squares centre.
 ///
 /// `g_ref_um` is the G the shares refer to. Servo mismatch needs both directions, and
@@ -432,6 +477,7 @@ pub fn diagnose(
             "record full turns in both directions with readings every 1° or closer",
         )
     })?;
+    let fit = with_nonlinear_covariance(&data, &shape, &cols, fit);
     let fitted = &a * DVector::from_column_slice(&fit.beta);
     let ctx = TermContext {
         c,

@@ -136,10 +136,14 @@ pub fn parse_run(path: &Path, text: &str, opts: &ReadOptions) -> Result<Circular
 
 fn from_table(t: &CsvTable, opts: &ReadOptions) -> Result<CircularRun> {
     let r_mm = opts.radius_mm;
-    if !(r_mm.is_finite() && r_mm > 0.0) || !opts.centre_mm.iter().all(|c| c.is_finite()) {
+    let radius_ok = r_mm.is_finite() && r_mm > 0.0;
+    if !radius_ok || opts.centre_mm.iter().any(|c| !c.is_finite()) {
         return Err(Error::usage(
-            format!("radius {r_mm} mm is not a positive length"),
-            "give the programmed radius with --radius, e.g. --radius 100",
+            format!(
+                "radius {r_mm} mm or centre {:?} mm is not usable",
+                opts.centre_mm
+            ),
+            "give the programmed radius with --radius (e.g. --radius 100) and a finite --centre",
         ));
     }
     let form = detect_form(t)?;

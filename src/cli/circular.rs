@@ -63,7 +63,7 @@ pub struct SynthCircularArgs {
     #[arg(long, value_name = "MM_PER_MIN", default_value_t = 1000.0)]
     pub feed: f64,
     /// Angle between readings (divides 360).
-    #[arg(long, value_name = "DEG", default_value_t = 0.1)]
+    #[arg(long, value_name = "DEG", default_value_t = 0.05)]
     pub step_deg: f64,
     /// Noise of each reading (standard deviation).
     #[arg(long, value_name = "UM", default_value_t = 0.2)]
@@ -213,10 +213,9 @@ pub fn run_synth(args: SynthCircularArgs, globals: Globals) -> Result<i32> {
             "choose a step that divides 360, e.g. 0.1, 0.5, 1",
         ));
     }
-    if !(args.radius.is_finite() && args.radius > 0.0)
-        || !(args.feed.is_finite() && args.feed > 0.0)
-        || !(args.noise_um.is_finite() && args.noise_um >= 0.0)
-    {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    let noise_ok = args.noise_um.is_finite() && args.noise_um >= 0.0;
+    if !positive(args.radius) || !positive(args.feed) || !noise_ok {
         return Err(Error::usage(
             "synth circular needs a positive --radius and --feed and a finite --noise-um ≥ 0",
             "e.g. --radius 100 --feed 1000 --noise-um 0.2",

@@ -54,7 +54,7 @@ impl Default for CircularSynthConfig {
             form: Form::Radial,
             radius_mm: 100.0,
             feed_mm_per_min: 1000.0,
-            step_deg: 0.1,
+            step_deg: 0.05,
             overshoot_deg: 10.0,
             ccw: true,
             cw: true,
