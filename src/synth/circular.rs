@@ -259,8 +259,13 @@ mod tests {
         let rows = generate(&c);
         for r in rows.iter().filter(|r| r.label != "overshoot") {
             let t = r.angle_deg.to_radians();
+            // Exact distance from the set-up centre, and its limaçon within |e|²/(2R).
+            let (x, y) = (100.0 * t.cos() + 0.012, 100.0 * t.sin() - 0.008);
+            let exact_um = (x.hypot(y) - 100.0) * 1e3;
+            assert!((r.reading[0] - exact_um).abs() < 1e-6, "{r:?}");
             let limacon = 12.0 * t.cos() - 8.0 * t.sin();
-            assert!((r.reading[0] - limacon).abs() < 1e-3, "{r:?}");
+            let bound_um = (0.012_f64.powi(2) + 0.008_f64.powi(2)) / 200.0 * 1e3;
+            assert!((r.reading[0] - limacon).abs() <= bound_um + 1e-6, "{r:?}");
         }
         assert_eq!(rows.iter().filter(|r| r.label == "ccw").count(), 36);
         assert_eq!(rows.iter().filter(|r| r.label == "overshoot").count(), 4);
