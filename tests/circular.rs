@@ -783,10 +783,10 @@ fn bad_labels_headers_and_outputs_are_refused() {
 }
 
 /// The worked example of docs/circular.md: R = 100 mm, 1000 mm/min, squareness 30 µm/m and
-/// servo mismatch 0.5 ms. Radial deviation −1.5·sin 2θ (squareness) ± 4.1667·sin 2θ (servo,
-/// + ccw): ccw 2.6667·sin 2θ, cw −5.6667·sin 2θ. By hand: G ccw 5.333, G cw 11.333,
-/// G both 11.333, H = 2.6667 + 5.6667 = 8.333 µm; squareness alone 3 µm = 26.5 % of G,
-/// servo alone 8.333 µm = 73.5 %.
+/// servo mismatch 0.5 ms. Radial deviation −1.5·sin 2θ (squareness) plus 4.1667·sin 2θ ccw,
+/// minus it cw (servo): ccw 2.6667·sin 2θ, cw −5.6667·sin 2θ. By hand: G ccw 5.333, G cw
+/// 11.333, G both 11.333, H = 2.6667 + 5.6667 = 8.333 µm; squareness alone 3 µm = 26.5 % of
+/// G, servo alone 8.333 µm = 73.5 %.
 #[test]
 fn the_worked_example_of_the_docs_gives_the_figures_computed_by_hand() {
     let mut text = String::from("direction,angle_deg,deviation_um\n");
@@ -810,5 +810,8 @@ fn the_worked_example_of_the_docs_gives_the_figures_computed_by_hand() {
     close(e.terms.squareness_um_per_m.value, 30.0);
     close(e.terms.servo_mismatch_ms.value, 0.5);
     close(e.terms.squareness_um_per_m.share_of_g, 3.0 / (34.0 / 3.0));
-    close(e.terms.servo_mismatch_ms.share_of_g, (25.0 / 3.0) / (34.0 / 3.0));
+    close(
+        e.terms.servo_mismatch_ms.share_of_g,
+        (25.0 / 3.0) / (34.0 / 3.0),
+    );
 }

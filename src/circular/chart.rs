@@ -27,20 +27,27 @@ fn fmt_opt(v: Option<f64>) -> String {
     v.map_or_else(|| "–".to_string(), |v| format!("{v:.2}"))
 }
 
-/// Draw the polar chart and write it as PNG.
-pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<()> {
+/// Magnified polar position of a deviation: the nominal circle at radius 1, ±span µm at ±DEV_UNITS.
+#[derive(Clone, Copy)]
+struct Polar {
+    span_um: f64,
+}
+
+impl Polar {
+    fn xy(self, angle_rad: f64, dev_um: f64) -> (f64, f64) {
+        let rho = 1.0 + DEV_UNITS * dev_um / self.span_um;
+        (rho * angle_rad.cos(), rho * angle_rad.sin())
+    }
+}
+
+/// The text beside the chart: figures and the largest contributors.
+fn side_text(eval: &Evaluation, span_um: f64) -> Vec<String> {
     let f = &eval.figures;
-    let max_abs = c.dev_um.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let zone = &f.zone;
-    let span = nice_span(max_abs.max(zone.outer_um.abs()).max(zone.inner_um.abs()));
-    let to_xy = |angle: f64, dev_um: f64| {
-        let rho = 1.0 + DEV_UNITS * dev_um / span;
-        (rho * angle.cos(), rho * angle.sin())
-    };
     let [first, second] = eval.axes;
+    let either = |v: &super::PerDirection| v.bidirectional.or(v.ccw).or(v.cw);
     let mut text = vec![
         format!("R = {} mm, plane {first}{second}", f.radius_mm),
-        format!("scale: ring ±{span} µm"),
+        format!("scale: ring ±{span_um} µm"),
         String::new(),
         format!("G ccw  {} µm", fmt_opt(f.g_um.ccw)),
         format!("G cw   {} µm", fmt_opt(f.g_um.cw)),
@@ -48,18 +55,8 @@ pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<(
         format!("H      {} µm", fmt_opt(f.h_um)),
         format!(
             "F      {} / {} µm",
-            fmt_opt(
-                f.f_max_um
-                    .bidirectional
-                    .or(f.f_max_um.ccw)
-                    .or(f.f_max_um.cw)
-            ),
-            fmt_opt(
-                f.f_min_um
-                    .bidirectional
-                    .or(f.f_min_um.ccw)
-                    .or(f.f_min_um.cw)
-            )
+            fmt_opt(either(&f.f_max_um)),
+            fmt_opt(either(&f.f_min_um))
         ),
         format!(
             "centre {:+.2}, {:+.2} µm",
@@ -83,24 +80,58 @@ pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<(
     if eval.model.largest.is_empty() {
         text.push(" none above 5 % of G".to_string());
     }
-    let band: Vec<(f64, f64)> = {
-        let [a, b] = zone.centre_from_lsc_um;
-        let curve = |level: f64, rev: bool| {
-            let mut pts: Vec<(f64, f64)> = (0..=360)
-                .map(|k| {
-                    let t = TAU * k as f64 / 360.0;
-                    to_xy(t, a * t.cos() + b * t.sin() + level)
-                })
-                .collect();
-            if rev {
-                pts.reverse();
-            }
-            pts
-        };
-        let mut v = curve(zone.outer_um, false);
-        v.extend(curve(zone.inner_um, true));
-        v
+    text
+}
+
+/// The minimum-zone band as one closed polygon: its outer circle, then its inner one backwards
+/// (both about the zone centre, drawn in the chart's LSC coordinates).
+fn zone_band(zone: &super::figures::ZoneReport, polar: Polar) -> Vec<(f64, f64)> {
+    let [a, b] = zone.centre_from_lsc_um;
+    let curve = |level: f64| {
+        (0..=360).map(move |k| {
+            let t = TAU * k as f64 / 360.0;
+            polar.xy(t, a * t.cos() + b * t.sin() + level)
+        })
     };
+    let mut v: Vec<(f64, f64)> = curve(zone.outer_um).collect();
+    let inner: Vec<(f64, f64)> = curve(zone.inner_um).collect();
+    v.extend(inner.into_iter().rev());
+    v
+}
+
+/// Grid lines: rings at −span, −span/2, 0 (the nominal circle, major), +span/2, +span, and
+/// spokes every 30°.
+fn grid_paths(polar: Polar) -> Vec<(Vec<(f64, f64)>, bool)> {
+    let span = polar.span_um;
+    let mut paths: Vec<(Vec<(f64, f64)>, bool)> = (-2..=2)
+        .map(|k| {
+            let dev = span * k as f64 / 2.0;
+            let ring = (0..=360)
+                .map(|i| polar.xy(TAU * i as f64 / 360.0, dev))
+                .collect();
+            (ring, k == 0)
+        })
+        .collect();
+    for k in 0..12 {
+        let t = TAU * k as f64 / 12.0;
+        paths.push((
+            vec![polar.xy(t, -span * 1.2), polar.xy(t, span * 1.2)],
+            false,
+        ));
+    }
+    paths
+}
+
+/// Draw the polar chart and write it as PNG.
+pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<()> {
+    let zone = &eval.figures.zone;
+    let max_abs = c.dev_um.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let span = nice_span(max_abs.max(zone.outer_um.abs()).max(zone.inner_um.abs()));
+    let polar = Polar { span_um: span };
+    let to_xy = move |angle: f64, dev_um: f64| polar.xy(angle, dev_um);
+    let [first, second] = eval.axes;
+    let text = side_text(eval, span);
+    let band = zone_band(zone, polar);
     save_png(path, 1250, 900, |root| {
         let (left, right) = root.split_horizontally(900);
         let mut chart = ChartBuilder::on(&left)
@@ -116,27 +147,13 @@ pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<(
             .legend(|(x, y)| {
                 Rectangle::new([(x, y - 5), (x + 20, y + 5)], GREEN.mix(0.3).filled())
             });
-        // Grid: rings at −span, −span/2, 0, +span/2, +span and spokes every 30°.
-        for k in -2..=2 {
-            let dev = span * k as f64 / 2.0;
-            let style = if k == 0 {
+        for (path, major) in grid_paths(polar) {
+            let style = if major {
                 BLACK.stroke_width(2)
             } else {
                 BLACK.mix(0.25).stroke_width(1)
             };
-            chart.draw_series(std::iter::once(PathElement::new(
-                (0..=360)
-                    .map(|i| to_xy(TAU * i as f64 / 360.0, dev))
-                    .collect::<Vec<_>>(),
-                style,
-            )))?;
-        }
-        for k in 0..12 {
-            let t = TAU * k as f64 / 12.0;
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![to_xy(t, -span * 1.2), to_xy(t, span * 1.2)],
-                BLACK.mix(0.2),
-            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(path, style)))?;
         }
         for (label, pos) in [
             (format!("+{first}"), (1.42, -0.03)),

@@ -488,43 +488,7 @@ pub fn diagnose(
         g_ref_um,
     };
     let servo_k = ctx.coef(Column::Servo);
-    let servo_ms = match (servo_k, feed_mm_per_min) {
-        (Some((k, se)), Some(feed)) => ctx.term(
-            &[Column::Servo],
-            Some((k * 120.0 / feed, se * 120.0 / feed)),
-        ),
-        (Some(_), None) => Term::missing(
-            "give --feed (mm/min) to convert the radial amplitude (model.servo_amplitude_um) to ms",
-        ),
-        (None, _) => Term::missing("servo mismatch needs both directions (ccw and cw)"),
-    };
-    let cyclic = |axis: usize, pair: [Column; 2]| match shape.cyclic_period_mm[axis] {
-        Some(p) => {
-            let mut t = ctx.amplitude(pair);
-            t.period_mm = Some(p);
-            t
-        }
-        None => {
-            Term::missing("the sampling is too coarse to resolve a cyclic error shorter than R/2")
-        }
-    };
-    let spike = |axis: usize, col: Column| {
-        let mut t = ctx.term(&[col], ctx.coef(col));
-        t.decay_mm = Some(shape.spike_decay_mm[axis]);
-        t
-    };
-    let terms = Terms {
-        squareness_um_per_m: ctx.term(&[Column::Squareness], ctx.coef(Column::Squareness)),
-        scale_mismatch_um_per_m: ctx
-            .term(&[Column::ScaleMismatch], ctx.coef(Column::ScaleMismatch)),
-        backlash_first_um: ctx.term(&[Column::BacklashFirst], ctx.coef(Column::BacklashFirst)),
-        backlash_second_um: ctx.term(&[Column::BacklashSecond], ctx.coef(Column::BacklashSecond)),
-        reversal_spike_first_um: spike(0, Column::SpikeFirst),
-        reversal_spike_second_um: spike(1, Column::SpikeSecond),
-        servo_mismatch_ms: servo_ms,
-        cyclic_first_um: cyclic(0, [Column::CyclicFirstSin, Column::CyclicFirstCos]),
-        cyclic_second_um: cyclic(1, [Column::CyclicSecondSin, Column::CyclicSecondCos]),
-    };
+    let terms = ctx.terms(feed_mm_per_min);
     let mut ranked: Vec<(&str, f64)> = terms
         .list()
         .iter()
@@ -560,6 +524,49 @@ struct TermContext<'a> {
 }
 
 impl TermContext<'_> {
+    /// Every term of the report from the fit.
+    fn terms(&self, feed_mm_per_min: Option<f64>) -> Terms {
+        let servo_ms = match (self.coef(Column::Servo), feed_mm_per_min) {
+            (Some((k, se)), Some(feed)) => self.term(
+                &[Column::Servo],
+                Some((k * 120.0 / feed, se * 120.0 / feed)),
+            ),
+            (Some(_), None) => Term::missing(
+                "give --feed (mm/min) to convert the radial amplitude (model.servo_amplitude_um) to ms",
+            ),
+            (None, _) => Term::missing("servo mismatch needs both directions (ccw and cw)"),
+        };
+        let cyclic = |axis: usize, pair: [Column; 2]| match self.shape.cyclic_period_mm[axis] {
+            Some(p) => {
+                let mut t = self.amplitude(pair);
+                t.period_mm = Some(p);
+                t
+            }
+            None => Term::missing(
+                "the sampling is too coarse to resolve a cyclic error shorter than R/2",
+            ),
+        };
+        let spike = |axis: usize, col: Column| {
+            let mut t = self.term(&[col], self.coef(col));
+            t.decay_mm = Some(self.shape.spike_decay_mm[axis]);
+            t
+        };
+        Terms {
+            squareness_um_per_m: self.term(&[Column::Squareness], self.coef(Column::Squareness)),
+            scale_mismatch_um_per_m: self
+                .term(&[Column::ScaleMismatch], self.coef(Column::ScaleMismatch)),
+            backlash_first_um: self
+                .term(&[Column::BacklashFirst], self.coef(Column::BacklashFirst)),
+            backlash_second_um: self
+                .term(&[Column::BacklashSecond], self.coef(Column::BacklashSecond)),
+            reversal_spike_first_um: spike(0, Column::SpikeFirst),
+            reversal_spike_second_um: spike(1, Column::SpikeSecond),
+            servo_mismatch_ms: servo_ms,
+            cyclic_first_um: cyclic(0, [Column::CyclicFirstSin, Column::CyclicFirstCos]),
+            cyclic_second_um: cyclic(1, [Column::CyclicSecondSin, Column::CyclicSecondCos]),
+        }
+    }
+
     fn index(&self, col: Column) -> Option<usize> {
         self.cols.iter().position(|&c| c == col)
     }
@@ -574,7 +581,6 @@ impl TermContext<'_> {
         let contrib: Vec<f64> = (0..self.c.len())
             .map(|i| idx.iter().map(|&j| self.a[(i, j)] * self.fit.beta[j]).sum())
             .collect();
-        let _ = self.shape;
         min_zone(&contrib, &self.c.angle_rad).width_um
     }
     fn term(&self, cols: &[Column], value: Option<(f64, f64)>) -> Term {

@@ -111,6 +111,33 @@ impl DualLp<'_> {
         b.try_inverse()
     }
 
+    /// Pricing: the column with the most negative reduced cost, or with `bland` the first one
+    /// (Bland's rule, which cannot cycle, after many degenerate steps). `None` at the optimum.
+    fn entering(
+        &self,
+        basis: &[usize; 4],
+        y: &Vector4<f64>,
+        tol: f64,
+        bland: bool,
+    ) -> Option<usize> {
+        let mut entering: Option<(usize, f64)> = None;
+        for j in 0..2 * self.n() {
+            if basis.contains(&j) {
+                continue;
+            }
+            let d = self.cost(j) - y.dot(&self.column(j));
+            if d < -tol {
+                if bland {
+                    return Some(j);
+                }
+                if entering.is_none_or(|(_, best)| d < best) {
+                    entering = Some((j, d));
+                }
+            }
+        }
+        entering.map(|e| e.0)
+    }
+
     /// Run the simplex method; returns the primal shift (a, b).
     fn solve(&self) -> [f64; 2] {
         let n = self.n();
@@ -143,44 +170,11 @@ impl DualLp<'_> {
             let x = binv * rhs;
             let cb = Vector4::from_fn(|k, _| self.cost(basis[k]));
             let y = binv.transpose() * cb;
-            // Pricing: most negative reduced cost, or the first one (Bland) after many degenerate steps.
-            let bland = degenerate_run > 50;
-            let mut entering: Option<(usize, f64)> = None;
-            for j in 0..2 * n {
-                if basis.contains(&j) {
-                    continue;
-                }
-                let d = self.cost(j) - y.dot(&self.column(j));
-                if d < -tol {
-                    match entering {
-                        None => entering = Some((j, d)),
-                        Some((_, best)) if !bland && d < best => entering = Some((j, d)),
-                        _ => {}
-                    }
-                    if bland {
-                        break;
-                    }
-                }
-            }
-            let Some((j, _)) = entering else {
+            let Some(j) = self.entering(&basis, &y, tol, degenerate_run > 50) else {
                 return [-y[0], -y[1]];
             };
             let u = binv * self.column(j);
-            let mut leave: Option<(usize, f64)> = None;
-            for k in 0..4 {
-                if u[k] > 1e-12 {
-                    let ratio = x[k].max(0.0) / u[k];
-                    let better = match leave {
-                        None => true,
-                        Some((kk, best)) => {
-                            ratio < best - 1e-15 || (ratio <= best + 1e-15 && basis[k] < basis[kk])
-                        }
-                    };
-                    if better {
-                        leave = Some((k, ratio));
-                    }
-                }
-            }
+            let leave = leaving(&basis, &x, &u);
             // Unbounded cannot happen (the primal is feasible); stop with the current multipliers.
             let Some((k, ratio)) = leave else {
                 return [-y[0], -y[1]];
@@ -204,6 +198,27 @@ impl DualLp<'_> {
         let y = binv.transpose() * cb;
         [-y[0], -y[1]]
     }
+}
+
+/// Ratio test: the basis position that leaves (smallest x/u over u > 0, ties to the smallest
+/// column index) and its ratio; `None` when no entry of u is positive.
+fn leaving(basis: &[usize; 4], x: &Vector4<f64>, u: &Vector4<f64>) -> Option<(usize, f64)> {
+    let mut leave: Option<(usize, f64)> = None;
+    for k in 0..4 {
+        if u[k] > 1e-12 {
+            let ratio = x[k].max(0.0) / u[k];
+            let better = match leave {
+                None => true,
+                Some((kk, best)) => {
+                    ratio < best - 1e-15 || (ratio <= best + 1e-15 && basis[k] < basis[kk])
+                }
+            };
+            if better {
+                leave = Some((k, ratio));
+            }
+        }
+    }
+    leave
 }
 
 #[cfg(test)]
