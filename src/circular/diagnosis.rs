@@ -236,7 +236,9 @@ fn ranges(c: &Centred, radius_mm: f64) -> Ranges {
         .max(1e-6);
     let lo = (radius_mm * step).max(1e-3);
     let hi = (radius_mm * PI / 12.0).max(2.0 * lo);
-    let (f_lo, f_hi) = (2.0 / radius_mm, 1.0 / (2.5 * radius_mm * step));
+    // Periods from R/2 down to 2.5 reading spacings along the axis, and not below 1 mm
+    // (screw leads; a scale's µm-long period is beyond any circular test).
+    let (f_lo, f_hi) = (2.0 / radius_mm, (1.0 / (2.5 * radius_mm * step)).min(1.0));
     Ranges {
         decay_mm: (lo, hi),
         freq_per_mm: (f_hi > 1.5 * f_lo).then_some((f_lo, f_hi)),
