@@ -6,11 +6,13 @@
 //!   pitch-error fits, bidirectional compensation tables.
 //! - Thermal error: cold/warm difference and the composite geometric + thermal model.
 //! - Rotary axes: double-vector angular error, axis location and tables.
+//! - Circular tests (ISO 230-4): circular deviation, hysteresis and a diagnosis of axis errors.
 #![forbid(unsafe_code)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod backend;
 pub mod batch;
+pub mod circular;
 pub mod error;
 pub mod geom;
 pub mod gpu;

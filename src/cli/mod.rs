@@ -20,6 +20,7 @@ macro_rules! out {
 }
 
 mod bench;
+mod circular;
 mod compensate;
 mod gpu;
 mod grid;
@@ -79,6 +80,8 @@ pub enum Command {
     /// Rotary axes measured with two spheres on a bar.
     #[command(subcommand)]
     Rotary(rotary::RotaryCommand),
+    /// Dynamic circular test (ISO 230-4, ballbar or grid encoder): G, F, H and a diagnosis of axis errors.
+    Circular(circular::CircularArgs),
     /// Generate sample data with known ground truth.
     #[command(subcommand)]
     Synth(SynthCommand),
@@ -94,6 +97,8 @@ pub enum SynthCommand {
     Thermal(thermal::SynthThermalArgs),
     /// Sphere probing around a rotary axis with planted angular errors.
     Rotary(rotary::SynthRotaryArgs),
+    /// Circular-test runs (ballbar or two-axis) with planted axis errors and noise.
+    Circular(circular::SynthCircularArgs),
 }
 
 /// Notes from the library go to stderr unless `--quiet`.
@@ -155,5 +160,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Synth(SynthCommand::Linear(args)) => linear::run_synth(args, globals),
         Command::Synth(SynthCommand::Thermal(args)) => thermal::run_synth(args, globals),
         Command::Synth(SynthCommand::Rotary(args)) => rotary::run_synth(args, globals),
+        Command::Circular(args) => circular::run(args, globals),
+        Command::Synth(SynthCommand::Circular(args)) => circular::run_synth(args, globals),
     }
 }

@@ -1,5 +1,6 @@
 //! Generators of sample data with known ground truth, for every kind of measurement errmap reads.
 
+pub mod circular;
 pub mod linear;
 pub mod rotary;
 pub mod thermal;
