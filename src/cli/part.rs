@@ -1,7 +1,9 @@
 //! CLI of part-family mapping: `batch`, `map` and `merge`.
 
 use super::Globals;
-use errmap::batch::{self, BatchOptions, BatchSummary, Job, PartInput, Plan, Settings, Shard};
+use errmap::batch::{
+    self, BatchOptions, BatchSummary, Job, MergeRequest, PartInput, Plan, Settings, Shard,
+};
 use errmap::geom::{Axis, Domain};
 use errmap::interp::Method;
 use errmap::nn::{Backend, ModelConfig};
@@ -21,9 +23,12 @@ pub struct BatchArgs {
     /// Number of shards when the index comes from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "COUNT")]
     pub shards: Option<usize>,
-    /// Output folder instead of the job's `output` (default out/<family>).
+    /// Output folder instead of the job's `output` (default out/<family>); a shard writes into its own OUT/shard-I-of-N/.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Keep the parts of the folder's last run whose probe file and outputs still match its run.json; redo the rest.
+    #[arg(long)]
+    pub resume: bool,
     /// Print the summary as one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -73,12 +78,21 @@ pub struct MapArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
-    /// Summaries of the shards (summary-shard-I-of-N.json).
+    /// The batch's output folder (holding shard-I-of-N/), or shard folders, or their summary.json.
     #[arg(required = true)]
-    pub summaries: Vec<PathBuf>,
-    /// Merged summary file (default: summary.json beside the first shard's).
-    #[arg(long, short)]
-    pub out: Option<PathBuf>,
+    pub inputs: Vec<PathBuf>,
+    /// Number of shards (default: the count the shard folders name).
+    #[arg(long, value_name = "N")]
+    pub shards: Option<usize>,
+    /// The job file (default: the one the shards' run.json names).
+    #[arg(long, value_name = "JOB.toml")]
+    pub job: Option<PathBuf>,
+    /// Trainer of the family network: pass the shards' --backend (it is part of the job hash).
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Wait up to this many seconds for shards that have not committed yet.
+    #[arg(long, value_name = "SECONDS")]
+    pub wait: Option<u64>,
     /// Print the merged summary as one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -134,13 +148,29 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         backend: args.backend,
         shard,
         output: args.out,
+        resume: args.resume,
     };
-    let (plan, summary_path) = batch::plan_job(&file, &opts)?;
-    let trainer = errmap::gpu::select_trainer(plan.settings.model.backend, globals.quiet)?;
-    let summary = batch::execute(&plan, trainer.as_ref(), globals.quiet)?;
-    errmap::io::write_json(&summary_path, &summary)?;
-    report(&summary, &summary_path, args.json, globals.quiet)?;
-    Ok(summary.exit_code())
+    let backend = args.backend.unwrap_or(file.job.model.backend);
+    let trainer = errmap::gpu::select_trainer(backend, globals.quiet)?;
+    let run = batch::run_job(&file, &opts, trainer.as_ref(), globals.quiet)?;
+    if args.resume && !globals.quiet && !args.json {
+        eprintln!(
+            "resume: kept {} part(s) of the previous run{}",
+            run.reused.len(),
+            if run.reused.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", run.reused.join(", "))
+            }
+        );
+    }
+    report(
+        &run.summary,
+        &run.folder.join("summary.json"),
+        args.json,
+        globals.quiet,
+    )?;
+    Ok(run.summary.exit_code())
 }
 
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
@@ -190,6 +220,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
             method: args.method,
             spacing_mm: args.spacing,
             model,
+            reduce_inputs: false,
         },
         parts: vec![PartInput {
             name,
@@ -215,21 +246,21 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
 }
 
 pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
-    let mut shards = Vec::new();
-    for p in &args.summaries {
-        shards.push((p.clone(), BatchSummary::read(p)?));
-    }
-    let mut merged = batch::merge(&shards)?;
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| batch::merged_summary_path(&args.summaries[0]));
-    // Shards could not see each other's parts: the family mean and std maps are made here.
-    let family_dir = out
-        .parent()
-        .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
-    merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
-    errmap::io::write_json(&out, &merged)?;
-    report(&merged, &out, args.json, globals.quiet)?;
-    Ok(merged.exit_code())
+    let req = MergeRequest {
+        inputs: args.inputs,
+        shards: args.shards,
+        job: args.job,
+        backend: args.backend,
+        wait: args.wait.map(std::time::Duration::from_secs),
+    };
+    let quiet = globals.quiet;
+    let trainer_for = |b: Backend| errmap::gpu::select_trainer(b, quiet);
+    let run = batch::merge_job(&req, &trainer_for)?;
+    report(
+        &run.summary,
+        &run.folder.join("summary.json"),
+        args.json,
+        globals.quiet,
+    )?;
+    Ok(run.summary.exit_code())
 }
