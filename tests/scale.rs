@@ -542,3 +542,26 @@ fn on_the_gpu_the_reduce_fits_the_same_family_network_as_the_unsharded_run() {
         );
     }
 }
+
+#[test]
+fn a_sharded_rerun_into_an_unsharded_runs_folder_leaves_no_part_of_the_old_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    family(d, 2);
+    batch(d, "out", &[]).expect_code(0);
+    assert!(d.join("out/p01/map.csv").is_file());
+    sharded(d, "out", 2);
+    let left: Vec<String> = common::listing(&d.join("out"))
+        .into_iter()
+        .filter(|f| !f.contains('/') || f.starts_with("p0"))
+        .collect();
+    assert_eq!(
+        left,
+        ["run.json", "summary.json"],
+        "{:?}",
+        common::listing(&d.join("out"))
+    );
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("out/run.json")).unwrap()).unwrap();
+    assert_eq!(m["kind"], "reduce");
+}

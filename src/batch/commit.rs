@@ -189,12 +189,30 @@ fn check_replaceable(target: &Path) -> Result<()> {
     Ok(())
 }
 
+/// `path` with its longest existing ancestor resolved (symbolic links, `..`).
+fn canonical_prefix(path: &Path) -> PathBuf {
+    let mut rest = Vec::new();
+    let mut head = path.to_path_buf();
+    loop {
+        if let Ok(c) = head.canonicalize() {
+            return rest.iter().rev().fold(c, |acc, n| acc.join(n));
+        }
+        match (head.file_name().map(|n| n.to_os_string()), head.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                head = parent.to_path_buf();
+            }
+            _ => return path.to_path_buf(),
+        }
+    }
+}
+
 /// Refuse an output folder that holds one of the run's inputs: replacing it would delete them.
 pub fn check_inputs_outside(target: &Path, inputs: &[PathBuf]) -> Result<()> {
     let Ok(target_abs) = std::path::absolute(target) else {
         return Ok(());
     };
-    let target_abs = target_abs.canonicalize().unwrap_or(target_abs);
+    let target_abs = canonical_prefix(&target_abs);
     for input in inputs {
         let abs = input
             .canonicalize()

@@ -89,10 +89,10 @@ pub fn run_job(
     let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
     let target = match opts.shard {
         Some(s) => out.join(s.folder_name()),
-        None => out,
+        None => out.clone(),
     };
     let inputs = job_inputs(&file)?;
-    commit::check_inputs_outside(&target, &inputs)?;
+    commit::check_inputs_outside(&out, &inputs)?;
     let previous = if opts.resume {
         RunManifest::read(&target)?.filter(|m| m.job_hash == job_hash)
     } else {
@@ -280,8 +280,12 @@ pub struct MergeRequest {
     pub wait: Option<std::time::Duration>,
 }
 
+/// Shard folders by shard index.
+type ShardFolders = BTreeMap<usize, (Shard, PathBuf)>;
+
 /// The batch folder and its shard folders (`shard-I-of-N` → Shard) named by the inputs.
-fn shard_folders(inputs: &[PathBuf]) -> Result<(PathBuf, BTreeMap<usize, (Shard, PathBuf)>)> {
+/// With `only_count`, folders of another split are left out.
+fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathBuf, ShardFolders)> {
     let mut found: Vec<(Shard, PathBuf)> = Vec::new();
     for input in inputs {
         let dir = if input.is_file() {
@@ -303,12 +307,15 @@ fn shard_folders(inputs: &[PathBuf]) -> Result<(PathBuf, BTreeMap<usize, (Shard,
                 }
             }
         }
-        if !found.iter().any(|(_, p)| p.starts_with(&dir)) {
+        if !found.iter().any(|(_, p)| p.starts_with(&dir)) && only_count.is_none() {
             return Err(Error::usage(
                 format!("{} holds no shard folder (shard-I-of-N)", dir.display()),
                 "pass the batch's output folder, or run the shards first with errmap batch --shard I/N",
             ));
         }
+    }
+    if let Some(n) = only_count {
+        found.retain(|(s, _)| s.count == n);
     }
     let batch_dir = found
         .first()
@@ -316,6 +323,13 @@ fn shard_folders(inputs: &[PathBuf]) -> Result<(PathBuf, BTreeMap<usize, (Shard,
         .map(Path::to_path_buf)
         .unwrap_or_default();
     let mut by_index = BTreeMap::new();
+    let counts: std::collections::BTreeSet<usize> = found.iter().map(|(s, _)| s.count).collect();
+    if counts.len() > 1 {
+        return Err(Error::usage(
+            format!("the shard folders are of different splits (of {counts:?})"),
+            "remove the folders of an earlier split, or pass --shards N to merge the split of N",
+        ));
+    }
     for (s, p) in found {
         if p.parent() != Some(batch_dir.as_path()) {
             return Err(Error::usage(
@@ -333,7 +347,7 @@ fn shard_folders(inputs: &[PathBuf]) -> Result<(PathBuf, BTreeMap<usize, (Shard,
 }
 
 /// Shard indexes of `0..count` that have no committed run.
-fn missing_shards(folders: &BTreeMap<usize, (Shard, PathBuf)>, count: usize) -> Vec<usize> {
+fn missing_shards(folders: &ShardFolders, count: usize) -> Vec<usize> {
     (0..count)
         .filter(|i| {
             !folders
@@ -344,21 +358,15 @@ fn missing_shards(folders: &BTreeMap<usize, (Shard, PathBuf)>, count: usize) -> 
 }
 
 /// The shard count: `--shards`, or the count every shard folder names.
-fn shard_count(req: &MergeRequest, folders: &BTreeMap<usize, (Shard, PathBuf)>) -> Result<usize> {
-    let counts: Vec<usize> = folders.values().map(|(s, _)| s.count).collect();
-    let count = req.shards.or(counts.first().copied()).ok_or_else(|| {
-        Error::usage(
-            "no shard folder found",
-            "pass --shards N or the shards' folder",
-        )
-    })?;
-    if counts.iter().any(|&c| c != count) {
-        return Err(Error::usage(
-            format!("the shard folders are of different splits ({counts:?}), not all of {count}"),
-            "remove the folders of an earlier split, or merge with --shards matching the latest",
-        ));
-    }
-    Ok(count)
+fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize> {
+    req.shards
+        .or(folders.values().next().map(|(s, _)| s.count))
+        .ok_or_else(|| {
+            Error::usage(
+                "no shard folder found",
+                "pass --shards N or the shards' folder",
+            )
+        })
 }
 
 /// Reduce the shards of a job: check they are one job's and complete, merge their summaries,
@@ -369,7 +377,7 @@ pub fn merge_job(
 ) -> Result<JobRun> {
     let start = std::time::Instant::now();
     let (batch_dir, folders) = loop {
-        let (batch_dir, folders) = shard_folders(&req.inputs)?;
+        let (batch_dir, folders) = shard_folders(&req.inputs, req.shards)?;
         let count = shard_count(req, &folders)?;
         let missing = missing_shards(&folders, count);
         if missing.is_empty() {
@@ -433,6 +441,7 @@ pub fn merge_job(
         .ok_or_else(|| Error::usage("the shards name no job file", "pass --job JOB.toml"))?;
     let file = effective_job(&super::Job::read(&job_path)?, req.backend);
     require_domain(&file, "the reduce")?;
+    commit::check_inputs_outside(&batch_dir, &job_inputs(&file)?)?;
     let hash = manifest::job_hash(&file.job, &file.probe_files()?)?;
     if hash != first.job_hash {
         return Err(Error::input(
@@ -449,7 +458,7 @@ pub fn merge_job(
 fn reduce_into(
     file: &JobFile,
     batch_dir: &Path,
-    folders: &BTreeMap<usize, (Shard, PathBuf)>,
+    folders: &ShardFolders,
     manifests: &[RunManifest],
     trainer_for: &dyn Fn(crate::nn::Backend) -> Result<Box<dyn Trainer>>,
 ) -> Result<JobRun> {
@@ -485,8 +494,14 @@ fn reduce_into(
     let opts = BatchOptions::default();
     let plan = plan_job(file, &opts, batch_dir)?;
     let family_dir = batch_dir.join("family");
-    // A stale run.json must not vouch for a family being replaced.
+    // A stale run.json must not vouch for a family being replaced; the parts of an unsharded
+    // run that the folder held before are removed, so the folder holds one run only.
     let manifest_path = batch_dir.join(RUN_MANIFEST);
+    if let Some(old) = RunManifest::read(batch_dir).ok().flatten() {
+        if old.kind == "batch" {
+            remove_part_outputs(batch_dir, &old)?;
+        }
+    }
     if manifest_path.exists() {
         std::fs::remove_file(&manifest_path).map_err(|e| Error::write(&manifest_path, e))?;
     }
@@ -515,11 +530,29 @@ fn reduce_into(
     })
 }
 
+/// Remove the part files an earlier unsharded run listed (and the folders left empty).
+fn remove_part_outputs(batch_dir: &Path, old: &RunManifest) -> Result<()> {
+    for rec in &old.parts {
+        for rel in rec.outputs.keys() {
+            let path = batch_dir.join(rel);
+            match std::fs::remove_file(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::write(&path, e))
+                }
+                _ => {}
+            }
+        }
+        // Only an emptied folder goes; a folder with other files stays.
+        let _ = std::fs::remove_dir(batch_dir.join(&rec.part));
+    }
+    Ok(())
+}
+
 /// The reduce's manifest: the shards' run.json hashes, their parts (paths under the batch
 /// folder), the family files and the merged summary.
 fn reduce_manifest(
     batch_dir: &Path,
-    folders: &BTreeMap<usize, (Shard, PathBuf)>,
+    folders: &ShardFolders,
     manifests: &[RunManifest],
     merged: &BatchSummary,
 ) -> Result<RunManifest> {

@@ -207,7 +207,7 @@ mod tests {
                 Some(-1e-300),
                 Some(f64::MIN_POSITIVE),
             ],
-            map_e_um: vec![1.0 / 3.0, -0.0, 12345.678_901_234_567],
+            map_e_um: vec![1.0 / 3.0, -0.0, 12_345.678_901_234_567],
         };
         p.write(dir.path()).unwrap();
         let back = PartReduce::read(&dir.path().join(REDUCE_FILE)).unwrap();
