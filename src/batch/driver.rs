@@ -85,7 +85,7 @@ pub fn run_job(
         require_domain(&file, "--resume")?;
     }
     let probe_files = file.probe_files()?;
-    let job_hash = manifest::job_hash(&file.job, &probe_files)?;
+    let job_hash = manifest::job_hash(&file.job, &probe_files, &file.base_dir())?;
     let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
     let target = match opts.shard {
         Some(s) => out.join(s.folder_name()),
@@ -442,7 +442,7 @@ pub fn merge_job(
     let file = effective_job(&super::Job::read(&job_path)?, req.backend);
     require_domain(&file, "the reduce")?;
     commit::check_inputs_outside(&batch_dir, &job_inputs(&file)?)?;
-    let hash = manifest::job_hash(&file.job, &file.probe_files()?)?;
+    let hash = manifest::job_hash(&file.job, &file.probe_files()?, &file.base_dir())?;
     if hash != first.job_hash {
         return Err(Error::input(
             Location::file(&job_path),

@@ -82,13 +82,18 @@ fn hex(bytes: &[u8]) -> String {
 
 /// Hash of what decides a run's results: the job's settings after command-line overrides
 /// (output folder excluded, so shards writing elsewhere still match) and the probe files'
-/// names in batch order.
-pub fn job_hash(job: &super::Job, probe_files: &[PathBuf]) -> Result<String> {
+/// names in batch order, relative to the job's folder `base` (however the job path was spelled).
+pub fn job_hash(job: &super::Job, probe_files: &[PathBuf], base: &Path) -> Result<String> {
     let mut job = job.clone();
     job.output = None;
     let names: Vec<String> = probe_files
         .iter()
-        .map(|f| f.to_string_lossy().to_string())
+        .map(|f| {
+            f.strip_prefix(base)
+                .unwrap_or(f)
+                .to_string_lossy()
+                .to_string()
+        })
         .collect();
     let text = serde_json::to_string(&(&job, names))
         .map_err(|e| Error::Internal(format!("job hash: {e}")))?;
@@ -240,13 +245,29 @@ mod tests {
     #[test]
     fn job_hash_ignores_the_output_folder_but_not_the_settings() {
         let files = vec![PathBuf::from("p/a.csv")];
+        let base = Path::new(".");
         let a = super::super::Job::default();
         let mut b = a.clone();
         b.output = Some(PathBuf::from("elsewhere"));
-        assert_eq!(job_hash(&a, &files).unwrap(), job_hash(&b, &files).unwrap());
+        assert_eq!(
+            job_hash(&a, &files, base).unwrap(),
+            job_hash(&b, &files, base).unwrap()
+        );
         b.model.epochs += 1;
-        assert_ne!(job_hash(&a, &files).unwrap(), job_hash(&b, &files).unwrap());
+        assert_ne!(
+            job_hash(&a, &files, base).unwrap(),
+            job_hash(&b, &files, base).unwrap()
+        );
         let more = vec![PathBuf::from("p/a.csv"), PathBuf::from("p/b.csv")];
-        assert_ne!(job_hash(&a, &files).unwrap(), job_hash(&a, &more).unwrap());
+        assert_ne!(
+            job_hash(&a, &files, base).unwrap(),
+            job_hash(&a, &more, base).unwrap()
+        );
+        // The same files named from another folder: the same job.
+        let abs = vec![PathBuf::from("/data/job/p/a.csv")];
+        assert_eq!(
+            job_hash(&a, &abs, Path::new("/data/job")).unwrap(),
+            job_hash(&a, &files, Path::new("")).unwrap()
+        );
     }
 }
