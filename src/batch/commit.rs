@@ -254,6 +254,7 @@ mod tests {
         let s = Staging::begin(&target).unwrap();
         assert!(!target.join(".errmap-x.tmp").exists());
         std::fs::write(s.path().join("b.txt"), "new b").unwrap();
+        std::fs::write(s.path().join(RUN_MANIFEST), "{}").unwrap();
         s.commit().unwrap();
         assert!(!target.join("a.txt").exists());
         assert_eq!(
