@@ -56,11 +56,8 @@ pub fn family_benches(c: &mut Criterion) {
     };
     generate(&spec, &data, "bench").expect("synth");
     let job = Job::read(&data.join("job.toml")).expect("job");
-    let opts = BatchOptions {
-        output: Some(dir.path().join("out")),
-        ..BatchOptions::default()
-    };
-    let (plan, _) = batch::plan_job(&job, &opts).expect("plan");
+    let plan =
+        batch::plan_job(&job, &BatchOptions::default(), &dir.path().join("out")).expect("plan");
     let mut group = c.benchmark_group("family");
     group.sample_size(10);
     group.bench_function("batch_2_parts_144_probes_50_epochs_cpu", |b| {

@@ -457,14 +457,14 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
     for shard in ["0/2", "1/2"] {
         run_expect(&batch_args("cpu", "out", &["--shard", shard]), d, 0);
     }
-    assert!(
-        d.join("out/p01/map.csv").is_file()
-            && d.join("out/p02/map.csv").is_file()
-            && d.join("out/p03/map.csv").is_file()
-    );
+    // Each shard maps its parts into its own folder, committed by its run.json.
+    for p in ["shard-0-of-2/p01", "shard-1-of-2/p02", "shard-0-of-2/p03"] {
+        assert!(d.join("out").join(p).join("map.csv").is_file(), "{p}");
+    }
+    assert!(d.join("out/shard-1-of-2/run.json").is_file());
     // Shard 0 of 2 took parts 1 and 3.
     let s0: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(d.join("out/summary-shard-0-of-2.json")).unwrap(),
+        &std::fs::read_to_string(d.join("out/shard-0-of-2/summary.json")).unwrap(),
     )
     .unwrap();
     let names: Vec<&str> = s0["parts"]
@@ -477,8 +477,10 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
     let out = run_expect(
         &[
             "merge",
-            "out/summary-shard-1-of-2.json",
-            "out/summary-shard-0-of-2.json",
+            "out/shard-1-of-2/summary.json",
+            "out/shard-0-of-2",
+            "--backend",
+            "cpu",
             "--json",
         ],
         d,
@@ -494,7 +496,7 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
     assert_eq!(names, ["p01", "p02", "p03"]);
     assert!(d.join("out/summary.json").is_file());
     // The family maps are the node-wise mean and std of the three parts' maps.
-    let maps: Vec<Vec<Vec<f64>>> = ["p01", "p02", "p03"]
+    let maps: Vec<Vec<Vec<f64>>> = ["shard-0-of-2/p01", "shard-1-of-2/p02", "shard-0-of-2/p03"]
         .iter()
         .map(|p| read_csv(&d.join("out").join(p).join("map.csv")).1)
         .collect();
@@ -512,10 +514,20 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
         assert_eq!((mean[k][0], mean[k][1]), (maps[0][k][0], maps[0][k][1]));
     }
     assert!(d.join("out/family/mean.png").is_file() && d.join("out/family/std.png").is_file());
+    // The reduce also fits the family network and compensates the family toolpath.
+    assert!(d.join("out/family/model.json").is_file());
+    assert!(d.join("out/family/finish-compensated.ngc").is_file());
     assert_eq!(merged["family_map"]["parts"], 3);
-    // A missing shard is an error.
-    let out = run_expect(&["merge", "out/summary-shard-1-of-2.json"], d, 2);
-    assert!(out.stderr.as_str().contains("shards [0] of 2 are missing"));
+    // A missing shard is an error naming it.
+    std::fs::remove_dir_all(d.join("out/shard-0-of-2")).unwrap();
+    let out = run_expect(&["merge", "out", "--backend", "cpu"], d, 2);
+    assert!(
+        out.stderr
+            .as_str()
+            .contains("shards [0] of 2 have no complete run"),
+        "{}",
+        out.report()
+    );
 }
 
 #[test]

@@ -1,10 +1,17 @@
 //! Batch jobs over a part family: the job manifest, scheduling over parts, sharding and the summary.
 
+pub mod commit;
+pub mod driver;
 pub mod job;
+pub mod k8s;
+pub mod manifest;
+pub mod reduce;
 pub mod run;
+pub mod slurm;
 pub mod summary;
 pub mod train_step;
 
+pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};
 pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use summary::{merge, BatchSummary, PartSummary};
@@ -121,14 +128,30 @@ pub struct BatchOptions {
     pub backend: Option<crate::nn::Backend>,
     pub shard: Option<Shard>,
     pub output: Option<PathBuf>,
+    /// Keep the parts of the folder's run whose input and outputs still match its `run.json`.
+    pub resume: bool,
 }
 
-/// Build the plan of a job file: its parts (this shard's), folders, family and toolpaths.
-pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> {
+impl Shard {
+    /// The shard's own folder inside the batch's output folder: `shard-I-of-N`.
+    pub fn folder_name(&self) -> String {
+        format!("shard-{}-of-{}", self.index, self.count)
+    }
+
+    /// The shard of a folder named `shard-I-of-N`.
+    pub fn from_folder_name(name: &str) -> Option<Shard> {
+        let rest = name.strip_prefix("shard-")?;
+        let (i, n) = rest.split_once("-of-")?;
+        Shard::new(i.parse().ok()?, n.parse().ok()?)
+    }
+}
+
+/// Build the plan of a job file: its parts (this shard's) with their folders under `out`,
+/// the family folder and the toolpaths.
+pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan> {
     let job = &file.job;
     let files = file.probe_files()?;
     let names = part_names(&files);
-    let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
     let parts: Vec<PartInput> = files
         .iter()
         .zip(&names)
@@ -178,6 +201,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
             spacing_mm: job.interp.spacing_mm,
             model,
             max_deviation_mm: job.max_deviation_mm,
+            reduce_inputs: true,
         },
         parts,
         family_dir,
@@ -185,87 +209,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions) -> Result<(Plan, PathBuf)> 
         job: Some(file.path.clone()),
         shard: opts.shard.map(|s| [s.index, s.count]),
     };
-    let summary_path = match opts.shard {
-        None => out.join("summary.json"),
-        Some(s) => out.join(format!("summary-shard-{}-of-{}.json", s.index, s.count)),
-    };
-    Ok((plan, summary_path))
-}
-
-/// Family mean and standard-deviation maps (CSV + heatmaps, no network) rebuilt from the
-/// `map.csv` of every mapped part of a merged summary, written to `dir`.
-pub fn family_maps_from_files(
-    summary: &BatchSummary,
-    dir: &Path,
-) -> Result<Option<summary::FamilySummary>> {
-    let mut maps = Vec::new();
-    for p in summary.parts.iter().filter(|p| p.ok) {
-        if let Some(out) = &p.output_dir {
-            maps.push(crate::map::ErrorMap::read_csv(
-                &out.join("map.csv"),
-                summary.normal,
-            )?);
-        }
-    }
-    let refs: Vec<&crate::map::ErrorMap> = maps.iter().collect();
-    let Some((mean, std)) = crate::map::family_stats(&refs) else {
-        if maps.is_empty() {
-            return Ok(None);
-        }
-        return Err(Error::usage(
-            "the parts' maps are on different grids",
-            "merge the shards of one job (same domain and grid step)",
-        ));
-    };
-    let axes = summary.normal.plane_axes();
-    mean.write_csv(&dir.join("mean.csv"), "e_um")?;
-    std.write_csv(&dir.join("std.csv"), "std_um")?;
-    let (pv, rms) = mean.pv_rms_um();
-    let std_max = std.values.iter().cloned().fold(0.0, f64::max);
-    let none: Vec<(f64, f64)> = Vec::new();
-    let title = format!(
-        "{} family mean of {} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
-        summary.family,
-        maps.len()
-    );
-    run::draw(
-        &dir.join("mean.png"),
-        &title,
-        &mean,
-        &none,
-        &none,
-        crate::report::heatmap::Scale::Diverging,
-        axes,
-        "E (µm)",
-    )?;
-    let title = format!(
-        "{} part-to-part standard deviation — max {std_max:.2} µm",
-        summary.family
-    );
-    run::draw(
-        &dir.join("std.png"),
-        &title,
-        &std,
-        &none,
-        &none,
-        crate::report::heatmap::Scale::Sequential,
-        axes,
-        "σ (µm)",
-    )?;
-    Ok(Some(summary::FamilySummary {
-        parts: maps.len(),
-        output_dir: dir.to_path_buf(),
-        mean_rms_um: rms,
-        mean_pv_um: pv,
-        std_max_um: std_max,
-    }))
-}
-
-/// Where a summary for `out` goes when shards are merged: `summary.json` beside the first.
-pub fn merged_summary_path(first_shard: &Path) -> PathBuf {
-    first_shard
-        .parent()
-        .map_or_else(|| PathBuf::from("summary.json"), |p| p.join("summary.json"))
+    Ok(plan)
 }
 
 #[cfg(test)]

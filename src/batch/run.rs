@@ -35,6 +35,8 @@ pub struct Settings {
     pub model: ModelConfig,
     /// Plausibility bound of probe deviations and map values, mm.
     pub max_deviation_mm: f64,
+    /// Write each part's `reduce.json` (batch runs: the shards' input to the reduce).
+    pub reduce_inputs: bool,
 }
 
 /// One part to map and where its files go.
@@ -280,7 +282,7 @@ fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
 }
 
 /// A training set from node values: the nodes that have a value.
-fn training_set(
+pub(crate) fn training_set(
     grid: &Grid,
     values: &[Option<f64>],
     domain: &Domain,
@@ -550,48 +552,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         norms[fslot].clone(),
                         nets[fslot].clone(),
                     );
-                    let probes: Vec<(f64, f64)> = Vec::new();
-                    mean.write_csv(&dir.join("mean.csv"), "e_um")?;
-                    std.write_csv(&dir.join("std.csv"), "std_um")?;
-                    let (pv, rms) = mean.pv_rms_um();
-                    let std_max = std.values.iter().cloned().fold(0.0, f64::max);
-                    let title_mean = format!(
-                        "{} family mean of {} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
-                        s.family,
-                        maps.len()
-                    );
-                    draw(
-                        &dir.join("mean.png"),
-                        &title_mean,
-                        &mean,
-                        &probes,
-                        &probes,
-                        Scale::Diverging,
-                        (ua, va),
-                        "E (µm)",
-                    )?;
-                    let title_std = format!(
-                        "{} part-to-part standard deviation — max {std_max:.2} µm",
-                        s.family
-                    );
-                    draw(
-                        &dir.join("std.png"),
-                        &title_std,
-                        &std,
-                        &probes,
-                        &probes,
-                        Scale::Sequential,
-                        (ua, va),
-                        "σ (µm)",
-                    )?;
-                    crate::io::write_json(&dir.join("model.json"), &model)?;
-                    family_summary = Some(FamilySummary {
-                        parts: maps.len(),
-                        output_dir: dir.clone(),
-                        mean_rms_um: rms,
-                        mean_pv_um: pv,
-                        std_max_um: std_max,
-                    });
+                    family_summary = Some(write_family(dir, &mean, &std, &model, maps.len(), s)?);
                     family_model = Some(model);
                 }
             }
@@ -658,6 +619,59 @@ fn finish(
     }
 }
 
+/// The family folder: mean and std maps (CSV, heatmaps) and the family network's `model.json`.
+pub(crate) fn write_family(
+    dir: &Path,
+    mean: &ErrorMap,
+    std: &ErrorMap,
+    model: &FittedModel,
+    parts: usize,
+    s: &Settings,
+) -> Result<FamilySummary> {
+    let probes: Vec<(f64, f64)> = Vec::new();
+    let axes = s.normal.plane_axes();
+    mean.write_csv(&dir.join("mean.csv"), "e_um")?;
+    std.write_csv(&dir.join("std.csv"), "std_um")?;
+    let (pv, rms) = mean.pv_rms_um();
+    let std_max = std.values.iter().cloned().fold(0.0, f64::max);
+    let title_mean = format!(
+        "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
+        s.family
+    );
+    draw(
+        &dir.join("mean.png"),
+        &title_mean,
+        mean,
+        &probes,
+        &probes,
+        Scale::Diverging,
+        axes,
+        "E (µm)",
+    )?;
+    let title_std = format!(
+        "{} part-to-part standard deviation — max {std_max:.2} µm",
+        s.family
+    );
+    draw(
+        &dir.join("std.png"),
+        &title_std,
+        std,
+        &probes,
+        &probes,
+        Scale::Sequential,
+        axes,
+        "σ (µm)",
+    )?;
+    crate::io::write_json(&dir.join("model.json"), model)?;
+    Ok(FamilySummary {
+        parts,
+        output_dir: dir.to_path_buf(),
+        mean_rms_um: rms,
+        mean_pv_um: pv,
+        std_max_um: std_max,
+    })
+}
+
 /// `finish.ngc` → `finish-compensated.ngc` in `dir`.
 fn compensated_name(input: &Path) -> PathBuf {
     let stem = input
@@ -669,7 +683,7 @@ fn compensated_name(input: &Path) -> PathBuf {
     }
 }
 
-fn compensate_one(
+pub(crate) fn compensate_one(
     input: &Path,
     dir: &Path,
     map_name: &str,
@@ -777,6 +791,15 @@ fn write_part(
     crate::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
+    if s.reduce_inputs {
+        super::reduce::PartReduce {
+            part: name.clone(),
+            holdout_fit: p.holdout_nodes.is_some(),
+            train_nodes: p.full_nodes.clone(),
+            map_e_um: map.values.clone(),
+        }
+        .write(dir)?;
+    }
     let (pv, rms) = map.pv_rms_um();
     let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
     let rejected: Vec<(f64, f64)> = p

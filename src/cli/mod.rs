@@ -27,6 +27,7 @@ mod grid;
 mod linear;
 mod part;
 mod rotary;
+mod scale;
 mod synth_web_plate;
 mod thermal;
 
@@ -60,8 +61,12 @@ pub enum Command {
     Batch(part::BatchArgs),
     /// Map one part from its probe file, without a job file.
     Map(part::MapArgs),
-    /// Join the summaries of a sharded batch into one.
+    /// Reduce a sharded batch: check the shards, join their summaries, build the family (maps, network, toolpaths).
     Merge(part::MergeArgs),
+    /// Run a job on Slurm: an array job of shards and a merge job after it (write, print or submit).
+    Slurm(scale::SlurmArgs),
+    /// Run a job on Kubernetes: Indexed Job manifests for the shards and a merge Job.
+    K8s(scale::K8sArgs),
     /// Interpolate probe points onto a grid (no network).
     Grid(grid::GridArgs),
     /// Rewrite a toolpath with P' = P − E from a fitted map.
@@ -149,6 +154,8 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Batch(args) => part::run_batch(args, globals),
         Command::Map(args) => part::run_map(args, globals),
         Command::Merge(args) => part::run_merge(args, globals),
+        Command::Slurm(args) => scale::run_slurm(args, globals),
+        Command::K8s(args) => scale::run_k8s(args, globals),
         Command::Grid(args) => grid::run(args, globals),
         Command::Compensate(args) => compensate::run(args, globals),
         Command::Bench(cmd) => bench::run(cmd, globals),

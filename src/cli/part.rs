@@ -1,7 +1,9 @@
 //! CLI of part-family mapping: `batch`, `map` and `merge`.
 
 use super::Globals;
-use errmap::batch::{self, BatchOptions, BatchSummary, Job, PartInput, Plan, Settings, Shard};
+use errmap::batch::{
+    self, BatchOptions, BatchSummary, Job, MergeRequest, PartInput, Plan, Settings, Shard,
+};
 use errmap::geom::{Axis, Domain};
 use errmap::interp::Method;
 use errmap::nn::{Backend, ModelConfig};
@@ -21,9 +23,12 @@ pub struct BatchArgs {
     /// Number of shards when the index comes from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "COUNT")]
     pub shards: Option<usize>,
-    /// Output folder instead of the job's `output` (default out/<family>).
+    /// Output folder instead of the job's `output` (default out/<family>); a shard writes into its own OUT/shard-I-of-N/.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Keep the parts of the folder's last run whose probe file and outputs still match its run.json; redo the rest.
+    #[arg(long)]
+    pub resume: bool,
     /// Print the summary as one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -77,12 +82,21 @@ pub struct MapArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
-    /// Summaries of the shards (summary-shard-I-of-N.json).
+    /// The batch's output folder (holding shard-I-of-N/), or shard folders, or their summary.json.
     #[arg(required = true)]
-    pub summaries: Vec<PathBuf>,
-    /// Merged summary file (default: summary.json beside the first shard's).
-    #[arg(long, short)]
-    pub out: Option<PathBuf>,
+    pub inputs: Vec<PathBuf>,
+    /// Number of shards (default: the count the shard folders name).
+    #[arg(long, value_name = "N")]
+    pub shards: Option<usize>,
+    /// The job file (default: the one the shards' run.json names).
+    #[arg(long, value_name = "JOB.toml")]
+    pub job: Option<PathBuf>,
+    /// Trainer of the family network: pass the shards' --backend (it is part of the job hash).
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Wait up to this many seconds for shards that have not committed yet.
+    #[arg(long, value_name = "SECONDS")]
+    pub wait: Option<u64>,
     /// Print the merged summary as one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -138,27 +152,36 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         backend: args.backend,
         shard,
         output: args.out,
+        resume: args.resume,
     };
-    let (plan, summary_path) = batch::plan_job(&file, &opts)?;
-    if let Some(out) = summary_path.parent() {
-        errmap::io::safety::confine_to(out)?;
-    }
-    protect_plan(&plan)?;
     if !globals.quiet {
         for note in batch::renamed_parts(&file.probe_files()?) {
             eprintln!("note: {note}");
         }
     }
-    let selection = errmap::backend::select_trainer(
-        plan.settings.model.backend,
-        &plan.settings.model,
-        super::notes(globals),
-    )?;
-    let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
-    errmap::io::write_json(&summary_path, &summary)?;
+    let backend = args.backend.unwrap_or(file.job.model.backend);
+    let selection =
+        errmap::backend::select_trainer(backend, &file.job.model, super::notes(globals))?;
+    let run = batch::run_job(&file, &opts, selection.trainer.as_ref(), globals.quiet)?;
+    if args.resume && !globals.quiet && !args.json {
+        eprintln!(
+            "resume: kept {} part(s) of the previous run{}",
+            run.reused.len(),
+            if run.reused.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", run.reused.join(", "))
+            }
+        );
+    }
     // A closed stdout must not turn "some parts failed" (exit 1) into success.
-    super::ignore_closed_pipe(report(&summary, &summary_path, args.json, globals.quiet))?;
-    Ok(summary.exit_code())
+    super::ignore_closed_pipe(report(
+        &run.summary,
+        &run.folder.join("summary.json"),
+        args.json,
+        globals.quiet,
+    ))?;
+    Ok(run.summary.exit_code())
 }
 
 /// Every file a plan reads is an input no output may replace: protect them all, then check
@@ -231,6 +254,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
             spacing_mm: args.spacing,
             model,
             max_deviation_mm: args.max_deviation_mm,
+            reduce_inputs: false,
         },
         parts: vec![PartInput {
             name,
@@ -258,21 +282,27 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
 }
 
 pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
-    let mut shards = Vec::new();
-    for p in &args.summaries {
-        shards.push((p.clone(), BatchSummary::read(p)?));
-    }
-    let mut merged = batch::merge(&shards)?;
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| batch::merged_summary_path(&args.summaries[0]));
-    // Shards could not see each other's parts: the family mean and std maps are made here.
-    let family_dir = out
-        .parent()
-        .map_or_else(|| PathBuf::from("family"), |p| p.join("family"));
-    merged.family_map = batch::family_maps_from_files(&merged, &family_dir)?;
-    errmap::io::write_json(&out, &merged)?;
-    super::ignore_closed_pipe(report(&merged, &out, args.json, globals.quiet))?;
-    Ok(merged.exit_code())
+    let req = MergeRequest {
+        inputs: args.inputs,
+        shards: args.shards,
+        job: args.job,
+        backend: args.backend,
+        wait: args.wait.map(std::time::Duration::from_secs),
+    };
+    let quiet = globals.quiet;
+    let trainer_for = |b: Backend| -> errmap::Result<Box<dyn errmap::nn::Trainer>> {
+        let notes = super::notes(super::Globals {
+            quiet,
+            ..globals
+        });
+        Ok(errmap::backend::select_trainer(b, &ModelConfig::default(), notes)?.trainer)
+    };
+    let run = batch::merge_job(&req, &trainer_for)?;
+    super::ignore_closed_pipe(report(
+        &run.summary,
+        &run.folder.join("summary.json"),
+        args.json,
+        globals.quiet,
+    ))?;
+    Ok(run.summary.exit_code())
 }

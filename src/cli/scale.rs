@@ -1,0 +1,258 @@
+//! CLI of scale-out: `slurm` (array job + merge job, written or submitted) and `k8s` (Indexed Job + merge Job manifests).
+
+use super::Globals;
+use errmap::batch::k8s::K8sPlan;
+use errmap::batch::slurm::{self, SlurmPlan};
+use errmap::batch::Job;
+use errmap::nn::Backend;
+use errmap::{Error, Result};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, clap::Args)]
+pub struct SlurmArgs {
+    /// The job manifest (its `domain` must be set: shards share one).
+    pub job: PathBuf,
+    /// Number of shards = array tasks.
+    #[arg(long, value_name = "N")]
+    pub shards: usize,
+    /// Slurm partition of both jobs.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit of each task and of the merge (Slurm format, e.g. 00:30:00).
+    #[arg(long)]
+    pub time: Option<String>,
+    /// Output folder (default: the job's output): OUT/shard-I-of-N/, OUT/family/, OUT/slurm/.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Trainer for every task and the merge (recorded in the job hash).
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// The errmap binary on the nodes (default: this one).
+    #[arg(long, value_name = "PATH")]
+    pub errmap: Option<PathBuf>,
+    /// Submit only these array task ids (e.g. 1,3 or 0-2): the shards a merge reported missing.
+    #[arg(long, value_name = "IDS")]
+    pub array: Option<String>,
+    /// Print the scripts and the sbatch commands; write and submit nothing.
+    #[arg(long, conflicts_with = "submit")]
+    pub dry_run: bool,
+    /// Submit the array job, then the merge job with --dependency=afterok on it.
+    #[arg(long)]
+    pub submit: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct K8sArgs {
+    /// The job manifest, as a path inside the volume (relative to --mount); read here too.
+    pub job: PathBuf,
+    /// Number of shards = completions of the Indexed Job.
+    #[arg(long, value_name = "N")]
+    pub shards: usize,
+    /// Container image with errmap (see Containerfile).
+    #[arg(long, value_name = "IMG")]
+    pub image: String,
+    /// PersistentVolumeClaim holding the job, probes and outputs (ReadWriteMany across nodes).
+    #[arg(long, value_name = "NAME")]
+    pub pvc: String,
+    /// Mount path of the claim in the containers (their working directory).
+    #[arg(long, default_value = "/work")]
+    pub mount: String,
+    /// Output folder inside the volume (default: the job's output).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Trainer for every shard and the merge.
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Seconds the merge Job waits for the shards.
+    #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
+    pub wait: u64,
+    /// Retries per shard index and for the merge.
+    #[arg(long, default_value_t = 2)]
+    pub retries: u32,
+    /// Folder of the manifests (default: OUT/k8s beside here).
+    #[arg(long, short)]
+    pub output: Option<PathBuf>,
+    /// Print the manifests instead of writing them.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+fn check_shards(shards: usize) -> Result<()> {
+    if !(1..=10_000).contains(&shards) {
+        return Err(Error::usage(
+            format!("--shards {shards} is not between 1 and 10000"),
+            "one shard per array task / completion, e.g. --shards 4",
+        ));
+    }
+    Ok(())
+}
+
+fn backend_name(b: Option<Backend>) -> Option<String> {
+    use clap::ValueEnum;
+    b.and_then(|b| b.to_possible_value().map(|v| v.get_name().to_string()))
+}
+
+fn absolute(p: &Path) -> Result<PathBuf> {
+    std::path::absolute(p).map_err(|e| Error::read(p, e))
+}
+
+pub fn run_slurm(args: SlurmArgs, globals: Globals) -> Result<i32> {
+    check_shards(args.shards)?;
+    let file = Job::read(&args.job)?;
+    if file.job.domain.is_none() {
+        return Err(Error::usage(
+            format!(
+                "{} has no `domain`, and shards need one",
+                args.job.display()
+            ),
+            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
+        ));
+    }
+    if let Some(ids) = &args.array {
+        if !slurm::valid_array_ids(ids, args.shards) {
+            return Err(Error::usage(
+                format!(
+                    "--array '{ids}' is not a list of task ids below {}",
+                    args.shards
+                ),
+                "e.g. --array 1,3 or --array 0-2",
+            ));
+        }
+    }
+    let errmap = match args.errmap {
+        Some(p) => p,
+        None => std::env::current_exe().map_err(|e| Error::read("errmap", e))?,
+    };
+    let plan = SlurmPlan {
+        errmap,
+        job: args
+            .job
+            .canonicalize()
+            .map_err(|e| Error::read(&args.job, e))?,
+        out: absolute(&args.out.unwrap_or_else(|| file.output_dir()))?,
+        family: file.job.family.clone(),
+        shards: args.shards,
+        partition: args.partition,
+        time: args.time,
+        backend: backend_name(args.backend),
+    };
+    let (shards_script, merge_script) = (plan.shards_script(), plan.merge_script());
+    let shards_cmd = format!(
+        "sbatch {}",
+        plan.sbatch_shards_args(args.array.as_deref()).join(" ")
+    );
+    let merge_cmd = format!(
+        "sbatch {}",
+        plan.sbatch_merge_args("<ARRAY_JOB_ID>").join(" ")
+    );
+    if args.dry_run {
+        println!(
+            "# {}\n{shards_script}",
+            plan.slurm_dir().join("shards.sbatch").display()
+        );
+        println!(
+            "# {}\n{merge_script}",
+            plan.slurm_dir().join("merge.sbatch").display()
+        );
+        println!("# submit:\n{shards_cmd}\n{merge_cmd}");
+        return Ok(0);
+    }
+    let dir = plan.slurm_dir();
+    errmap::io::write_atomic_bytes(&dir.join("shards.sbatch"), shards_script.as_bytes())?;
+    errmap::io::write_atomic_bytes(&dir.join("merge.sbatch"), merge_script.as_bytes())?;
+    if !args.submit {
+        println!(
+            "wrote {} and {}",
+            dir.join("shards.sbatch").display(),
+            dir.join("merge.sbatch").display()
+        );
+        println!("submit with:\n  {shards_cmd}\n  {merge_cmd}");
+        return Ok(0);
+    }
+    let array_id = sbatch(&plan.sbatch_shards_args(args.array.as_deref()))?;
+    let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
+    if !globals.quiet {
+        eprintln!(
+            "slurm: array job {array_id} ({} shards), merge job {merge_id} after it",
+            args.shards
+        );
+    }
+    println!("{array_id} {merge_id}");
+    Ok(0)
+}
+
+/// Run `sbatch --parsable …` and return the job id.
+fn sbatch(args: &[String]) -> Result<String> {
+    let out = std::process::Command::new("sbatch")
+        .args(args)
+        .output()
+        .map_err(|e| {
+            Error::usage(
+                format!("cannot run sbatch: {e}"),
+                "run on a Slurm login node, or use --dry-run and submit the scripts yourself",
+            )
+        })?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    match (out.status.success(), slurm::parse_job_id(&stdout)) {
+        (true, Some(id)) => Ok(id),
+        _ => Err(Error::device(
+            format!(
+                "sbatch {} failed: {}{}",
+                args.join(" "),
+                stdout.trim(),
+                String::from_utf8_lossy(&out.stderr).trim()
+            ),
+            "check the partition and time limit with sinfo, or submit the scripts in OUT/slurm/ by hand",
+        )),
+    }
+}
+
+pub fn run_k8s(args: K8sArgs, globals: Globals) -> Result<i32> {
+    check_shards(args.shards)?;
+    let file = Job::read(&args.job)?;
+    if file.job.domain.is_none() {
+        return Err(Error::usage(
+            format!(
+                "{} has no `domain`, and shards need one",
+                args.job.display()
+            ),
+            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
+        ));
+    }
+    let out = args.out.unwrap_or_else(|| file.output_dir());
+    let plan = K8sPlan {
+        family: file.job.family.clone(),
+        shards: args.shards,
+        image: args.image,
+        pvc: args.pvc,
+        mount: args.mount,
+        job: args.job.to_string_lossy().into(),
+        out: out.to_string_lossy().into(),
+        backend: backend_name(args.backend),
+        wait_s: args.wait,
+        retries: args.retries,
+    };
+    let docs = [
+        ("shards-job.json", plan.shards_job()),
+        ("merge-job.json", plan.merge_job()),
+    ];
+    let to_text = |v: &serde_json::Value| {
+        serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))
+    };
+    if args.dry_run {
+        for (_, doc) in &docs {
+            println!("{}", to_text(doc)?);
+        }
+        return Ok(0);
+    }
+    let dir = args.output.unwrap_or_else(|| out.join("k8s"));
+    for (name, doc) in &docs {
+        errmap::io::write_atomic_bytes(&dir.join(name), format!("{}\n", to_text(doc)?).as_bytes())?;
+    }
+    if !globals.quiet {
+        eprintln!("apply with: kubectl apply -f {}", dir.display());
+    }
+    println!("{}", dir.join("shards-job.json").display());
+    println!("{}", dir.join("merge-job.json").display());
+    Ok(0)
+}
