@@ -1,12 +1,14 @@
 //! The wgpu path: adapter choice, device limits, buffers and pipelines for training and evaluating networks in WGSL compute shaders.
 //!
-//! One host file per shader family: [`train`] (`shaders/train.wgsl`), [`evaluate`]
+//! One host file per shader family: [`train`] (`shaders/train.wgsl`) and [`fixed`] for
+//! hardware GPUs, [`lavapipe`] (generated WGSL) for CPU adapters, [`evaluate`]
 //! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; [`context`] picks the
 //! adapter and turns device failures into [`Error::device`].
 
 pub mod context;
 pub mod evaluate;
 pub mod fixed;
+pub mod lavapipe;
 pub mod layout;
 pub mod train;
 
@@ -19,12 +21,30 @@ use crate::nn::{
 };
 use crate::{Error, Result};
 
+/// Which training kernels a [`GpuTrainer`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KernelFamily {
+    /// By adapter: [`KernelFamily::CpuAdapter`] on a CPU adapter (lavapipe), else
+    /// [`KernelFamily::Hardware`].
+    #[default]
+    Auto,
+    /// `shaders/train.wgsl` and [`fixed`]: a workgroup per tile of samples, 64 gradient
+    /// lanes (the order of `CpuTrainer::with_lanes(GRAD_LANES)`).
+    Hardware,
+    /// [`lavapipe`]: one 8-invocation workgroup per network and epoch, the reference order
+    /// (`CpuTrainer::reference()`, bit for bit). Architectures it does not take (see
+    /// [`lavapipe::epoch_source`]) train with the hardware kernels.
+    CpuAdapter,
+}
+
 /// Trains and evaluates networks in WGSL compute shaders on one device.
 pub struct GpuTrainer {
     ctx: GpuContext,
     /// Largest buffer a training group may use (the device limit unless lowered).
     buffer_limit_bytes: u64,
+    family: KernelFamily,
     train: train::TrainPipelines,
+    cpu_adapter: lavapipe::CpuKernels,
     eval: evaluate::EvalPipeline,
 }
 
@@ -38,6 +58,7 @@ impl GpuTrainer {
     pub fn open(allow_software: bool) -> Result<GpuTrainer> {
         let ctx = GpuContext::open(allow_software)?;
         let train = train::TrainPipelines::new(&ctx)?;
+        let cpu_adapter = lavapipe::CpuKernels::new(&ctx);
         let eval = evaluate::EvalPipeline::new(&ctx)?;
         let buffer_limit_bytes = ctx
             .limits
@@ -46,7 +67,9 @@ impl GpuTrainer {
         Ok(GpuTrainer {
             ctx,
             buffer_limit_bytes,
+            family: KernelFamily::Auto,
             train,
+            cpu_adapter,
             eval,
         })
     }
@@ -58,8 +81,32 @@ impl GpuTrainer {
         self
     }
 
+    /// Chooses the training kernels (both families run on any adapter; tests use this to
+    /// check each against its CPU reference order on lavapipe).
+    pub fn with_kernels(mut self, family: KernelFamily) -> GpuTrainer {
+        self.family = family;
+        self
+    }
+
     pub fn context(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// The CPU-adapter kernel of `net`'s architecture when this trainer uses that family
+    /// for it (built on first use).
+    fn cpu_adapter_kernel(
+        &self,
+        net: &Mlp,
+    ) -> Result<Option<std::sync::Arc<lavapipe::EpochPipeline>>> {
+        let wanted = match self.family {
+            KernelFamily::Auto => self.ctx.adapter.software,
+            KernelFamily::Hardware => false,
+            KernelFamily::CpuAdapter => true,
+        };
+        if !wanted {
+            return Ok(None);
+        }
+        self.cpu_adapter.pipeline_for(&self.ctx, net)
     }
 }
 
@@ -98,6 +145,30 @@ impl Trainer for GpuTrainer {
         let Some(first) = initial.first() else {
             return Ok(Vec::new());
         };
+        if let Some(kernel) = self.cpu_adapter_kernel(first)? {
+            // Samples (16 bytes each, as 4 "units") and the parameter buffers per group.
+            let plan = kernel.plan();
+            let groups = train::plan_groups(
+                self.buffer_limit_bytes,
+                usize::MAX,
+                sets,
+                4,
+                plan.stride_floats as u64,
+            )?;
+            let mut out = Vec::with_capacity(initial.len());
+            for range in groups {
+                out.extend(lavapipe::train_group(
+                    &self.ctx,
+                    &self.cpu_adapter,
+                    &kernel,
+                    &initial[range.clone()],
+                    &sets[range.clone()],
+                    config,
+                    range.start,
+                )?);
+            }
+            return Ok(out);
+        }
         let dims = layout::dims_for(first, 1, 0);
         let groups = train::plan_groups(
             self.buffer_limit_bytes,
