@@ -60,6 +60,7 @@ pub fn epoch_source(
     activation: Activation,
     stride_floats: usize,
     nets_per_binding: usize,
+    subgroups: bool,
 ) -> Option<String> {
     let spans = layer_spans(layer_sizes);
     let params = spans.last().map(|s| s.bias_offset + s.outputs)?;
@@ -77,6 +78,9 @@ pub fn epoch_source(
         // `writeln!` into a String cannot fail.
         let _ = writeln!(w, "{text}");
     };
+    for text in COMMON_WGSL.lines() {
+        line(text);
+    }
     declarations(&mut line, stride_floats, nets_per_binding, params);
     line("@compute @workgroup_size(8)");
     line("fn train_epoch(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {");
@@ -85,25 +89,34 @@ pub fn epoch_source(
     line("    let k = batch.first_net + local_net;");
     line("    let net = nets[k];");
     line("    let n = net.sample_count;");
-    line(&format!("    let wb = local_net * {}u;", stride_floats / 4));
-    for c in 0..params {
+    if nets_per_binding == 1 {
+        line("    let wb = 0u;");
+    } else {
+        line(&format!("    let wb = local_net * {}u;", stride_floats / 4));
+    }
+    // g0 … g{P-1}: this lane's gradient sums; g{P}: its squared errors.
+    for c in 0..=params {
         line(&format!("    var g{c} = 0.0;"));
     }
-    line("    var sq = 0.0;");
     line("    for (var s = t; s < n; s += 8u) {");
     line("        let sample = samples[net.sample_offset + s];");
     line("        let a0_0 = sample.x;");
     line("        let a0_1 = sample.y;");
     forward(&mut line, &spans, activation);
     line("        let err = y - sample.target_value;");
-    line("        sq = sq + err * err;");
+    let sq = acc(params);
+    line(&format!("        {sq} = {sq} + err * err;"));
     line(&format!(
         "        let d{}_0 = err * net.grad_scale;",
         spans.len() - 1
     ));
     backward(&mut line, &spans, activation);
     line("    }");
-    reduce_and_adam(&mut line, params, stride_floats);
+    if subgroups {
+        subgroup_reduce_and_adam(&mut line, params, stride_floats);
+    } else {
+        reduce_and_adam(&mut line, params, stride_floats);
+    }
     line("}");
     Some(w)
 }
@@ -139,6 +152,11 @@ var<workgroup> red: array<f32, {}>;
     for l in text.lines() {
         line(l);
     }
+}
+
+/// The accumulator of parameter `c` (`c` = parameter count: the squared error).
+fn acc(c: usize) -> String {
+    format!("g{c}")
 }
 
 /// `w[…]` of parameter `c` of this network (a constant offset from `wb`).
@@ -193,10 +211,14 @@ fn backward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activat
     for (l, span) in spans.iter().enumerate().rev() {
         for i in 0..span.outputs {
             let b = span.bias_offset + i;
-            line(&format!("        g{b} = g{b} + d{l}_{i};"));
+            line(&format!("        {} = {} + d{l}_{i};", acc(b), acc(b)));
             for j in 0..span.inputs {
                 let c = span.weight_offset + i * span.inputs + j;
-                line(&format!("        g{c} = g{c} + d{l}_{i} * a{l}_{j};"));
+                line(&format!(
+                    "        {} = {} + d{l}_{i} * a{l}_{j};",
+                    acc(c),
+                    acc(c)
+                ));
             }
         }
         if l == 0 {
@@ -221,6 +243,57 @@ fn backward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activat
     }
 }
 
+/// The tree of the 8 lanes of parameter `c` with subgroup broadcasts (lane l's value is
+/// `subgroupBroadcast(g, l)`); every lane gets the sum.
+fn broadcast_tree(c: usize) -> String {
+    let g = acc(c);
+    let b = |l: usize| format!("subgroupBroadcast({g}, {l}u)");
+    format!(
+        "(({} + {}) + ({} + {})) + (({} + {}) + ({} + {}))",
+        b(0),
+        b(4),
+        b(2),
+        b(6),
+        b(1),
+        b(5),
+        b(3),
+        b(7)
+    )
+}
+
+/// With one 8-lane subgroup per workgroup: every lane computes each parameter's tree sum
+/// from broadcasts and writes it at a constant address (the same value from every lane, so
+/// llvmpipe stores it once: no per-lane loop); then lane t applies Adam to parameters
+/// t, t + 8, …
+fn subgroup_reduce_and_adam(line: &mut dyn FnMut(&str), params: usize, stride: usize) {
+    line(&format!("    let pb = k * {stride}u;"));
+    line(&format!("    let mb = 2u * k * {stride}u;"));
+    for c in 0..=params {
+        line(&format!("    red[{c}u] = {};", broadcast_tree(c)));
+    }
+    line("    workgroupBarrier();");
+    line(&format!("    for (var c = t; c < {params}u; c += 8u) {{"));
+    line("        let g = red[c];");
+    adam(line, stride);
+    line("    }");
+    line("    if t == 0u {");
+    line(&format!("        losses[k] = red[{params}u];"));
+    line("    }");
+}
+
+/// Adam on parameter `c` of network k with gradient `g` (as `crate::nn::adam_update`).
+fn adam(line: &mut dyn FnMut(&str), stride: usize) {
+    line("        let m = adam.beta1 * moments[mb + c] + adam.one_minus_beta1 * g;");
+    line(&format!(
+        "        let v = adam.beta2 * moments[mb + {stride}u + c] + adam.one_minus_beta2 * (g * g);"
+    ));
+    line("        moments[mb + c] = m;");
+    line(&format!("        moments[mb + {stride}u + c] = v;"));
+    line("        let m_hat = m * step.correction1;");
+    line("        let v_hat = v * step.correction2;");
+    line("        p_out[pb + c] = p_in[pb + c] - step.learning_rate * m_hat / (sqrt(v_hat) + adam.epsilon);");
+}
+
 /// The lanes meet in workgroup memory chunk by chunk; lane t then sums parameters
 /// t, t + 8, … of the chunk in the tree order and applies Adam to them.
 fn reduce_and_adam(line: &mut dyn FnMut(&str), params: usize, stride: usize) {
@@ -232,11 +305,13 @@ fn reduce_and_adam(line: &mut dyn FnMut(&str), params: usize, stride: usize) {
         if start > 0 {
             line("    workgroupBarrier();");
         }
-        for c in start..end {
-            line(&format!("    red[{}u + t] = g{c};", (c - start) * LANES));
-        }
-        if end == params {
-            line(&format!("    red[{}u + t] = sq;", (end - start) * LANES));
+        let stored = if end == params { end + 1 } else { end };
+        for c in start..stored {
+            line(&format!(
+                "    red[{}u + t] = {};",
+                (c - start) * LANES,
+                acc(c)
+            ));
         }
         line("    workgroupBarrier();");
         line(&format!(
@@ -244,15 +319,7 @@ fn reduce_and_adam(line: &mut dyn FnMut(&str), params: usize, stride: usize) {
         ));
         line(&format!("        let r = (c - {start}u) * 8u;"));
         line("        let g = ((red[r] + red[r + 4u]) + (red[r + 2u] + red[r + 6u])) + ((red[r + 1u] + red[r + 5u]) + (red[r + 3u] + red[r + 7u]));");
-        line("        let m = adam.beta1 * moments[mb + c] + adam.one_minus_beta1 * g;");
-        line(&format!(
-            "        let v = adam.beta2 * moments[mb + {stride}u + c] + adam.one_minus_beta2 * (g * g);"
-        ));
-        line("        moments[mb + c] = m;");
-        line(&format!("        moments[mb + {stride}u + c] = v;"));
-        line("        let m_hat = m * step.correction1;");
-        line("        let v_hat = v * step.correction2;");
-        line("        p_out[pb + c] = p_in[pb + c] - step.learning_rate * m_hat / (sqrt(v_hat) + adam.epsilon);");
+        adam(line, stride);
         line("    }");
         start = end;
     }
@@ -434,6 +501,7 @@ impl CpuKernels {
                     net.activation,
                     plan.stride_floats,
                     plan.nets_per_binding,
+                    ctx.subgroup_size == Some(LANES as u32),
                 ) {
                     None => None,
                     Some(source) => Some(Arc::new(self.build(ctx, net, &source, plan)?)),
@@ -455,7 +523,7 @@ impl CpuKernels {
         let device = &ctx.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cpu-adapter train_epoch"),
-            source: wgpu::ShaderSource::Wgsl(format!("{COMMON_WGSL}\n{source}").into()),
+            source: wgpu::ShaderSource::Wgsl(source.to_string().into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("train_epoch"),
