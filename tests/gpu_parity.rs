@@ -575,3 +575,26 @@ fn cpu_adapter_structs_match_the_generated_wgsl() {
         assert_eq!(seen, 5);
     }
 }
+
+/// Without subgroup operations the lanes meet in workgroup memory (two chunks of at most
+/// 512 parameters for 2-32-16-1's 641): the same bits as the reference.
+#[test]
+fn cpu_adapter_workgroup_memory_reduction_matches_the_reference() {
+    if cpu_adapter("cpu_adapter_workgroup_memory_reduction_matches_the_reference").is_none() {
+        return;
+    }
+    let gpu = GpuTrainer::new()
+        .unwrap()
+        .with_kernels(KernelFamily::CpuAdapter)
+        .without_subgroups();
+    let (sets, _) = sets(&[(7, 5), (9, 6), (5, 5), (11, 4)]);
+    let config = ModelConfig {
+        hidden: vec![32, 16],
+        epochs: 40,
+        loss_every: 20,
+        ..Default::default()
+    };
+    let reference = CpuTrainer::reference().train_batch(&sets, &config).unwrap();
+    let on_gpu = gpu.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&on_gpu), bits(&reference));
+}

@@ -9,8 +9,9 @@
 //!   parameters ping-pong between two buffers so that the Adam step writes the one that is
 //!   not bound as uniform in this epoch.
 //! - Lane t handles samples t, t + 8, t + 16, … in ascending order and accumulates every
-//!   gradient in registers; at the end the 8 lanes meet in workgroup memory and are added in
-//!   the fixed tree (lane l += lane l + 4, + 2, + 1), then Adam updates each parameter.
+//!   gradient in registers; at the end the 8 lanes are added in the fixed tree (lane l +=
+//!   lane l + 4, + 2, + 1) with subgroup shuffles (where the device has 8-wide subgroups) or
+//!   through workgroup memory, then Adam updates each parameter.
 //!   That is exactly the order of the CPU reference ([`crate::nn::REFERENCE_LANES`] = 8), and
 //!   the arithmetic is the reference's operation for operation (no FMA, the rational
 //!   `tanh_f32`, Adam constants read from a uniform so the compiler cannot fold them), so the
@@ -762,4 +763,44 @@ pub fn train_group(
         return Err(diverged(first_index + k, config.epochs));
     }
     Ok(nets)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(align: u32, binding: u64) -> wgpu::Limits {
+        wgpu::Limits {
+            min_uniform_buffer_offset_alignment: align,
+            max_uniform_buffer_binding_size: binding as _,
+            ..wgpu::Limits::default()
+        }
+    }
+
+    #[test]
+    fn networks_start_at_aligned_offsets_and_fill_a_binding() {
+        // 1185 parameters, 256-byte alignment: 1216 floats (4864 bytes) per network,
+        // 13 networks in 64 KiB (13 × 4864 = 63 232 bytes).
+        let plan = param_plan(&limits(256, 65_536), 1185).unwrap();
+        assert_eq!(plan.stride_floats, 1216);
+        assert_eq!(plan.nets_per_binding, 13);
+        // 32-byte alignment: 1192 floats.
+        assert_eq!(
+            param_plan(&limits(32, 65_536), 1185).unwrap().stride_floats,
+            1192
+        );
+        // One network that does not fit a binding: no plan.
+        assert_eq!(param_plan(&limits(256, 4096), 1185), None);
+    }
+
+    #[test]
+    fn architectures_outside_the_family_get_no_kernel() {
+        let tanh = Activation::Tanh;
+        assert!(epoch_source(&[2, 32, 32, 1], tanh, 1192, 13, true).is_some());
+        // 5251 parameters > MAX_CPU_PARAMS.
+        assert!(epoch_source(&[2, 70, 70, 1], tanh, 5256, 3, true).is_none());
+        // A stride shorter than the parameters, or not a multiple of 4.
+        assert!(epoch_source(&[2, 4, 1], tanh, 12, 1, true).is_none());
+        assert!(epoch_source(&[2, 4, 1], tanh, 18, 1, true).is_none());
+    }
 }

@@ -88,8 +88,27 @@ impl GpuTrainer {
         self
     }
 
+    /// Makes the CPU-adapter kernels reduce their lanes through workgroup memory, as on a
+    /// device without 8-wide subgroups (for tests of that path; the bits do not change).
+    pub fn without_subgroups(mut self) -> GpuTrainer {
+        self.ctx.subgroup_size = None;
+        self
+    }
+
     pub fn context(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// Builds the training kernel of this architecture now instead of at the first training
+    /// call, and returns the seconds its build took (pipeline creation and llvmpipe's compile
+    /// at the first dispatch; 0 when it was built before), or `None` when this trainer uses
+    /// the hardware kernels for it (compiled in [`GpuTrainer::open`]).
+    pub fn prepare(&self, config: &ModelConfig) -> Result<Option<f64>> {
+        config.validate()?;
+        let net = Mlp::init(&config.layer_sizes(), config.activation, 0);
+        let started = std::time::Instant::now();
+        let kernel = self.cpu_adapter_kernel(&net)?;
+        Ok(kernel.map(|_| started.elapsed().as_secs_f64()))
     }
 
     /// The CPU-adapter kernel of `net`'s architecture when this trainer uses that family
