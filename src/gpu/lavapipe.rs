@@ -69,7 +69,7 @@ pub fn epoch_source(
         || layer_sizes.first() != Some(&2)
         || layer_sizes.last() != Some(&1)
         || stride_floats < params
-        || stride_floats % 4 != 0
+        || !stride_floats.is_multiple_of(4)
         || nets_per_binding == 0
     {
         return None;
@@ -389,7 +389,7 @@ pub struct ParamPlan {
 pub fn param_plan(limits: &wgpu::Limits, params: usize) -> Option<ParamPlan> {
     let align_floats = (limits.min_uniform_buffer_offset_alignment.max(16) / 4) as usize;
     let stride_floats = params.div_ceil(align_floats) * align_floats;
-    let binding_bytes = limits.max_uniform_buffer_binding_size as u64;
+    let binding_bytes = limits.max_uniform_buffer_binding_size;
     let nets_per_binding = (binding_bytes / (stride_floats as u64 * 4))
         .min(limits.max_compute_workgroups_per_dimension as u64)
         as usize;
@@ -772,7 +772,7 @@ mod tests {
     fn limits(align: u32, binding: u64) -> wgpu::Limits {
         wgpu::Limits {
             min_uniform_buffer_offset_alignment: align,
-            max_uniform_buffer_binding_size: binding as _,
+            max_uniform_buffer_binding_size: binding,
             ..wgpu::Limits::default()
         }
     }
