@@ -1,6 +1,8 @@
-//! GPU (wgpu, lavapipe on CI) against the CPU reference trainer: training parity, evaluation parity, batch splitting, struct layouts.
+//! GPU (wgpu, lavapipe on CI) against the CPU reference trainer: training parity of both kernel families, evaluation parity, batch splitting, struct layouts.
 //!
 //! Without an adapter these tests print why they skip, unless ERRMAP_REQUIRE_GPU=1, where they fail.
+//! The hardware kernels are compared with `CpuTrainer::with_lanes(GRAD_LANES)` (their order);
+//! the CPU-adapter kernels with `CpuTrainer::reference()`, bit for bit.
 
 #[path = "common/plate_sets.rs"]
 mod plate_sets;
@@ -8,16 +10,34 @@ mod plate_sets;
 use std::sync::OnceLock;
 
 use errmap::gpu::layout::{Dims, LayerInfo, NetInfo, Sample, Step};
-use errmap::gpu::GpuTrainer;
+use errmap::gpu::{GpuTrainer, KernelFamily};
 use errmap::nn::*;
 use plate_sets::sets;
 
+/// A trainer with the hardware-GPU kernels, on whatever adapter there is.
 fn gpu(test: &str) -> Option<&'static GpuTrainer> {
     static TRAINER: OnceLock<Result<GpuTrainer, String>> = OnceLock::new();
+    trainer(test, &TRAINER, KernelFamily::Hardware)
+}
+
+/// A trainer with the CPU-adapter kernels (src/gpu/lavapipe.rs), on whatever adapter there is.
+fn cpu_adapter(test: &str) -> Option<&'static GpuTrainer> {
+    static TRAINER: OnceLock<Result<GpuTrainer, String>> = OnceLock::new();
+    trainer(test, &TRAINER, KernelFamily::CpuAdapter)
+}
+
+fn trainer(
+    test: &str,
+    cell: &'static OnceLock<Result<GpuTrainer, String>>,
+    family: KernelFamily,
+) -> Option<&'static GpuTrainer> {
+    static ENV: OnceLock<()> = OnceLock::new();
     // Every test that opens Vulkan calls this first, so the variable is set before any does.
-    match TRAINER.get_or_init(|| {
-        errmap::gpu::quiet_headless_vulkan();
-        GpuTrainer::new().map_err(|e| e.to_string())
+    ENV.get_or_init(errmap::gpu::quiet_headless_vulkan);
+    match cell.get_or_init(|| {
+        GpuTrainer::new()
+            .map(|t| t.with_kernels(family))
+            .map_err(|e| e.to_string())
     }) {
         Ok(trainer) => Some(trainer),
         Err(reason) => {
@@ -195,6 +215,7 @@ fn gpu_training_is_bitwise_repeatable_and_split_invariant() {
     let units = 16 + 8 + 1;
     let tiny = GpuTrainer::new()
         .unwrap()
+        .with_kernels(KernelFamily::Hardware)
         .with_buffer_limit(120 * units as u64 * 4);
     let split = tiny.train_batch(&sets, &config).unwrap();
     assert_eq!(bits(&split), bits(&a));
@@ -433,4 +454,183 @@ fn batches_split_under_buffer_and_dispatch_limits() {
         err.to_string().contains("training set 0 (100 samples)"),
         "{err}"
     );
+}
+
+fn bits(nets: &[Mlp]) -> Vec<u32> {
+    nets.iter()
+        .flat_map(|n| n.params.iter().map(|p| p.to_bits()))
+        .collect()
+}
+
+/// The CPU-adapter kernels do the reference's f32 operations in the reference's order
+/// (8 lanes, tree +4 +2 +1), so after 200 Adam steps every parameter has the same bits as
+/// `CpuTrainer::reference()`, for networks of different training-set sizes (none a multiple
+/// of 8), the default architecture and a relu one.
+#[test]
+fn cpu_adapter_kernels_match_the_reference_bit_for_bit() {
+    let Some(gpu) = cpu_adapter("cpu_adapter_kernels_match_the_reference_bit_for_bit") else {
+        return;
+    };
+    // 40, 130, 135 and 273 samples.
+    let (sets, norms) = sets(&[(8, 5), (13, 10), (15, 9), (21, 13)]);
+    for (hidden, activation) in [
+        (vec![32, 32], Activation::Tanh),
+        (vec![12, 8], Activation::Relu),
+    ] {
+        let config = ModelConfig {
+            hidden: hidden.clone(),
+            activation,
+            epochs: 200,
+            loss_every: 50,
+            ..Default::default()
+        };
+        let initial = initial_networks(sets.len(), &config);
+        let reference = CpuTrainer::reference()
+            .train_from(initial.clone(), &sets, &config)
+            .unwrap();
+        let on_gpu = gpu.train_from(initial.clone(), &sets, &config).unwrap();
+        assert_eq!(on_gpu.len(), sets.len());
+        for (k, ((c, g), start)) in reference.iter().zip(&on_gpu).zip(&initial).enumerate() {
+            assert_eq!(g.layer_sizes, c.layer_sizes);
+            let moved = c
+                .params
+                .iter()
+                .zip(&start.params)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(
+                moved > 0.1,
+                "{hidden:?} network {k} barely trained ({moved})"
+            );
+            for (i, (a, b)) in c.params.iter().zip(&g.params).enumerate() {
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "{hidden:?} {activation:?} network {k} parameter {i}: reference {a:e}, kernel {b:e}"
+                );
+            }
+            // The maps (µm on a 5 mm grid), compared independently of the bits.
+            let inputs = grid_inputs(&norms[k], 5.0);
+            let map = |net: &Mlp| -> Vec<f64> {
+                inputs
+                    .iter()
+                    .map(|&x| norms[k].unscale_output(net.forward(x)))
+                    .collect()
+            };
+            let (mc, mg) = (map(c), map(g));
+            let rms = (mc
+                .iter()
+                .zip(&mg)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / mc.len() as f64)
+                .sqrt();
+            assert!(rms <= 0.05, "network {k}: maps differ by {rms} µm RMS");
+        }
+    }
+}
+
+/// Run to run the same bits; a batch larger than one uniform binding holds (15 networks of
+/// 1185 parameters: 13 fit 64 KiB) and a batch split by the buffer limit give the bits of
+/// the reference too.
+#[test]
+fn cpu_adapter_kernels_are_repeatable_and_split_invariant() {
+    let Some(gpu) = cpu_adapter("cpu_adapter_kernels_are_repeatable_and_split_invariant") else {
+        return;
+    };
+    let sizes: Vec<(usize, usize)> = (0..15).map(|k| (4 + k % 3, 3 + k % 4)).collect();
+    let (sets, _) = sets(&sizes);
+    let config = ModelConfig {
+        epochs: 25,
+        loss_every: 7,
+        ..Default::default()
+    };
+    let a = gpu.train_batch(&sets, &config).unwrap();
+    let b = gpu.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&a), bits(&b));
+    let reference = CpuTrainer::reference().train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&a), bits(&reference));
+    // A buffer limit that admits about one network's moments at a time forces 15 groups.
+    let tiny = GpuTrainer::new()
+        .unwrap()
+        .with_kernels(KernelFamily::CpuAdapter)
+        .with_buffer_limit(2 * 1200 * 4);
+    let split = tiny.train_batch(&sets[..3], &config).unwrap();
+    assert_eq!(bits(&split), bits(&a[..3]));
+}
+
+/// Architectures the CPU-adapter family does not take (here 5 251 parameters) train with the
+/// hardware kernels: the same bits as a trainer that asks for those.
+#[test]
+fn cpu_adapter_family_falls_back_to_the_hardware_kernels() {
+    let Some(gpu) = cpu_adapter("cpu_adapter_family_falls_back_to_the_hardware_kernels") else {
+        return;
+    };
+    let hardware = self::gpu("cpu_adapter_family_falls_back_to_the_hardware_kernels").unwrap();
+    let (sets, _) = sets(&[(6, 5), (7, 4)]);
+    let config = ModelConfig {
+        hidden: vec![70, 70],
+        epochs: 10,
+        loss_every: 5,
+        ..Default::default()
+    };
+    assert!(errmap::nn::param_count(&config.layer_sizes()) > errmap::gpu::lavapipe::MAX_CPU_PARAMS);
+    let a = gpu.train_batch(&sets, &config).unwrap();
+    let b = hardware.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&a), bits(&b));
+}
+
+/// The host mirrors of the CPU-adapter kernel's own structs against its generated WGSL.
+#[test]
+fn cpu_adapter_structs_match_the_generated_wgsl() {
+    use errmap::gpu::lavapipe::{epoch_source, AdamConstants, BatchInfo};
+    use std::mem::size_of;
+    use wgpu::naga;
+    for subgroups in [false, true] {
+        let source = epoch_source(&[2, 3, 1], Activation::Tanh, 16, 2, subgroups).unwrap();
+        let module = naga::front::wgsl::parse_str(&source).expect("generated WGSL parses");
+        let mut seen = 0;
+        for (_, ty) in module.types.iter() {
+            let naga::TypeInner::Struct { members, span } = &ty.inner else {
+                continue;
+            };
+            let offsets: Vec<u32> = members.iter().map(|m| m.offset).collect();
+            let (size, count) = match ty.name.as_deref() {
+                Some("AdamConstants") => (size_of::<AdamConstants>(), 8),
+                Some("BatchInfo") => (size_of::<BatchInfo>(), 4),
+                Some("NetInfo") => (size_of::<NetInfo>(), 4),
+                Some("Sample") => (size_of::<Sample>(), 4),
+                Some("Step") => (size_of::<Step>(), 4),
+                _ => continue,
+            };
+            // Every field a 4-byte scalar, in order, no padding.
+            assert_eq!(*span as usize, size, "{:?}", ty.name);
+            assert_eq!(offsets, (0..count).map(|i| 4 * i).collect::<Vec<u32>>());
+            seen += 1;
+        }
+        assert_eq!(seen, 5);
+    }
+}
+
+/// Without subgroup operations the lanes meet in workgroup memory (two chunks of at most
+/// 512 parameters for 2-32-16-1's 641): the same bits as the reference.
+#[test]
+fn cpu_adapter_workgroup_memory_reduction_matches_the_reference() {
+    if cpu_adapter("cpu_adapter_workgroup_memory_reduction_matches_the_reference").is_none() {
+        return;
+    }
+    let gpu = GpuTrainer::new()
+        .unwrap()
+        .with_kernels(KernelFamily::CpuAdapter)
+        .without_subgroups();
+    let (sets, _) = sets(&[(7, 5), (9, 6), (5, 5), (11, 4)]);
+    let config = ModelConfig {
+        hidden: vec![32, 16],
+        epochs: 40,
+        loss_every: 20,
+        ..Default::default()
+    };
+    let reference = CpuTrainer::reference().train_batch(&sets, &config).unwrap();
+    let on_gpu = gpu.train_batch(&sets, &config).unwrap();
+    assert_eq!(bits(&on_gpu), bits(&reference));
 }

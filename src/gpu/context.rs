@@ -93,6 +93,9 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     pub adapter: AdapterSummary,
     pub limits: wgpu::Limits,
+    /// The subgroup size when subgroup operations are enabled and the adapter has a single
+    /// size (lavapipe: 8 with 256-bit SIMD); the CPU-adapter kernels use it.
+    pub subgroup_size: Option<u32>,
     errors: Arc<Mutex<Vec<String>>>,
     lost: Arc<Mutex<Option<String>>>,
 }
@@ -132,7 +135,8 @@ impl GpuContext {
             let info = adapter.get_info();
             let descriptor = wgpu::DeviceDescriptor {
                 label: Some("errmap"),
-                required_features: wgpu::Features::empty(),
+                // Subgroup operations where offered (the CPU-adapter kernels' lane reduction).
+                required_features: adapter.features() & wgpu::Features::SUBGROUP,
                 required_limits: adapter.limits(),
                 ..Default::default()
             };
@@ -164,11 +168,15 @@ impl GpuContext {
             }
         });
         let limits = device.limits();
+        let subgroup_size = (device.features().contains(wgpu::Features::SUBGROUP)
+            && info.subgroup_min_size == info.subgroup_max_size)
+            .then_some(info.subgroup_min_size);
         GpuContext {
             device,
             queue,
             adapter: summarise(info),
             limits,
+            subgroup_size,
             errors,
             lost,
         }

@@ -1,12 +1,14 @@
 //! The wgpu path: adapter choice, device limits, buffers and pipelines for training and evaluating networks in WGSL compute shaders.
 //!
-//! One host file per shader family: [`train`] (`shaders/train.wgsl`), [`evaluate`]
+//! One host file per shader family: [`train`] (`shaders/train.wgsl`) and [`fixed`] for
+//! hardware GPUs, [`lavapipe`] (generated WGSL) for CPU adapters, [`evaluate`]
 //! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; [`context`] picks the
 //! adapter and turns device failures into [`Error::device`].
 
 pub mod context;
 pub mod evaluate;
 pub mod fixed;
+pub mod lavapipe;
 pub mod layout;
 pub mod train;
 
@@ -15,12 +17,30 @@ pub use context::{list_adapters, AdapterSummary, GpuContext, LimitsSummary};
 use crate::nn::{check_batch, check_nets, Mlp, ModelConfig, Trainer, TrainingSet, MAX_WIDTH};
 use crate::{Error, Result};
 
+/// Which training kernels a [`GpuTrainer`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KernelFamily {
+    /// By adapter: [`KernelFamily::CpuAdapter`] on a CPU adapter (lavapipe), else
+    /// [`KernelFamily::Hardware`].
+    #[default]
+    Auto,
+    /// `shaders/train.wgsl` and [`fixed`]: a workgroup per tile of samples, 64 gradient
+    /// lanes (the order of `CpuTrainer::with_lanes(GRAD_LANES)`).
+    Hardware,
+    /// [`lavapipe`]: one 8-invocation workgroup per network and epoch, the reference order
+    /// (`CpuTrainer::reference()`, bit for bit). Architectures it does not take (see
+    /// [`lavapipe::epoch_source`]) train with the hardware kernels.
+    CpuAdapter,
+}
+
 /// Trains and evaluates networks in WGSL compute shaders on one device.
 pub struct GpuTrainer {
     ctx: GpuContext,
     /// Largest buffer a training group may use (the device limit unless lowered).
     buffer_limit_bytes: u64,
+    family: KernelFamily,
     train: train::TrainPipelines,
+    cpu_adapter: lavapipe::CpuKernels,
     eval: evaluate::EvalPipeline,
 }
 
@@ -34,6 +54,7 @@ impl GpuTrainer {
     pub fn open(allow_software: bool) -> Result<GpuTrainer> {
         let ctx = GpuContext::open(allow_software)?;
         let train = train::TrainPipelines::new(&ctx)?;
+        let cpu_adapter = lavapipe::CpuKernels::new(&ctx);
         let eval = evaluate::EvalPipeline::new(&ctx)?;
         let buffer_limit_bytes = ctx
             .limits
@@ -42,7 +63,9 @@ impl GpuTrainer {
         Ok(GpuTrainer {
             ctx,
             buffer_limit_bytes,
+            family: KernelFamily::Auto,
             train,
+            cpu_adapter,
             eval,
         })
     }
@@ -54,8 +77,51 @@ impl GpuTrainer {
         self
     }
 
+    /// Chooses the training kernels (both families run on any adapter; tests use this to
+    /// check each against its CPU reference order on lavapipe).
+    pub fn with_kernels(mut self, family: KernelFamily) -> GpuTrainer {
+        self.family = family;
+        self
+    }
+
+    /// Makes the CPU-adapter kernels reduce their lanes through workgroup memory, as on a
+    /// device without 8-wide subgroups (for tests of that path; the bits do not change).
+    pub fn without_subgroups(mut self) -> GpuTrainer {
+        self.ctx.subgroup_size = None;
+        self
+    }
+
     pub fn context(&self) -> &GpuContext {
         &self.ctx
+    }
+
+    /// Builds the training kernel of this architecture now instead of at the first training
+    /// call, and returns the seconds its build took (pipeline creation and llvmpipe's compile
+    /// at the first dispatch; 0 when it was built before), or `None` when this trainer uses
+    /// the hardware kernels for it (compiled in [`GpuTrainer::open`]).
+    pub fn prepare(&self, config: &ModelConfig) -> Result<Option<f64>> {
+        config.validate()?;
+        let net = Mlp::init(&config.layer_sizes(), config.activation, 0);
+        let started = std::time::Instant::now();
+        let kernel = self.cpu_adapter_kernel(&net)?;
+        Ok(kernel.map(|_| started.elapsed().as_secs_f64()))
+    }
+
+    /// The CPU-adapter kernel of `net`'s architecture when this trainer uses that family
+    /// for it (built on first use).
+    fn cpu_adapter_kernel(
+        &self,
+        net: &Mlp,
+    ) -> Result<Option<std::sync::Arc<lavapipe::EpochPipeline>>> {
+        let wanted = match self.family {
+            KernelFamily::Auto => self.ctx.adapter.software,
+            KernelFamily::Hardware => false,
+            KernelFamily::CpuAdapter => true,
+        };
+        if !wanted {
+            return Ok(None);
+        }
+        self.cpu_adapter.pipeline_for(&self.ctx, net)
     }
 }
 
@@ -100,6 +166,30 @@ impl Trainer for GpuTrainer {
         let Some(first) = initial.first() else {
             return Ok(Vec::new());
         };
+        if let Some(kernel) = self.cpu_adapter_kernel(first)? {
+            // Samples (16 bytes each, as 4 "units") and the parameter buffers per group.
+            let plan = kernel.plan();
+            let groups = train::plan_groups(
+                self.buffer_limit_bytes,
+                usize::MAX,
+                sets,
+                4,
+                plan.stride_floats as u64,
+            )?;
+            let mut out = Vec::with_capacity(initial.len());
+            for range in groups {
+                out.extend(lavapipe::train_group(
+                    &self.ctx,
+                    &self.cpu_adapter,
+                    &kernel,
+                    &initial[range.clone()],
+                    &sets[range.clone()],
+                    config,
+                    range.start,
+                )?);
+            }
+            return Ok(out);
+        }
         let dims = layout::dims_for(first, 1, 0);
         let groups = train::plan_groups(
             self.buffer_limit_bytes,
