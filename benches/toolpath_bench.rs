@@ -64,7 +64,10 @@ fn raster(lines: usize) -> String {
 }
 
 pub fn toolpath_compensate(c: &mut Criterion) {
-    let settings = CompensationSettings::default();
+    let settings = CompensationSettings {
+        everywhere: true,
+        ..CompensationSettings::default()
+    };
     let mut group = c.benchmark_group("toolpath/compensate");
     for rows in [10usize, 100, 1000] {
         let text = zigzag(rows);

@@ -436,7 +436,12 @@ fn compensated_corpus_programs_pass_linuxcnc_rs274() {
                 x_min_mm: -1e6,
                 x_max_mm: 1e6,
             };
-            let err = compensate_gcode(&text, &src, &f, &CompensationSettings::default())
+            let s = CompensationSettings {
+                everywhere: true,
+                dialect: Some(errmap::toolpath::Dialect::Linuxcnc),
+                ..CompensationSettings::default()
+            };
+            let err = compensate_gcode(&text, &src, &f, &s)
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -485,6 +490,8 @@ fn compensated_corpus_programs_pass_linuxcnc_rs274() {
         for (vi, (field, zone)) in variants.iter().enumerate() {
             let settings = CompensationSettings {
                 zone: *zone,
+                everywhere: zone.is_none(),
+                dialect: Some(errmap::toolpath::Dialect::Linuxcnc),
                 ..CompensationSettings::default()
             };
             let result = compensate_gcode(&text, &src, field, &settings);

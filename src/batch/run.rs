@@ -438,7 +438,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         domain,
                         norms[d].clone(),
                         nets[d].clone(),
-                    );
+                    )
+                    .with_probes(&p.prep.clean);
                     let holdout_rmse_um = h.map(|h| {
                         let hm = FittedModel::new(
                             "holdout",
@@ -484,13 +485,15 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             if let (Some(dir), Some(fslot)) = (&plan.family_dir, family_slot) {
                 let maps: Vec<&ErrorMap> = part_maps.iter().map(|(_, _, m, _)| m).collect();
                 if let Some((mean, std)) = family_stats(&maps) {
+                    let parts: Vec<&FittedModel> = part_maps.iter().map(|(_, _, _, m)| m).collect();
                     let model = FittedModel::new(
                         "family",
                         s.normal,
                         domain,
                         norms[fslot].clone(),
                         nets[fslot].clone(),
-                    );
+                    )
+                    .with_parts(&parts);
                     let probes: Vec<(f64, f64)> = Vec::new();
                     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
                     std.write_csv(&dir.join("std.csv"), "std_um")?;

@@ -29,6 +29,13 @@ pub struct FittedModel {
     pub domain: Domain,
     pub normalisation: Normalisation,
     pub network: Mlp,
+    /// The measured domain: convex hull of the probed points (plane axes, mm), counter-clockwise.
+    /// Absent in maps written by older versions (toolpath compensation then needs `--extrapolate`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hull_mm: Option<Vec<[f64; 2]>>,
+    /// Nominal extent `[min, max]` of the probed surface along the normal, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_mm: Option<[f64; 2]>,
 }
 
 impl FittedModel {
@@ -46,7 +53,38 @@ impl FittedModel {
             domain,
             normalisation,
             network,
+            hull_mm: None,
+            surface_mm: None,
         }
+    }
+
+    /// Record the measured domain and surface of the probed points the map was fitted to.
+    pub fn with_probes(mut self, points: &[crate::probe::ProbePoint]) -> Self {
+        let n = self.normal.index();
+        let plane: Vec<[f64; 2]> = points.iter().map(|p| [p.u_mm, p.v_mm]).collect();
+        self.hull_mm = Some(crate::geom::convex_hull(&plane));
+        self.surface_mm = points
+            .iter()
+            .map(|p| p.nominal_mm[n])
+            .fold(None, |acc: Option<[f64; 2]>, z| {
+                Some(acc.map_or([z, z], |[lo, hi]| [lo.min(z), hi.max(z)]))
+            });
+        self
+    }
+
+    /// Record the union of the parts' measured domains and surfaces (for a family map); none
+    /// if a part lacks one.
+    pub fn with_parts(mut self, parts: &[&FittedModel]) -> Self {
+        let hulls: Option<Vec<&Vec<[f64; 2]>>> = parts.iter().map(|m| m.hull_mm.as_ref()).collect();
+        let surfaces: Option<Vec<[f64; 2]>> = parts.iter().map(|m| m.surface_mm).collect();
+        if let (Some(h), Some(s), false) = (hulls, surfaces, parts.is_empty()) {
+            let all: Vec<[f64; 2]> = h.into_iter().flatten().copied().collect();
+            self.hull_mm = Some(crate::geom::convex_hull(&all));
+            self.surface_mm = s
+                .into_iter()
+                .reduce(|a, b| [a[0].min(b[0]), a[1].max(b[1])]);
+        }
+        self
     }
 
     /// E at (u, v) in µm, evaluated anywhere (outside the domain the network extrapolates).
@@ -106,7 +144,14 @@ impl FittedModel {
         ]
         .iter()
         .all(|v| v.is_finite());
-        if !finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
+        let extra_finite = model
+            .hull_mm
+            .iter()
+            .flatten()
+            .flatten()
+            .chain(model.surface_mm.iter().flatten())
+            .all(|v| v.is_finite());
+        if !finite || !extra_finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
             return Err(Error::input(
                 Location::file(path),
                 "the normalisation or domain holds a non-finite number or an empty range",
@@ -129,6 +174,14 @@ impl ErrorField for FittedModel {
             && v_mm >= self.domain.v_min_mm - tol
             && v_mm <= self.domain.v_max_mm + tol;
         inside.then(|| self.e_um(u_mm, v_mm) / 1000.0)
+    }
+    fn measured(&self, u_mm: f64, v_mm: f64, margin_mm: f64) -> Option<bool> {
+        let hull = self.hull_mm.as_ref()?;
+        let tol = 1e-9 * (1.0 + self.domain.width_mm().abs() + self.domain.height_mm().abs());
+        Some(crate::geom::hull_distance_mm(hull, [u_mm, v_mm]) <= margin_mm + tol)
+    }
+    fn surface_mm(&self) -> Option<(f64, f64)> {
+        self.surface_mm.map(|[lo, hi]| (lo, hi))
     }
 }
 

@@ -4,12 +4,15 @@
 //! Lines that are not rewritten are copied byte for byte from the input. See `docs/toolpath.md`.
 
 use super::arc::{Arc, Plane};
+use super::dialect::{self, Dialect, Frame, Motion, G};
 use super::expr::{eval, Params};
-use super::lexer::{lex, Line, TokenKind, WordValue};
+use super::lexer::{lex_dialect, Line, TokenKind, WordValue};
 use super::{CompensationReport, CompensationSettings};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
+use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
+use std::ops::Range;
 use std::path::Path;
 
 const AXES: [u8; 3] = [b'X', b'Y', b'Z'];
@@ -21,7 +24,11 @@ struct W {
     value: Option<f64>,
     is_expr: bool,
     token: usize,
-    text: String,
+    span: Range<usize>,
+    /// Sinumerik `AC()` (`Some(true)`) or `IC()` (`Some(false)`): overrides G90/G91.
+    abs: Option<bool>,
+    /// The number was written without a decimal point.
+    no_dot: bool,
 }
 
 /// What a subroutine body does, collected while reading its definition.
@@ -71,6 +78,27 @@ struct Rewriter<'a> {
     unknown_since: Option<u64>,
     report: CompensationReport,
     out: String,
+    dialect: Dialect,
+    /// Whether the program's units are known (a G20/G21 or equivalent, or `--units`).
+    units_known: bool,
+    /// The zone in the program's first units, until those are known; then `zone_mm`.
+    zone_first_units: Option<(f64, f64)>,
+    zone_mm: Option<(f64, f64)>,
+    /// Work coordinates = program coordinates + `shift` (G92, G52, Sinumerik TRANS), program units.
+    shift: [f64; 3],
+    /// Fanuc G52 local offsets (part of `shift`).
+    local: [f64; 3],
+    /// Transformations errmap does not follow, with the line and word that started them.
+    frames: Vec<(Frame, u64, String)>,
+    /// The first work offset selected (the map's coordinates); another one is a frame.
+    first_offset: Option<i32>,
+    /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
+    flow: Option<(u64, String)>,
+    /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
+    programs: u32,
+    m99: Option<u64>,
+    /// Set by `error_at` when a point in the zone lies outside the measured domain.
+    extrapolated: Cell<bool>,
 }
 
 /// Compensate a G-code program. See the module documentation of [`crate::toolpath`].
@@ -81,8 +109,12 @@ pub fn compensate(
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
     settings.validate()?;
+    let dialect = dialect::resolve(text, source, settings.dialect)?;
+    refuse_klartext(text, source, dialect)?;
+    let zone_mm = super::default_zone_mm(source, field, settings)?;
     let normal_axis = field.normal();
     let (u, v) = normal_axis.plane_axes();
+    let units = settings.units;
     let mut rw = Rewriter {
         text,
         source,
@@ -91,7 +123,7 @@ pub fn compensate(
         normal: normal_axis.index(),
         plane_uv: (u.index(), v.index()),
         pos: [None; 3],
-        inches: false,
+        inches: units == Some(super::Units::Inch),
         absolute: true,
         arc_absolute: false,
         plane: Plane::G17,
@@ -107,13 +139,38 @@ pub fn compensate(
         program_decimals: 0,
         report: CompensationReport::default(),
         out: String::with_capacity(text.len() + text.len() / 4),
+        dialect,
+        units_known: false,
+        zone_first_units: settings.zone,
+        zone_mm,
+        shift: [0.0; 3],
+        local: [0.0; 3],
+        frames: Vec::new(),
+        first_offset: None,
+        flow: None,
+        programs: 0,
+        m99: None,
+        extrapolated: Cell::new(false),
     };
-    let lines = lex(text);
+    if units.is_some() {
+        rw.set_units_known();
+    }
+    let lines = lex_dialect(text, dialect);
+    rw.flow = first_jump(text, &lines, dialect);
     rw.program_decimals = coordinate_decimals(text, &lines);
     rw.report.lines_in = lines.len() as u64;
     for line in &lines {
         rw.line(line)?;
     }
+    if let (Some(l), true) = (rw.m99, rw.report.moves_changed > 0) {
+        return Err(Error::input(
+            Location::cell(source, l, "M99"),
+            "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
+            "compensate the main program with the subprogram expanded into it",
+        ));
+    }
+    rw.report.dialect = Some(dialect);
+    rw.report.zone_mm = rw.zone_mm;
     rw.report.lines_out = rw.out.matches('\n').count() as u64
         + u64::from(!rw.out.is_empty() && !rw.out.ends_with('\n'));
     Ok((rw.out, rw.report))
@@ -161,21 +218,120 @@ fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
     most.min(9)
 }
 
+/// `G` value × 10, rounded (G38.2 → 382).
 fn g_code(v: f64) -> i32 {
     (v * 10.0).round() as i32
 }
 
-fn is_canned(code: i32) -> bool {
-    code == 730 || code == 740 || code == 760 || (810..=890).contains(&code)
+/// Heidenhain conversational (Klartext) programs are refused as a whole.
+fn refuse_klartext(text: &str, source: &Path, dialect: Dialect) -> Result<()> {
+    if dialect != Dialect::Heidenhain {
+        return Ok(());
+    }
+    for (i, l) in text.lines().enumerate() {
+        let t = l.trim_start();
+        if t.starts_with('%') || t.starts_with(';') || t.is_empty() {
+            continue;
+        }
+        let mut words = t.split_whitespace();
+        let first = words.next().unwrap_or("");
+        let klartext = first.chars().all(|c| c.is_ascii_digit())
+            && words
+                .next()
+                .is_some_and(|w| w.chars().all(|c| c.is_ascii_uppercase()));
+        if klartext || t.contains("BEGIN PGM") {
+            return Err(Error::input(
+                Location::cell(source, i as u64 + 1, "1"),
+                format!("`{}`: a Heidenhain conversational (Klartext) program; errmap follows Heidenhain ISO programs only", t.chars().take(40).collect::<String>()),
+                "output the program as Heidenhain ISO (G-code) from the CAM post, or as another dialect errmap follows",
+            ));
+        }
+    }
+    Ok(())
 }
 
-fn is_group1(code: i32) -> bool {
-    matches!(code, 0 | 10 | 20 | 30 | 50 | 51 | 52 | 330 | 331 | 800)
-        || (380..=385).contains(&code)
-        || is_canned(code)
+/// The first jump of the program (Fanuc `GOTO`, Sinumerik `GOTOF`/`GOTOB`/`GOTO`/loops): after
+/// one, a block may run any number of times, so no cut in the zone can be vouched for.
+fn first_jump(text: &str, lines: &[Line], dialect: Dialect) -> Option<(u64, String)> {
+    const JUMPS: [&str; 13] = [
+        "GOTO", "GOTOF", "GOTOB", "GOTOC", "WHILE", "FOR", "LOOP", "REPEAT", "REPEATB", "UNTIL",
+        "CASE", "IF", "ELSE",
+    ];
+    if dialect == Dialect::Linuxcnc {
+        return None;
+    }
+    for l in lines {
+        for t in &l.tokens {
+            if let TokenKind::Keyword { name } = &t.kind {
+                let body = text.get(t.span.clone()).unwrap_or("").to_ascii_uppercase();
+                let jump = match dialect {
+                    Dialect::Fanuc => body.contains("GOTO"),
+                    _ => JUMPS.contains(&name.as_str()),
+                };
+                if jump {
+                    return Some((l.number, name.clone()));
+                }
+            }
+        }
+    }
+    None
 }
 
 impl<'a> Rewriter<'a> {
+    fn g(&self, code: i32) -> Option<G> {
+        dialect::g_code(self.dialect, code)
+    }
+
+    fn is_canned(&self, code: i32) -> bool {
+        self.g(code) == Some(G::Motion(Motion::Canned))
+    }
+
+    fn is_group1(&self, code: i32) -> bool {
+        matches!(self.g(code), Some(G::Motion(_) | G::MotionCancel))
+    }
+
+    fn wtext(&self, w: &W) -> &'a str {
+        self.text.get(w.span.clone()).unwrap_or("").trim()
+    }
+
+    /// The units became known (a unit code, or `--units`).
+    fn set_units_known(&mut self) {
+        self.units_known = true;
+    }
+
+    /// Fix the zone given in program units in mm, in the units in effect now: at the program's
+    /// first unit code, or its first move if that comes first.
+    fn fix_zone(&mut self) {
+        if let Some((lo, hi)) = self.zone_first_units.take() {
+            let s = self.scale_mm();
+            self.zone_mm = Some((lo * s, hi * s));
+        }
+    }
+
+    /// The zone in current program coordinates (units and shift).
+    fn zone_now(&self) -> Option<(f64, f64)> {
+        let s = self.scale_mm();
+        let (lo, hi) = match (self.zone_first_units, self.zone_mm) {
+            (Some(z), _) => z,
+            (None, Some((lo, hi))) => (lo / s, hi / s),
+            (None, None) => return None,
+        };
+        let d = self.shift[self.normal];
+        Some((lo - d, hi - d))
+    }
+
+    /// Whether the map compensates at plane point (u, v) in program coordinates.
+    fn compensable(&self, u: f64, v: f64) -> bool {
+        let s = self.scale_mm();
+        let (u, v) = (
+            (u + self.shift[self.plane_uv.0]) * s,
+            (v + self.shift[self.plane_uv.1]) * s,
+        );
+        self.field.error_mm(u, v).is_some()
+            && (self.settings.extrapolate
+                || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
+    }
+
     /// Coordinates get at least 4 decimals in mm and 5 in inches, and as many as the program
     /// itself uses (so unchanged end points are written back exactly).
     fn fmt(&self, v: f64) -> String {
@@ -191,12 +347,32 @@ impl<'a> Rewriter<'a> {
         }
     }
 
-    fn err(&self, line: &Line, column: &str, message: String, hint: &str) -> Error {
+    /// An error at `word` (its first occurrence on the line gives the column).
+    fn err(&self, line: &Line, word: &str, message: String, hint: &str) -> Error {
+        let content = self.text.get(line.span.clone()).unwrap_or("");
+        let at = content
+            .find(word)
+            .or_else(|| {
+                content
+                    .to_ascii_uppercase()
+                    .find(&word.to_ascii_uppercase())
+            })
+            .unwrap_or(0);
+        let column = content[..at].chars().count() + 1;
         Error::input(
-            Location::cell(self.source, line.number, column),
+            Location::cell(self.source, line.number, format!("{column} ({word})")),
             message,
             hint,
         )
+    }
+
+    /// What ends an inserted block: ` *` in Heidenhain ISO.
+    fn eob(&self) -> &'static str {
+        if self.dialect == Dialect::Heidenhain {
+            " *"
+        } else {
+            ""
+        }
     }
 
     fn copy_line(&mut self, line: &Line) {
@@ -205,16 +381,24 @@ impl<'a> Rewriter<'a> {
 
     /// E in program units at a point, if the point is in the zone and the map domain.
     fn error_at(&self, p: &[f64; 3]) -> Option<f64> {
-        if let Some((lo, hi)) = self.settings.zone {
+        if let Some((lo, hi)) = self.zone_now() {
             let n = p[self.normal];
             if n < lo || n > hi {
                 return None;
             }
         }
         let s = self.scale_mm();
-        let e_mm = self
-            .field
-            .error_mm(p[self.plane_uv.0] * s, p[self.plane_uv.1] * s)?;
+        let (u, v) = (
+            (p[self.plane_uv.0] + self.shift[self.plane_uv.0]) * s,
+            (p[self.plane_uv.1] + self.shift[self.plane_uv.1]) * s,
+        );
+        let e_mm = self.field.error_mm(u, v)?;
+        if !self.settings.extrapolate
+            && self.field.measured(u, v, self.settings.domain_margin_mm) != Some(true)
+        {
+            self.extrapolated.set(true);
+            return None;
+        }
         e_mm.is_finite().then_some(e_mm / s)
     }
 
@@ -232,7 +416,7 @@ impl<'a> Rewriter<'a> {
                 None => normal_known = false,
             }
         }
-        if let (Some((zlo, zhi)), true) = (self.settings.zone, normal_known) {
+        if let (Some((zlo, zhi)), true) = (self.zone_now(), normal_known) {
             if hi < zlo || lo > zhi {
                 return false;
             }
@@ -247,9 +431,8 @@ impl<'a> Rewriter<'a> {
         if known.is_empty() {
             return true;
         }
-        let s = self.scale_mm();
         let step = self.settings.max_segment_in(self.inches);
-        let inside = |p: &[f64; 3]| self.field.error_mm(p[0] * s, p[1] * s).is_some();
+        let inside = |p: &[f64; 3]| self.compensable(p[0], p[1]);
         if inside(&known[0]) {
             return true;
         }
@@ -267,6 +450,17 @@ impl<'a> Rewriter<'a> {
 
     fn line(&mut self, line: &Line) -> Result<()> {
         let text = self.text;
+        self.check_block(line)?;
+        let keyword = line.tokens.iter().find_map(|t| match &t.kind {
+            TokenKind::Keyword { name } => Some((name.clone(), t.span.clone())),
+            _ => None,
+        });
+        if let Some((name, span)) = keyword {
+            if !self.keyword(line, &name, span)? {
+                self.copy_line(line);
+                return Ok(());
+            }
+        }
         // Words, assignments and O-words of the line.
         let mut words: Vec<W> = Vec::new();
         let mut oword: Option<(String, String, String)> = None;
@@ -274,19 +468,27 @@ impl<'a> Rewriter<'a> {
         for (ti, tok) in line.tokens.iter().enumerate() {
             match &tok.kind {
                 TokenKind::Word { letter, value } => {
-                    let (value, is_expr) = match value {
-                        WordValue::Number(v) => (Some(*v), false),
+                    let (value, is_expr, abs) = match value {
+                        WordValue::Number(v) => (Some(*v), false, None),
+                        WordValue::Abs(v) => (Some(*v), false, Some(true)),
+                        WordValue::Inc(v) => (Some(*v), false, Some(false)),
                         WordValue::Expr(r) => (
                             text.get(r.clone()).and_then(|t| eval(t, &self.params)),
                             true,
+                            None,
                         ),
                     };
+                    let no_dot = matches!(value, Some(_))
+                        && !is_expr
+                        && !text.get(tok.span.clone()).unwrap_or("").contains('.');
                     words.push(W {
                         letter: *letter,
                         value,
                         is_expr,
                         token: ti,
-                        text: text.get(tok.span.clone()).unwrap_or("").trim().to_string(),
+                        span: tok.span.clone(),
+                        abs,
+                        no_dot,
                     });
                 }
                 TokenKind::OWord { name, keyword } => {
@@ -316,25 +518,45 @@ impl<'a> Rewriter<'a> {
             }
         }
         if let Some((name, keyword, otext)) = oword {
+            if self.dialect == Dialect::Fanuc {
+                // `O1234`: a program number; a second one starts a subprogram.
+                self.programs += 1;
+                if self.programs > 1 && self.sub.is_none() {
+                    self.sub = Some((name.clone(), SubInfo::default()));
+                }
+                self.copy_line(line);
+                return Ok(());
+            }
             self.oword(line, &name, &keyword, &otext)?;
             self.copy_line(line);
             return Ok(());
         }
-        if let Some((_, info)) = self.sub.as_mut() {
+        self.fanuc_m_codes(line, &words)?;
+        if self.sub.is_some() {
             // Subroutine bodies are classified where they are called.
             let n = AXES[self.normal];
-            let g: Vec<i32> = words
-                .iter()
-                .filter(|w| w.letter == b'G')
-                .map(|w| w.value.map(g_code).unwrap_or(-1))
-                .collect();
+            let writes = words.iter().filter(|w| w.letter == b'G').any(|w| {
+                !matches!(
+                    w.value.and_then(|v| self.g(g_code(v))),
+                    Some(
+                        G::Motion(Motion::Rapid | Motion::Linear | Motion::ArcCw | Motion::ArcCcw)
+                            | G::Plane(_)
+                            | G::Units(_)
+                            | G::Distance(_)
+                            | G::ArcDistance(_)
+                            | G::CutterComp(_)
+                            | G::Neutral
+                            | G::MotionCancel
+                    )
+                )
+            });
             let axis_words = words
                 .iter()
                 .any(|w| matches!(w.letter, b'X' | b'Y' | b'Z' | b'@' | b'^'));
-            if words.iter().any(|w| w.letter == n)
-                || g.iter()
-                    .any(|c| matches!(c, 280 | 300 | 530 | 920 | 100) || is_canned(*c))
-            {
+            let Some((_, info)) = self.sub.as_mut() else {
+                return Ok(());
+            };
+            if words.iter().any(|w| w.letter == n) || writes {
                 info.writes_normal = true;
             }
             if axis_words && info.first_move.is_none() {
@@ -344,6 +566,241 @@ impl<'a> Rewriter<'a> {
             return Ok(());
         }
         self.words(line, &words)
+    }
+
+    /// Strict blocks: no stray characters, no word twice (but G and M), no unknown letter.
+    fn check_block(&self, line: &Line) -> Result<()> {
+        let mut seen = [false; 128];
+        let mut first = true;
+        let mut prev_number: Option<&str> = None;
+        for t in &line.tokens {
+            let here = self.text.get(t.span.clone()).unwrap_or("");
+            match &t.kind {
+                TokenKind::Space => continue,
+                TokenKind::Other if first && here == "/" => {}
+                TokenKind::Other => {
+                    let (msg, hint) = match (here, prev_number) {
+                        (",", Some(w)) => (
+                            format!("malformed number: `{w},` has a decimal comma"),
+                            "write numbers with a decimal point (e.g. X20.5)".to_string(),
+                        ),
+                        _ => (
+                            format!("`{here}` is not a word errmap can read in the {} dialect", self.dialect.name()),
+                            "fix or remove it (a word is a letter and a number), or pass the program's --dialect".to_string(),
+                        ),
+                    };
+                    return Err(self.err(line, here, msg, &hint));
+                }
+                TokenKind::Word { letter, value } => {
+                    let l = *letter;
+                    if self.dialect == Dialect::Linuxcnc && l == b'E' {
+                        return Err(self.err(
+                            line,
+                            here.trim(),
+                            format!("`{}`: E is not a LinuxCNC word", here.trim()),
+                            "remove it, or pass the program's --dialect",
+                        ));
+                    }
+                    if l != b'G' && l != b'M' {
+                        if seen[usize::from(l & 0x7f)] {
+                            return Err(self.err(
+                                line,
+                                here.trim(),
+                                format!(
+                                    "word {} given twice in one block (`{}`)",
+                                    l as char,
+                                    here.trim()
+                                ),
+                                "keep one value per letter in each block",
+                            ));
+                        }
+                        seen[usize::from(l & 0x7f)] = true;
+                    }
+                    prev_number = matches!(value, WordValue::Number(_)).then_some(here.trim());
+                    first = false;
+                    continue;
+                }
+                _ => {}
+            }
+            first = false;
+            prev_number = None;
+        }
+        Ok(())
+    }
+
+    /// A dialect statement. `Ok(true)`: harmless, read the line's words as usual; `Ok(false)`:
+    /// followed here, copy the line.
+    fn keyword(&mut self, line: &Line, name: &str, span: Range<usize>) -> Result<bool> {
+        let body = self.text.get(span).unwrap_or("");
+        let refuse = |what: String, hint: &str| Err(self.err(line, name, what, hint));
+        match (self.dialect, name) {
+            (Dialect::Fanuc, "WHILE") => {
+                let n = body.rsplit("DO").next().unwrap_or("").trim().to_string();
+                self.blocks.push(Block {
+                    name: n,
+                    keyword: "WHILE … DO".into(),
+                    line: line.number,
+                    written: [false; 3],
+                });
+                Ok(false)
+            }
+            (Dialect::Fanuc, "END") => {
+                self.close_block(line.number);
+                Ok(false)
+            }
+            (Dialect::Fanuc, "IF") if !body.contains("GOTO") => {
+                // `IF [...] THEN #i = …`: parameters are unknown afterwards.
+                self.params.clear();
+                Ok(false)
+            }
+            (Dialect::Fanuc, _) => Ok(false),
+            (Dialect::Heidenhain, "%") | (Dialect::Sinumerik, "%") => {
+                let upper = body.to_ascii_uppercase();
+                if self.dialect == Dialect::Heidenhain {
+                    if upper.contains("G70") || upper.contains("G71") {
+                        self.inches = upper.contains("G70");
+                        self.set_units_known();
+                        self.fix_zone();
+                    }
+                }
+                Ok(false)
+            }
+            (Dialect::Sinumerik, "TRANS" | "ATRANS" | "ROT" | "AROT" | "SCALE" | "ASCALE" | "MIRROR" | "AMIRROR") => {
+                self.siemens_frame(line, name, body)?;
+                Ok(false)
+            }
+            (Dialect::Sinumerik, "CALL" | "PCALL" | "MCALL" | "REPEAT" | "REPEATB" | "EXTCALL") => refuse(
+                format!("`{}` runs a subprogram or program section whose moves errmap cannot follow", body.trim()),
+                "expand the subprogram or repeated section into plain blocks",
+            ),
+            (Dialect::Sinumerik, "RET") => {
+                self.m99 = Some(line.number);
+                Ok(false)
+            }
+            (
+                Dialect::Sinumerik,
+                "MSG" | "SOFT" | "BRISK" | "FFWON" | "FFWOF" | "CFC" | "CFTCP" | "CFIN" | "COMPCAD" | "COMPCURV"
+                | "COMPON" | "COMPOF" | "CYCLE832" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA"
+                | "G642" | "G641",
+            ) => Ok(true),
+            (Dialect::Sinumerik, _) if self.flow.as_ref().is_some_and(|(l, _)| *l <= line.number) => Ok(false),
+            _ => refuse(
+                format!("`{}`: errmap does not follow the {} instruction {name}, which may move the machine or change its coordinates", body.trim(), self.dialect.name()),
+                "expand it into plain G0/G1/G2/G3 blocks with your CAM post",
+            ),
+        }
+    }
+
+    /// Sinumerik programmable frames: TRANS/ATRANS are followed (a shift), ROT/SCALE/MIRROR
+    /// (and their additive forms) are frames errmap refuses cuts under; a bare TRANS, ROT,
+    /// SCALE or MIRROR deletes the whole programmable frame.
+    fn siemens_frame(&mut self, line: &Line, name: &str, body: &str) -> Result<()> {
+        let args = &body[name.len().min(body.len())..];
+        let mut values = [None; 3];
+        for w in args.split_whitespace() {
+            let (l, v) = w.split_at(1);
+            let i = match l.to_ascii_uppercase().as_str() {
+                "X" => 0,
+                "Y" => 1,
+                "Z" => 2,
+                _ => {
+                    return Err(self.err(
+                        line,
+                        name,
+                        format!(
+                            "`{}`: errmap reads {name} with X, Y and Z numbers only",
+                            body.trim()
+                        ),
+                        "write the frame with plain numbers, or expand the program",
+                    ))
+                }
+            };
+            values[i] = Some(v.trim_start_matches('=').parse::<f64>().map_err(|_| {
+                self.err(
+                    line,
+                    w,
+                    format!("`{w}` is not a number"),
+                    "write the frame with plain numbers",
+                )
+            })?);
+        }
+        let bare = values.iter().all(|v| v.is_none());
+        let mut shift = self.shift;
+        match name {
+            _ if bare => {
+                shift = [0.0; 3];
+                self.frames.retain(|f| f.0 == Frame::WorkOffset);
+            }
+            "TRANS" => {
+                shift = values.map(|v| v.unwrap_or(0.0));
+                self.frames.retain(|f| f.0 == Frame::WorkOffset);
+            }
+            "ATRANS" => {
+                for i in 0..3 {
+                    shift[i] += values[i].unwrap_or(0.0);
+                }
+            }
+            _ => {
+                let kind = match name {
+                    "ROT" | "AROT" => Frame::Rotation,
+                    "SCALE" | "ASCALE" => Frame::Scaling,
+                    _ => Frame::Mirror,
+                };
+                if !name.starts_with('A') {
+                    shift = [0.0; 3];
+                    self.frames.retain(|f| f.0 == Frame::WorkOffset);
+                }
+                self.frames.push((kind, line.number, name.to_string()));
+            }
+        }
+        self.set_shift(shift);
+        Ok(())
+    }
+
+    /// Change the shift between program and work coordinates; the machine stays put.
+    fn set_shift(&mut self, shift: [f64; 3]) {
+        for i in 0..3 {
+            self.pos[i] = self.pos[i].map(|p| p + self.shift[i] - shift[i]);
+        }
+        self.shift = shift;
+    }
+
+    /// Fanuc M98/M99/M30 and Sinumerik L/M17: subprogram calls are refused, subprogram bodies
+    /// are kept as text.
+    fn fanuc_m_codes(&mut self, line: &Line, words: &[W]) -> Result<()> {
+        let m = |v: f64| words.iter().any(|w| w.letter == b'M' && w.value == Some(v));
+        let call = match self.dialect {
+            Dialect::Fanuc if m(98.0) => Some("M98"),
+            Dialect::Sinumerik => words
+                .iter()
+                .find(|w| w.letter == b'L')
+                .map(|w| self.wtext(w)),
+            _ => None,
+        };
+        if let (Some(word), None) = (call, &self.sub) {
+            return Err(self.err(
+                line,
+                word,
+                format!("`{}` calls a subprogram whose moves errmap cannot follow (they run in this program's position, modes and frames)", self.text.get(line.span.clone()).unwrap_or("").trim()),
+                "expand the subprogram into the program (or post the program without subprograms)",
+            ));
+        }
+        let end_sub = match self.dialect {
+            Dialect::Fanuc => m(99.0),
+            Dialect::Sinumerik => m(17.0),
+            _ => false,
+        };
+        if end_sub {
+            if self.sub.is_some() && self.dialect == Dialect::Fanuc {
+                self.sub = None;
+            } else {
+                self.m99 = Some(line.number);
+            }
+        }
+        if self.dialect == Dialect::Fanuc && (m(30.0) || m(2.0)) {
+            self.programs = self.programs.max(1);
+        }
+        Ok(())
     }
 
     fn oword(&mut self, line: &Line, name: &str, keyword: &str, otext: &str) -> Result<()> {
@@ -484,31 +941,99 @@ impl<'a> Rewriter<'a> {
         Ok(())
     }
 
-    fn words(&mut self, line: &Line, words: &[W]) -> Result<()> {
-        let find = |l: u8| words.iter().find(|w| w.letter == l);
-        let gs: Vec<(&W, Option<i32>)> = words
+    /// The G words of a block with their meaning in the dialect; an unknown code is refused.
+    fn g_words<'w>(&self, line: &Line, words: &'w [W]) -> Result<Vec<(&'w W, i32, G)>> {
+        let mut gs = Vec::new();
+        for w in words.iter().filter(|w| w.letter == b'G') {
+            let Some(v) = w.value.filter(|_| !w.is_expr) else {
+                return Err(self.err(
+                    line,
+                    self.wtext(w),
+                    "a G word given by a parameter or expression".into(),
+                    "write the G code as a number",
+                ));
+            };
+            let code = g_code(v);
+            let Some(g) = self.g(code) else {
+                return Err(self.err(
+                    line,
+                    self.wtext(w),
+                    format!(
+                        "`{}` is not a G code errmap follows in the {} dialect",
+                        self.wtext(w),
+                        self.dialect.name()
+                    ),
+                    "expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect), or pass the program's --dialect",
+                ));
+            };
+            gs.push((w, code, g));
+        }
+        Ok(gs)
+    }
+
+    /// Fanuc numbers without a decimal point are least input increments unless the machine
+    /// reads them as millimetres/inches (calculator type): scale them, or refuse.
+    fn fanuc_numbers(&self, line: &Line, words: &[W]) -> Result<Option<Vec<W>>> {
+        let coord = |l: u8| matches!(l, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R');
+        let Some(first) = words
             .iter()
-            .filter(|w| w.letter == b'G')
-            .map(|w| (w, w.value.map(g_code)))
-            .collect();
-        let has_g = |c: i32| gs.iter().any(|(_, g)| *g == Some(c));
-        // Modal codes (applied before motion, RS274/NGC order of execution).
+            .find(|w| w.no_dot && coord(w.letter) && w.value != Some(0.0))
+        else {
+            return Ok(None);
+        };
+        if self.dialect != Dialect::Fanuc {
+            return Ok(None);
+        }
+        let Some(numbers) = self.settings.fanuc_numbers else {
+            let t = self.wtext(first);
+            return Err(self.err(
+                line,
+                t,
+                format!("`{t}` has no decimal point: a Fanuc reads it as {} mm with 0.001 mm increment input (parameter 3401#0 DPI = 0) but as {} mm with calculator-type input (DPI = 1)", first.value.unwrap_or(0.0) * 0.001, first.value.unwrap_or(0.0)),
+                "pass --fanuc-numbers is-b (or is-a, is-c) or --fanuc-numbers calculator as the machine is set (job key [toolpaths] fanuc_numbers)",
+            ));
+        };
+        let unit = numbers.unit(self.inches);
+        Ok(Some(
+            words
+                .iter()
+                .map(|w| {
+                    let mut w = w.clone();
+                    if w.no_dot && coord(w.letter) {
+                        w.value = w.value.map(|v| v * unit);
+                    }
+                    w
+                })
+                .collect(),
+        ))
+    }
+
+    /// Apply the modal G codes of a block (plane, units, distance modes, cutter compensation).
+    fn modal(&mut self, line: &Line, gs: &[(&W, i32, G)]) {
         let orig_inches = self.inches;
-        for (_, g) in &gs {
+        let mut units_word = false;
+        for &(_, code, g) in gs {
             match g {
-                Some(170) => self.plane = Plane::G17,
-                Some(180) => self.plane = Plane::G18,
-                Some(190) => self.plane = Plane::G19,
-                Some(200) => self.inches = true,
-                Some(210) => self.inches = false,
-                Some(900) => self.absolute = true,
-                Some(910) => self.absolute = false,
-                Some(901) => self.arc_absolute = true,
-                Some(911) => self.arc_absolute = false,
-                Some(400) => self.cutter_comp = None,
-                Some(c @ (410 | 411 | 420 | 421)) => {
-                    self.cutter_comp = Some((line.number, format!("G{}", *c as f64 / 10.0)));
+                G::Plane(p) => self.plane = p,
+                G::Units(inches) => {
+                    self.inches = inches;
+                    units_word = true;
                 }
+                G::Distance(a) => self.absolute = a,
+                G::ArcDistance(a) => self.arc_absolute = a,
+                G::CutterComp(false) => self.cutter_comp = None,
+                G::CutterComp(true) => {
+                    self.cutter_comp = Some((line.number, format!("G{}", code as f64 / 10.0)));
+                }
+                G::WorkOffset => match self.first_offset {
+                    None => self.first_offset = Some(code),
+                    Some(c) if c == code => self.frames.retain(|f| f.0 != Frame::WorkOffset),
+                    Some(_) => self.frames.push((
+                        Frame::WorkOffset,
+                        line.number,
+                        format!("G{}", code as f64 / 10.0),
+                    )),
+                },
                 _ => {}
             }
         }
@@ -518,14 +1043,108 @@ impl<'a> Rewriter<'a> {
             for p in self.pos.iter_mut() {
                 *p = p.map(|v| v * f);
             }
+            for s in self.shift.iter_mut() {
+                *s *= f;
+            }
             self.offset *= f;
         }
-        let motion_word = gs.iter().find(|(_, g)| g.is_some_and(is_group1));
-        let unknown_g = gs.iter().find(|(_, g)| g.is_none());
-        let group0 = gs
+        if units_word {
+            self.set_units_known();
+            self.fix_zone();
+        }
+    }
+
+    /// Non-motion codes that take axis words (G92, G52, G68, G51, G10, G28 …): followed where
+    /// errmap can (G92 and G52 as shifts), a frame under which cuts in the zone are refused
+    /// otherwise.
+    fn group0(&mut self, line: &Line, words: &[W], gw: &W, g: G) -> Result<()> {
+        let find = |l: u8| words.iter().find(|w| w.letter == l);
+        let word = self.wtext(gw).to_string();
+        match g {
+            G::SetPosition => {
+                let mut shift = self.shift;
+                let mut known = true;
+                for (i, l) in AXES.iter().enumerate() {
+                    if let Some(w) = find(*l) {
+                        match (self.pos[i], w.value) {
+                            (Some(p), Some(v)) => shift[i] = self.shift[i] + p - v,
+                            _ => known = false,
+                        }
+                    }
+                }
+                if known {
+                    self.set_shift(shift);
+                } else {
+                    self.frames.push((Frame::Shift, line.number, word));
+                    self.pos = [None; 3];
+                    self.unknown_since = Some(line.number);
+                }
+            }
+            G::Frame(Frame::Local) => {
+                let mut shift = self.shift;
+                for (i, l) in AXES.iter().enumerate() {
+                    match find(*l).map(|w| w.value) {
+                        Some(Some(v)) if self.dialect == Dialect::Fanuc => {
+                            shift[i] = self.shift[i] - self.local[i] + v;
+                            self.local[i] = v;
+                        }
+                        Some(Some(v)) => shift[i] = v,
+                        Some(None) => self.frames.push((Frame::Local, line.number, word.clone())),
+                        None => {}
+                    }
+                }
+                self.set_shift(shift);
+            }
+            G::FrameCancel(Frame::Shift) => {
+                self.local = [0.0; 3];
+                self.set_shift([0.0; 3]);
+                self.frames.retain(|f| f.0 != Frame::Shift);
+            }
+            G::Frame(kind) => self.frames.push((kind, line.number, word)),
+            G::FrameCancel(kind) => self.frames.retain(|f| f.0 != kind),
+            G::DataSetting => {
+                let l = find(b'L').and_then(|w| w.value);
+                if !matches!(l, Some(v) if [1.0, 10.0, 11.0, 12.0, 13.0].contains(&v)) {
+                    self.frames.push((Frame::Data, line.number, word));
+                }
+            }
+            G::Call => {
+                return Err(self.err(
+                    line,
+                    &word,
+                    format!("`{word}` calls a macro whose moves errmap cannot follow"),
+                    "expand the macro into the program",
+                ))
+            }
+            _ => {
+                self.pos = [None; 3];
+                self.unknown_since = Some(line.number);
+            }
+        }
+        Ok(())
+    }
+
+    fn words(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
+        let gs = self.g_words(line, words_in)?;
+        self.modal(line, &gs);
+        let scaled = self.fanuc_numbers(line, words_in)?;
+        let words: &[W] = scaled.as_deref().unwrap_or(words_in);
+        let find = |l: u8| words.iter().find(|w| w.letter == l);
+        let motion_word = gs
             .iter()
-            .find(|(_, g)| matches!(g, Some(100 | 280 | 281 | 300 | 301 | 920 | 921 | 922 | 923)));
-        let g53 = has_g(530);
+            .find(|(_, _, g)| matches!(g, G::Motion(_) | G::MotionCancel));
+        let group0 = gs.iter().find(|(_, _, g)| {
+            matches!(
+                g,
+                G::SetPosition
+                    | G::Frame(_)
+                    | G::FrameCancel(_)
+                    | G::Home
+                    | G::DataSetting
+                    | G::Call
+            )
+        });
+        let g53 = gs.iter().any(|(_, _, g)| *g == G::Machine);
         let axis_present = words.iter().any(|w| {
             matches!(
                 w.letter,
@@ -535,34 +1154,15 @@ impl<'a> Rewriter<'a> {
         let arc_words = words
             .iter()
             .any(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
-        if let Some((_, Some(c))) = motion_word {
-            self.motion = Some(*c);
+        if let Some((_, c, g)) = motion_word {
+            self.motion = (*g != G::MotionCancel).then_some(*c);
         }
-        // G80 cancels the motion mode; a line with axis words then has no motion to make.
-        let motion = if motion_word.is_some_and(|(_, g)| *g == Some(800)) {
-            self.motion = None;
-            None
-        } else {
-            self.motion
-        };
+        let motion = self.motion;
 
         // Group 0 codes that take axis words (G10, G28, G30, G92…): no cutting move on the line.
-        if let Some((_, g)) = group0 {
+        if let Some(&(gw, _, g)) = group0 {
             self.return_if_needed(line, words, true)?;
-            match g {
-                Some(920) => {
-                    for (i, l) in AXES.iter().enumerate() {
-                        if let Some(w) = find(*l) {
-                            self.pos[i] = w.value;
-                        }
-                    }
-                }
-                Some(100) => {}
-                _ => {
-                    self.pos = [None; 3];
-                    self.unknown_since = Some(line.number);
-                }
-            }
+            self.group0(line, words, gw, g)?;
             self.sync_out_motion(words);
             self.copy_line(line);
             return Ok(());
@@ -572,22 +1172,12 @@ impl<'a> Rewriter<'a> {
             axis_present || (motion_word.is_some() && arc_words && matches!(motion, Some(20 | 30)));
         let Some(motion) = motion.filter(|_| moves) else {
             // No motion on this line.
-            if let Some((gw, _)) = unknown_g {
-                if axis_present {
-                    return Err(self.err(
-                        line,
-                        &gw.text,
-                        "a G word given by a parameter or expression on a line with axis words"
-                            .into(),
-                        "write the G code as a number",
-                    ));
-                }
-            }
             self.sync_out_motion(words);
             self.copy_line(line);
             return Ok(());
         };
 
+        self.fix_zone();
         // Start and end of the move in the original program.
         let start = self.pos;
         let mut end = self.pos;
@@ -596,7 +1186,7 @@ impl<'a> Rewriter<'a> {
             if let Some(w) = find(*l) {
                 end[i] = if g53 {
                     None
-                } else if self.absolute {
+                } else if w.abs.unwrap_or(self.absolute) {
                     w.value
                 } else {
                     match (start[i], w.value) {
@@ -615,7 +1205,10 @@ impl<'a> Rewriter<'a> {
             .iter()
             .find(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'));
         let expr_word = words.iter().find(|w| w.is_expr);
-        let cutting = matches!(motion, 10 | 20 | 30);
+        let cutting = matches!(
+            self.g(motion),
+            Some(G::Motion(Motion::Linear | Motion::ArcCw | Motion::ArcCcw))
+        );
         // `/` at the start of a line: block delete, the controller may skip the line.
         let block_delete = line
             .tokens
@@ -627,9 +1220,11 @@ impl<'a> Rewriter<'a> {
 
         // Refusals: things errmap cannot compensate safely, if the move may touch the zone.
         let refusal: Option<(String, String, &str)> = if !cutting {
-            if is_canned(motion) || matches!(motion, 50 | 51 | 52 | 330 | 331) {
+            let special = self.g(motion) == Some(G::Motion(Motion::Special))
+                && !(self.dialect == Dialect::Linuxcnc && (380..=385).contains(&motion));
+            if self.is_canned(motion) || special {
                 let mut pts = vec![start, end];
-                if is_canned(motion) {
+                if self.is_canned(motion) {
                     // The drill axis runs from the start through the R level to the bottom Z;
                     // under G91, R is relative to the start and Z to the R level.
                     let (_, _, ax) = self.plane.axes();
@@ -649,12 +1244,13 @@ impl<'a> Rewriter<'a> {
                     }
                 }
                 let name = format!("G{}", motion as f64 / 10.0);
-                let what = if is_canned(motion) {
+                let what = if self.is_canned(motion) {
                     format!("canned cycle {name}")
-                } else if motion < 100 {
-                    format!("spline {name}")
                 } else {
-                    format!("threading/tapping move {name}")
+                    format!(
+                        "{name} (in the {} dialect a spline, thread, tap or other move errmap does not follow)",
+                        self.dialect.name()
+                    )
                 };
                 self.may_touch(&pts).then(|| {
                     (
@@ -666,6 +1262,39 @@ impl<'a> Rewriter<'a> {
             } else {
                 None
             }
+        } else if !self.units_known {
+            let at = words
+                .iter()
+                .find(|w| matches!(w.letter, b'G' | b'X' | b'Y' | b'Z'))
+                .map(|w| self.wtext(w).to_string())
+                .unwrap_or_default();
+            let (codes, hint) = match self.dialect {
+                Dialect::Linuxcnc | Dialect::Fanuc => ("G20/G21", "add G21 (mm) or G20 (inch) before the first cut, or pass --units mm|inch"),
+                Dialect::Sinumerik => ("G70/G71/G700/G710", "add G71 (mm) or G70 (inch) before the first cut, or pass --units mm|inch"),
+                Dialect::Heidenhain => ("G70/G71 in the % header", "begin the program with %NAME G71 * (mm) or G70 * (inch), or pass --units mm|inch"),
+            };
+            Some((
+                at,
+                format!("cut with no unit code ({codes}) before it: errmap cannot tell millimetres from inches (a 25.4× error)"),
+                hint,
+            ))
+        } else if let Some((kind, fl, fw)) = self.frames.last().cloned() {
+            let pts = self.frame_points(kind, &[start, end]);
+            self.may_touch(&pts).then(|| {
+                (
+                    fw.clone(),
+                    format!("`{fw}` (line {fl}) transforms the coordinates ({kind:?}), which errmap does not follow, and this cut may lie in the compensation zone"),
+                    "cancel the transformation before the cuts in the zone (G69, G50, G50.1, G54 …), or post the program without it",
+                )
+            })
+        } else if let Some((fl, fw)) = self.flow.clone() {
+            self.may_touch(&[start, end]).then(|| {
+                (
+                    fw.clone(),
+                    format!("the program jumps (`{fw}` on line {fl}), so a cut may run any number of times from any position, and this cut may lie in the compensation zone"),
+                    "expand loops and jumps into plain blocks",
+                )
+            })
         } else if !self.blocks.is_empty() {
             let b = &self.blocks[self.blocks.len() - 1];
             let head = format!("o{} {}", b.name, b.keyword);
@@ -696,7 +1325,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = polar {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     "polar coordinates (@ ^) on a move in the compensation zone".into(),
                     "post the program with X/Y coordinates (or move the zone away)",
                 )
@@ -704,7 +1333,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = expr_word {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     "# parameters or [expressions] on a move in the compensation zone".into(),
                     "expand the program to plain numbers (or move the zone away)",
                 )
@@ -712,7 +1341,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = other_axis {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     format!(
                         "axis {} moves together with a cut in the compensation zone",
                         w.letter as char
@@ -748,6 +1377,9 @@ impl<'a> Rewriter<'a> {
         }
 
         let plain = cutting
+            && self.units_known
+            && self.frames.is_empty()
+            && self.flow.is_none()
             && !block_delete
             && self.blocks.is_empty()
             && self.cutter_comp.is_none()
@@ -775,7 +1407,7 @@ impl<'a> Rewriter<'a> {
                     }
                 }
             }
-            if is_canned(motion) {
+            if self.is_canned(motion) {
                 // The cycle retracts to the R level or the start (G98/G99): not tracked.
                 end[self.plane.axes().2] = None;
             }
@@ -823,6 +1455,9 @@ impl<'a> Rewriter<'a> {
                 .collect(),
         };
         let emitted = self.emit_points(&path);
+        if self.extrapolated.replace(false) {
+            self.report.moves_outside_domain += 1;
+        }
         if !emitted.iter().any(|(_, e)| e.is_some()) {
             return self.finish_unchanged(line, words, end);
         }
@@ -849,8 +1484,10 @@ impl<'a> Rewriter<'a> {
         let result = if let Some(r) = find(b'R') {
             Arc::from_radius(self.plane, s, e, r, cw, turns)
         } else {
-            // Offsets I, J, K go with X, Y, Z.
-            let off = |axis: usize| find([b'I', b'J', b'K'][axis]);
+            // Offsets I, J, K go with X, Y, Z; Sinumerik `I=AC(…)` is an absolute centre.
+            let word = |axis: usize| words.iter().find(|w| w.letter == [b'I', b'J', b'K'][axis]);
+            let off = |axis: usize| word(axis).and_then(|w| w.value);
+            let abs = |axis: usize| word(axis).and_then(|w| w.abs).unwrap_or(self.arc_absolute);
             let (o1, o2) = (off(a1), off(a2));
             if o1.is_none() && o2.is_none() {
                 return Err(self.err(
@@ -860,11 +1497,14 @@ impl<'a> Rewriter<'a> {
                     "give R or the I/J/K words of the plane (G17: I J, G18: I K, G19: J K)",
                 ));
             }
-            let c = if self.arc_absolute {
-                (o1.unwrap_or(0.0), o2.unwrap_or(0.0))
-            } else {
-                (s[a1] + o1.unwrap_or(0.0), s[a2] + o2.unwrap_or(0.0))
+            let centre = |o: Option<f64>, axis: usize, start: f64| {
+                if abs(axis) {
+                    o.unwrap_or(start)
+                } else {
+                    start + o.unwrap_or(0.0)
+                }
             };
+            let c = (centre(o1, a1, s[a1]), centre(o2, a2, s[a2]));
             Arc::from_centre(self.plane, s, e, c, cw, turns)
         };
         result.map_err(|m| {
@@ -877,11 +1517,26 @@ impl<'a> Rewriter<'a> {
         })
     }
 
+    /// The points of a move as errmap can know them under a frame: plane coordinates unknown,
+    /// the normal too unless a rotation turns about it.
+    fn frame_points(&self, kind: Frame, pts: &[[Option<f64>; 3]]) -> Vec<[Option<f64>; 3]> {
+        let keep_normal = kind == Frame::Rotation && self.plane.axes().2 == self.normal;
+        pts.iter()
+            .map(|p| {
+                let mut q = [None; 3];
+                if keep_normal {
+                    q[self.normal] = p[self.normal];
+                }
+                q
+            })
+            .collect()
+    }
+
     fn emit_points(&self, path: &[[f64; 3]]) -> Vec<([f64; 3], Option<f64>)> {
         emit_points(
             path,
             self.settings.max_segment_in(self.inches),
-            self.settings.zone,
+            self.zone_now(),
             self.normal,
             &|p| self.error_at(p),
         )
@@ -898,7 +1553,7 @@ impl<'a> Rewriter<'a> {
         // to an absolute normal coordinate.
         let absolute_normal = !group0
             && self.absolute
-            && !self.motion.is_some_and(is_canned)
+            && !self.motion.is_some_and(|m| self.is_canned(m))
             && words.iter().any(|w| w.letter == n && w.value.is_some())
             && !words
                 .iter()
@@ -920,8 +1575,12 @@ impl<'a> Rewriter<'a> {
         } else {
             "G1"
         };
-        self.out
-            .push_str(&format!("{code} {}{}", n as char, self.fmt(value)));
+        self.out.push_str(&format!(
+            "{code} {}{}{}",
+            n as char,
+            self.fmt(value),
+            self.eob()
+        ));
         self.out.push_str(line_terminator(self.text, line));
         self.out_motion = Some(if code == "G0" { 0 } else { 10 });
         self.offset = 0.0;
@@ -933,7 +1592,7 @@ impl<'a> Rewriter<'a> {
     fn sync_out_motion(&mut self, words: &[W]) {
         if words
             .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1))
+            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)))
         {
             self.out_motion = self.motion;
         }
@@ -943,7 +1602,7 @@ impl<'a> Rewriter<'a> {
         self.return_if_needed(line, words, false)?;
         let has_motion_g = words
             .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1));
+            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)));
         let moves = words.iter().any(|w| {
             matches!(
                 w.letter,
@@ -1116,7 +1775,12 @@ impl<'a> Rewriter<'a> {
                 words_text.push_str(&format!(" {}{}", *l as char, t));
             }
             if let Some(r) = r_word {
-                words_text.push_str(&format!(" R{}", self.fmt(r)));
+                let r_letter = if self.dialect == Dialect::Sinumerik {
+                    "CR="
+                } else {
+                    "R"
+                };
+                words_text.push_str(&format!(" {r_letter}{}", self.fmt(r)));
             }
             self.out_motion = Some(if code == "G1" { 10 } else { motion });
             lines_text.push(words_text);
@@ -1138,7 +1802,7 @@ impl<'a> Rewriter<'a> {
         if let Some(last) = lines_text.last_mut() {
             for w in &stops {
                 last.push(' ');
-                last.push_str(&w.text);
+                last.push_str(self.wtext(w));
             }
         }
         let stop_tokens: HashSet<usize> = stops.iter().map(|w| w.token).collect();
@@ -1174,8 +1838,13 @@ impl<'a> Rewriter<'a> {
         }
         // Inserted lines use the file's terminator; the last one keeps the line's own
         // (none on a last line without a newline).
+        let eob = self.eob();
+        let extra: Vec<String> = lines_text[1..]
+            .iter()
+            .map(|t| format!("{t}{eob}"))
+            .collect();
         let mut pieces: Vec<&str> = vec![first.trim_end_matches([' ', '\t'])];
-        pieces.extend(lines_text[1..].iter().map(|t| t.as_str()));
+        pieces.extend(extra.iter().map(|t| t.as_str()));
         let count = pieces.len();
         for (k, piece) in pieces.into_iter().enumerate() {
             self.out.push_str(piece);
