@@ -1448,13 +1448,20 @@ impl<'a> Rewriter<'a> {
                 "check the coordinates and units, or raise --max-segment / --chord-tol",
             ));
         }
-        let path: Vec<[f64; 3]> = match &arc {
-            None => vec![s, e],
-            Some(a) => (0..=chords)
-                .map(|i| a.point(i as f64 / chords as f64))
-                .collect(),
-        };
-        let emitted = self.emit_points(&path);
+        // The move as a curve over [0, 1] with its chord ends as break points: splits at the
+        // zone and domain edges fall on the curve itself (on the arc, not on a chord).
+        let breaks: Vec<f64> = (0..=chords).map(|i| i as f64 / chords as f64).collect();
+        let line_at = |t: f64| lerp(&s, &e, t);
+        let arc_at = |t: f64| arc.as_ref().map_or(e, |a| a.point(t));
+        let curve: &dyn Fn(f64) -> [f64; 3] = if arc.is_some() { &arc_at } else { &line_at };
+        let emitted = emit_curve(
+            &breaks,
+            curve,
+            self.settings.max_segment_in(self.inches),
+            self.zone_now(),
+            self.normal,
+            &|p| self.error_at(p),
+        );
         if self.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
@@ -1530,16 +1537,6 @@ impl<'a> Rewriter<'a> {
                 q
             })
             .collect()
-    }
-
-    fn emit_points(&self, path: &[[f64; 3]]) -> Vec<([f64; 3], Option<f64>)> {
-        emit_points(
-            path,
-            self.settings.max_segment_in(self.inches),
-            self.zone_now(),
-            self.normal,
-            &|p| self.error_at(p),
-        )
     }
 
     /// Emit a return along the normal to the original position before an unchanged line that
@@ -1757,22 +1754,40 @@ impl<'a> Rewriter<'a> {
                     }
                 }
             }
+            // The words as written, and the values the controller reads from them.
+            let written: Vec<(String, f64)> = (0..3)
+                .map(|i| {
+                    let v = if self.absolute {
+                        q[i]
+                    } else {
+                        q[i] - out_pos[i]
+                    };
+                    let t = self.fmt(v);
+                    let rounded: f64 = t.parse().unwrap_or(v);
+                    (t, rounded)
+                })
+                .collect();
+            // No zero-length moves: a point that rounds to where the tool already is goes.
+            let zero = (0..3).all(|i| {
+                if self.absolute {
+                    let here = self.fmt(out_pos[i]).parse().unwrap_or(out_pos[i]);
+                    written[i].1 == here
+                } else {
+                    written[i].1 == 0.0
+                }
+            });
+            if zero {
+                continue;
+            }
             words_text.push_str(&code);
             for (i, l) in AXES.iter().enumerate() {
-                let v = if self.absolute {
-                    q[i]
-                } else {
-                    q[i] - out_pos[i]
-                };
-                let t = self.fmt(v);
                 // Track the position the controller will reach after rounding.
-                let rounded: f64 = t.parse().unwrap_or(v);
                 out_pos[i] = if self.absolute {
-                    rounded
+                    written[i].1
                 } else {
-                    out_pos[i] + rounded
+                    out_pos[i] + written[i].1
                 };
-                words_text.push_str(&format!(" {}{}", *l as char, t));
+                words_text.push_str(&format!(" {}{}", *l as char, written[i].0));
             }
             if let Some(r) = r_word {
                 let r_letter = if self.dialect == Dialect::Sinumerik {
@@ -1785,6 +1800,11 @@ impl<'a> Rewriter<'a> {
             self.out_motion = Some(if code == "G1" { 10 } else { motion });
             lines_text.push(words_text);
         }
+        if lines_text.is_empty() {
+            // Every point rounds to the current position: the line keeps its other words only.
+            lines_text.push(String::new());
+        }
+        let nseg = lines_text.len();
         // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
         // segment, so the program does not stop after the first one.
         let stops: Vec<&W> = if nseg > 1 {
@@ -1876,13 +1896,46 @@ pub(crate) fn emit_points(
     normal: usize,
     error_at: &dyn Fn(&[f64; 3]) -> Option<f64>,
 ) -> Vec<([f64; 3], Option<f64>)> {
+    let breaks: Vec<f64> = (0..path.len()).map(|i| i as f64).collect();
+    let curve = |s: f64| {
+        let i = (s.floor() as usize).min(path.len().saturating_sub(2));
+        match (path.get(i), path.get(i + 1)) {
+            (Some(a), Some(b)) => lerp(a, b, s - i as f64),
+            (Some(a), None) => *a,
+            _ => [0.0; 3],
+        }
+    };
+    emit_curve(&breaks, &curve, step, zone, normal, error_at)
+}
+
+/// [`emit_points`] along a curve given by its parameter: `breaks` are the parameters of the
+/// polyline's corners; intermediate and boundary points are taken on the curve.
+pub(crate) fn emit_curve(
+    breaks: &[f64],
+    curve: &dyn Fn(f64) -> [f64; 3],
+    step: f64,
+    zone: Option<(f64, f64)>,
+    normal: usize,
+    error_at: &dyn Fn(&[f64; 3]) -> Option<f64>,
+) -> Vec<([f64; 3], Option<f64>)> {
     let mut out: Vec<([f64; 3], Option<f64>)> = Vec::new();
-    let Some(first) = path.first() else {
+    let Some(&s0) = breaks.first() else {
         return out;
     };
-    out.push((*first, error_at(first)));
-    for w in path.windows(2) {
-        let (a, b) = (w[0], w[1]);
+    let first = curve(s0);
+    out.push((first, error_at(&first)));
+    for w in breaks.windows(2) {
+        let (sa, sb) = (w[0], w[1]);
+        let (a, b) = (curve(sa), curve(sb));
+        let at = |t: f64| {
+            if t <= 0.0 {
+                a
+            } else if t >= 1.0 {
+                b
+            } else {
+                curve(sa + t * (sb - sa))
+            }
+        };
         let len = dist(&a, &b);
         let k = (len / step).ceil().clamp(1.0, 1e7) as usize;
         let mut ts: Vec<f64> = (1..=k).map(|i| i as f64 / k as f64).collect();
@@ -1903,14 +1956,14 @@ pub(crate) fn emit_points(
         let mut e_prev = error_at(&a);
         for t in ts {
             // The last point is the piece end exactly (lerp can round past a domain edge).
-            let p = if t >= 1.0 { b } else { lerp(&a, &b, t) };
+            let p = at(t);
             let e_here = error_at(&p);
             if e_prev.is_some() != e_here.is_some() {
                 // Bisect for the boundary: keep `lo_t` on the side of e_prev.
                 let (mut lo_t, mut hi_t) = (t_prev, t);
                 for _ in 0..60 {
                     let mid = 0.5 * (lo_t + hi_t);
-                    if error_at(&lerp(&a, &b, mid)).is_some() == e_prev.is_some() {
+                    if error_at(&at(mid)).is_some() == e_prev.is_some() {
                         lo_t = mid;
                     } else {
                         hi_t = mid;
@@ -1921,8 +1974,8 @@ pub(crate) fn emit_points(
                 } else {
                     (hi_t, lo_t)
                 };
-                let p_in = lerp(&a, &b, t_in);
-                let p_out = lerp(&a, &b, t_out);
+                let p_in = at(t_in);
+                let p_out = at(t_out);
                 let e_in = error_at(&p_in);
                 if e_prev.is_some() {
                     out.push((p_in, e_in));
