@@ -497,14 +497,17 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                     let probes: Vec<(f64, f64)> = Vec::new();
                     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
                     std.write_csv(&dir.join("std.csv"), "std_um")?;
-                    let (pv, rms) = mean.pv_rms_um();
+                    let extrapolated = mean.extrapolated_nodes(model.hull_mm.as_deref());
+                    let (pv, rms) = mean
+                        .pv_rms_where_um(&extrapolated, false)
+                        .unwrap_or_else(|| mean.pv_rms_um());
                     let std_max = std.values.iter().cloned().fold(0.0, f64::max);
                     let title_mean = format!(
-                        "{} family mean of {} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
+                        "{} family mean of {} parts — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)",
                         s.family,
                         maps.len()
                     );
-                    draw(
+                    draw_shaded(
                         &dir.join("mean.png"),
                         &title_mean,
                         &mean,
@@ -513,6 +516,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         Scale::Diverging,
                         (ua, va),
                         "E (µm)",
+                        &extrapolated,
                     )?;
                     let title_std = format!(
                         "{} part-to-part standard deviation — max {std_max:.2} µm",
@@ -650,6 +654,32 @@ pub(crate) fn draw(
     (ua, va): (Axis, Axis),
     label: &str,
 ) -> Result<()> {
+    draw_shaded(
+        path,
+        title,
+        map,
+        probes,
+        rejected,
+        scale,
+        (ua, va),
+        label,
+        &[],
+    )
+}
+
+/// [`draw`] with the nodes outside the measured domain lightened.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn draw_shaded(
+    path: &Path,
+    title: &str,
+    map: &ErrorMap,
+    probes: &[(f64, f64)],
+    rejected: &[(f64, f64)],
+    scale: Scale,
+    (ua, va): (Axis, Axis),
+    label: &str,
+    extrapolated: &[bool],
+) -> Result<()> {
     let values: Vec<Option<f64>> = map.values.iter().map(|&v| Some(v)).collect();
     heatmap::save_heatmap(
         path,
@@ -667,6 +697,7 @@ pub(crate) fn draw(
             probes,
             rejected,
             scale,
+            extrapolated,
         },
     )
 }
@@ -686,7 +717,12 @@ fn write_part(
     crate::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
-    let (pv, rms) = map.pv_rms_um();
+    // Accuracy figures over the measured domain; the extrapolated rest reported apart.
+    let extrapolated = map.extrapolated_nodes(model.hull_mm.as_deref());
+    let (pv, rms) = map
+        .pv_rms_where_um(&extrapolated, false)
+        .unwrap_or((0.0, 0.0));
+    let outside = map.pv_rms_where_um(&extrapolated, true);
     let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
     let rejected: Vec<(f64, f64)> = p
         .prep
@@ -700,8 +736,8 @@ fn write_part(
     } else {
         format!("{} {name}", s.family)
     };
-    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm");
-    draw(
+    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)");
+    draw_shaded(
         &dir.join("map.png"),
         &title,
         map,
@@ -710,6 +746,7 @@ fn write_part(
         Scale::Diverging,
         axes,
         "E (µm)",
+        &extrapolated,
     )?;
     let summary = PartSummary {
         part: name.clone(),
@@ -723,6 +760,11 @@ fn write_part(
         holdout_rmse_um,
         rms_um: Some(rms),
         pv_um: Some(pv),
+        extrapolated_fraction: Some(
+            extrapolated.iter().filter(|&&x| x).count() as f64 / extrapolated.len().max(1) as f64,
+        ),
+        rms_extrapolated_um: outside.map(|o| o.1),
+        pv_extrapolated_um: outside.map(|o| o.0),
         output_dir: Some(dir.clone()),
         error: None,
     };

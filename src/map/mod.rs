@@ -205,6 +205,35 @@ impl ErrorMap {
         crate::report::heatmap::pv_rms_um(&opts)
     }
 
+    /// Which nodes lie outside the measured domain `hull_mm` (where the map extrapolates);
+    /// all `false` when the hull is unknown.
+    pub fn extrapolated_nodes(&self, hull_mm: Option<&[[f64; 2]]>) -> Vec<bool> {
+        let Some(hull) = hull_mm else {
+            return vec![false; self.values.len()];
+        };
+        let tol = 1e-9 * (1.0 + self.grid.step_mm);
+        (0..self.grid.nv)
+            .flat_map(|j| (0..self.grid.nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let (u, v) = self.grid.node(i, j);
+                crate::geom::hull_distance_mm(hull, [u, v]) > tol
+            })
+            .collect()
+    }
+
+    /// PV and RMS of the nodes whose `extrapolated` flag equals `which`, µm; `None` if none.
+    pub fn pv_rms_where_um(&self, extrapolated: &[bool], which: bool) -> Option<(f64, f64)> {
+        let opts: Vec<Option<f64>> = self
+            .values
+            .iter()
+            .zip(extrapolated)
+            .map(|(&v, &x)| (x == which).then_some(v))
+            .collect();
+        opts.iter()
+            .any(|v| v.is_some())
+            .then(|| crate::report::heatmap::pv_rms_um(&opts))
+    }
+
     /// Write as CSV `<u>_mm,<v>_mm,<value_column>` (e.g. `x_mm,y_mm,e_um`), atomically.
     pub fn write_csv(&self, path: &Path, value_column: &str) -> Result<()> {
         let (ua, va) = self.normal.plane_axes();
@@ -348,6 +377,29 @@ pub fn family_stats(maps: &[&ErrorMap]) -> Option<(ErrorMap, ErrorMap)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn accuracy_figures_split_at_the_measured_hull() {
+        // Nodes at u = 0, 1, 2 (v = 0) with E = 1, −1, 5 µm; the hull covers u ∈ [0, 1]:
+        // measured PV 2, RMS 1; extrapolated (u = 2 alone) PV 0, RMS 5.
+        let map = ErrorMap {
+            grid: Grid {
+                u0_mm: 0.0,
+                v0_mm: 0.0,
+                step_mm: 1.0,
+                nu: 3,
+                nv: 1,
+            },
+            normal: Axis::Z,
+            values: vec![1.0, -1.0, 5.0],
+        };
+        let hull = [[0.0, -1.0], [1.0, -1.0], [1.0, 1.0], [0.0, 1.0]];
+        let x = map.extrapolated_nodes(Some(&hull));
+        assert_eq!(x, vec![false, false, true]);
+        assert_eq!(map.pv_rms_where_um(&x, false), Some((2.0, 1.0)));
+        assert_eq!(map.pv_rms_where_um(&x, true), Some((0.0, 5.0)));
+        assert_eq!(map.extrapolated_nodes(None), vec![false; 3]);
+    }
     use crate::nn::Activation;
 
     fn tiny_model() -> FittedModel {
