@@ -66,6 +66,7 @@ fn raster(lines: usize) -> String {
 pub fn toolpath_compensate(c: &mut Criterion) {
     let settings = CompensationSettings {
         everywhere: true,
+        dialect: Some(errmap::toolpath::Dialect::Linuxcnc),
         ..CompensationSettings::default()
     };
     let mut group = c.benchmark_group("toolpath/compensate");

@@ -633,3 +633,14 @@ fn random_programs_compensate_to_the_original_minus_e_inside_and_unchanged_outsi
         }
     }
 }
+
+#[test]
+fn coordinates_are_fixed_point_without_minus_zero() {
+    use errmap::toolpath::format_coord;
+    assert_eq!(format_coord(-0.00001, false), "0.0000");
+    assert_eq!(format_coord(1.23456, false), "1.2346");
+    assert_eq!(format_coord(-2.5, true), "-2.50000");
+    assert_eq!(format_coord(80.0, false), "80.0000");
+    assert_eq!(format_coord(-1.014, false), "-1.0140");
+    assert_eq!(format_coord(1e20, false), "100000000000000000000.0000");
+}

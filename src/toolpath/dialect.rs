@@ -329,7 +329,7 @@ pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dial
             Some((line, w)) => Err(Error::input(
                 Location::cell(source, line, column_of(text, line, &w)),
                 format!(
-                    "cannot tell the controller dialect: `{w}` has no decimal point (10 mm on LinuxCNC or Sinumerik, 10 µm on a Fanuc in 0.001 mm increment input) and the program has nothing only one dialect has"
+                    "cannot tell the controller dialect: `{w}` has no decimal point (whole mm or inches on LinuxCNC or Sinumerik, least input increments, e.g. 0.001 mm, on a Fanuc in increment input) and the program has nothing only one dialect has"
                 ),
                 "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
             )),

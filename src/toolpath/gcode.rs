@@ -183,6 +183,37 @@ pub fn format_coord(v: f64, inches: bool) -> String {
 
 /// Fixed-point text with `d` decimals; never `-0` nor an exponent.
 pub fn format_decimals(v: f64, d: usize) -> String {
+    // Fast path: the value in units of the last decimal fits an integer exactly.
+    if let Some(units) = decimal_units(v, d) {
+        return units_text(units, d);
+    }
+    format_decimals_slow(v, d)
+}
+
+/// `v` rounded to `d` decimals, in units of the last decimal, when that is exact in an f64.
+fn decimal_units(v: f64, d: usize) -> Option<i64> {
+    const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
+    let n = (v * *POW10.get(d)?).round();
+    (n.is_finite() && n.abs() < 4e15).then_some(n as i64)
+}
+
+/// `units` × 10^-d as fixed-point text (`-0` written as `0`).
+fn units_text(units: i64, d: usize) -> String {
+    use std::fmt::Write;
+    let p = 10u64.pow(d as u32);
+    let a = units.unsigned_abs();
+    let mut t = String::with_capacity(24);
+    if units < 0 {
+        t.push('-');
+    }
+    let _ = write!(t, "{}", a / p);
+    if d > 0 {
+        let _ = write!(t, ".{:0d$}", a % p);
+    }
+    t
+}
+
+fn format_decimals_slow(v: f64, d: usize) -> String {
     let s = format!("{v:.d$}");
     if s.trim_start_matches('-')
         .chars()
@@ -335,8 +366,25 @@ impl<'a> Rewriter<'a> {
     /// Coordinates get at least 4 decimals in mm and 5 in inches, and as many as the program
     /// itself uses (so unchanged end points are written back exactly).
     fn fmt(&self, v: f64) -> String {
+        format_decimals(v, self.decimals())
+    }
+
+    fn decimals(&self) -> usize {
         let d = if self.inches { 5 } else { 4 };
-        format_decimals(v, d.max(self.program_decimals))
+        d.max(self.program_decimals)
+    }
+
+    /// The text of a coordinate and the value the controller reads from it.
+    fn written(&self, v: f64) -> (String, f64) {
+        let d = self.decimals();
+        match decimal_units(v, d) {
+            Some(u) => (units_text(u, d), u as f64 / 10f64.powi(d as i32)),
+            None => {
+                let t = format_decimals_slow(v, d);
+                let r = t.parse().unwrap_or(v);
+                (t, r)
+            }
+        }
     }
 
     fn scale_mm(&self) -> f64 {
@@ -1728,11 +1776,10 @@ impl<'a> Rewriter<'a> {
                         .is_some_and(|c| matches!(c, 0 | 10 | 20 | 30)))
                 || (w.letter == b'P' && arc.is_some())
         };
-        let removed_tokens: HashSet<usize> = words
-            .iter()
-            .filter(|w| removed(w))
-            .map(|w| w.token)
-            .collect();
+        let mut removed_tokens = vec![false; line.tokens.len()];
+        for w in words.iter().filter(|w| removed(w)) {
+            removed_tokens[w.token] = true;
+        }
         let nseg = segs.len();
         let mut lines_text: Vec<String> = Vec::with_capacity(nseg);
         for (k, q) in segs.iter().enumerate() {
@@ -1762,18 +1809,16 @@ impl<'a> Rewriter<'a> {
                     } else {
                         q[i] - out_pos[i]
                     };
-                    let t = self.fmt(v);
-                    let rounded: f64 = t.parse().unwrap_or(v);
-                    (t, rounded)
+                    self.written(v)
                 })
                 .collect();
             // No zero-length moves: a point that rounds to where the tool already is goes.
+            let d = self.decimals();
             let zero = (0..3).all(|i| {
                 if self.absolute {
-                    let here = self.fmt(out_pos[i]).parse().unwrap_or(out_pos[i]);
-                    written[i].1 == here
+                    decimal_units(written[i].1, d) == decimal_units(out_pos[i], d)
                 } else {
-                    written[i].1 == 0.0
+                    decimal_units(written[i].1, d) == Some(0)
                 }
             });
             if zero {
@@ -1825,17 +1870,20 @@ impl<'a> Rewriter<'a> {
                 last.push_str(self.wtext(w));
             }
         }
-        let stop_tokens: HashSet<usize> = stops.iter().map(|w| w.token).collect();
+        let mut stop_tokens = vec![false; line.tokens.len()];
+        for w in &stops {
+            stop_tokens[w.token] = true;
+        }
         // First line: the original line with its motion words replaced by the first segment.
         let mut first = String::new();
         let mut inserted = false;
         let mut skip_space = false;
         for (ti, tok) in line.tokens.iter().enumerate() {
-            if stop_tokens.contains(&ti) {
+            if stop_tokens[ti] {
                 skip_space = true;
                 continue;
             }
-            if removed_tokens.contains(&ti) {
+            if removed_tokens[ti] {
                 if !inserted {
                     first.push_str(&lines_text[0]);
                     inserted = true;
@@ -1845,7 +1893,7 @@ impl<'a> Rewriter<'a> {
             }
             if skip_space && tok.kind == TokenKind::Space {
                 skip_space = false;
-                if ti + 1 < line.tokens.len() && !removed_tokens.contains(&(ti + 1)) {
+                if ti + 1 < line.tokens.len() && !removed_tokens[ti + 1] {
                     first.push(' ');
                 }
                 continue;
