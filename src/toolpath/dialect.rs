@@ -228,7 +228,7 @@ pub fn g_code(dialect: Dialect, code: i32) -> Option<G> {
             520 => Some(G::Frame(Frame::Local)),
             100 => Some(G::DataSetting),
             280 | 281 | 300 | 301 => Some(G::Home),
-            540..=590 | 591..=593 => Some(G::WorkOffset),
+            540..=593 => Some(G::WorkOffset),
             800 => Some(G::MotionCancel),
             730 | 740 | 810..=890 => Some(G::Motion(Canned)),
             50..=53 | 330 | 331 | 380..=385 | 760 => Some(G::Motion(Special)),

@@ -371,7 +371,7 @@ impl<'a> Rewriter<'a> {
                             None,
                         ),
                     };
-                    let no_dot = matches!(value, Some(_))
+                    let no_dot = value.is_some()
                         && !is_expr
                         && !text.get(tok.span.clone()).unwrap_or("").contains('.');
                     words.push(W {

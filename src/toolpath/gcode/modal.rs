@@ -286,8 +286,8 @@ impl<'a> Rewriter<'a> {
 
     /// Change the shift between program and work coordinates; the machine stays put.
     pub(super) fn set_shift(&mut self, shift: [f64; 3]) {
-        for i in 0..3 {
-            self.pos[i] = self.pos[i].map(|p| p + self.shift[i] - shift[i]);
+        for (i, new) in shift.iter().enumerate() {
+            self.pos[i] = self.pos[i].map(|p| p + self.shift[i] - new);
         }
         self.shift = shift;
     }
@@ -386,12 +386,12 @@ impl<'a> Rewriter<'a> {
             (Dialect::Fanuc, _) => Ok(false),
             (Dialect::Heidenhain, "%") | (Dialect::Sinumerik, "%") => {
                 let upper = body.to_ascii_uppercase();
-                if self.dialect == Dialect::Heidenhain {
-                    if upper.contains("G70") || upper.contains("G71") {
-                        self.inches = upper.contains("G70");
-                        self.set_units_known();
-                        self.fix_zone();
-                    }
+                if self.dialect == Dialect::Heidenhain
+                    && (upper.contains("G70") || upper.contains("G71"))
+                {
+                    self.inches = upper.contains("G70");
+                    self.set_units_known();
+                    self.fix_zone();
                 }
                 Ok(false)
             }
