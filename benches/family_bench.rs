@@ -42,6 +42,7 @@ pub fn family_benches(c: &mut Criterion) {
                     probes: &probes,
                     rejected: &probes[..3],
                     scale: Scale::Diverging,
+                    extrapolated: &[],
                 },
             )
             .expect("heatmap")

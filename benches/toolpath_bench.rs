@@ -64,7 +64,11 @@ fn raster(lines: usize) -> String {
 }
 
 pub fn toolpath_compensate(c: &mut Criterion) {
-    let settings = CompensationSettings::default();
+    let settings = CompensationSettings {
+        everywhere: true,
+        dialect: Some(errmap::toolpath::Dialect::Linuxcnc),
+        ..CompensationSettings::default()
+    };
     let mut group = c.benchmark_group("toolpath/compensate");
     for rows in [10usize, 100, 1000] {
         let text = zigzag(rows);

@@ -81,11 +81,111 @@ pub trait ErrorField: Sync {
     fn normal(&self) -> Axis;
     /// Error E in mm along the normal at plane point (u, v) in mm; `None` outside the map's domain.
     fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64>;
+    /// Whether (u, v) lies in the measured domain (where E rests on probes, not extrapolation)
+    /// or within `margin_mm` of it; `None` when the map does not record it (a `model.json`
+    /// from an older errmap).
+    fn measured(&self, _u_mm: f64, _v_mm: f64, _margin_mm: f64) -> Option<bool> {
+        Some(true)
+    }
+    /// The probed surface's nominal extent along the normal, mm, when the map records it.
+    fn surface_mm(&self) -> Option<(f64, f64)> {
+        None
+    }
+}
+
+/// Convex hull of plane points, counter-clockwise, without collinear points (Andrew's monotone
+/// chain). Fewer than three distinct points give those points.
+pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = points
+        .iter()
+        .copied()
+        .filter(|q| q[0].is_finite() && q[1].is_finite())
+        .collect();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// Distance from `q` to a convex polygon from [`convex_hull`] (0 inside), mm.
+pub fn hull_distance_mm(hull: &[[f64; 2]], q: [f64; 2]) -> f64 {
+    let seg = |a: [f64; 2], b: [f64; 2]| {
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (q[0] - a[0] - t * dx).hypot(q[1] - a[1] - t * dy)
+    };
+    match hull.len() {
+        0 => f64::INFINITY,
+        1 => seg(hull[0], hull[0]),
+        2 => seg(hull[0], hull[1]),
+        n => {
+            let inside = (0..n).all(|i| {
+                let (a, b) = (hull[i], hull[(i + 1) % n]);
+                (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]) >= 0.0
+            });
+            if inside {
+                0.0
+            } else {
+                (0..n)
+                    .map(|i| seg(hull[i], hull[(i + 1) % n]))
+                    .fold(f64::INFINITY, f64::min)
+            }
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hull_of_a_square_with_inner_points_and_distances() {
+        let pts = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.0, 1.0],
+            [1.0, 0.0],
+        ];
+        let h = convex_hull(&pts);
+        assert_eq!(h, vec![[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]]);
+        assert_eq!(hull_distance_mm(&h, [1.0, 1.5]), 0.0);
+        assert!((hull_distance_mm(&h, [3.0, 1.0]) - 1.0).abs() < 1e-12);
+        // Beyond a corner: the distance to the corner, √2.
+        assert!((hull_distance_mm(&h, [3.0, 3.0]) - 2f64.sqrt()).abs() < 1e-12);
+        // A triangle's hypotenuse: (1.5, 1.5) is 0.5·√2 from x + y = 2.
+        let t = convex_hull(&[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]);
+        assert!((hull_distance_mm(&t, [1.5, 1.5]) - 0.5 * 2f64.sqrt()).abs() < 1e-12);
+    }
 
     #[test]
     fn plane_axes_are_right_handed_and_exclude_the_normal() {

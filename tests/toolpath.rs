@@ -2,7 +2,7 @@
 
 use errmap::geom::{Axis, Domain, ErrorField};
 use errmap::toolpath::lexer::lex;
-use errmap::toolpath::{compensate_csv, compensate_gcode, CompensationSettings};
+use errmap::toolpath::{compensate_csv, compensate_gcode, CompensationSettings, Dialect, Units};
 use std::path::{Path, PathBuf};
 
 /// E = e0 + g·u mm inside `dom`, `None` outside.
@@ -45,8 +45,12 @@ fn z_field(e0: f64, g: f64) -> Lin {
 fn settings(zone: Option<(f64, f64)>, max_segment: f64) -> CompensationSettings {
     CompensationSettings {
         zone,
+        everywhere: zone.is_none(),
         max_segment,
         chord_tol: 0.005,
+        dialect: Some(Dialect::Linuxcnc),
+        units: Some(Units::Mm),
+        ..CompensationSettings::default()
     }
 }
 
@@ -411,28 +415,38 @@ fn unit_switch_mid_program_converts_the_position() {
 }
 
 #[test]
-fn a_return_step_keeps_later_modal_arcs_arcs() {
-    // The arc ends compensated; G92 needs the original position, so a G1 return is inserted;
-    // the next line relies on modal G2 and gets `G2` after its N-word.
+fn a_return_step_precedes_g92_and_g92_is_followed_as_a_shift() {
+    // The arc ends compensated; G92 needs the original position, so a G1 return is inserted.
+    // G92 X30 at x = 9 shifts the program by −21 mm: the next arc (program x from 30 down to
+    // 10) is compensated exactly where x − 21 lies in the domain [1, 10].
     let f = Lin {
         normal: Axis::Z,
         dom: dom(1.0, -50.0, 10.0, 50.0),
         e0: 0.01,
         g: 0.0,
     };
-    let text = "G0 X1 Y0 Z0\nG2 X9 Y0 R4 F100\nG92 X0 Y0\nN9 X-20 Y0 R10\nM2\n";
+    let text = "G0 X1 Y0 Z0\nG2 X9 Y0 R4 F100\nG92 X30 Y0\nN9 X10 Y0 R10\nM2\n";
     let (out, rep) = run(text, &f, &settings(None, 1000.0));
     let lines: Vec<&str> = out.lines().collect();
-    let n = lines.len();
+    let g92 = lines.iter().position(|l| *l == "G92 X30 Y0").unwrap();
+    assert!(lines[g92 - 1] == "G1 Z0.0000", "{out}");
     assert!(
-        lines[n - 5].starts_with("G2 X9.0000 Y0.0000 Z-0.0100 R4.0000"),
+        lines[g92 - 2].starts_with("G2 X9.0000 Y0.0000 Z-0.0100 R4.0000"),
         "{out}"
     );
-    assert_eq!(
-        &lines[n - 4..],
-        ["G1 Z0.0000", "G92 X0 Y0", "N9 G2 X-20 Y0 R10", "M2"]
-    );
-    assert_eq!((rep.returns_inserted, rep.lines_prefixed), (1, 1));
+    assert_eq!(rep.returns_inserted, 1, "{out}");
+    let mut inside = 0;
+    for l in &lines[g92 + 1..lines.len() - 1] {
+        let p = xyz(l);
+        let x_map = p[0] - 21.0;
+        if (p[2] + 0.01).abs() < 1e-12 {
+            inside += 1;
+            assert!((1.0 - 1e-6..=10.0 + 1e-6).contains(&x_map), "{l}");
+        } else if !p[2].is_nan() {
+            assert_eq!(p[2], 0.0, "{l}");
+        }
+    }
+    assert!(inside > 5, "{out}");
 }
 
 #[test]
@@ -513,7 +527,8 @@ fn corpus_outside_the_domain_or_zone_is_byte_identical() {
         // refuses any zone (see docs); the others pass a zone far above the program.
         // plasmatest never sets Z, so no zone along Z can be shown to miss it (refused, see the
         // refusal test); a domain away from its X/Y passes it through below.
-        if *name != "mmount.ngc" && *name != "plasmatest.ngc" {
+        // systems.ngc switches to G55, whose offset errmap cannot know: refused (see below).
+        if *name != "mmount.ngc" && *name != "plasmatest.ngc" && *name != "systems.ngc" {
             let (out, rep) = compensate_gcode(
                 &text,
                 &src,

@@ -12,7 +12,9 @@ const MODEL: &str = r#"{
   "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
   "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
                     "e_mean_um": 20.0, "e_std_um": 1.0},
-  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]}
+  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
+  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
+  "surface_mm": [-1.0, -1.0]
 }"#;
 
 #[test]
@@ -30,6 +32,8 @@ fn compensate_writes_the_program_and_reports() {
             "model.json",
             "--zone",
             "-2,0",
+            "--dialect",
+            "linuxcnc",
             "in.ngc",
             "-o",
             "out.ngc",
@@ -61,6 +65,8 @@ fn compensate_writes_the_program_and_reports() {
             "compensate",
             "--model",
             "model.json",
+            "--dialect",
+            "linuxcnc",
             "in.ngc",
             "-o",
             "out2.ngc",
@@ -73,13 +79,19 @@ fn compensate_writes_the_program_and_reports() {
     assert!((doc["report"]["max_abs_error_mm"].as_f64().unwrap() - 0.02).abs() < 1e-9);
 
     // A refusal names file:line and exits 2; nothing is written.
-    std::fs::write(dir.join("comp.ngc"), "G0 X10 Y10 Z0\nG41 D1\nG1 X20 F100\n").unwrap();
+    std::fs::write(
+        dir.join("comp.ngc"),
+        "G21 G0 X10 Y10 Z-1\nG41 D1\nG1 X20 F100\n",
+    )
+    .unwrap();
     let out = errmap(
         dir,
         &[
             "compensate",
             "--model",
             "model.json",
+            "--dialect",
+            "linuxcnc",
             "comp.ngc",
             "-o",
             "bad.ngc",
@@ -106,7 +118,13 @@ fn bad_options_exit_2_with_a_hint() {
         (vec!["--max-segment", "0"], "maximum segment length"),
         (vec!["--chord-tol", "-1"], "chord tolerance"),
     ] {
-        let mut all = vec!["compensate", "--model", "model.json"];
+        let mut all = vec![
+            "compensate",
+            "--model",
+            "model.json",
+            "--dialect",
+            "linuxcnc",
+        ];
         all.extend(args);
         all.extend(["in.ngc", "-o", "out.ngc"]);
         let out = errmap(dir, &all);

@@ -108,8 +108,23 @@ pub struct ToolpathConfig {
     /// G-code (`.ngc`, `.nc`, `.gcode`, `.tap`) or CSV (`.csv`) toolpaths, relative to the job file.
     pub files: Vec<PathBuf>,
     /// Band `[min, max]` along the normal axis, in the program's units, where moves are
-    /// compensated; default: everywhere.
+    /// compensated; default: the map's probed surface ± `surface_tol_mm`.
     pub zone: Option<[f64; 2]>,
+    /// With no `zone`: compensate at every height along the normal.
+    pub zone_all: bool,
+    /// Half-width of the default zone around the probed surface, mm.
+    pub surface_tol_mm: f64,
+    /// The programs' controller dialect (`linuxcnc`, `fanuc`, `sinumerik`, `heidenhain`);
+    /// default: detected, refused when uncertain.
+    pub dialect: Option<crate::toolpath::Dialect>,
+    /// Units of programs that do not state them (`mm` or `inch`).
+    pub units: Option<crate::toolpath::Units>,
+    /// Fanuc decimal-less numbers: `calculator`, `is-a`, `is-b` or `is-c`.
+    pub fanuc_numbers: Option<crate::toolpath::FanucNumbers>,
+    /// Also compensate where the map extrapolates beyond the measured domain.
+    pub extrapolate: bool,
+    /// Margin around the probes' hull that still counts as measured, mm.
+    pub domain_margin_mm: f64,
     /// Longest segment after splitting, mm (converted to inches for G20 programs).
     pub max_segment_mm: f64,
     /// Chord tolerance when arcs are linearised, mm.
@@ -123,6 +138,13 @@ impl Default for ToolpathConfig {
         ToolpathConfig {
             files: Vec::new(),
             zone: None,
+            zone_all: false,
+            surface_tol_mm: 0.5,
+            dialect: None,
+            units: None,
+            fanuc_numbers: None,
+            extrapolate: false,
+            domain_margin_mm: 0.0,
             max_segment_mm: 5.0,
             chord_tol_mm: 0.005,
             map: MapChoice::Family,

@@ -177,8 +177,15 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
         files: file.toolpath_files(),
         settings: crate::toolpath::CompensationSettings {
             zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
+            everywhere: job.toolpaths.zone_all,
+            surface_tol_mm: job.toolpaths.surface_tol_mm,
             max_segment: job.toolpaths.max_segment_mm,
             chord_tol: job.toolpaths.chord_tol_mm,
+            dialect: job.toolpaths.dialect,
+            units: job.toolpaths.units,
+            fanuc_numbers: job.toolpaths.fanuc_numbers,
+            extrapolate: job.toolpaths.extrapolate,
+            domain_margin_mm: job.toolpaths.domain_margin_mm,
         },
         per_part: job.toolpaths.map == MapChoice::Part,
     });

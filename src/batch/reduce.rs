@@ -6,11 +6,11 @@
 
 use super::run::{compensate_one, training_set, write_family, Settings, ToolpathPlan};
 use super::summary::{FamilySummary, ToolpathSummary};
+use super::train_step::{initial_network, Role};
 use crate::error::{Error, Location, Result};
 use crate::geom::Domain;
 use crate::interp::Grid;
 use crate::map::{family_stats, ErrorMap, FittedModel};
-use super::train_step::{initial_network, Role};
 use crate::nn::Trainer;
 use serde::{Deserialize, Serialize};
 use std::path::Path;

@@ -478,7 +478,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         domain,
                         norms[d].clone(),
                         nets[d].clone(),
-                    );
+                    )
+                    .with_probes(&p.prep.clean);
                     let holdout_rmse_um = h.map(|h| {
                         let hm = FittedModel::new(
                             "holdout",
@@ -545,13 +546,15 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 if let Some((mean, std)) = family_stats(&maps) {
                     let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
                     check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
+                    let parts: Vec<&FittedModel> = part_maps.iter().map(|(_, _, _, m)| m).collect();
                     let model = FittedModel::new(
                         "family",
                         s.normal,
                         domain,
                         norms[fslot].clone(),
                         nets[fslot].clone(),
-                    );
+                    )
+                    .with_parts(&parts);
                     family_summary = Some(write_family(dir, &mean, &std, &model, maps.len(), s)?);
                     family_model = Some(model);
                 }
@@ -632,13 +635,16 @@ pub(crate) fn write_family(
     let axes = s.normal.plane_axes();
     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
     std.write_csv(&dir.join("std.csv"), "std_um")?;
-    let (pv, rms) = mean.pv_rms_um();
+    let extrapolated = mean.extrapolated_nodes(model.hull_mm.as_deref());
+    let (pv, rms) = mean
+        .pv_rms_where_um(&extrapolated, false)
+        .unwrap_or_else(|| mean.pv_rms_um());
     let std_max = std.values.iter().cloned().fold(0.0, f64::max);
     let title_mean = format!(
-        "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm",
+        "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)",
         s.family
     );
-    draw(
+    draw_shaded(
         &dir.join("mean.png"),
         &title_mean,
         mean,
@@ -647,6 +653,7 @@ pub(crate) fn write_family(
         Scale::Diverging,
         axes,
         "E (µm)",
+        &extrapolated,
     )?;
     let title_std = format!(
         "{} part-to-part standard deviation — max {std_max:.2} µm",
@@ -720,6 +727,32 @@ pub(crate) fn draw(
     (ua, va): (Axis, Axis),
     label: &str,
 ) -> Result<()> {
+    draw_shaded(
+        path,
+        title,
+        map,
+        probes,
+        rejected,
+        scale,
+        (ua, va),
+        label,
+        &[],
+    )
+}
+
+/// [`draw`] with the nodes outside the measured domain lightened.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn draw_shaded(
+    path: &Path,
+    title: &str,
+    map: &ErrorMap,
+    probes: &[(f64, f64)],
+    rejected: &[(f64, f64)],
+    scale: Scale,
+    (ua, va): (Axis, Axis),
+    label: &str,
+    extrapolated: &[bool],
+) -> Result<()> {
     let values: Vec<Option<f64>> = map.values.iter().map(|&v| Some(v)).collect();
     heatmap::save_heatmap(
         path,
@@ -737,6 +770,7 @@ pub(crate) fn draw(
             probes,
             rejected,
             scale,
+            extrapolated,
         },
     )
 }
@@ -800,7 +834,12 @@ fn write_part(
         }
         .write(dir)?;
     }
-    let (pv, rms) = map.pv_rms_um();
+    // Accuracy figures over the measured domain; the extrapolated rest reported apart.
+    let extrapolated = map.extrapolated_nodes(model.hull_mm.as_deref());
+    let (pv, rms) = map
+        .pv_rms_where_um(&extrapolated, false)
+        .unwrap_or((0.0, 0.0));
+    let outside = map.pv_rms_where_um(&extrapolated, true);
     let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
     let rejected: Vec<(f64, f64)> = p
         .prep
@@ -814,8 +853,8 @@ fn write_part(
     } else {
         format!("{} {name}", s.family)
     };
-    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm");
-    draw(
+    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)");
+    draw_shaded(
         &dir.join("map.png"),
         &title,
         map,
@@ -824,6 +863,7 @@ fn write_part(
         Scale::Diverging,
         axes,
         "E (µm)",
+        &extrapolated,
     )?;
     let summary = PartSummary {
         part: name.clone(),
@@ -839,6 +879,11 @@ fn write_part(
         better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
         rms_um: Some(rms),
         pv_um: Some(pv),
+        extrapolated_fraction: Some(
+            extrapolated.iter().filter(|&&x| x).count() as f64 / extrapolated.len().max(1) as f64,
+        ),
+        rms_extrapolated_um: outside.map(|o| o.1),
+        pv_extrapolated_um: outside.map(|o| o.0),
         output_dir: Some(dir.clone()),
         error: None,
     };

@@ -29,9 +29,18 @@ pub struct PartSummary {
     /// `network` or `kriging`: the lower hold-out RMSE (a tie goes to the network).
     #[serde(default)]
     pub better_fit: Option<String>,
-    /// RMS (about 0) and peak-to-valley of the map over the output grid, µm.
+    /// RMS (about 0) and peak-to-valley of the map over the grid nodes in the measured domain
+    /// (the probes' hull), µm.
     pub rms_um: Option<f64>,
     pub pv_um: Option<f64>,
+    /// Share of grid nodes outside the measured domain, where the map extrapolates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extrapolated_fraction: Option<f64>,
+    /// RMS and PV over the extrapolated nodes alone, µm (not accuracy figures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rms_extrapolated_um: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pv_extrapolated_um: Option<f64>,
     /// Folder of the part's files.
     pub output_dir: Option<PathBuf>,
     /// Why the part failed: `{kind, message, file, line, column, hint}` (kind `input`, `io`,
@@ -55,6 +64,9 @@ impl PartSummary {
             better_fit: None,
             rms_um: None,
             pv_um: None,
+            extrapolated_fraction: None,
+            rms_extrapolated_um: None,
+            pv_extrapolated_um: None,
             output_dir: None,
             error: Some(error.report()),
         }

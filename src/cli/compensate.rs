@@ -1,7 +1,7 @@
 //! CLI of `errmap compensate`: rewrite a G-code or CSV toolpath with P' = P − E.
 
 use super::Globals;
-use errmap::toolpath::{compensate_file, CompensationSettings};
+use errmap::toolpath::{compensate_file, CompensationSettings, Dialect, FanucNumbers, Units};
 use errmap::{Error, Result};
 use std::path::PathBuf;
 
@@ -10,10 +10,41 @@ pub struct CompensateArgs {
     /// Fitted map (`model.json` from `errmap map` or a batch).
     #[arg(long, value_name = "MODEL.json")]
     pub model: PathBuf,
-    /// Band along the map's normal axis where moves are compensated, in program units
-    /// (inches in a G20 program). Default: everywhere.
-    #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
+    /// Band along the map's normal axis where moves are compensated, in the units the program
+    /// starts in (inches in a G20 program), or `all`. Default: the map's probed surface ±
+    /// --surface-tol.
+    #[arg(long, value_name = "MIN,MAX|all", allow_hyphen_values = true)]
     pub zone: Option<String>,
+    /// Half-width of the default zone around the map's probed surface, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 0.5,
+        allow_negative_numbers = true
+    )]
+    pub surface_tol: f64,
+    /// The program's controller dialect: linuxcnc, fanuc, sinumerik or heidenhain. Default:
+    /// detected from the program (refused when uncertain).
+    #[arg(long, value_name = "DIALECT")]
+    pub dialect: Option<String>,
+    /// Units of a program that states none before its first cut: mm or inch.
+    #[arg(long, value_name = "mm|inch")]
+    pub units: Option<String>,
+    /// How the Fanuc reads numbers without a decimal point: calculator (mm/inch), or the
+    /// increment system is-a, is-b (0.001 mm) or is-c.
+    #[arg(long, value_name = "MODE")]
+    pub fanuc_numbers: Option<String>,
+    /// Also compensate outside the measured domain (the probes' hull), where the map extrapolates.
+    #[arg(long)]
+    pub extrapolate: bool,
+    /// Margin around the probes' hull that still counts as measured, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub domain_margin: f64,
     /// Longest segment emitted in the zone, mm.
     #[arg(
         long,
@@ -49,7 +80,7 @@ pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
     let bad = || {
         Error::usage(
             format!("--zone '{text}' is not MIN,MAX"),
-            "give two numbers in program units, e.g. --zone -5,0",
+            "give two numbers in program units, e.g. --zone -5,0 (or --zone all)",
         )
     };
     let (a, b) = text.split_once(',').ok_or_else(bad)?;
@@ -58,11 +89,52 @@ pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
     Ok((lo, hi))
 }
 
+/// Parse an enumerated flag value, or a usage error listing the choices.
+fn choice<T>(
+    flag: &str,
+    text: Option<&str>,
+    parse: fn(&str) -> Option<T>,
+    choices: &str,
+) -> Result<Option<T>> {
+    text.map(|t| {
+        parse(t).ok_or_else(|| {
+            Error::usage(
+                format!("--{flag} '{t}' is not one of {choices}"),
+                format!("use --{flag} with one of {choices}"),
+            )
+        })
+    })
+    .transpose()
+}
+
 pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
+    let everywhere = args.zone.as_deref() == Some("all");
     let settings = CompensationSettings {
-        zone: args.zone.as_deref().map(parse_zone).transpose()?,
+        zone: args
+            .zone
+            .as_deref()
+            .filter(|z| *z != "all")
+            .map(parse_zone)
+            .transpose()?,
+        everywhere,
+        surface_tol_mm: args.surface_tol,
         max_segment: args.max_segment,
         chord_tol: args.chord_tol,
+        dialect: choice(
+            "dialect",
+            args.dialect.as_deref(),
+            Dialect::parse,
+            "linuxcnc, fanuc, sinumerik, heidenhain",
+        )?,
+        units: choice("units", args.units.as_deref(), Units::parse, "mm, inch")?,
+        fanuc_numbers: choice(
+            "fanuc-numbers",
+            args.fanuc_numbers.as_deref(),
+            FanucNumbers::parse,
+            "calculator, is-a, is-b, is-c",
+        )?,
+        extrapolate: args.extrapolate,
+        domain_margin_mm: args.domain_margin,
     };
     settings.validate()?;
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;

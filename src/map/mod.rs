@@ -33,6 +33,13 @@ pub struct FittedModel {
     /// held-out points better than the network), and [`FittedModel::e_um`] evaluates it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kriging: Option<crate::interp::kriging::Kriging>,
+    /// The measured domain: convex hull of the probed points (plane axes, mm), counter-clockwise.
+    /// Absent in maps written by older versions (toolpath compensation then needs `--extrapolate`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hull_mm: Option<Vec<[f64; 2]>>,
+    /// Nominal extent `[min, max]` of the probed surface along the normal, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_mm: Option<[f64; 2]>,
 }
 
 impl FittedModel {
@@ -51,12 +58,43 @@ impl FittedModel {
             normalisation,
             network,
             kriging: None,
+            hull_mm: None,
+            surface_mm: None,
         }
     }
 
     /// The same model delivering `kriging` instead of the network.
     pub fn with_kriging(mut self, kriging: crate::interp::kriging::Kriging) -> Self {
         self.kriging = Some(kriging);
+        self
+    }
+
+    /// Record the measured domain and surface of the probed points the map was fitted to.
+    pub fn with_probes(mut self, points: &[crate::probe::ProbePoint]) -> Self {
+        let n = self.normal.index();
+        let plane: Vec<[f64; 2]> = points.iter().map(|p| [p.u_mm, p.v_mm]).collect();
+        self.hull_mm = Some(crate::geom::convex_hull(&plane));
+        self.surface_mm = points
+            .iter()
+            .map(|p| p.nominal_mm[n])
+            .fold(None, |acc: Option<[f64; 2]>, z| {
+                Some(acc.map_or([z, z], |[lo, hi]| [lo.min(z), hi.max(z)]))
+            });
+        self
+    }
+
+    /// Record the union of the parts' measured domains and surfaces (for a family map); none
+    /// if a part lacks one.
+    pub fn with_parts(mut self, parts: &[&FittedModel]) -> Self {
+        let hulls: Option<Vec<&Vec<[f64; 2]>>> = parts.iter().map(|m| m.hull_mm.as_ref()).collect();
+        let surfaces: Option<Vec<[f64; 2]>> = parts.iter().map(|m| m.surface_mm).collect();
+        if let (Some(h), Some(s), false) = (hulls, surfaces, parts.is_empty()) {
+            let all: Vec<[f64; 2]> = h.into_iter().flatten().copied().collect();
+            self.hull_mm = Some(crate::geom::convex_hull(&all));
+            self.surface_mm = s
+                .into_iter()
+                .reduce(|a, b| [a[0].min(b[0]), a[1].max(b[1])]);
+        }
         self
     }
 
@@ -166,7 +204,14 @@ impl FittedModel {
         ]
         .iter()
         .all(|v| v.is_finite());
-        if !finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
+        let extra_finite = model
+            .hull_mm
+            .iter()
+            .flatten()
+            .flatten()
+            .chain(model.surface_mm.iter().flatten())
+            .all(|v| v.is_finite());
+        if !finite || !extra_finite || d.u_min_mm > d.u_max_mm || d.v_min_mm > d.v_max_mm {
             return Err(Error::input(
                 Location::file(path),
                 "the normalisation or domain holds a non-finite number or an empty range",
@@ -190,6 +235,14 @@ impl ErrorField for FittedModel {
             && v_mm <= self.domain.v_max_mm + tol;
         inside.then(|| self.e_um(u_mm, v_mm) / 1000.0)
     }
+    fn measured(&self, u_mm: f64, v_mm: f64, margin_mm: f64) -> Option<bool> {
+        let hull = self.hull_mm.as_ref()?;
+        let tol = 1e-9 * (1.0 + self.domain.width_mm().abs() + self.domain.height_mm().abs());
+        Some(crate::geom::hull_distance_mm(hull, [u_mm, v_mm]) <= margin_mm + tol)
+    }
+    fn surface_mm(&self) -> Option<(f64, f64)> {
+        self.surface_mm.map(|[lo, hi]| (lo, hi))
+    }
 }
 
 /// Load a fitted map (`model.json`) as an error field for toolpath compensation.
@@ -210,6 +263,35 @@ impl ErrorMap {
     pub fn pv_rms_um(&self) -> (f64, f64) {
         let opts: Vec<Option<f64>> = self.values.iter().map(|&v| Some(v)).collect();
         crate::report::heatmap::pv_rms_um(&opts)
+    }
+
+    /// Which nodes lie outside the measured domain `hull_mm` (where the map extrapolates);
+    /// all `false` when the hull is unknown.
+    pub fn extrapolated_nodes(&self, hull_mm: Option<&[[f64; 2]]>) -> Vec<bool> {
+        let Some(hull) = hull_mm else {
+            return vec![false; self.values.len()];
+        };
+        let tol = 1e-9 * (1.0 + self.grid.step_mm);
+        (0..self.grid.nv)
+            .flat_map(|j| (0..self.grid.nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let (u, v) = self.grid.node(i, j);
+                crate::geom::hull_distance_mm(hull, [u, v]) > tol
+            })
+            .collect()
+    }
+
+    /// PV and RMS of the nodes whose `extrapolated` flag equals `which`, µm; `None` if none.
+    pub fn pv_rms_where_um(&self, extrapolated: &[bool], which: bool) -> Option<(f64, f64)> {
+        let opts: Vec<Option<f64>> = self
+            .values
+            .iter()
+            .zip(extrapolated)
+            .map(|(&v, &x)| (x == which).then_some(v))
+            .collect();
+        opts.iter()
+            .any(|v| v.is_some())
+            .then(|| crate::report::heatmap::pv_rms_um(&opts))
     }
 
     /// Write as CSV `<u>_mm,<v>_mm,<value_column>` (e.g. `x_mm,y_mm,e_um`), atomically.
@@ -355,6 +437,29 @@ pub fn family_stats(maps: &[&ErrorMap]) -> Option<(ErrorMap, ErrorMap)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn accuracy_figures_split_at_the_measured_hull() {
+        // Nodes at u = 0, 1, 2 (v = 0) with E = 1, −1, 5 µm; the hull covers u ∈ [0, 1]:
+        // measured PV 2, RMS 1; extrapolated (u = 2 alone) PV 0, RMS 5.
+        let map = ErrorMap {
+            grid: Grid {
+                u0_mm: 0.0,
+                v0_mm: 0.0,
+                step_mm: 1.0,
+                nu: 3,
+                nv: 1,
+            },
+            normal: Axis::Z,
+            values: vec![1.0, -1.0, 5.0],
+        };
+        let hull = [[0.0, -1.0], [1.0, -1.0], [1.0, 1.0], [0.0, 1.0]];
+        let x = map.extrapolated_nodes(Some(&hull));
+        assert_eq!(x, vec![false, false, true]);
+        assert_eq!(map.pv_rms_where_um(&x, false), Some((2.0, 1.0)));
+        assert_eq!(map.pv_rms_where_um(&x, true), Some((0.0, 5.0)));
+        assert_eq!(map.extrapolated_nodes(None), vec![false; 3]);
+    }
     use crate::nn::Activation;
 
     fn tiny_model() -> FittedModel {

@@ -41,6 +41,8 @@ pub struct Heatmap<'a> {
     /// Rejected probe points (u, v) mm.
     pub rejected: &'a [(f64, f64)],
     pub scale: Scale,
+    /// Nodes outside the measured domain (index j·nu + i), drawn lightened; empty = none.
+    pub extrapolated: &'a [bool],
 }
 
 /// Peak-to-valley and RMS (about 0) of the values present, µm.
@@ -213,10 +215,15 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
                 .map(|(i, j)| {
                     let u = map.u0_mm + step * i as f64;
                     let v = map.v0_mm + step * j as f64;
-                    let colour = match values.get(j * nu + i).copied().flatten() {
+                    let mut colour = match values.get(j * nu + i).copied().flatten() {
                         Some(e) => colour_of(e, lo, hi, map.scale),
                         None => grey,
                     };
+                    if map.extrapolated.get(j * nu + i) == Some(&true) {
+                        // Extrapolated: halfway to white, so the measured domain stands out.
+                        let w = |c: u8| ((u16::from(c) + 255) / 2) as u8;
+                        colour = RGBColor(w(colour.0), w(colour.1), w(colour.2));
+                    }
                     Rectangle::new(
                         [(u - half, v - half), (u + half, v + half)],
                         colour.filled(),
@@ -362,6 +369,7 @@ mod tests {
             probes: &[(0.0, 0.0)],
             rejected: &[(20.0, 10.0)],
             scale: Scale::Diverging,
+            extrapolated: &[],
         };
         save_heatmap(&path, &map).unwrap();
         if let Ok(keep) = std::env::var("ERRMAP_KEEP_PNG") {

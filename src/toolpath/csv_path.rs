@@ -48,16 +48,24 @@ pub fn compensate(
         table.require(COLUMNS[1])?,
         table.require(COLUMNS[2])?,
     ];
+    let zone = super::default_zone_mm(source, field, settings)?.or(settings.zone);
     let normal = field.normal().index();
     let (ui, vi) = field.normal().plane_axes();
     let (ui, vi) = (ui.index(), vi.index());
+    let extrapolated = std::cell::Cell::new(false);
     let error_at = |p: &[f64; 3]| -> Option<f64> {
-        if let Some((lo, hi)) = settings.zone {
+        if let Some((lo, hi)) = zone {
             if p[normal] < lo || p[normal] > hi {
                 return None;
             }
         }
-        field.error_mm(p[ui], p[vi]).filter(|e| e.is_finite())
+        let e = field.error_mm(p[ui], p[vi]).filter(|e| e.is_finite())?;
+        let measured = field.measured(p[ui], p[vi], settings.domain_margin_mm) == Some(true);
+        if !settings.extrapolate && !measured {
+            extrapolated.set(true);
+            return None;
+        }
+        Some(e)
     };
 
     // Lines with their terminators, so unchanged ones are copied exactly.
@@ -102,13 +110,10 @@ pub fn compensate(
             Some(q) => vec![q, p],
             None => vec![p],
         };
-        let mut emitted = emit_points(
-            &path,
-            settings.max_segment,
-            settings.zone,
-            normal,
-            &error_at,
-        );
+        let mut emitted = emit_points(&path, settings.max_segment, zone, normal, &error_at);
+        if extrapolated.replace(false) {
+            report.moves_outside_domain += 1;
+        }
         if prev.is_some() {
             emitted.remove(0); // the previous row, already written
         }

@@ -3,13 +3,26 @@
 //!
 //! Lines that are not rewritten are copied byte for byte from the input. See `docs/toolpath.md`.
 
+mod emit;
+mod format;
+mod modal;
+
+use emit::emit_curve;
+pub(crate) use emit::{dist, emit_points, lerp};
+use format::{coordinate_decimals, decimal_units, format_decimals_slow, units_text};
+pub use format::{format_coord, format_decimals};
+use modal::{first_jump, refuse_klartext};
+
 use super::arc::{Arc, Plane};
+use super::dialect::{self, Dialect, Frame, Motion, G};
 use super::expr::{eval, Params};
-use super::lexer::{lex, Line, TokenKind, WordValue};
+use super::lexer::{lex_dialect, Line, TokenKind, WordValue};
 use super::{CompensationReport, CompensationSettings};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
-use std::collections::{HashMap, HashSet};
+use std::cell::Cell;
+use std::collections::HashMap;
+use std::ops::Range;
 use std::path::Path;
 
 const AXES: [u8; 3] = [b'X', b'Y', b'Z'];
@@ -21,7 +34,11 @@ struct W {
     value: Option<f64>,
     is_expr: bool,
     token: usize,
-    text: String,
+    span: Range<usize>,
+    /// Sinumerik `AC()` (`Some(true)`) or `IC()` (`Some(false)`): overrides G90/G91.
+    abs: Option<bool>,
+    /// The number was written without a decimal point.
+    no_dot: bool,
 }
 
 /// What a subroutine body does, collected while reading its definition.
@@ -71,6 +88,27 @@ struct Rewriter<'a> {
     unknown_since: Option<u64>,
     report: CompensationReport,
     out: String,
+    dialect: Dialect,
+    /// Whether the program's units are known (a G20/G21 or equivalent, or `--units`).
+    units_known: bool,
+    /// The zone in the program's first units, until those are known; then `zone_mm`.
+    zone_first_units: Option<(f64, f64)>,
+    zone_mm: Option<(f64, f64)>,
+    /// Work coordinates = program coordinates + `shift` (G92, G52, Sinumerik TRANS), program units.
+    shift: [f64; 3],
+    /// Fanuc G52 local offsets (part of `shift`).
+    local: [f64; 3],
+    /// Transformations errmap does not follow, with the line and word that started them.
+    frames: Vec<(Frame, u64, String)>,
+    /// The first work offset selected (the map's coordinates); another one is a frame.
+    first_offset: Option<i32>,
+    /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
+    flow: Option<(u64, String)>,
+    /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
+    programs: u32,
+    m99: Option<u64>,
+    /// Set by `error_at` when a point in the zone lies outside the measured domain.
+    extrapolated: Cell<bool>,
 }
 
 /// Compensate a G-code program. See the module documentation of [`crate::toolpath`].
@@ -81,8 +119,12 @@ pub fn compensate(
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
     settings.validate()?;
+    let dialect = dialect::resolve(text, source, settings.dialect)?;
+    refuse_klartext(text, source, dialect)?;
+    let zone_mm = super::default_zone_mm(source, field, settings)?;
     let normal_axis = field.normal();
     let (u, v) = normal_axis.plane_axes();
+    let units = settings.units;
     let mut rw = Rewriter {
         text,
         source,
@@ -91,7 +133,7 @@ pub fn compensate(
         normal: normal_axis.index(),
         plane_uv: (u.index(), v.index()),
         pos: [None; 3],
-        inches: false,
+        inches: units == Some(super::Units::Inch),
         absolute: true,
         arc_absolute: false,
         plane: Plane::G17,
@@ -107,80 +149,87 @@ pub fn compensate(
         program_decimals: 0,
         report: CompensationReport::default(),
         out: String::with_capacity(text.len() + text.len() / 4),
+        dialect,
+        units_known: false,
+        zone_first_units: settings.zone,
+        zone_mm,
+        shift: [0.0; 3],
+        local: [0.0; 3],
+        frames: Vec::new(),
+        first_offset: None,
+        flow: None,
+        programs: 0,
+        m99: None,
+        extrapolated: Cell::new(false),
     };
-    let lines = lex(text);
+    if units.is_some() {
+        rw.set_units_known();
+    }
+    let lines = lex_dialect(text, dialect);
+    rw.flow = first_jump(text, &lines, dialect);
     rw.program_decimals = coordinate_decimals(text, &lines);
     rw.report.lines_in = lines.len() as u64;
     for line in &lines {
         rw.line(line)?;
     }
+    if let (Some(l), true) = (rw.m99, rw.report.moves_changed > 0) {
+        return Err(Error::input(
+            Location::cell(source, l, "M99"),
+            "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
+            "compensate the main program with the subprogram expanded into it",
+        ));
+    }
+    rw.report.dialect = Some(dialect);
+    rw.report.zone_mm = rw.zone_mm;
     rw.report.lines_out = rw.out.matches('\n').count() as u64
         + u64::from(!rw.out.is_empty() && !rw.out.ends_with('\n'));
     Ok((rw.out, rw.report))
 }
 
-/// Fixed-point text of a coordinate: 4 decimals in mm, 5 in inches; never `-0` nor an exponent.
-pub fn format_coord(v: f64, inches: bool) -> String {
-    format_decimals(v, if inches { 5 } else { 4 })
-}
-
-/// Fixed-point text with `d` decimals; never `-0` nor an exponent.
-pub fn format_decimals(v: f64, d: usize) -> String {
-    let s = format!("{v:.d$}");
-    if s.trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        s.trim_start_matches('-').to_string()
-    } else {
-        s
-    }
-}
-
-/// Most decimals written in an X/Y/Z/I/J/K/R number of the program, capped at 9.
-fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
-    let mut most = 0;
-    for line in lines {
-        for t in &line.tokens {
-            if let TokenKind::Word {
-                letter: b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R',
-                value: WordValue::Number(_),
-            } = t.kind
-            {
-                let w = text.get(t.span.clone()).unwrap_or("");
-                if let Some(dot) = w.find('.') {
-                    let d = w[dot + 1..]
-                        .chars()
-                        .take_while(|c| c.is_ascii_digit())
-                        .count();
-                    most = most.max(d);
-                }
-            }
-        }
-    }
-    most.min(9)
-}
-
+/// `G` value × 10, rounded (G38.2 → 382).
 fn g_code(v: f64) -> i32 {
     (v * 10.0).round() as i32
 }
 
-fn is_canned(code: i32) -> bool {
-    code == 730 || code == 740 || code == 760 || (810..=890).contains(&code)
-}
-
-fn is_group1(code: i32) -> bool {
-    matches!(code, 0 | 10 | 20 | 30 | 50 | 51 | 52 | 330 | 331 | 800)
-        || (380..=385).contains(&code)
-        || is_canned(code)
-}
-
 impl<'a> Rewriter<'a> {
+    fn wtext(&self, w: &W) -> &'a str {
+        self.text.get(w.span.clone()).unwrap_or("").trim()
+    }
+
+    /// Whether the map compensates at plane point (u, v) in program coordinates.
+    fn compensable(&self, u: f64, v: f64) -> bool {
+        let s = self.scale_mm();
+        let (u, v) = (
+            (u + self.shift[self.plane_uv.0]) * s,
+            (v + self.shift[self.plane_uv.1]) * s,
+        );
+        self.field.error_mm(u, v).is_some()
+            && (self.settings.extrapolate
+                || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
+    }
+
     /// Coordinates get at least 4 decimals in mm and 5 in inches, and as many as the program
     /// itself uses (so unchanged end points are written back exactly).
     fn fmt(&self, v: f64) -> String {
+        format_decimals(v, self.decimals())
+    }
+
+    fn decimals(&self) -> usize {
         let d = if self.inches { 5 } else { 4 };
-        format_decimals(v, d.max(self.program_decimals))
+        d.max(self.program_decimals)
+    }
+
+    /// The text of a coordinate and the value the controller reads from it.
+    fn written(&self, v: f64) -> (String, f64) {
+        let d = self.decimals();
+        match decimal_units(v, d) {
+            Some(u) => (units_text(u, d), u as f64 / 10f64.powi(d as i32)),
+            None => {
+                let t = format_decimals_slow(v, d);
+                let r = t.parse().unwrap_or(v);
+                (t, r)
+            }
+        }
     }
 
     fn scale_mm(&self) -> f64 {
@@ -191,12 +240,32 @@ impl<'a> Rewriter<'a> {
         }
     }
 
-    fn err(&self, line: &Line, column: &str, message: String, hint: &str) -> Error {
+    /// An error at `word` (its first occurrence on the line gives the column).
+    fn err(&self, line: &Line, word: &str, message: String, hint: &str) -> Error {
+        let content = self.text.get(line.span.clone()).unwrap_or("");
+        let at = content
+            .find(word)
+            .or_else(|| {
+                content
+                    .to_ascii_uppercase()
+                    .find(&word.to_ascii_uppercase())
+            })
+            .unwrap_or(0);
+        let column = content[..at].chars().count() + 1;
         Error::input(
-            Location::cell(self.source, line.number, column),
+            Location::cell(self.source, line.number, format!("{column} ({word})")),
             message,
             hint,
         )
+    }
+
+    /// What ends an inserted block: ` *` in Heidenhain ISO.
+    fn eob(&self) -> &'static str {
+        if self.dialect == Dialect::Heidenhain {
+            " *"
+        } else {
+            ""
+        }
     }
 
     fn copy_line(&mut self, line: &Line) {
@@ -205,16 +274,24 @@ impl<'a> Rewriter<'a> {
 
     /// E in program units at a point, if the point is in the zone and the map domain.
     fn error_at(&self, p: &[f64; 3]) -> Option<f64> {
-        if let Some((lo, hi)) = self.settings.zone {
+        if let Some((lo, hi)) = self.zone_now() {
             let n = p[self.normal];
             if n < lo || n > hi {
                 return None;
             }
         }
         let s = self.scale_mm();
-        let e_mm = self
-            .field
-            .error_mm(p[self.plane_uv.0] * s, p[self.plane_uv.1] * s)?;
+        let (u, v) = (
+            (p[self.plane_uv.0] + self.shift[self.plane_uv.0]) * s,
+            (p[self.plane_uv.1] + self.shift[self.plane_uv.1]) * s,
+        );
+        let e_mm = self.field.error_mm(u, v)?;
+        if !self.settings.extrapolate
+            && self.field.measured(u, v, self.settings.domain_margin_mm) != Some(true)
+        {
+            self.extrapolated.set(true);
+            return None;
+        }
         e_mm.is_finite().then_some(e_mm / s)
     }
 
@@ -232,7 +309,7 @@ impl<'a> Rewriter<'a> {
                 None => normal_known = false,
             }
         }
-        if let (Some((zlo, zhi)), true) = (self.settings.zone, normal_known) {
+        if let (Some((zlo, zhi)), true) = (self.zone_now(), normal_known) {
             if hi < zlo || lo > zhi {
                 return false;
             }
@@ -247,9 +324,8 @@ impl<'a> Rewriter<'a> {
         if known.is_empty() {
             return true;
         }
-        let s = self.scale_mm();
         let step = self.settings.max_segment_in(self.inches);
-        let inside = |p: &[f64; 3]| self.field.error_mm(p[0] * s, p[1] * s).is_some();
+        let inside = |p: &[f64; 3]| self.compensable(p[0], p[1]);
         if inside(&known[0]) {
             return true;
         }
@@ -267,6 +343,17 @@ impl<'a> Rewriter<'a> {
 
     fn line(&mut self, line: &Line) -> Result<()> {
         let text = self.text;
+        self.check_block(line)?;
+        let keyword = line.tokens.iter().find_map(|t| match &t.kind {
+            TokenKind::Keyword { name } => Some((name.clone(), t.span.clone())),
+            _ => None,
+        });
+        if let Some((name, span)) = keyword {
+            if !self.keyword(line, &name, span)? {
+                self.copy_line(line);
+                return Ok(());
+            }
+        }
         // Words, assignments and O-words of the line.
         let mut words: Vec<W> = Vec::new();
         let mut oword: Option<(String, String, String)> = None;
@@ -274,19 +361,27 @@ impl<'a> Rewriter<'a> {
         for (ti, tok) in line.tokens.iter().enumerate() {
             match &tok.kind {
                 TokenKind::Word { letter, value } => {
-                    let (value, is_expr) = match value {
-                        WordValue::Number(v) => (Some(*v), false),
+                    let (value, is_expr, abs) = match value {
+                        WordValue::Number(v) => (Some(*v), false, None),
+                        WordValue::Abs(v) => (Some(*v), false, Some(true)),
+                        WordValue::Inc(v) => (Some(*v), false, Some(false)),
                         WordValue::Expr(r) => (
                             text.get(r.clone()).and_then(|t| eval(t, &self.params)),
                             true,
+                            None,
                         ),
                     };
+                    let no_dot = value.is_some()
+                        && !is_expr
+                        && !text.get(tok.span.clone()).unwrap_or("").contains('.');
                     words.push(W {
                         letter: *letter,
                         value,
                         is_expr,
                         token: ti,
-                        text: text.get(tok.span.clone()).unwrap_or("").trim().to_string(),
+                        span: tok.span.clone(),
+                        abs,
+                        no_dot,
                     });
                 }
                 TokenKind::OWord { name, keyword } => {
@@ -316,25 +411,45 @@ impl<'a> Rewriter<'a> {
             }
         }
         if let Some((name, keyword, otext)) = oword {
+            if self.dialect == Dialect::Fanuc {
+                // `O1234`: a program number; a second one starts a subprogram.
+                self.programs += 1;
+                if self.programs > 1 && self.sub.is_none() {
+                    self.sub = Some((name.clone(), SubInfo::default()));
+                }
+                self.copy_line(line);
+                return Ok(());
+            }
             self.oword(line, &name, &keyword, &otext)?;
             self.copy_line(line);
             return Ok(());
         }
-        if let Some((_, info)) = self.sub.as_mut() {
+        self.fanuc_m_codes(line, &words)?;
+        if self.sub.is_some() {
             // Subroutine bodies are classified where they are called.
             let n = AXES[self.normal];
-            let g: Vec<i32> = words
-                .iter()
-                .filter(|w| w.letter == b'G')
-                .map(|w| w.value.map(g_code).unwrap_or(-1))
-                .collect();
+            let writes = words.iter().filter(|w| w.letter == b'G').any(|w| {
+                !matches!(
+                    w.value.and_then(|v| self.g(g_code(v))),
+                    Some(
+                        G::Motion(Motion::Rapid | Motion::Linear | Motion::ArcCw | Motion::ArcCcw)
+                            | G::Plane(_)
+                            | G::Units(_)
+                            | G::Distance(_)
+                            | G::ArcDistance(_)
+                            | G::CutterComp(_)
+                            | G::Neutral
+                            | G::MotionCancel
+                    )
+                )
+            });
             let axis_words = words
                 .iter()
                 .any(|w| matches!(w.letter, b'X' | b'Y' | b'Z' | b'@' | b'^'));
-            if words.iter().any(|w| w.letter == n)
-                || g.iter()
-                    .any(|c| matches!(c, 280 | 300 | 530 | 920 | 100) || is_canned(*c))
-            {
+            let Some((_, info)) = self.sub.as_mut() else {
+                return Ok(());
+            };
+            if words.iter().any(|w| w.letter == n) || writes {
                 info.writes_normal = true;
             }
             if axis_words && info.first_move.is_none() {
@@ -346,186 +461,27 @@ impl<'a> Rewriter<'a> {
         self.words(line, &words)
     }
 
-    fn oword(&mut self, line: &Line, name: &str, keyword: &str, otext: &str) -> Result<()> {
-        match keyword {
-            "sub" => {
-                self.sub = Some((
-                    name.to_string(),
-                    SubInfo {
-                        def_line: line.number,
-                        ..SubInfo::default()
-                    },
-                ));
-            }
-            "endsub" => {
-                if let Some((n, info)) = self.sub.take() {
-                    self.subs.insert(n, info);
-                }
-            }
-            "call" => {
-                if let Some((_, info)) = self.sub.as_mut() {
-                    info.calls.push(name.to_string());
-                } else {
-                    self.return_if_needed(line, &[], true)?;
-                    self.call(line, name, otext)?;
-                }
-            }
-            _ if self.sub.is_some() => {}
-            "if" | "while" | "repeat" | "do" => {
-                // `oN while` closes an open `oN do`.
-                let closes_do = keyword == "while"
-                    && self
-                        .blocks
-                        .last()
-                        .is_some_and(|b| b.name == name && b.keyword == "do");
-                if closes_do {
-                    self.close_block(line.number);
-                } else {
-                    self.blocks.push(Block {
-                        name: name.to_string(),
-                        keyword: keyword.to_string(),
-                        line: line.number,
-                        written: [false; 3],
-                    });
-                }
-            }
-            "endif" | "endwhile" | "endrepeat" => self.close_block(line.number),
-            _ => {}
-        }
-        Ok(())
-    }
-
-    fn close_block(&mut self, line: u64) {
-        if let Some(b) = self.blocks.pop() {
-            for (i, w) in b.written.iter().enumerate() {
-                if *w {
-                    self.pos[i] = None;
-                    self.unknown_since = Some(line);
-                }
-            }
-            if let Some(parent) = self.blocks.last_mut() {
-                for i in 0..3 {
-                    parent.written[i] |= b.written[i];
-                }
-            }
-        }
-    }
-
-    /// Subroutine closure: does it (or what it calls) write the normal axis; its first move line.
-    fn sub_summary(&self, name: &str) -> (bool, Option<(String, u64)>, bool) {
-        let mut seen = HashSet::new();
-        let mut stack = vec![name.to_string()];
-        let mut writes = false;
-        let mut first: Option<(String, u64)> = None;
-        let mut external = false;
-        while let Some(n) = stack.pop() {
-            if !seen.insert(n.clone()) {
-                continue;
-            }
-            match self.subs.get(&n) {
-                Some(info) => {
-                    writes |= info.writes_normal;
-                    if let (None, Some(l)) = (&first, info.first_move) {
-                        first = Some((n.clone(), l));
-                    }
-                    stack.extend(info.calls.iter().cloned());
-                }
-                None => external = true,
-            }
-        }
-        (writes, first, external)
-    }
-
-    fn call(&mut self, line: &Line, name: &str, otext: &str) -> Result<()> {
-        let (writes_normal, first_move, external) = self.sub_summary(name);
-        let moves = first_move.is_some() || external;
-        if moves {
-            let mut p = self.pos;
-            if writes_normal || external {
-                p[self.normal] = None;
-            }
-            let (u, v) = self.plane_uv;
-            p[u] = None;
-            p[v] = None;
-            if self.may_touch(&[p]) {
-                let what = match (&first_move, external) {
-                    (_, true) => format!("subroutine o{name} is not defined in this file"),
-                    (Some((sub, l)), _) => format!(
-                        "subroutine o{sub} (defined at line {}) moves on line {l}",
-                        self.subs.get(sub).map(|i| i.def_line).unwrap_or(0)
-                    ),
-                    (None, _) => String::new(),
-                };
-                return Err(self.err(
-                    line,
-                    otext.split_whitespace().next().unwrap_or("O"),
-                    format!(
-                        "`{otext}` runs moves that may lie in the compensation zone and cannot be compensated: {what}"
-                    ),
-                    "expand O-word subroutines and loops into plain G-code (or move the zone away from these moves)",
-                ));
-            }
-        }
-        // After a call the plane position is unknown, and the normal too if the body writes it.
-        let (u, v) = self.plane_uv;
-        if moves {
-            self.pos[u] = None;
-            self.pos[v] = None;
-            for i in 0..3 {
-                if i != self.normal {
-                    self.pos[i] = None;
-                }
-            }
-            if writes_normal || external {
-                self.pos[self.normal] = None;
-            }
-            self.unknown_since = Some(line.number);
-        }
-        Ok(())
-    }
-
-    fn words(&mut self, line: &Line, words: &[W]) -> Result<()> {
+    fn words(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
+        let gs = self.g_words(line, words_in)?;
+        self.modal(line, &gs);
+        let scaled = self.fanuc_numbers(line, words_in)?;
+        let words: &[W] = scaled.as_deref().unwrap_or(words_in);
         let find = |l: u8| words.iter().find(|w| w.letter == l);
-        let gs: Vec<(&W, Option<i32>)> = words
+        let motion_word = gs
             .iter()
-            .filter(|w| w.letter == b'G')
-            .map(|w| (w, w.value.map(g_code)))
-            .collect();
-        let has_g = |c: i32| gs.iter().any(|(_, g)| *g == Some(c));
-        // Modal codes (applied before motion, RS274/NGC order of execution).
-        let orig_inches = self.inches;
-        for (_, g) in &gs {
-            match g {
-                Some(170) => self.plane = Plane::G17,
-                Some(180) => self.plane = Plane::G18,
-                Some(190) => self.plane = Plane::G19,
-                Some(200) => self.inches = true,
-                Some(210) => self.inches = false,
-                Some(900) => self.absolute = true,
-                Some(910) => self.absolute = false,
-                Some(901) => self.arc_absolute = true,
-                Some(911) => self.arc_absolute = false,
-                Some(400) => self.cutter_comp = None,
-                Some(c @ (410 | 411 | 420 | 421)) => {
-                    self.cutter_comp = Some((line.number, format!("G{}", *c as f64 / 10.0)));
-                }
-                _ => {}
-            }
-        }
-        if self.inches != orig_inches {
-            // The machine stays put; its coordinates change unit.
-            let f = if self.inches { 1.0 / 25.4 } else { 25.4 };
-            for p in self.pos.iter_mut() {
-                *p = p.map(|v| v * f);
-            }
-            self.offset *= f;
-        }
-        let motion_word = gs.iter().find(|(_, g)| g.is_some_and(is_group1));
-        let unknown_g = gs.iter().find(|(_, g)| g.is_none());
-        let group0 = gs
-            .iter()
-            .find(|(_, g)| matches!(g, Some(100 | 280 | 281 | 300 | 301 | 920 | 921 | 922 | 923)));
-        let g53 = has_g(530);
+            .find(|(_, _, g)| matches!(g, G::Motion(_) | G::MotionCancel));
+        let group0 = gs.iter().find(|(_, _, g)| {
+            matches!(
+                g,
+                G::SetPosition
+                    | G::Frame(_)
+                    | G::FrameCancel(_)
+                    | G::Home
+                    | G::DataSetting
+                    | G::Call
+            )
+        });
+        let g53 = gs.iter().any(|(_, _, g)| *g == G::Machine);
         let axis_present = words.iter().any(|w| {
             matches!(
                 w.letter,
@@ -535,34 +491,15 @@ impl<'a> Rewriter<'a> {
         let arc_words = words
             .iter()
             .any(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
-        if let Some((_, Some(c))) = motion_word {
-            self.motion = Some(*c);
+        if let Some((_, c, g)) = motion_word {
+            self.motion = (*g != G::MotionCancel).then_some(*c);
         }
-        // G80 cancels the motion mode; a line with axis words then has no motion to make.
-        let motion = if motion_word.is_some_and(|(_, g)| *g == Some(800)) {
-            self.motion = None;
-            None
-        } else {
-            self.motion
-        };
+        let motion = self.motion;
 
         // Group 0 codes that take axis words (G10, G28, G30, G92…): no cutting move on the line.
-        if let Some((_, g)) = group0 {
+        if let Some(&(gw, _, g)) = group0 {
             self.return_if_needed(line, words, true)?;
-            match g {
-                Some(920) => {
-                    for (i, l) in AXES.iter().enumerate() {
-                        if let Some(w) = find(*l) {
-                            self.pos[i] = w.value;
-                        }
-                    }
-                }
-                Some(100) => {}
-                _ => {
-                    self.pos = [None; 3];
-                    self.unknown_since = Some(line.number);
-                }
-            }
+            self.group0(line, words, gw, g)?;
             self.sync_out_motion(words);
             self.copy_line(line);
             return Ok(());
@@ -572,22 +509,12 @@ impl<'a> Rewriter<'a> {
             axis_present || (motion_word.is_some() && arc_words && matches!(motion, Some(20 | 30)));
         let Some(motion) = motion.filter(|_| moves) else {
             // No motion on this line.
-            if let Some((gw, _)) = unknown_g {
-                if axis_present {
-                    return Err(self.err(
-                        line,
-                        &gw.text,
-                        "a G word given by a parameter or expression on a line with axis words"
-                            .into(),
-                        "write the G code as a number",
-                    ));
-                }
-            }
             self.sync_out_motion(words);
             self.copy_line(line);
             return Ok(());
         };
 
+        self.fix_zone();
         // Start and end of the move in the original program.
         let start = self.pos;
         let mut end = self.pos;
@@ -596,7 +523,7 @@ impl<'a> Rewriter<'a> {
             if let Some(w) = find(*l) {
                 end[i] = if g53 {
                     None
-                } else if self.absolute {
+                } else if w.abs.unwrap_or(self.absolute) {
                     w.value
                 } else {
                     match (start[i], w.value) {
@@ -615,7 +542,10 @@ impl<'a> Rewriter<'a> {
             .iter()
             .find(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'));
         let expr_word = words.iter().find(|w| w.is_expr);
-        let cutting = matches!(motion, 10 | 20 | 30);
+        let cutting = matches!(
+            self.g(motion),
+            Some(G::Motion(Motion::Linear | Motion::ArcCw | Motion::ArcCcw))
+        );
         // `/` at the start of a line: block delete, the controller may skip the line.
         let block_delete = line
             .tokens
@@ -627,9 +557,11 @@ impl<'a> Rewriter<'a> {
 
         // Refusals: things errmap cannot compensate safely, if the move may touch the zone.
         let refusal: Option<(String, String, &str)> = if !cutting {
-            if is_canned(motion) || matches!(motion, 50 | 51 | 52 | 330 | 331) {
+            let special = self.g(motion) == Some(G::Motion(Motion::Special))
+                && !(self.dialect == Dialect::Linuxcnc && (380..=385).contains(&motion));
+            if self.is_canned(motion) || special {
                 let mut pts = vec![start, end];
-                if is_canned(motion) {
+                if self.is_canned(motion) {
                     // The drill axis runs from the start through the R level to the bottom Z;
                     // under G91, R is relative to the start and Z to the R level.
                     let (_, _, ax) = self.plane.axes();
@@ -649,12 +581,13 @@ impl<'a> Rewriter<'a> {
                     }
                 }
                 let name = format!("G{}", motion as f64 / 10.0);
-                let what = if is_canned(motion) {
+                let what = if self.is_canned(motion) {
                     format!("canned cycle {name}")
-                } else if motion < 100 {
-                    format!("spline {name}")
                 } else {
-                    format!("threading/tapping move {name}")
+                    format!(
+                        "{name} (in the {} dialect a spline, thread, tap or other move errmap does not follow)",
+                        self.dialect.name()
+                    )
                 };
                 self.may_touch(&pts).then(|| {
                     (
@@ -666,6 +599,39 @@ impl<'a> Rewriter<'a> {
             } else {
                 None
             }
+        } else if !self.units_known {
+            let at = words
+                .iter()
+                .find(|w| matches!(w.letter, b'G' | b'X' | b'Y' | b'Z'))
+                .map(|w| self.wtext(w).to_string())
+                .unwrap_or_default();
+            let (codes, hint) = match self.dialect {
+                Dialect::Linuxcnc | Dialect::Fanuc => ("G20/G21", "add G21 (mm) or G20 (inch) before the first cut, or pass --units mm|inch"),
+                Dialect::Sinumerik => ("G70/G71/G700/G710", "add G71 (mm) or G70 (inch) before the first cut, or pass --units mm|inch"),
+                Dialect::Heidenhain => ("G70/G71 in the % header", "begin the program with %NAME G71 * (mm) or G70 * (inch), or pass --units mm|inch"),
+            };
+            Some((
+                at,
+                format!("cut with no unit code ({codes}) before it: errmap cannot tell millimetres from inches (a 25.4× error)"),
+                hint,
+            ))
+        } else if let Some((kind, fl, fw)) = self.frames.last().cloned() {
+            let pts = self.frame_points(kind, &[start, end]);
+            self.may_touch(&pts).then(|| {
+                (
+                    fw.clone(),
+                    format!("`{fw}` (line {fl}) transforms the coordinates ({kind:?}), which errmap does not follow, and this cut may lie in the compensation zone"),
+                    "cancel the transformation before the cuts in the zone (G69, G50, G50.1, G54 …), or post the program without it",
+                )
+            })
+        } else if let Some((fl, fw)) = self.flow.clone() {
+            self.may_touch(&[start, end]).then(|| {
+                (
+                    fw.clone(),
+                    format!("the program jumps (`{fw}` on line {fl}), so a cut may run any number of times from any position, and this cut may lie in the compensation zone"),
+                    "expand loops and jumps into plain blocks",
+                )
+            })
         } else if !self.blocks.is_empty() {
             let b = &self.blocks[self.blocks.len() - 1];
             let head = format!("o{} {}", b.name, b.keyword);
@@ -696,7 +662,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = polar {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     "polar coordinates (@ ^) on a move in the compensation zone".into(),
                     "post the program with X/Y coordinates (or move the zone away)",
                 )
@@ -704,7 +670,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = expr_word {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     "# parameters or [expressions] on a move in the compensation zone".into(),
                     "expand the program to plain numbers (or move the zone away)",
                 )
@@ -712,7 +678,7 @@ impl<'a> Rewriter<'a> {
         } else if let Some(w) = other_axis {
             self.may_touch(&[start, end]).then(|| {
                 (
-                    w.text.clone(),
+                    self.wtext(w).to_string(),
                     format!(
                         "axis {} moves together with a cut in the compensation zone",
                         w.letter as char
@@ -748,6 +714,9 @@ impl<'a> Rewriter<'a> {
         }
 
         let plain = cutting
+            && self.units_known
+            && self.frames.is_empty()
+            && self.flow.is_none()
             && !block_delete
             && self.blocks.is_empty()
             && self.cutter_comp.is_none()
@@ -775,7 +744,7 @@ impl<'a> Rewriter<'a> {
                     }
                 }
             }
-            if is_canned(motion) {
+            if self.is_canned(motion) {
                 // The cycle retracts to the R level or the start (G98/G99): not tracked.
                 end[self.plane.axes().2] = None;
             }
@@ -816,13 +785,23 @@ impl<'a> Rewriter<'a> {
                 "check the coordinates and units, or raise --max-segment / --chord-tol",
             ));
         }
-        let path: Vec<[f64; 3]> = match &arc {
-            None => vec![s, e],
-            Some(a) => (0..=chords)
-                .map(|i| a.point(i as f64 / chords as f64))
-                .collect(),
-        };
-        let emitted = self.emit_points(&path);
+        // The move as a curve over [0, 1] with its chord ends as break points: splits at the
+        // zone and domain edges fall on the curve itself (on the arc, not on a chord).
+        let breaks: Vec<f64> = (0..=chords).map(|i| i as f64 / chords as f64).collect();
+        let line_at = |t: f64| lerp(&s, &e, t);
+        let arc_at = |t: f64| arc.as_ref().map_or(e, |a| a.point(t));
+        let curve: &dyn Fn(f64) -> [f64; 3] = if arc.is_some() { &arc_at } else { &line_at };
+        let emitted = emit_curve(
+            &breaks,
+            curve,
+            self.settings.max_segment_in(self.inches),
+            self.zone_now(),
+            self.normal,
+            &|p| self.error_at(p),
+        );
+        if self.extrapolated.replace(false) {
+            self.report.moves_outside_domain += 1;
+        }
         if !emitted.iter().any(|(_, e)| e.is_some()) {
             return self.finish_unchanged(line, words, end);
         }
@@ -849,8 +828,10 @@ impl<'a> Rewriter<'a> {
         let result = if let Some(r) = find(b'R') {
             Arc::from_radius(self.plane, s, e, r, cw, turns)
         } else {
-            // Offsets I, J, K go with X, Y, Z.
-            let off = |axis: usize| find([b'I', b'J', b'K'][axis]);
+            // Offsets I, J, K go with X, Y, Z; Sinumerik `I=AC(…)` is an absolute centre.
+            let word = |axis: usize| words.iter().find(|w| w.letter == [b'I', b'J', b'K'][axis]);
+            let off = |axis: usize| word(axis).and_then(|w| w.value);
+            let abs = |axis: usize| word(axis).and_then(|w| w.abs).unwrap_or(self.arc_absolute);
             let (o1, o2) = (off(a1), off(a2));
             if o1.is_none() && o2.is_none() {
                 return Err(self.err(
@@ -860,11 +841,14 @@ impl<'a> Rewriter<'a> {
                     "give R or the I/J/K words of the plane (G17: I J, G18: I K, G19: J K)",
                 ));
             }
-            let c = if self.arc_absolute {
-                (o1.unwrap_or(0.0), o2.unwrap_or(0.0))
-            } else {
-                (s[a1] + o1.unwrap_or(0.0), s[a2] + o2.unwrap_or(0.0))
+            let centre = |o: Option<f64>, axis: usize, start: f64| {
+                if abs(axis) {
+                    o.unwrap_or(start)
+                } else {
+                    start + o.unwrap_or(0.0)
+                }
             };
+            let c = (centre(o1, a1, s[a1]), centre(o2, a2, s[a2]));
             Arc::from_centre(self.plane, s, e, c, cw, turns)
         };
         result.map_err(|m| {
@@ -875,16 +859,6 @@ impl<'a> Rewriter<'a> {
                 "fix the arc's end point or centre",
             )
         })
-    }
-
-    fn emit_points(&self, path: &[[f64; 3]]) -> Vec<([f64; 3], Option<f64>)> {
-        emit_points(
-            path,
-            self.settings.max_segment_in(self.inches),
-            self.settings.zone,
-            self.normal,
-            &|p| self.error_at(p),
-        )
     }
 
     /// Emit a return along the normal to the original position before an unchanged line that
@@ -898,7 +872,7 @@ impl<'a> Rewriter<'a> {
         // to an absolute normal coordinate.
         let absolute_normal = !group0
             && self.absolute
-            && !self.motion.is_some_and(is_canned)
+            && !self.motion.is_some_and(|m| self.is_canned(m))
             && words.iter().any(|w| w.letter == n && w.value.is_some())
             && !words
                 .iter()
@@ -920,8 +894,12 @@ impl<'a> Rewriter<'a> {
         } else {
             "G1"
         };
-        self.out
-            .push_str(&format!("{code} {}{}", n as char, self.fmt(value)));
+        self.out.push_str(&format!(
+            "{code} {}{}{}",
+            n as char,
+            self.fmt(value),
+            self.eob()
+        ));
         self.out.push_str(line_terminator(self.text, line));
         self.out_motion = Some(if code == "G0" { 0 } else { 10 });
         self.offset = 0.0;
@@ -933,7 +911,7 @@ impl<'a> Rewriter<'a> {
     fn sync_out_motion(&mut self, words: &[W]) {
         if words
             .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1))
+            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)))
         {
             self.out_motion = self.motion;
         }
@@ -943,7 +921,7 @@ impl<'a> Rewriter<'a> {
         self.return_if_needed(line, words, false)?;
         let has_motion_g = words
             .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(is_group1));
+            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)));
         let moves = words.iter().any(|w| {
             matches!(
                 w.letter,
@@ -1072,11 +1050,10 @@ impl<'a> Rewriter<'a> {
                         .is_some_and(|c| matches!(c, 0 | 10 | 20 | 30)))
                 || (w.letter == b'P' && arc.is_some())
         };
-        let removed_tokens: HashSet<usize> = words
-            .iter()
-            .filter(|w| removed(w))
-            .map(|w| w.token)
-            .collect();
+        let mut removed_tokens = vec![false; line.tokens.len()];
+        for w in words.iter().filter(|w| removed(w)) {
+            removed_tokens[w.token] = true;
+        }
         let nseg = segs.len();
         let mut lines_text: Vec<String> = Vec::with_capacity(nseg);
         for (k, q) in segs.iter().enumerate() {
@@ -1098,29 +1075,55 @@ impl<'a> Rewriter<'a> {
                     }
                 }
             }
+            // The words as written, and the values the controller reads from them.
+            let written: Vec<(String, f64)> = (0..3)
+                .map(|i| {
+                    let v = if self.absolute {
+                        q[i]
+                    } else {
+                        q[i] - out_pos[i]
+                    };
+                    self.written(v)
+                })
+                .collect();
+            // No zero-length moves: a point that rounds to where the tool already is goes.
+            let d = self.decimals();
+            let zero = (0..3).all(|i| {
+                if self.absolute {
+                    decimal_units(written[i].1, d) == decimal_units(out_pos[i], d)
+                } else {
+                    decimal_units(written[i].1, d) == Some(0)
+                }
+            });
+            if zero {
+                continue;
+            }
             words_text.push_str(&code);
             for (i, l) in AXES.iter().enumerate() {
-                let v = if self.absolute {
-                    q[i]
-                } else {
-                    q[i] - out_pos[i]
-                };
-                let t = self.fmt(v);
                 // Track the position the controller will reach after rounding.
-                let rounded: f64 = t.parse().unwrap_or(v);
                 out_pos[i] = if self.absolute {
-                    rounded
+                    written[i].1
                 } else {
-                    out_pos[i] + rounded
+                    out_pos[i] + written[i].1
                 };
-                words_text.push_str(&format!(" {}{}", *l as char, t));
+                words_text.push_str(&format!(" {}{}", *l as char, written[i].0));
             }
             if let Some(r) = r_word {
-                words_text.push_str(&format!(" R{}", self.fmt(r)));
+                let r_letter = if self.dialect == Dialect::Sinumerik {
+                    "CR="
+                } else {
+                    "R"
+                };
+                words_text.push_str(&format!(" {r_letter}{}", self.fmt(r)));
             }
             self.out_motion = Some(if code == "G1" { 10 } else { motion });
             lines_text.push(words_text);
         }
+        if lines_text.is_empty() {
+            // Every point rounds to the current position: the line keeps its other words only.
+            lines_text.push(String::new());
+        }
+        let nseg = lines_text.len();
         // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
         // segment, so the program does not stop after the first one.
         let stops: Vec<&W> = if nseg > 1 {
@@ -1138,20 +1141,23 @@ impl<'a> Rewriter<'a> {
         if let Some(last) = lines_text.last_mut() {
             for w in &stops {
                 last.push(' ');
-                last.push_str(&w.text);
+                last.push_str(self.wtext(w));
             }
         }
-        let stop_tokens: HashSet<usize> = stops.iter().map(|w| w.token).collect();
+        let mut stop_tokens = vec![false; line.tokens.len()];
+        for w in &stops {
+            stop_tokens[w.token] = true;
+        }
         // First line: the original line with its motion words replaced by the first segment.
         let mut first = String::new();
         let mut inserted = false;
         let mut skip_space = false;
         for (ti, tok) in line.tokens.iter().enumerate() {
-            if stop_tokens.contains(&ti) {
+            if stop_tokens[ti] {
                 skip_space = true;
                 continue;
             }
-            if removed_tokens.contains(&ti) {
+            if removed_tokens[ti] {
                 if !inserted {
                     first.push_str(&lines_text[0]);
                     inserted = true;
@@ -1161,7 +1167,7 @@ impl<'a> Rewriter<'a> {
             }
             if skip_space && tok.kind == TokenKind::Space {
                 skip_space = false;
-                if ti + 1 < line.tokens.len() && !removed_tokens.contains(&(ti + 1)) {
+                if ti + 1 < line.tokens.len() && !removed_tokens[ti + 1] {
                     first.push(' ');
                 }
                 continue;
@@ -1174,8 +1180,13 @@ impl<'a> Rewriter<'a> {
         }
         // Inserted lines use the file's terminator; the last one keeps the line's own
         // (none on a last line without a newline).
+        let eob = self.eob();
+        let extra: Vec<String> = lines_text[1..]
+            .iter()
+            .map(|t| format!("{t}{eob}"))
+            .collect();
         let mut pieces: Vec<&str> = vec![first.trim_end_matches([' ', '\t'])];
-        pieces.extend(lines_text[1..].iter().map(|t| t.as_str()));
+        pieces.extend(extra.iter().map(|t| t.as_str()));
         let count = pieces.len();
         for (k, piece) in pieces.into_iter().enumerate() {
             self.out.push_str(piece);
@@ -1196,85 +1207,6 @@ impl<'a> Rewriter<'a> {
     }
 }
 
-/// Walk the polyline; split every piece so segments in the zone are at most max_segment
-/// long, and split exactly where the path enters or leaves the zone/domain. Returns each
-/// point with E (program units) when it is compensated. At a boundary the point is emitted
-/// twice, uncompensated and compensated, so the outside part of the move stays unchanged.
-pub(crate) fn emit_points(
-    path: &[[f64; 3]],
-    step: f64,
-    zone: Option<(f64, f64)>,
-    normal: usize,
-    error_at: &dyn Fn(&[f64; 3]) -> Option<f64>,
-) -> Vec<([f64; 3], Option<f64>)> {
-    let mut out: Vec<([f64; 3], Option<f64>)> = Vec::new();
-    let Some(first) = path.first() else {
-        return out;
-    };
-    out.push((*first, error_at(first)));
-    for w in path.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let len = dist(&a, &b);
-        let k = (len / step).ceil().clamp(1.0, 1e7) as usize;
-        let mut ts: Vec<f64> = (1..=k).map(|i| i as f64 / k as f64).collect();
-        // Exact zone crossings along the normal.
-        if let Some((lo, hi)) = zone {
-            let (na, nb) = (a[normal], b[normal]);
-            if (nb - na).abs() > 0.0 {
-                for z in [lo, hi] {
-                    let t = (z - na) / (nb - na);
-                    if t > 0.0 && t < 1.0 {
-                        ts.push(t);
-                    }
-                }
-            }
-        }
-        ts.sort_by(|x, y| x.total_cmp(y));
-        let mut t_prev = 0.0;
-        let mut e_prev = error_at(&a);
-        for t in ts {
-            // The last point is the piece end exactly (lerp can round past a domain edge).
-            let p = if t >= 1.0 { b } else { lerp(&a, &b, t) };
-            let e_here = error_at(&p);
-            if e_prev.is_some() != e_here.is_some() {
-                // Bisect for the boundary: keep `lo_t` on the side of e_prev.
-                let (mut lo_t, mut hi_t) = (t_prev, t);
-                for _ in 0..60 {
-                    let mid = 0.5 * (lo_t + hi_t);
-                    if error_at(&lerp(&a, &b, mid)).is_some() == e_prev.is_some() {
-                        lo_t = mid;
-                    } else {
-                        hi_t = mid;
-                    }
-                }
-                let (t_in, t_out) = if e_prev.is_some() {
-                    (lo_t, hi_t)
-                } else {
-                    (hi_t, lo_t)
-                };
-                let p_in = lerp(&a, &b, t_in);
-                let p_out = lerp(&a, &b, t_out);
-                let e_in = error_at(&p_in);
-                if e_prev.is_some() {
-                    out.push((p_in, e_in));
-                    out.push((p_out, None));
-                } else {
-                    out.push((p_out, None));
-                    out.push((p_in, e_in));
-                }
-            }
-            // Outside stretches of a straight piece need no intermediate points.
-            let last = (t - 1.0).abs() < 1e-15;
-            if e_here.is_some() || last {
-                out.push((if last { b } else { p }, e_here));
-            }
-            t_prev = t;
-            e_prev = e_here;
-        }
-    }
-    out
-}
-
 fn line_terminator<'t>(text: &'t str, line: &Line) -> &'t str {
     match line.terminator(text) {
         "" => {
@@ -1286,16 +1218,4 @@ fn line_terminator<'t>(text: &'t str, line: &Line) -> &'t str {
         }
         t => t,
     }
-}
-
-pub(crate) fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-pub(crate) fn lerp(a: &[f64; 3], b: &[f64; 3], t: f64) -> [f64; 3] {
-    [
-        a[0] + t * (b[0] - a[0]),
-        a[1] + t * (b[1] - a[1]),
-        a[2] + t * (b[2] - a[2]),
-    ]
 }

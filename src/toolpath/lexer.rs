@@ -6,7 +6,14 @@
 //! program. `O` words are flow control (sub, call, while, if, repeat …). `#name = value` assigns
 //! a parameter. Polar words `@` (radius) and `^` (angle) are lexed like letters.
 //! Nothing is evaluated here: see `expr` for the small evaluator used to classify moves.
+//!
+//! Dialect deltas: Fanuc macro B statements (`WHILE`, `IF`, `GOTO`, `END`) and Sinumerik
+//! instructions (`TRANS`, `DEF`, …) are [`TokenKind::Keyword`] running to the end of the block;
+//! Sinumerik writes `X=10`, `X=AC(10)`, `X=IC(1)`, `CR=5` (lexed as an `R` word), `R1=5` (an
+//! assignment) and only `;` comments; Heidenhain ISO blocks end in `*` and `%` lines are headers.
+//! Every byte is looked at a bounded number of times: lexing is linear in the line length.
 
+use super::dialect::Dialect;
 use std::ops::Range;
 
 /// What a token is. The tokens of a line tile its content exactly.
@@ -29,6 +36,9 @@ pub enum TokenKind {
     OWord { name: String, keyword: String },
     /// Spaces and tabs.
     Space,
+    /// A dialect statement or instruction (`WHILE`, `GOTO`, `TRANS`, `DEF`, a Heidenhain `%`
+    /// header …): `name` upper-cased; the token runs to the end of the block.
+    Keyword { name: String },
     /// Anything else (a letter without a value, a stray character).
     Other,
 }
@@ -40,6 +50,10 @@ pub enum WordValue {
     Number(f64),
     /// A `#` parameter reference, `[expression]` or function: its text span (not evaluated here).
     Expr(Range<usize>),
+    /// Sinumerik `X=AC(…)`: an absolute value whatever G90/G91 say.
+    Abs(f64),
+    /// Sinumerik `X=IC(…)`: an incremental value whatever G90/G91 say.
+    Inc(f64),
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -66,8 +80,13 @@ impl Line {
     }
 }
 
-/// Split a program into lines and tokens. Never fails: what it cannot read becomes `Other`.
+/// Split a LinuxCNC program into lines and tokens. Never fails: what it cannot read becomes `Other`.
 pub fn lex(text: &str) -> Vec<Line> {
+    lex_dialect(text, Dialect::Linuxcnc)
+}
+
+/// [`lex`] with the lexing rules of `dialect`.
+pub fn lex_dialect(text: &str, dialect: Dialect) -> Vec<Line> {
     let bytes = text.as_bytes();
     let mut lines = Vec::new();
     let mut start = 0usize;
@@ -92,7 +111,7 @@ pub fn lex(text: &str) -> Vec<Line> {
             number,
             span: start..content_end,
             end,
-            tokens: lex_line(bytes, start, content_end),
+            tokens: lex_line(bytes, start, content_end, dialect),
         });
         number += 1;
         start = end;
@@ -104,17 +123,61 @@ fn is_space(b: u8) -> bool {
     b == b' ' || b == b'\t'
 }
 
-fn lex_line(b: &[u8], start: usize, end: usize) -> Vec<Token> {
+/// Fanuc custom macro B statements.
+const FANUC_KEYWORDS: [&str; 10] = [
+    "WHILE", "IF", "GOTO", "DO", "END", "THEN", "POPEN", "PCLOS", "DPRNT", "BPRNT",
+];
+
+fn letter_run(b: &[u8], i: usize, end: usize) -> usize {
+    let mut j = i;
+    while j < end && b[j].is_ascii_alphabetic() {
+        j += 1;
+    }
+    j
+}
+
+/// A keyword token from `i` to the end of the block (before a `;` comment).
+fn keyword(b: &[u8], i: usize, name_end: usize, end: usize) -> (TokenKind, usize) {
+    let mut m = name_end;
+    while m < end && b[m] != b';' {
+        m += 1;
+    }
+    while m > name_end && is_space(b[m - 1]) {
+        m -= 1;
+    }
+    let name = String::from_utf8_lossy(&b[i..name_end]).to_ascii_uppercase();
+    (TokenKind::Keyword { name }, m)
+}
+
+fn lex_line(b: &[u8], start: usize, end: usize, dialect: Dialect) -> Vec<Token> {
     let mut tokens = Vec::new();
     let mut i = start;
     while i < end {
         let c = b[i];
+        let run = if c.is_ascii_alphabetic() {
+            letter_run(b, i, end)
+        } else {
+            i
+        };
         let (kind, next) = if is_space(c) {
             let mut j = i;
             while j < end && is_space(b[j]) {
                 j += 1;
             }
             (TokenKind::Space, j)
+        } else if dialect == Dialect::Fanuc
+            && run - i >= 2
+            && FANUC_KEYWORDS
+                .iter()
+                .any(|k| k.as_bytes().eq_ignore_ascii_case(&b[i..run]))
+        {
+            keyword(b, i, run, end)
+        } else if dialect == Dialect::Sinumerik && c != b';' && !is_space(c) {
+            lex_siemens(b, i, run, end)
+        } else if dialect == Dialect::Heidenhain && c == b'*' {
+            (TokenKind::LineComment, end)
+        } else if dialect == Dialect::Heidenhain && c == b'%' {
+            keyword(b, i, i + 1, end)
         } else if c == b'(' {
             let j = b[i..end]
                 .iter()
@@ -131,7 +194,11 @@ fn lex_line(b: &[u8], start: usize, end: usize) -> Vec<Token> {
         } else if c == b'o' || c == b'O' {
             lex_oword(b, i, end)
         } else if c.is_ascii_alphabetic() || c == b'@' || c == b'^' {
-            lex_word(b, i, end)
+            match lex_word(b, i, end) {
+                // A run of letters that is no word: one token, so it is not rescanned.
+                (TokenKind::Other, _) if run > i + 1 => (TokenKind::Other, run),
+                t => t,
+            }
         } else {
             // Keep multi-byte UTF-8 characters whole so every span is a valid `str` range.
             let mut j = i + 1;
@@ -159,6 +226,27 @@ fn skip_spaces(b: &[u8], mut i: usize, end: usize) -> usize {
 /// A number: optional sign, digits and one decimal point; spaces between digits are allowed
 /// (LinuxCNC ignores them). Returns the end and the value.
 fn lex_number(b: &[u8], i: usize, end: usize) -> Option<(usize, f64)> {
+    // Fast path: sign, digits and a point with no spaces inside.
+    let s = skip_spaces(b, i, end);
+    let mut j = s;
+    if j < end && (b[j] == b'+' || b[j] == b'-') {
+        j += 1;
+    }
+    let (mut digits, mut dot) = (0, false);
+    while j < end && (b[j].is_ascii_digit() || (b[j] == b'.' && !dot)) {
+        dot |= b[j] == b'.';
+        digits += usize::from(b[j] != b'.');
+        j += 1;
+    }
+    if digits > 0 && (j >= end || !is_space(b[j])) {
+        let v: f64 = std::str::from_utf8(&b[s..j]).ok()?.parse().ok()?;
+        return Some((j, v));
+    }
+    lex_number_spaced(b, i, end)
+}
+
+/// [`lex_number`] with spaces between the digits.
+fn lex_number_spaced(b: &[u8], i: usize, end: usize) -> Option<(usize, f64)> {
     let mut j = skip_spaces(b, i, end);
     let mut text = String::new();
     if j < end && (b[j] == b'+' || b[j] == b'-') {
@@ -378,6 +466,109 @@ fn lex_oword(b: &[u8], i: usize, end: usize) -> (TokenKind, usize) {
         m -= 1;
     }
     (TokenKind::OWord { name, keyword }, m.max(k))
+}
+
+/// Map a Sinumerik address to the letter errmap's rewrite knows: `CR` → `R` (radius), `AP` →
+/// `^` and `RP` → `@` (polar, refused in the zone); single letters are themselves.
+fn siemens_address(name: &[u8]) -> Option<u8> {
+    match name.len() {
+        1 if name[0] != b'R' => Some(name[0].to_ascii_uppercase()),
+        2 => match [name[0].to_ascii_uppercase(), name[1].to_ascii_uppercase()] {
+            [b'C', b'R'] => Some(b'R'),
+            [b'A', b'P'] => Some(b'^'),
+            [b'R', b'P'] => Some(b'@'),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// One Sinumerik token starting at a non-space `i` (`run` is the end of its letter run).
+fn lex_siemens(b: &[u8], i: usize, run: usize, end: usize) -> (TokenKind, usize) {
+    let c = b[i];
+    if !c.is_ascii_alphabetic() {
+        let mut j = i + 1;
+        while j < end && (0x80..0xC0).contains(&b[j]) {
+            j += 1;
+        }
+        return (TokenKind::Other, j);
+    }
+    let eq = skip_spaces(b, run, end);
+    // `R1=…`: an R parameter assignment.
+    if (c == b'R' || c == b'r') && run == i + 1 {
+        let mut d = run;
+        while d < end && b[d].is_ascii_digit() {
+            d += 1;
+        }
+        let e = skip_spaces(b, d, end);
+        if d > run && e < end && b[e] == b'=' {
+            let vs = skip_spaces(b, e + 1, end);
+            let ve = value_end(b, vs, end);
+            let target = String::from_utf8_lossy(&b[i..d]).to_ascii_lowercase();
+            return (
+                TokenKind::Assignment {
+                    target,
+                    value_span: vs..ve,
+                },
+                ve.max(e + 1),
+            );
+        }
+    }
+    if eq < end && b[eq] == b'=' {
+        let vs = skip_spaces(b, eq + 1, end);
+        let ve = value_end(b, vs, end);
+        let Some(letter) = siemens_address(&b[i..run]) else {
+            return keyword(b, i, run, end);
+        };
+        let value = siemens_value(b, vs, ve);
+        return (TokenKind::Word { letter, value }, ve.max(eq + 1));
+    }
+    if run - i >= 2 {
+        return keyword(b, i, run, end);
+    }
+    if c == b'R' || c == b'r' {
+        // A bare R is a parameter reference in Sinumerik, not a radius.
+        return (TokenKind::Other, run);
+    }
+    lex_word(b, i, end)
+}
+
+/// End of a Sinumerik value: up to a space or `;` outside parentheses and quotes.
+fn value_end(b: &[u8], i: usize, end: usize) -> usize {
+    let (mut depth, mut quote, mut j) = (0i32, false, i);
+    while j < end {
+        match b[j] {
+            b'"' => quote = !quote,
+            b'(' | b'[' if !quote => depth += 1,
+            b')' | b']' if !quote => depth -= 1,
+            b' ' | b'\t' | b';' if depth <= 0 && !quote => break,
+            _ => {}
+        }
+        j += 1;
+    }
+    j
+}
+
+/// `10.5`, `AC(10.5)`, `IC(-1)` or anything else (an expression).
+fn siemens_value(b: &[u8], vs: usize, ve: usize) -> WordValue {
+    let text = std::str::from_utf8(&b[vs..ve]).unwrap_or("");
+    let num = |t: &str| t.trim().parse::<f64>().ok();
+    let upper = text.to_ascii_uppercase();
+    let inner = |p: &str| {
+        upper
+            .strip_prefix(p)
+            .and_then(|r| r.strip_suffix(')'))
+            .and_then(num)
+    };
+    if let Some(v) = num(text) {
+        WordValue::Number(v)
+    } else if let Some(v) = inner("AC(") {
+        WordValue::Abs(v)
+    } else if let Some(v) = inner("IC(") {
+        WordValue::Inc(v)
+    } else {
+        WordValue::Expr(vs..ve)
+    }
 }
 
 #[cfg(test)]

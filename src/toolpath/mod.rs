@@ -13,11 +13,13 @@
 
 mod arc;
 mod csv_path;
+pub mod dialect;
 mod expr;
 mod gcode;
 pub mod lexer;
 
 pub use arc::{Arc, Plane};
+pub use dialect::{Dialect, FanucNumbers, Units};
 pub use gcode::format_coord;
 
 use crate::error::{Error, Location, Result};
@@ -25,24 +27,47 @@ use crate::geom::ErrorField;
 use serde::Serialize;
 use std::path::Path;
 
-/// How to compensate. `zone` is in program units (inches in a G20 program, mm in CSV);
-/// `max_segment` and `chord_tol` are in mm (converted to inches for G20 programs).
+/// How to compensate. `zone` is in the units the program starts in (inches in a G20 program,
+/// mm in CSV) and follows later G20/G21 switches; `max_segment` and `chord_tol` are in mm
+/// (converted to inches for G20 programs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CompensationSettings {
-    /// Band `(min, max)` along the normal axis where moves are compensated; `None` = everywhere.
+    /// Band `(min, max)` along the normal axis where moves are compensated. `None`: the map's
+    /// probed surface ± `surface_tol_mm` (or everywhere if `everywhere`).
     pub zone: Option<(f64, f64)>,
+    /// With no `zone`: compensate at every height along the normal (an explicit opt-in).
+    pub everywhere: bool,
+    /// Half-width of the default zone around the probed surface, mm (default 0.5).
+    pub surface_tol_mm: f64,
     /// Longest segment emitted in the zone, mm (default 5).
     pub max_segment: f64,
     /// Largest distance between an arc and its chords, mm (default 0.005).
     pub chord_tol: f64,
+    /// The program's controller dialect; `None` = detect (refused when uncertain).
+    pub dialect: Option<Dialect>,
+    /// Units of a program that does not say (no G20/G21 before its first cut); `None` = refuse.
+    pub units: Option<Units>,
+    /// How a Fanuc reads decimal-less coordinates; `None` = refuse such a program.
+    pub fanuc_numbers: Option<FanucNumbers>,
+    /// Also compensate outside the measured domain, where the map extrapolates.
+    pub extrapolate: bool,
+    /// Margin around the probes' hull that still counts as measured, mm.
+    pub domain_margin_mm: f64,
 }
 
 impl Default for CompensationSettings {
     fn default() -> Self {
         CompensationSettings {
             zone: None,
+            everywhere: false,
+            surface_tol_mm: 0.5,
             max_segment: 5.0,
             chord_tol: 0.005,
+            dialect: None,
+            units: None,
+            fanuc_numbers: None,
+            extrapolate: false,
+            domain_margin_mm: 0.0,
         }
     }
 }
@@ -70,6 +95,24 @@ impl CompensationSettings {
                     self.chord_tol
                 ),
                 "use e.g. --chord-tol 0.005",
+            ));
+        }
+        if !(self.surface_tol_mm.is_finite() && self.surface_tol_mm >= 0.0) {
+            return Err(Error::usage(
+                format!(
+                    "surface tolerance must be a non-negative number of mm, got {}",
+                    self.surface_tol_mm
+                ),
+                "use e.g. --surface-tol 0.5",
+            ));
+        }
+        if !(self.domain_margin_mm.is_finite() && self.domain_margin_mm >= 0.0) {
+            return Err(Error::usage(
+                format!(
+                    "domain margin must be a non-negative number of mm, got {}",
+                    self.domain_margin_mm
+                ),
+                "use e.g. domain_margin_mm = 2",
             ));
         }
         if let Some((lo, hi)) = self.zone {
@@ -100,6 +143,36 @@ impl CompensationSettings {
     }
 }
 
+/// Checks shared by G-code and CSV: the map must know its measured domain unless
+/// `extrapolate`; with no zone given, the zone is the map's probed surface ± the tolerance (mm),
+/// or everywhere when asked for, else the program is refused.
+pub(crate) fn default_zone_mm(
+    source: &Path,
+    field: &dyn ErrorField,
+    settings: &CompensationSettings,
+) -> Result<Option<(f64, f64)>> {
+    if !settings.extrapolate && field.measured(0.0, 0.0, 0.0).is_none() {
+        return Err(Error::input(
+            Location::file(source),
+            "the map does not record its measured domain (a model.json from an older errmap), so errmap cannot keep compensation inside the probed area",
+            "refit the map with this version of errmap, or pass --extrapolate to compensate wherever the map is defined",
+        ));
+    }
+    match (settings.zone, field.surface_mm()) {
+        (Some(_), _) => Ok(None),
+        (None, _) if settings.everywhere => Ok(None),
+        (None, Some((lo, hi))) => Ok(Some((
+            lo - settings.surface_tol_mm,
+            hi + settings.surface_tol_mm,
+        ))),
+        (None, None) => Err(Error::input(
+            Location::file(source),
+            "no compensation zone: the map does not record its probed surface and no --zone was given",
+            "pass --zone MIN,MAX (program units along the map's normal axis; job key [toolpaths] zone), or --zone all (job key zone_all) to compensate at every height, or refit the map",
+        )),
+    }
+}
+
 /// What a compensation did.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct CompensationReport {
@@ -111,6 +184,15 @@ pub struct CompensationReport {
     pub max_abs_error_mm: f64,
     /// Points that received P' = P − E.
     pub points_compensated: u64,
+    /// Cutting moves in the zone that reach outside the measured domain (the probes' hull),
+    /// where they keep their nominal coordinates (unless `--extrapolate`).
+    pub moves_outside_domain: u64,
+    /// The dialect the program was read in.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dialect: Option<Dialect>,
+    /// The zone used, mm along the normal (`None`: everywhere).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone_mm: Option<(f64, f64)>,
     /// Segments (G-code lines or CSV rows) emitted for rewritten moves.
     pub segments_emitted: u64,
     /// Returns along the normal inserted before an unchanged line that starts where a
@@ -128,11 +210,12 @@ impl CompensationReport {
     /// The one-line summary the CLI prints.
     pub fn summary_line(&self) -> String {
         format!(
-            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} lines in, {} out)",
+            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} moves kept nominal outside the measured domain, {} lines in, {} out)",
             self.moves_changed,
             self.moves_split,
             self.max_abs_error_mm,
             self.points_compensated,
+            self.moves_outside_domain,
             self.lines_in,
             self.lines_out
         )

@@ -1,0 +1,601 @@
+//! Controller dialects: which one a program is written for (given or detected), and each one's table of G codes.
+//!
+//! A dialect is a table ([`g_code`]) plus a small delta of lexing rules (see `lexer`) and of
+//! instructions errmap follows or refuses (see `gcode`). Detection looks for constructs only one
+//! dialect has; a program with none of them is read as common ISO G-code only when every
+//! coordinate has a decimal point (a decimal-less `X10` means 10 mm on LinuxCNC and Sinumerik but
+//! 10 µm on a Fanuc in increment input), otherwise errmap asks for `--dialect`.
+
+use crate::error::{Error, Location, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A controller's G-code dialect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// LinuxCNC RS274/NGC.
+    Linuxcnc,
+    /// Fanuc (Series 0i/30i, ISO with macro B).
+    Fanuc,
+    /// Siemens Sinumerik 840D (Siemens mode).
+    Sinumerik,
+    /// Heidenhain TNC: Klartext (refused) or ISO programs.
+    Heidenhain,
+}
+
+impl Dialect {
+    /// Parse a `--dialect` value.
+    pub fn parse(text: &str) -> Option<Dialect> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "linuxcnc" | "rs274" | "ngc" => Some(Dialect::Linuxcnc),
+            "fanuc" => Some(Dialect::Fanuc),
+            "sinumerik" | "siemens" => Some(Dialect::Sinumerik),
+            "heidenhain" => Some(Dialect::Heidenhain),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Dialect::Linuxcnc => "linuxcnc",
+            Dialect::Fanuc => "fanuc",
+            Dialect::Sinumerik => "sinumerik",
+            Dialect::Heidenhain => "heidenhain",
+        }
+    }
+}
+
+/// How a Fanuc reads a coordinate without a decimal point (parameter 3401 bit 0, DPI, and the
+/// increment system of parameter 1013): `Calculator` = millimetres/inches (DPI = 1); otherwise
+/// least input increments of IS-A (0.01 mm / 0.001 in), IS-B (0.001 mm / 0.0001 in) or IS-C
+/// (0.0001 mm / 0.00001 in).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FanucNumbers {
+    Calculator,
+    IsA,
+    IsB,
+    IsC,
+}
+
+impl FanucNumbers {
+    pub fn parse(text: &str) -> Option<FanucNumbers> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "calculator" => Some(FanucNumbers::Calculator),
+            "is-a" => Some(FanucNumbers::IsA),
+            "is-b" | "increment" => Some(FanucNumbers::IsB),
+            "is-c" => Some(FanucNumbers::IsC),
+            _ => None,
+        }
+    }
+
+    /// Value of one unit of a decimal-less number, in program units.
+    pub fn unit(self, inches: bool) -> f64 {
+        let mm = match self {
+            FanucNumbers::Calculator => return 1.0,
+            FanucNumbers::IsA => 0.01,
+            FanucNumbers::IsB => 0.001,
+            FanucNumbers::IsC => 0.0001,
+        };
+        if inches {
+            mm / 10.0
+        } else {
+            mm
+        }
+    }
+}
+
+/// Program units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Units {
+    Mm,
+    Inch,
+}
+
+impl Units {
+    pub fn parse(text: &str) -> Option<Units> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "mm" => Some(Units::Mm),
+            "inch" | "in" => Some(Units::Inch),
+            _ => None,
+        }
+    }
+}
+
+/// Kind of a motion mode (group 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Motion {
+    Rapid,
+    Linear,
+    ArcCw,
+    ArcCcw,
+    /// Drilling/boring canned cycle (G73, G74, G76, G81–G89 …).
+    Canned,
+    /// Splines, NURBS, threading, rigid tapping, probing: never compensated.
+    Special,
+}
+
+/// A coordinate transformation errmap does not follow: cuts in the zone are refused while one
+/// is active.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Frame {
+    /// Local coordinate system (G52).
+    Local,
+    /// Coordinate rotation (G68).
+    Rotation,
+    /// Scaling (G51).
+    Scaling,
+    /// Programmable mirror image (G51.1).
+    Mirror,
+    /// Polar coordinate command (Fanuc G16).
+    Polar,
+    /// Position set by G92 (offsets from the work coordinates).
+    Shift,
+    /// A work offset other than the program's first one (G54–G59 …).
+    WorkOffset,
+    /// Offsets or parameters set by G10 L2/L20/L50.
+    Data,
+}
+
+/// What a G code means to the rewrite. Codes are `G × 10` rounded (G38.2 → 382).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum G {
+    Motion(Motion),
+    /// Cancel the motion mode (G80).
+    MotionCancel,
+    Plane(super::arc::Plane),
+    /// Units: `true` for inches.
+    Units(bool),
+    /// Absolute (`true`) or incremental distance mode.
+    Distance(bool),
+    /// Absolute (`true`) or incremental arc centres (G90.1/G91.1).
+    ArcDistance(bool),
+    /// Cutter radius compensation on (`true`) or off.
+    CutterComp(bool),
+    /// G92: the current position takes the values of the block's axis words.
+    SetPosition,
+    /// Starts a transformation (its axis words are its parameters, not a move).
+    Frame(Frame),
+    /// Cancels a transformation.
+    FrameCancel(Frame),
+    /// Reference-point return (G28, G30): position unknown afterwards.
+    Home,
+    /// Machine coordinates for one block (G53).
+    Machine,
+    /// Work offset selection (G54–G59, G54.1, G500 …); the code tells which.
+    WorkOffset,
+    /// Data setting (G10): work offsets with L2/L20, tool data otherwise.
+    DataSetting,
+    /// Macro or subprogram call (Fanuc G65/G66).
+    Call,
+    /// A code with no effect on the geometry errmap follows (dwell, feed modes, path control …).
+    Neutral,
+}
+
+/// The meaning of `G<code/10>` in `dialect`, or `None` if errmap does not know it there (such a
+/// code is refused: a G code errmap does not know may move the machine).
+pub fn g_code(dialect: Dialect, code: i32) -> Option<G> {
+    use super::arc::Plane;
+    use Motion::*;
+    if dialect == Dialect::Heidenhain {
+        // TNC ISO: G02/G03 take the centre from I/J (absolute) or G29; errmap follows G00/G01 only.
+        match code {
+            20 | 30 | 50 | 60 | 100 | 110 | 120 | 130 | 150 | 160 | 240 | 250 | 260 | 270 | 790 => {
+                return Some(G::Motion(Special))
+            }
+            700 => return Some(G::Units(true)),
+            710 => return Some(G::Units(false)),
+            280 => return Some(G::Frame(Frame::Mirror)),
+            730 => return Some(G::Frame(Frame::Rotation)),
+            720 => return Some(G::Frame(Frame::Scaling)),
+            540 => return Some(G::Frame(Frame::Local)),
+            290 | 980 | 990 => return Some(G::Neutral),
+            _ => {}
+        }
+    }
+    let common = match code {
+        0 => Some(G::Motion(Rapid)),
+        10 => Some(G::Motion(Linear)),
+        20 => Some(G::Motion(ArcCw)),
+        30 => Some(G::Motion(ArcCcw)),
+        40 | 90 | 940 | 950 | 640 | 490 | 430 | 440 => Some(G::Neutral),
+        170 => Some(G::Plane(Plane::G17)),
+        180 => Some(G::Plane(Plane::G18)),
+        190 => Some(G::Plane(Plane::G19)),
+        900 => Some(G::Distance(true)),
+        910 => Some(G::Distance(false)),
+        400 => Some(G::CutterComp(false)),
+        410 | 420 => Some(G::CutterComp(true)),
+        530 => Some(G::Machine),
+        _ => None,
+    };
+    if common.is_some() {
+        return common;
+    }
+    match dialect {
+        // LinuxCNC G-code reference (milling).
+        Dialect::Linuxcnc => match code {
+            200 => Some(G::Units(true)),
+            210 => Some(G::Units(false)),
+            901 => Some(G::ArcDistance(true)),
+            911 => Some(G::ArcDistance(false)),
+            411 | 421 => Some(G::CutterComp(true)),
+            920 => Some(G::SetPosition),
+            921 | 922 => Some(G::FrameCancel(Frame::Shift)),
+            923 => Some(G::Frame(Frame::Shift)),
+            520 => Some(G::Frame(Frame::Local)),
+            100 => Some(G::DataSetting),
+            280 | 281 | 300 | 301 => Some(G::Home),
+            540..=593 => Some(G::WorkOffset),
+            800 => Some(G::MotionCancel),
+            730 | 740 | 810..=890 => Some(G::Motion(Canned)),
+            50..=53 | 330 | 331 | 380..=385 | 760 => Some(G::Motion(Special)),
+            70 | 80 | 610 | 930 | 931 | 960 | 970 | 980 | 990 | 641 | 431 | 432 | 433 | 600
+            | 650 | 951 => Some(G::Neutral),
+            _ => None,
+        },
+        // Fanuc Series 0i-MF / 30i-B (milling), G-code system A.
+        Dialect::Fanuc => match code {
+            200 => Some(G::Units(true)),
+            210 => Some(G::Units(false)),
+            920 => Some(G::SetPosition),
+            921 => Some(G::FrameCancel(Frame::Shift)),
+            520 => Some(G::Frame(Frame::Local)),
+            680 => Some(G::Frame(Frame::Rotation)),
+            690 => Some(G::FrameCancel(Frame::Rotation)),
+            510 => Some(G::Frame(Frame::Scaling)),
+            500 => Some(G::FrameCancel(Frame::Scaling)),
+            511 => Some(G::Frame(Frame::Mirror)),
+            501 => Some(G::FrameCancel(Frame::Mirror)),
+            160 => Some(G::Frame(Frame::Polar)),
+            150 => Some(G::FrameCancel(Frame::Polar)),
+            100 => Some(G::DataSetting),
+            280 | 290 | 300 => Some(G::Home),
+            540..=590 => Some(G::WorkOffset),
+            800 => Some(G::MotionCancel),
+            730 | 740 | 760 | 810..=890 => Some(G::Motion(Canned)),
+            330 | 62 | 310 | 121 => Some(G::Motion(Special)),
+            650 | 660 | 661 => Some(G::Call),
+            670 | 50 | 51 | 80 | 131 | 610 | 620 | 630 | 980 | 990 | 110 => Some(G::Neutral),
+            _ => None,
+        },
+        // Sinumerik 840D sl, Siemens mode: G70/G71 (G700/G710) are units.
+        Dialect::Sinumerik => match code {
+            700 | 7000 => Some(G::Units(true)),
+            710 | 7100 => Some(G::Units(false)),
+            5000 | 540..=570 | 5050..=5990 => Some(G::WorkOffset),
+            740 | 750 => Some(G::Home),
+            1530 => Some(G::Machine),
+            250
+            | 260
+            | 1100
+            | 1110
+            | 1120
+            | 641..=645
+            | 600
+            | 6010
+            | 6020
+            | 6030
+            | 930
+            | 960
+            | 970 => Some(G::Neutral),
+            330 | 331 | 332 | 340 | 350 | 630 => Some(G::Motion(Special)),
+            _ => None,
+        },
+        Dialect::Heidenhain => None,
+    }
+}
+
+/// A construct that only one dialect has, found at `line`.
+#[derive(Debug, Clone)]
+struct Marker {
+    dialect: Dialect,
+    line: u64,
+    what: String,
+}
+
+/// The dialect of `text`: `given` if set, else detected. A program whose meaning depends on the
+/// dialect and that shows no construct of one is refused with a hint to pass `--dialect`.
+pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dialect> {
+    if let Some(d) = given {
+        return Ok(d);
+    }
+    let mut found: Vec<Marker> = Vec::new();
+    let mut decimal_less: Option<(u64, String)> = None;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i as u64 + 1;
+        let upper = strip_comments(raw).to_ascii_uppercase();
+        for m in markers(&upper) {
+            if !found.iter().any(|f| f.dialect == m.0) {
+                found.push(Marker {
+                    dialect: m.0,
+                    line,
+                    what: m.1.to_string(),
+                });
+            }
+        }
+        if decimal_less.is_none() {
+            if let Some(w) = decimal_less_coordinate(&upper) {
+                decimal_less = Some((line, w));
+            }
+        }
+    }
+    match found.as_slice() {
+        [one] => Ok(one.dialect),
+        [] => match decimal_less {
+            None => Ok(Dialect::Linuxcnc),
+            Some((line, w)) => Err(Error::input(
+                Location::cell(source, line, column_of(text, line, &w)),
+                format!(
+                    "cannot tell the controller dialect: `{w}` has no decimal point (whole mm or inches on LinuxCNC or Sinumerik, least input increments, e.g. 0.001 mm, on a Fanuc in increment input) and the program has nothing only one dialect has"
+                ),
+                "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
+            )),
+        },
+        many => {
+            let list: Vec<String> = many
+                .iter()
+                .map(|m| format!("{} (`{}` on line {})", m.dialect.name(), m.what, m.line))
+                .collect();
+            Err(Error::input(
+                Location::cell(source, many[1].line, column_of(text, many[1].line, &many[1].what)),
+                format!(
+                    "cannot tell the controller dialect: the program has constructs of {}",
+                    list.join(" and ")
+                ),
+                "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
+            ))
+        }
+    }
+}
+
+/// `"7 (X10)"`: the 1-based character column of `word` on `line` (1 if not found), and the word.
+fn column_of(text: &str, line: u64, word: &str) -> String {
+    let l = text
+        .lines()
+        .nth(line.saturating_sub(1) as usize)
+        .unwrap_or("");
+    let at = l
+        .to_ascii_uppercase()
+        .find(&word.to_ascii_uppercase())
+        .unwrap_or(0);
+    format!("{} ({word})", l[..at].chars().count() + 1)
+}
+
+/// The line without `( … )` and `;` comments.
+fn strip_comments(line: &str) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut depth = 0;
+    for c in line.chars() {
+        match c {
+            '(' => depth += 1,
+            ')' if depth > 0 => depth -= 1,
+            ';' if depth == 0 => break,
+            _ if depth == 0 => out.push(c),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Dialect-only constructs on one upper-cased, comment-free line.
+fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
+    let t = l.trim_start();
+    let mut out = Vec::new();
+    let words: Vec<&str> = t.split_whitespace().collect();
+    // Heidenhain Klartext: `0 BEGIN PGM`, `5 L X+10 R0 FMAX`, `7 CC X…`, `TOOL CALL`, `CYCL DEF`.
+    if t.contains("BEGIN PGM") || t.contains("END PGM") {
+        out.push((Dialect::Heidenhain, "BEGIN PGM"));
+    }
+    if words.len() >= 2 && words[0].chars().all(|c| c.is_ascii_digit()) {
+        let kw = words[1];
+        if matches!(
+            kw,
+            "L" | "CC"
+                | "C"
+                | "CR"
+                | "CT"
+                | "RND"
+                | "CHF"
+                | "LBL"
+                | "CALL"
+                | "TOOL"
+                | "CYCL"
+                | "BLK"
+                | "LP"
+                | "CP"
+                | "FK"
+                | "FL"
+                | "FC"
+        ) {
+            out.push((Dialect::Heidenhain, "Klartext block"));
+        }
+    }
+    // Heidenhain ISO: `%NAME G71 *`, blocks ending in `*`.
+    if t.starts_with('%') && (t.contains("G70") || t.contains("G71")) && t.ends_with('*') {
+        out.push((Dialect::Heidenhain, "%… G71 *"));
+    }
+    // LinuxCNC: O-words with keywords, named parameters, G64 P, G38.x, G5.x.
+    if t.starts_with('O') || t.contains(" O") {
+        for k in [
+            "SUB",
+            "ENDSUB",
+            "CALL",
+            "WHILE",
+            "ENDWHILE",
+            "REPEAT",
+            "ENDREPEAT",
+            "IF",
+            "ENDIF",
+            "DO",
+        ] {
+            if let Some(p) = t.find(k) {
+                let before = &t[..p];
+                if before.trim_start().starts_with('O') && !before.contains('[') {
+                    out.push((Dialect::Linuxcnc, "O-word"));
+                    break;
+                }
+            }
+        }
+    }
+    if t.contains("#<") {
+        out.push((Dialect::Linuxcnc, "#<name>"));
+    }
+    // Fanuc: M98/M99 subprograms, G65/G66 macro calls, macro B flow, G68/G51/G52.
+    let compact: String = t.chars().filter(|c| !c.is_whitespace()).collect();
+    for (pat, what) in [
+        ("M98", "M98"),
+        ("M99", "M99"),
+        ("G65P", "G65"),
+        ("G66P", "G66"),
+        ("WHILE[", "WHILE"),
+        ("GOTO", "GOTO"),
+        ("G68", "G68"),
+        ("G51", "G51"),
+    ] {
+        if compact.contains(pat) && !out.iter().any(|(d, _)| *d == Dialect::Fanuc) {
+            out.push((Dialect::Fanuc, what));
+        }
+    }
+    if compact.starts_with('O')
+        && compact.len() > 1
+        && compact[1..].chars().all(|c| c.is_ascii_digit())
+        && !out.iter().any(|(d, _)| *d == Dialect::Linuxcnc)
+    {
+        out.push((Dialect::Fanuc, "O program number"));
+    }
+    // Sinumerik: `X=…`, `CR=`, AC()/IC(), frames, DEF, R-parameter assignment, MSG, G500/G710.
+    let siemens = [
+        "CR=", "X=", "Y=", "Z=", "=AC(", "=IC(", "TRANS", "ROT ", "SCALE", "MIRROR", "DEF ",
+        "MSG(", "G500", "G710", "G700", "M17", "REPEAT ", "CALL ", "CYCLE", "SUPA",
+    ];
+    if let Some(s) = siemens
+        .iter()
+        .find(|s| compact.contains(*s) || t.contains(*s))
+    {
+        let klartext = out.iter().any(|(d, _)| *d == Dialect::Heidenhain);
+        let lcnc_call =
+            (*s == "CALL " || *s == "REPEAT ") && out.iter().any(|(d, _)| *d == Dialect::Linuxcnc);
+        if !klartext && !lcnc_call {
+            out.push((Dialect::Sinumerik, s.trim()));
+        }
+    }
+    if is_r_assignment(&compact) {
+        out.push((Dialect::Sinumerik, "R parameter"));
+    }
+    out
+}
+
+fn is_r_assignment(compact: &str) -> bool {
+    let mut rest = compact;
+    if let Some(p) = rest.find(|c: char| !(c == 'N' || c.is_ascii_digit())) {
+        if rest.starts_with('N') {
+            rest = &rest[p..];
+        }
+    }
+    let Some(r) = rest.strip_prefix('R') else {
+        return false;
+    };
+    let digits = r.chars().take_while(|c| c.is_ascii_digit()).count();
+    digits > 0 && r[digits..].starts_with('=')
+}
+
+/// A coordinate word (X Y Z I J K R) whose number has no decimal point, e.g. `X10`.
+fn decimal_less_coordinate(l: &str) -> Option<String> {
+    let b = l.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        let c = b[i];
+        let prev_alpha = i > 0 && b[i - 1].is_ascii_alphabetic();
+        if matches!(c, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R') && !prev_alpha {
+            let mut j = i + 1;
+            while j < b.len() && (b[j] == b' ' || b[j] == b'+' || b[j] == b'-') {
+                j += 1;
+            }
+            let ds = j;
+            while j < b.len() && b[j].is_ascii_digit() {
+                j += 1;
+            }
+            let next_alpha = j < b.len() && b[j].is_ascii_alphabetic();
+            let next_ok = j >= b.len() || b[j] != b'.' && b[j] != b'=' && b[j] != b'[';
+            let value_nonzero = b[ds..j].iter().any(|&d| d != b'0');
+            if j > ds
+                && next_ok
+                && value_nonzero
+                && (next_alpha || j >= b.len() || b[j] == b' ' || b[j] == b'*')
+            {
+                return Some(l[i..j].trim().to_string());
+            }
+            i = j.max(i + 1);
+        } else {
+            i += 1;
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn detect(text: &str) -> Result<Dialect> {
+        resolve(text, Path::new("t.nc"), None)
+    }
+
+    #[test]
+    fn each_dialect_is_detected_from_its_own_constructs() {
+        assert_eq!(
+            detect("O1000\nG21 G90\nG1 X1. Y2.\nM98 P2000\nM30\n").unwrap(),
+            Dialect::Fanuc
+        );
+        assert_eq!(
+            detect("N10 G1 X=10.5 Y20\nN20 G2 X0 Y0 CR=5\n").unwrap(),
+            Dialect::Sinumerik
+        );
+        assert_eq!(
+            detect("0 BEGIN PGM P1 MM\n1 L X+10 Y+5 R0 FMAX\n").unwrap(),
+            Dialect::Heidenhain
+        );
+        assert_eq!(
+            detect("o100 sub\nG1 X1\no100 endsub\n").unwrap(),
+            Dialect::Linuxcnc
+        );
+        assert_eq!(
+            detect("%P1 G71 *\nN10 G01 X+10 Y+5 F100 *\n").unwrap(),
+            Dialect::Heidenhain
+        );
+    }
+
+    #[test]
+    fn plain_programs_need_decimal_points_or_the_flag() {
+        assert_eq!(
+            detect("G21 G90\nG1 X1.5 Y0. Z0.\n").unwrap(),
+            Dialect::Linuxcnc
+        );
+        let e = detect("G21 G90\nG1 X1.5 Y80000\n").unwrap_err().to_string();
+        assert!(
+            e.contains("t.nc:2") && e.contains("Y80000") && e.contains("--dialect"),
+            "{e}"
+        );
+        // Zero means the same everywhere.
+        assert_eq!(
+            detect("G21 G90\nG1 X0 Y0 Z0.5\n").unwrap(),
+            Dialect::Linuxcnc
+        );
+    }
+
+    #[test]
+    fn mixed_constructs_are_refused() {
+        let e = detect("o100 sub\nM98 P10\n").unwrap_err().to_string();
+        assert!(e.contains("linuxcnc") && e.contains("fanuc"), "{e}");
+    }
+
+    #[test]
+    fn fanuc_increments() {
+        assert_eq!(FanucNumbers::IsB.unit(false), 0.001);
+        assert_eq!(FanucNumbers::IsB.unit(true), 0.0001);
+        assert_eq!(FanucNumbers::Calculator.unit(false), 1.0);
+    }
+}

@@ -1,0 +1,76 @@
+//! Fixed-point text of coordinates: never an exponent nor `-0`, as many decimals as the program uses.
+
+use super::super::lexer::{Line, TokenKind, WordValue};
+
+/// Fixed-point text of a coordinate: 4 decimals in mm, 5 in inches; never `-0` nor an exponent.
+pub fn format_coord(v: f64, inches: bool) -> String {
+    format_decimals(v, if inches { 5 } else { 4 })
+}
+
+/// Fixed-point text with `d` decimals; never `-0` nor an exponent.
+pub fn format_decimals(v: f64, d: usize) -> String {
+    // Fast path: the value in units of the last decimal fits an integer exactly.
+    if let Some(units) = decimal_units(v, d) {
+        return units_text(units, d);
+    }
+    format_decimals_slow(v, d)
+}
+
+/// `v` rounded to `d` decimals, in units of the last decimal, when that is exact in an f64.
+pub(super) fn decimal_units(v: f64, d: usize) -> Option<i64> {
+    const POW10: [f64; 10] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
+    let n = (v * *POW10.get(d)?).round();
+    (n.is_finite() && n.abs() < 4e15).then_some(n as i64)
+}
+
+/// `units` × 10^-d as fixed-point text (`-0` written as `0`).
+pub(super) fn units_text(units: i64, d: usize) -> String {
+    use std::fmt::Write;
+    let p = 10u64.pow(d as u32);
+    let a = units.unsigned_abs();
+    let mut t = String::with_capacity(24);
+    if units < 0 {
+        t.push('-');
+    }
+    let _ = write!(t, "{}", a / p);
+    if d > 0 {
+        let _ = write!(t, ".{:0d$}", a % p);
+    }
+    t
+}
+
+pub(super) fn format_decimals_slow(v: f64, d: usize) -> String {
+    let s = format!("{v:.d$}");
+    if s.trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        s.trim_start_matches('-').to_string()
+    } else {
+        s
+    }
+}
+
+/// Most decimals written in an X/Y/Z/I/J/K/R number of the program, capped at 9.
+pub(super) fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
+    let mut most = 0;
+    for line in lines {
+        for t in &line.tokens {
+            if let TokenKind::Word {
+                letter: b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R',
+                value: WordValue::Number(_),
+            } = t.kind
+            {
+                let w = text.get(t.span.clone()).unwrap_or("");
+                if let Some(dot) = w.find('.') {
+                    let d = w[dot + 1..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_digit())
+                        .count();
+                    most = most.max(d);
+                }
+            }
+        }
+    }
+    most.min(9)
+}

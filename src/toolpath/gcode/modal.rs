@@ -1,0 +1,684 @@
+//! The modal-state machine of the rewrite: each dialect's G-code table applied to the state (units, distance modes, plane, frames, shifts, work offsets), dialect statements, flow control and subprograms, and strict block checks.
+
+use super::super::dialect::{self, Dialect, Frame, Motion, G};
+use super::super::lexer::{Line, TokenKind, WordValue};
+use super::{g_code, Block, Rewriter, SubInfo, AXES, W};
+use crate::error::{Error, Location, Result};
+use std::collections::HashSet;
+use std::ops::Range;
+use std::path::Path;
+
+/// Heidenhain conversational (Klartext) programs are refused as a whole.
+pub(super) fn refuse_klartext(text: &str, source: &Path, dialect: Dialect) -> Result<()> {
+    if dialect != Dialect::Heidenhain {
+        return Ok(());
+    }
+    for (i, l) in text.lines().enumerate() {
+        let t = l.trim_start();
+        if t.starts_with('%') || t.starts_with(';') || t.is_empty() {
+            continue;
+        }
+        let mut words = t.split_whitespace();
+        let first = words.next().unwrap_or("");
+        let klartext = first.chars().all(|c| c.is_ascii_digit())
+            && words
+                .next()
+                .is_some_and(|w| w.chars().all(|c| c.is_ascii_uppercase()));
+        if klartext || t.contains("BEGIN PGM") {
+            return Err(Error::input(
+                Location::cell(source, i as u64 + 1, "1"),
+                format!("`{}`: a Heidenhain conversational (Klartext) program; errmap follows Heidenhain ISO programs only", t.chars().take(40).collect::<String>()),
+                "output the program as Heidenhain ISO (G-code) from the CAM post, or as another dialect errmap follows",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The first jump of the program (Fanuc `GOTO`, Sinumerik `GOTOF`/`GOTOB`/`GOTO`/loops): after
+/// one, a block may run any number of times, so no cut in the zone can be vouched for.
+pub(super) fn first_jump(text: &str, lines: &[Line], dialect: Dialect) -> Option<(u64, String)> {
+    const JUMPS: [&str; 13] = [
+        "GOTO", "GOTOF", "GOTOB", "GOTOC", "WHILE", "FOR", "LOOP", "REPEAT", "REPEATB", "UNTIL",
+        "CASE", "IF", "ELSE",
+    ];
+    if dialect == Dialect::Linuxcnc {
+        return None;
+    }
+    for l in lines {
+        for t in &l.tokens {
+            if let TokenKind::Keyword { name } = &t.kind {
+                let body = text.get(t.span.clone()).unwrap_or("").to_ascii_uppercase();
+                let jump = match dialect {
+                    Dialect::Fanuc => body.contains("GOTO"),
+                    _ => JUMPS.contains(&name.as_str()),
+                };
+                if jump {
+                    return Some((l.number, name.clone()));
+                }
+            }
+        }
+    }
+    None
+}
+
+impl<'a> Rewriter<'a> {
+    /// The units became known (a unit code, or `--units`).
+    pub(super) fn set_units_known(&mut self) {
+        self.units_known = true;
+    }
+
+    /// Fix the zone given in program units in mm, in the units in effect now: at the program's
+    /// first unit code, or its first move if that comes first.
+    pub(super) fn fix_zone(&mut self) {
+        if let Some((lo, hi)) = self.zone_first_units.take() {
+            let s = self.scale_mm();
+            self.zone_mm = Some((lo * s, hi * s));
+        }
+    }
+
+    /// The zone in current program coordinates (units and shift).
+    pub(super) fn zone_now(&self) -> Option<(f64, f64)> {
+        let s = self.scale_mm();
+        let (lo, hi) = match (self.zone_first_units, self.zone_mm) {
+            (Some(z), _) => z,
+            (None, Some((lo, hi))) => (lo / s, hi / s),
+            (None, None) => return None,
+        };
+        let d = self.shift[self.normal];
+        Some((lo - d, hi - d))
+    }
+
+    pub(super) fn g(&self, code: i32) -> Option<G> {
+        dialect::g_code(self.dialect, code)
+    }
+
+    pub(super) fn is_canned(&self, code: i32) -> bool {
+        self.g(code) == Some(G::Motion(Motion::Canned))
+    }
+
+    pub(super) fn is_group1(&self, code: i32) -> bool {
+        matches!(self.g(code), Some(G::Motion(_) | G::MotionCancel))
+    }
+
+    /// The G words of a block with their meaning in the dialect; an unknown code is refused.
+    pub(super) fn g_words<'w>(&self, line: &Line, words: &'w [W]) -> Result<Vec<(&'w W, i32, G)>> {
+        let mut gs = Vec::new();
+        for w in words.iter().filter(|w| w.letter == b'G') {
+            let Some(v) = w.value.filter(|_| !w.is_expr) else {
+                return Err(self.err(
+                    line,
+                    self.wtext(w),
+                    "a G word given by a parameter or expression".into(),
+                    "write the G code as a number",
+                ));
+            };
+            let code = g_code(v);
+            let Some(g) = self.g(code) else {
+                return Err(self.err(
+                    line,
+                    self.wtext(w),
+                    format!(
+                        "`{}` is not a G code errmap follows in the {} dialect",
+                        self.wtext(w),
+                        self.dialect.name()
+                    ),
+                    "expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect), or pass the program's --dialect",
+                ));
+            };
+            gs.push((w, code, g));
+        }
+        Ok(gs)
+    }
+
+    /// Fanuc numbers without a decimal point are least input increments unless the machine
+    /// reads them as millimetres/inches (calculator type): scale them, or refuse.
+    pub(super) fn fanuc_numbers(&self, line: &Line, words: &[W]) -> Result<Option<Vec<W>>> {
+        let coord = |l: u8| matches!(l, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R');
+        let Some(first) = words
+            .iter()
+            .find(|w| w.no_dot && coord(w.letter) && w.value != Some(0.0))
+        else {
+            return Ok(None);
+        };
+        if self.dialect != Dialect::Fanuc {
+            return Ok(None);
+        }
+        let Some(numbers) = self.settings.fanuc_numbers else {
+            let t = self.wtext(first);
+            return Err(self.err(
+                line,
+                t,
+                format!("`{t}` has no decimal point: a Fanuc reads it as {} mm with 0.001 mm increment input (parameter 3401#0 DPI = 0) but as {} mm with calculator-type input (DPI = 1)", first.value.unwrap_or(0.0) * 0.001, first.value.unwrap_or(0.0)),
+                "pass --fanuc-numbers is-b (or is-a, is-c) or --fanuc-numbers calculator as the machine is set (job key [toolpaths] fanuc_numbers)",
+            ));
+        };
+        let unit = numbers.unit(self.inches);
+        Ok(Some(
+            words
+                .iter()
+                .map(|w| {
+                    let mut w = w.clone();
+                    if w.no_dot && coord(w.letter) {
+                        w.value = w.value.map(|v| v * unit);
+                    }
+                    w
+                })
+                .collect(),
+        ))
+    }
+
+    /// Apply the modal G codes of a block (plane, units, distance modes, cutter compensation).
+    pub(super) fn modal(&mut self, line: &Line, gs: &[(&W, i32, G)]) {
+        let orig_inches = self.inches;
+        let mut units_word = false;
+        for &(_, code, g) in gs {
+            match g {
+                G::Plane(p) => self.plane = p,
+                G::Units(inches) => {
+                    self.inches = inches;
+                    units_word = true;
+                }
+                G::Distance(a) => self.absolute = a,
+                G::ArcDistance(a) => self.arc_absolute = a,
+                G::CutterComp(false) => self.cutter_comp = None,
+                G::CutterComp(true) => {
+                    self.cutter_comp = Some((line.number, format!("G{}", code as f64 / 10.0)));
+                }
+                G::WorkOffset => match self.first_offset {
+                    None => self.first_offset = Some(code),
+                    Some(c) if c == code => self.frames.retain(|f| f.0 != Frame::WorkOffset),
+                    Some(_) => self.frames.push((
+                        Frame::WorkOffset,
+                        line.number,
+                        format!("G{}", code as f64 / 10.0),
+                    )),
+                },
+                _ => {}
+            }
+        }
+        if self.inches != orig_inches {
+            // The machine stays put; its coordinates change unit.
+            let f = if self.inches { 1.0 / 25.4 } else { 25.4 };
+            for p in self.pos.iter_mut() {
+                *p = p.map(|v| v * f);
+            }
+            for s in self.shift.iter_mut() {
+                *s *= f;
+            }
+            self.offset *= f;
+        }
+        if units_word {
+            self.set_units_known();
+            self.fix_zone();
+        }
+    }
+
+    /// Non-motion codes that take axis words (G92, G52, G68, G51, G10, G28 …): followed where
+    /// errmap can (G92 and G52 as shifts), a frame under which cuts in the zone are refused
+    /// otherwise.
+    pub(super) fn group0(&mut self, line: &Line, words: &[W], gw: &W, g: G) -> Result<()> {
+        let find = |l: u8| words.iter().find(|w| w.letter == l);
+        let word = self.wtext(gw).to_string();
+        match g {
+            G::SetPosition => {
+                let mut shift = self.shift;
+                let mut known = true;
+                for (i, l) in AXES.iter().enumerate() {
+                    if let Some(w) = find(*l) {
+                        match (self.pos[i], w.value) {
+                            (Some(p), Some(v)) => shift[i] = self.shift[i] + p - v,
+                            _ => known = false,
+                        }
+                    }
+                }
+                if known {
+                    self.set_shift(shift);
+                } else {
+                    self.frames.push((Frame::Shift, line.number, word));
+                    self.pos = [None; 3];
+                    self.unknown_since = Some(line.number);
+                }
+            }
+            G::Frame(Frame::Local) => {
+                let mut shift = self.shift;
+                for (i, l) in AXES.iter().enumerate() {
+                    match find(*l).map(|w| w.value) {
+                        Some(Some(v)) if self.dialect == Dialect::Fanuc => {
+                            shift[i] = self.shift[i] - self.local[i] + v;
+                            self.local[i] = v;
+                        }
+                        Some(Some(v)) => shift[i] = v,
+                        Some(None) => self.frames.push((Frame::Local, line.number, word.clone())),
+                        None => {}
+                    }
+                }
+                self.set_shift(shift);
+            }
+            G::FrameCancel(Frame::Shift) => {
+                self.local = [0.0; 3];
+                self.set_shift([0.0; 3]);
+                self.frames.retain(|f| f.0 != Frame::Shift);
+            }
+            G::Frame(kind) => self.frames.push((kind, line.number, word)),
+            G::FrameCancel(kind) => self.frames.retain(|f| f.0 != kind),
+            G::DataSetting => {
+                let l = find(b'L').and_then(|w| w.value);
+                if !matches!(l, Some(v) if [1.0, 10.0, 11.0, 12.0, 13.0].contains(&v)) {
+                    self.frames.push((Frame::Data, line.number, word));
+                }
+            }
+            G::Call => {
+                return Err(self.err(
+                    line,
+                    &word,
+                    format!("`{word}` calls a macro whose moves errmap cannot follow"),
+                    "expand the macro into the program",
+                ))
+            }
+            _ => {
+                self.pos = [None; 3];
+                self.unknown_since = Some(line.number);
+            }
+        }
+        Ok(())
+    }
+
+    /// Change the shift between program and work coordinates; the machine stays put.
+    pub(super) fn set_shift(&mut self, shift: [f64; 3]) {
+        for (i, new) in shift.iter().enumerate() {
+            self.pos[i] = self.pos[i].map(|p| p + self.shift[i] - new);
+        }
+        self.shift = shift;
+    }
+
+    /// Sinumerik programmable frames: TRANS/ATRANS are followed (a shift), ROT/SCALE/MIRROR
+    /// (and their additive forms) are frames errmap refuses cuts under; a bare TRANS, ROT,
+    /// SCALE or MIRROR deletes the whole programmable frame.
+    pub(super) fn siemens_frame(&mut self, line: &Line, name: &str, body: &str) -> Result<()> {
+        let args = &body[name.len().min(body.len())..];
+        let mut values = [None; 3];
+        for w in args.split_whitespace() {
+            let (l, v) = w.split_at(1);
+            let i = match l.to_ascii_uppercase().as_str() {
+                "X" => 0,
+                "Y" => 1,
+                "Z" => 2,
+                _ => {
+                    return Err(self.err(
+                        line,
+                        name,
+                        format!(
+                            "`{}`: errmap reads {name} with X, Y and Z numbers only",
+                            body.trim()
+                        ),
+                        "write the frame with plain numbers, or expand the program",
+                    ))
+                }
+            };
+            values[i] = Some(v.trim_start_matches('=').parse::<f64>().map_err(|_| {
+                self.err(
+                    line,
+                    w,
+                    format!("`{w}` is not a number"),
+                    "write the frame with plain numbers",
+                )
+            })?);
+        }
+        let bare = values.iter().all(|v| v.is_none());
+        let mut shift = self.shift;
+        match name {
+            _ if bare => {
+                shift = [0.0; 3];
+                self.frames.retain(|f| f.0 == Frame::WorkOffset);
+            }
+            "TRANS" => {
+                shift = values.map(|v| v.unwrap_or(0.0));
+                self.frames.retain(|f| f.0 == Frame::WorkOffset);
+            }
+            "ATRANS" => {
+                for i in 0..3 {
+                    shift[i] += values[i].unwrap_or(0.0);
+                }
+            }
+            _ => {
+                let kind = match name {
+                    "ROT" | "AROT" => Frame::Rotation,
+                    "SCALE" | "ASCALE" => Frame::Scaling,
+                    _ => Frame::Mirror,
+                };
+                if !name.starts_with('A') {
+                    shift = [0.0; 3];
+                    self.frames.retain(|f| f.0 == Frame::WorkOffset);
+                }
+                self.frames.push((kind, line.number, name.to_string()));
+            }
+        }
+        self.set_shift(shift);
+        Ok(())
+    }
+
+    /// A dialect statement. `Ok(true)`: harmless, read the line's words as usual; `Ok(false)`:
+    /// followed here, copy the line.
+    pub(super) fn keyword(&mut self, line: &Line, name: &str, span: Range<usize>) -> Result<bool> {
+        let body = self.text.get(span).unwrap_or("");
+        let refuse = |what: String, hint: &str| Err(self.err(line, name, what, hint));
+        match (self.dialect, name) {
+            (Dialect::Fanuc, "WHILE") => {
+                let n = body.rsplit("DO").next().unwrap_or("").trim().to_string();
+                self.blocks.push(Block {
+                    name: n,
+                    keyword: "WHILE … DO".into(),
+                    line: line.number,
+                    written: [false; 3],
+                });
+                Ok(false)
+            }
+            (Dialect::Fanuc, "END") => {
+                self.close_block(line.number);
+                Ok(false)
+            }
+            (Dialect::Fanuc, "IF") if !body.contains("GOTO") => {
+                // `IF [...] THEN #i = …`: parameters are unknown afterwards.
+                self.params.clear();
+                Ok(false)
+            }
+            (Dialect::Fanuc, _) => Ok(false),
+            (Dialect::Heidenhain, "%") | (Dialect::Sinumerik, "%") => {
+                let upper = body.to_ascii_uppercase();
+                if self.dialect == Dialect::Heidenhain
+                    && (upper.contains("G70") || upper.contains("G71"))
+                {
+                    self.inches = upper.contains("G70");
+                    self.set_units_known();
+                    self.fix_zone();
+                }
+                Ok(false)
+            }
+            (Dialect::Sinumerik, "TRANS" | "ATRANS" | "ROT" | "AROT" | "SCALE" | "ASCALE" | "MIRROR" | "AMIRROR") => {
+                self.siemens_frame(line, name, body)?;
+                Ok(false)
+            }
+            (Dialect::Sinumerik, "CALL" | "PCALL" | "MCALL" | "REPEAT" | "REPEATB" | "EXTCALL") => refuse(
+                format!("`{}` runs a subprogram or program section whose moves errmap cannot follow", body.trim()),
+                "expand the subprogram or repeated section into plain blocks",
+            ),
+            (Dialect::Sinumerik, "RET") => {
+                self.m99 = Some(line.number);
+                Ok(false)
+            }
+            (
+                Dialect::Sinumerik,
+                "MSG" | "SOFT" | "BRISK" | "FFWON" | "FFWOF" | "CFC" | "CFTCP" | "CFIN" | "COMPCAD" | "COMPCURV"
+                | "COMPON" | "COMPOF" | "CYCLE832" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA"
+                | "G642" | "G641",
+            ) => Ok(true),
+            (Dialect::Sinumerik, _) if self.flow.as_ref().is_some_and(|(l, _)| *l <= line.number) => Ok(false),
+            _ => refuse(
+                format!("`{}`: errmap does not follow the {} instruction {name}, which may move the machine or change its coordinates", body.trim(), self.dialect.name()),
+                "expand it into plain G0/G1/G2/G3 blocks with your CAM post",
+            ),
+        }
+    }
+
+    /// Fanuc M98/M99/M30 and Sinumerik L/M17: subprogram calls are refused, subprogram bodies
+    /// are kept as text.
+    pub(super) fn fanuc_m_codes(&mut self, line: &Line, words: &[W]) -> Result<()> {
+        let m = |v: f64| words.iter().any(|w| w.letter == b'M' && w.value == Some(v));
+        let call = match self.dialect {
+            Dialect::Fanuc if m(98.0) => Some("M98"),
+            Dialect::Sinumerik => words
+                .iter()
+                .find(|w| w.letter == b'L')
+                .map(|w| self.wtext(w)),
+            _ => None,
+        };
+        if let (Some(word), None) = (call, &self.sub) {
+            return Err(self.err(
+                line,
+                word,
+                format!("`{}` calls a subprogram whose moves errmap cannot follow (they run in this program's position, modes and frames)", self.text.get(line.span.clone()).unwrap_or("").trim()),
+                "expand the subprogram into the program (or post the program without subprograms)",
+            ));
+        }
+        let end_sub = match self.dialect {
+            Dialect::Fanuc => m(99.0),
+            Dialect::Sinumerik => m(17.0),
+            _ => false,
+        };
+        if end_sub {
+            if self.sub.is_some() && self.dialect == Dialect::Fanuc {
+                self.sub = None;
+            } else {
+                self.m99 = Some(line.number);
+            }
+        }
+        if self.dialect == Dialect::Fanuc && (m(30.0) || m(2.0)) {
+            self.programs = self.programs.max(1);
+        }
+        Ok(())
+    }
+
+    /// Strict blocks: no stray characters, no word twice (but G and M), no unknown letter.
+    pub(super) fn check_block(&self, line: &Line) -> Result<()> {
+        let mut seen = [false; 128];
+        let mut first = true;
+        let mut prev_number: Option<&str> = None;
+        for t in &line.tokens {
+            let here = self.text.get(t.span.clone()).unwrap_or("");
+            match &t.kind {
+                TokenKind::Space => continue,
+                TokenKind::Other if first && here == "/" => {}
+                TokenKind::Other => {
+                    let (msg, hint) = match (here, prev_number) {
+                        (",", Some(w)) => (
+                            format!("malformed number: `{w},` has a decimal comma"),
+                            "write numbers with a decimal point (e.g. X20.5)".to_string(),
+                        ),
+                        _ => (
+                            format!("`{here}` is not a word errmap can read in the {} dialect", self.dialect.name()),
+                            "fix or remove it (a word is a letter and a number), or pass the program's --dialect".to_string(),
+                        ),
+                    };
+                    return Err(self.err(line, here, msg, &hint));
+                }
+                TokenKind::Word { letter, value } => {
+                    let l = *letter;
+                    if self.dialect == Dialect::Linuxcnc && l == b'E' {
+                        return Err(self.err(
+                            line,
+                            here.trim(),
+                            format!("`{}`: E is not a LinuxCNC word", here.trim()),
+                            "remove it, or pass the program's --dialect",
+                        ));
+                    }
+                    if l != b'G' && l != b'M' {
+                        if seen[usize::from(l & 0x7f)] {
+                            return Err(self.err(
+                                line,
+                                here.trim(),
+                                format!(
+                                    "word {} given twice in one block (`{}`)",
+                                    l as char,
+                                    here.trim()
+                                ),
+                                "keep one value per letter in each block",
+                            ));
+                        }
+                        seen[usize::from(l & 0x7f)] = true;
+                    }
+                    prev_number = matches!(value, WordValue::Number(_)).then_some(here.trim());
+                    first = false;
+                    continue;
+                }
+                _ => {}
+            }
+            first = false;
+            prev_number = None;
+        }
+        Ok(())
+    }
+
+    pub(super) fn oword(
+        &mut self,
+        line: &Line,
+        name: &str,
+        keyword: &str,
+        otext: &str,
+    ) -> Result<()> {
+        match keyword {
+            "sub" => {
+                self.sub = Some((
+                    name.to_string(),
+                    SubInfo {
+                        def_line: line.number,
+                        ..SubInfo::default()
+                    },
+                ));
+            }
+            "endsub" => {
+                if let Some((n, info)) = self.sub.take() {
+                    self.subs.insert(n, info);
+                }
+            }
+            "call" => {
+                if let Some((_, info)) = self.sub.as_mut() {
+                    info.calls.push(name.to_string());
+                } else {
+                    self.return_if_needed(line, &[], true)?;
+                    self.call(line, name, otext)?;
+                }
+            }
+            _ if self.sub.is_some() => {}
+            "if" | "while" | "repeat" | "do" => {
+                // `oN while` closes an open `oN do`.
+                let closes_do = keyword == "while"
+                    && self
+                        .blocks
+                        .last()
+                        .is_some_and(|b| b.name == name && b.keyword == "do");
+                if closes_do {
+                    self.close_block(line.number);
+                } else {
+                    self.blocks.push(Block {
+                        name: name.to_string(),
+                        keyword: keyword.to_string(),
+                        line: line.number,
+                        written: [false; 3],
+                    });
+                }
+            }
+            "endif" | "endwhile" | "endrepeat" => self.close_block(line.number),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    pub(super) fn close_block(&mut self, line: u64) {
+        if let Some(b) = self.blocks.pop() {
+            for (i, w) in b.written.iter().enumerate() {
+                if *w {
+                    self.pos[i] = None;
+                    self.unknown_since = Some(line);
+                }
+            }
+            if let Some(parent) = self.blocks.last_mut() {
+                for i in 0..3 {
+                    parent.written[i] |= b.written[i];
+                }
+            }
+        }
+    }
+
+    /// Subroutine closure: does it (or what it calls) write the normal axis; its first move line.
+    pub(super) fn sub_summary(&self, name: &str) -> (bool, Option<(String, u64)>, bool) {
+        let mut seen = HashSet::new();
+        let mut stack = vec![name.to_string()];
+        let mut writes = false;
+        let mut first: Option<(String, u64)> = None;
+        let mut external = false;
+        while let Some(n) = stack.pop() {
+            if !seen.insert(n.clone()) {
+                continue;
+            }
+            match self.subs.get(&n) {
+                Some(info) => {
+                    writes |= info.writes_normal;
+                    if let (None, Some(l)) = (&first, info.first_move) {
+                        first = Some((n.clone(), l));
+                    }
+                    stack.extend(info.calls.iter().cloned());
+                }
+                None => external = true,
+            }
+        }
+        (writes, first, external)
+    }
+
+    pub(super) fn call(&mut self, line: &Line, name: &str, otext: &str) -> Result<()> {
+        let (writes_normal, first_move, external) = self.sub_summary(name);
+        let moves = first_move.is_some() || external;
+        if moves {
+            let mut p = self.pos;
+            if writes_normal || external {
+                p[self.normal] = None;
+            }
+            let (u, v) = self.plane_uv;
+            p[u] = None;
+            p[v] = None;
+            if self.may_touch(&[p]) {
+                let what = match (&first_move, external) {
+                    (_, true) => format!("subroutine o{name} is not defined in this file"),
+                    (Some((sub, l)), _) => format!(
+                        "subroutine o{sub} (defined at line {}) moves on line {l}",
+                        self.subs.get(sub).map(|i| i.def_line).unwrap_or(0)
+                    ),
+                    (None, _) => String::new(),
+                };
+                return Err(self.err(
+                    line,
+                    otext.split_whitespace().next().unwrap_or("O"),
+                    format!(
+                        "`{otext}` runs moves that may lie in the compensation zone and cannot be compensated: {what}"
+                    ),
+                    "expand O-word subroutines and loops into plain G-code (or move the zone away from these moves)",
+                ));
+            }
+        }
+        // After a call the plane position is unknown, and the normal too if the body writes it.
+        let (u, v) = self.plane_uv;
+        if moves {
+            self.pos[u] = None;
+            self.pos[v] = None;
+            for i in 0..3 {
+                if i != self.normal {
+                    self.pos[i] = None;
+                }
+            }
+            if writes_normal || external {
+                self.pos[self.normal] = None;
+            }
+            self.unknown_since = Some(line.number);
+        }
+        Ok(())
+    }
+
+    /// The points of a move as errmap can know them under a frame: plane coordinates unknown,
+    /// the normal too unless a rotation turns about it.
+    pub(super) fn frame_points(
+        &self,
+        kind: Frame,
+        pts: &[[Option<f64>; 3]],
+    ) -> Vec<[Option<f64>; 3]> {
+        let keep_normal = kind == Frame::Rotation && self.plane.axes().2 == self.normal;
+        pts.iter()
+            .map(|p| {
+                let mut q = [None; 3];
+                if keep_normal {
+                    q[self.normal] = p[self.normal];
+                }
+                q
+            })
+            .collect()
+    }
+}
