@@ -288,7 +288,7 @@ fn committed_sample_is_what_its_readme_command_makes() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let readme = std::fs::read_to_string(sample_dir().join("README.md")).unwrap();
-    let command = "errmap synth web-plate --parts 8 --out data/web-plate";
+    let command = "errmap synth web-plate --parts 8 --warm-epochs 60 --out data/web-plate";
     assert!(readme.contains(command), "{readme}");
     let args: Vec<&str> = command.split(' ').skip(1).collect();
     run_expect(&args, d, 0);

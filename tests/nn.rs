@@ -559,3 +559,74 @@ fn fast_trainer_is_bitwise_repeatable_whatever_the_thread_count() {
     assert_eq!(bits(&one), bits(&on(2)));
     assert_eq!(bits(&one), bits(&on(3)));
 }
+
+#[test]
+fn lbfgs_reaches_the_closed_form_minimiser_of_a_quadratic() {
+    // f(x) = ½xᵀAx − bᵀx, A = [[4,1,0],[1,3,1],[0,1,2]], b = [1,2,3]: the minimiser solves
+    // Ax = b, x = (2/9, 1/9, 13/9) (check: 4·2/9 + 1/9 = 1; 2/9 + 3/9 + 13/9 = 2; 1/9 + 26/9 = 3).
+    let a = [[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 2.0]];
+    let b = [1.0, 2.0, 3.0];
+    let f = |x: &[f64]| {
+        let ax: Vec<f64> = a
+            .iter()
+            .map(|row| row.iter().zip(x).map(|(r, v)| r * v).sum())
+            .collect();
+        let value = 0.5 * x.iter().zip(&ax).map(|(v, w)| v * w).sum::<f64>()
+            - x.iter().zip(&b).map(|(v, w)| v * w).sum::<f64>();
+        (value, ax.iter().zip(&b).map(|(w, c)| w - c).collect())
+    };
+    let m = lbfgs::minimize(f, vec![5.0, -3.0, 0.0], 200, 1e-12);
+    let expected = [2.0 / 9.0, 1.0 / 9.0, 13.0 / 9.0];
+    for (got, want) in m.x.iter().zip(expected) {
+        assert!((got - want).abs() < 1e-9, "{:?} vs {expected:?}", m.x);
+    }
+    assert_eq!(m.stop, lbfgs::Stop::Converged);
+    // A quadratic in 3 unknowns takes few iterations, far fewer than the budget.
+    assert!(m.evaluations < 40, "{} evaluations", m.evaluations);
+}
+
+#[test]
+fn lbfgs_finds_the_rosenbrock_minimum() {
+    // f = (1 − x)² + 100(y − x²)², minimum 0 at (1, 1), from the classic start (−1.2, 1).
+    let f = |p: &[f64]| {
+        let (x, y) = (p[0], p[1]);
+        let value = (1.0 - x).powi(2) + 100.0 * (y - x * x).powi(2);
+        let gx = -2.0 * (1.0 - x) - 400.0 * x * (y - x * x);
+        let gy = 200.0 * (y - x * x);
+        (value, vec![gx, gy])
+    };
+    let m = lbfgs::minimize(f, vec![-1.2, 1.0], 1000, 1e-10);
+    assert!(
+        (m.x[0] - 1.0).abs() < 1e-6 && (m.x[1] - 1.0).abs() < 1e-6,
+        "{:?}",
+        m
+    );
+}
+
+#[test]
+fn lbfgs_fits_networks_on_both_cpu_trainers() {
+    let sets = vec![ragged_set(300), ragged_set(520)];
+    let adam = ModelConfig {
+        hidden: vec![16, 16],
+        epochs: 150,
+        loss_every: 150,
+        ..Default::default()
+    };
+    let lbfgs = ModelConfig {
+        optimizer: Optimizer::Lbfgs,
+        ..adam.clone()
+    };
+    let by_adam = CpuTrainer::reference().train_batch(&sets, &adam).unwrap();
+    for trainer in [&CpuTrainer::reference() as &dyn Trainer, &FastCpuTrainer] {
+        let nets = trainer.train_batch(&sets, &lbfgs).unwrap();
+        for (k, (n, a)) in nets.iter().zip(&by_adam).enumerate() {
+            // With the same budget of loss evaluations L-BFGS ends far below Adam.
+            let (l, la) = (mse(n, &sets[k]), mse(a, &sets[k]));
+            assert!(
+                l < 0.5 * la,
+                "{}: set {k}: lbfgs {l:e}, adam {la:e}",
+                trainer.name()
+            );
+        }
+    }
+}

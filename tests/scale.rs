@@ -168,7 +168,6 @@ fn family_network_and_toolpaths_of_1_2_3_7_shards_equal_the_unsharded_run() {
 }
 
 #[test]
-#[ignore = "needs part seeds derived from the part name, not its batch position (issue 14 item 1)"]
 fn every_file_of_2_3_7_shards_equals_the_unsharded_run() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -7,10 +7,6 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-/// Until each part's network seed derives from its name (issue 14 item 1), a part's network
-/// depends on its batch position, so only the family network and its toolpath are compared.
-const PART_SEEDS_BY_NAME: bool = false;
-
 fn have(cmd: &str) -> bool {
     Command::new("sh")
         .args(["-c", &format!("command -v {cmd}")])
@@ -95,7 +91,7 @@ fn sample_job_as_a_4_task_slurm_array_and_merge_matches_one_machine() {
     for (rel, bytes) in &single {
         let theirs: Option<&Vec<u8>> = if rel.starts_with("family/") {
             sharded.get(rel)
-        } else if PART_SEEDS_BY_NAME && rel.contains('/') && !rel.ends_with("summary.json") {
+        } else if rel.contains('/') && !rel.ends_with("summary.json") {
             sharded
                 .iter()
                 .find(|(k, _)| k.starts_with("shard-") && k.ends_with(&format!("/{rel}")))
@@ -103,14 +99,11 @@ fn sample_job_as_a_4_task_slurm_array_and_merge_matches_one_machine() {
         } else {
             continue;
         };
-        let family_network =
-            ["family/model.json", "family/finish-compensated.ngc"].contains(&rel.as_str());
-        if PART_SEEDS_BY_NAME || family_network {
-            assert_eq!(theirs, Some(bytes), "{rel} differs from the unsharded run");
-            compared += 1;
-        }
+        // Every part file and every family file: seeds come from names, not positions.
+        assert_eq!(theirs, Some(bytes), "{rel} differs from the unsharded run");
+        compared += 1;
     }
-    assert!(compared >= 2, "nothing compared: {:?}", single.keys());
+    assert!(compared >= 8 * 5, "nothing compared: {:?}", single.keys());
     let merged: serde_json::Value = serde_json::from_slice(&sharded["summary.json"]).unwrap();
     assert_eq!(merged["parts"].as_array().unwrap().len(), 8);
     assert_eq!(merged["failed_parts"], 0);

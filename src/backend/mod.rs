@@ -93,6 +93,21 @@ fn select_auto(
             })
         }
     };
+    // A software adapter's first kernel build takes tens of seconds: a run does not wait for
+    // it. Until `errmap gpu-info` (or `bench training`) has measured it, auto trains on the CPU.
+    if gpu.context().adapter.software
+        && probe::cached_verdict(&gpu, config, cache_file.as_deref()).is_none()
+    {
+        return Ok(Selection {
+            trainer: Box::new(FastCpuTrainer),
+            backend: Backend::Cpu,
+            reason: format!(
+                "auto: {} (the software adapter {} is not measured yet: `errmap gpu-info` measures it once)",
+                FastCpuTrainer.name(),
+                gpu.context().adapter.name
+            ),
+        });
+    }
     let verdict = probe::compare_cached_in(&gpu, config, cache_file)?;
     if verdict.gpu_is_faster() {
         let reason = format!("auto: {}", verdict.describe(true));

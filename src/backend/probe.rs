@@ -121,11 +121,7 @@ pub fn compare_cached_in(
     path: Option<PathBuf>,
 ) -> Result<Verdict> {
     let key = probe_key(gpu, config);
-    let mut cache: BTreeMap<String, Verdict> = path
-        .as_ref()
-        .and_then(|p| std::fs::read_to_string(p).ok())
-        .and_then(|text| serde_json::from_str(&text).ok())
-        .unwrap_or_default();
+    let mut cache = read_cache(path.as_deref());
     if let Some(found) = cache.get(&key) {
         return Ok(Verdict {
             cached: true,
@@ -146,6 +142,23 @@ pub fn compare_cached_in(
         let _ = crate::io::write_json(&path, &cache);
     }
     Ok(verdict)
+}
+
+fn read_cache(path: Option<&std::path::Path>) -> BTreeMap<String, Verdict> {
+    path.and_then(|p| std::fs::read_to_string(p).ok())
+        .and_then(|text| serde_json::from_str(&text).ok())
+        .unwrap_or_default()
+}
+
+/// The verdict cached for this machine and architecture, without measuring.
+pub fn cached_verdict(
+    gpu: &GpuTrainer,
+    config: &ModelConfig,
+    path: Option<&std::path::Path>,
+) -> Option<Verdict> {
+    read_cache(path)
+        .remove(&probe_key(gpu, config))
+        .map(|v| Verdict { cached: true, ..v })
 }
 
 /// Trains `sets` on `trainer` for one warm-up epoch (timed as the pipeline build, on top of

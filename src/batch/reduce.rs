@@ -202,18 +202,7 @@ mod tests {
     }
 
     #[test]
-    fn family_index_counts_every_earlier_network_and_mean_needs_every_part() {
-        let part = |h| PartReduce {
-            part: "x".into(),
-            holdout_fit: h,
-            train_nodes: vec![],
-            map_e_um: vec![],
-        };
-        // Two parts with a hold-out fit (2 nets each) and one without (1 net): family is net 5.
-        assert_eq!(
-            family_network_index(&[part(true), part(false), part(true)]),
-            5
-        );
+    fn family_mean_needs_every_part() {
         let a = [Some(1.0), None, Some(3.0)];
         let b = [Some(2.0), Some(5.0), Some(4.0)];
         assert_eq!(

@@ -86,8 +86,6 @@ struct Interpolated {
     holdout_nodes: Option<Vec<Option<f64>>>,
     /// Hold-out RMSE of the kriging baseline (fitted on the same kept points), µm.
     kriging_holdout_rmse_um: Option<f64>,
-    /// The kriging of all clean points, delivered when it fits the hold-out better.
-    kriging_full: Option<interp::kriging::Kriging>,
 }
 
 /// Indices of points on the boundary of the convex hull (vertices and points on its edges).
@@ -218,8 +216,6 @@ fn interpolate(
         Err(e) => return Err(Box::new((prep.input, e))),
     };
     let kriging_holdout_rmse_um = kriging_holdout_rmse(&prep);
-    let kriging_full = kriging_holdout_rmse_um
-        .and_then(|_| interp::kriging::Kriging::fit(&probe::uve(&prep.clean)).ok());
     let holdout_nodes = if prep.holdout.is_empty() {
         None
     } else {
@@ -251,7 +247,6 @@ fn interpolate(
         full_nodes: full,
         holdout_nodes,
         kriging_holdout_rmse_um,
-        kriging_full,
     })
 }
 
@@ -499,9 +494,13 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                             .sum();
                         (sq / p.prep.holdout.len() as f64).sqrt()
                     });
-                    // The delivered map: the kriging when it fits the held-out points better.
-                    let (map, model) = match (&p.kriging_full, better_fit(p, holdout_rmse_um)) {
-                        (Some(k), Some("kriging")) => {
+                    // The delivered map: the kriging when it fits the held-out points better
+                    // (fitted to every clean point only then: it costs a likelihood search).
+                    let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
+                        .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
+                        .flatten();
+                    let (map, model) = match &kriging_full {
+                        Some(k) => {
                             let values = (0..grid.nv)
                                 .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
                                 .map(|(i, j)| {

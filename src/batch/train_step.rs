@@ -102,3 +102,81 @@ pub fn rescaled(net: &Mlp, from: &Normalisation, to: &Normalisation) -> Mlp {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::Domain;
+    use crate::nn::{mse, Activation, FastCpuTrainer};
+
+    fn domain() -> Domain {
+        crate::synth::training::plate_domain()
+    }
+
+    #[test]
+    fn seeds_follow_names_not_positions() {
+        let c = ModelConfig::default();
+        let a = initial_network(&c, &Role::Delivered("p1".into()));
+        assert_eq!(a, initial_network(&c, &Role::Delivered("p1".into())));
+        for other in [
+            Role::Holdout("p1".into()),
+            Role::Delivered("p2".into()),
+            Role::Delivered("family".into()),
+            Role::Family,
+        ] {
+            assert_ne!(a.params, initial_network(&c, &other).params, "{other:?}");
+        }
+    }
+
+    #[test]
+    fn a_rescaled_network_gives_the_same_errors_in_micrometres() {
+        let net = Mlp::init(&[2, 8, 8, 1], Activation::Tanh, 5);
+        let from = Normalisation {
+            e_mean_um: 3.0,
+            e_std_um: 12.0,
+            ..Normalisation::new(&domain(), &[])
+        };
+        let to = Normalisation {
+            e_mean_um: -1.5,
+            e_std_um: 4.0,
+            ..from.clone()
+        };
+        let moved = rescaled(&net, &from, &to);
+        for x in [[0.0f32, 0.0], [0.5, -0.3], [-0.9, 0.8]] {
+            let a = from.unscale_output(net.forward(x));
+            let b = to.unscale_output(moved.forward(x));
+            assert!((a - b).abs() < 1e-5 * a.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn parts_warm_started_from_the_family_fit_better_in_the_same_steps() {
+        // Three parts of one family (the plate field, part-dependent tilt); the "family" set is
+        // their first part. Same normalisation for all, so the rescale is the identity.
+        let sets = crate::synth::training::plate_family(3, 384);
+        let norms = vec![Normalisation::new(&domain(), &[0.0, 2.0]); 3];
+        let roles = vec![
+            Role::Family,
+            Role::Delivered("a".into()),
+            Role::Delivered("b".into()),
+        ];
+        let scratch = ModelConfig {
+            hidden: vec![16, 16],
+            epochs: 40,
+            loss_every: 40,
+            ..ModelConfig::default()
+        };
+        let warm = ModelConfig {
+            epochs: 300,
+            warm_start: WarmStart::Family,
+            warm_epochs: 40,
+            ..scratch.clone()
+        };
+        let cold = train_all(&FastCpuTrainer, &sets, &norms, &roles, &scratch).unwrap();
+        let hot = train_all(&FastCpuTrainer, &sets, &norms, &roles, &warm).unwrap();
+        for k in 1..3 {
+            let (c, h) = (mse(&cold[k], &sets[k]), mse(&hot[k], &sets[k]));
+            assert!(h < 0.25 * c, "part {k}: warm {h:e}, scratch {c:e}");
+        }
+    }
+}

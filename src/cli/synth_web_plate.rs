@@ -39,6 +39,10 @@ pub struct SynthWebPlateArgs {
     /// Training epochs written into job.toml.
     #[arg(long, default_value_t = WebPlateSpec::default().epochs)]
     pub epochs: u32,
+    /// Start each part from the family network and train it N steps (warm_start = "family" in
+    /// job.toml; such a job runs unsharded).
+    #[arg(long, value_name = "N")]
+    pub warm_epochs: Option<u32>,
     /// Family name written into job.toml.
     #[arg(long, default_value = "web-plate")]
     pub family: String,
@@ -105,6 +109,7 @@ pub fn run(args: SynthWebPlateArgs, globals: Globals) -> Result<i32> {
         outliers_per_part: args.outliers,
         nominal_columns: args.nominal_columns,
         epochs: args.epochs,
+        warm_epochs: args.warm_epochs,
         ..WebPlateSpec::default()
     };
     let command = std::iter::once("errmap".to_string())

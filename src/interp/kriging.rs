@@ -42,12 +42,23 @@ fn matern52(r: f64, l: f64) -> f64 {
 pub const MAX_SITES: usize = 4000;
 
 /// The profiled fit of one (ℓ, g): (−log-likelihood without constants, μ̂, σ̂², weights).
-fn profile(sites: &[[f64; 2]], e: &[f64], l: f64, g: f64) -> Option<(f64, f64, f64, Vec<f64>)> {
-    let n = sites.len();
-    let r = DMatrix::from_fn(n, n, |i, j| {
-        let d = ((sites[i][0] - sites[j][0]).powi(2) + (sites[i][1] - sites[j][1]).powi(2)).sqrt();
-        matern52(d, l) + if i == j { g } else { 0.0 }
-    });
+fn profile(
+    distances: &DMatrix<f64>,
+    e: &[f64],
+    l: f64,
+    g: f64,
+) -> Option<(f64, f64, f64, Vec<f64>)> {
+    let n = e.len();
+    // Symmetric: each correlation computed once.
+    let mut r = DMatrix::zeros(n, n);
+    for j in 0..n {
+        r[(j, j)] = 1.0 + g;
+        for i in j + 1..n {
+            let c = matern52(distances[(i, j)], l);
+            r[(i, j)] = c;
+            r[(j, i)] = c;
+        }
+    }
     let chol = r.cholesky()?;
     let ones = DVector::from_element(n, 1.0);
     let y = DVector::from_column_slice(e);
@@ -105,14 +116,17 @@ impl Kriging {
                 "probe points spread over the part",
             ));
         }
+        let distances = DMatrix::from_fn(n, n, |i, j| {
+            (sites[i][0] - sites[j][0]).hypot(sites[i][1] - sites[j][1])
+        });
         // Coarse grid: ℓ from 1 % to 200 % of the diagonal, g from 1e-6 to 1.
-        let lengths: Vec<f64> = (0..10)
-            .map(|k| diag * 0.01 * 200f64.powf(k as f64 / 9.0))
+        let lengths: Vec<f64> = (0..7)
+            .map(|k| diag * 0.01 * 200f64.powf(k as f64 / 6.0))
             .collect();
-        let nuggets = [1e-6, 1e-4, 1e-3, 1e-2, 0.03, 0.1, 0.3, 1.0];
+        let nuggets = [1e-6, 1e-3, 1e-2, 0.1, 1.0];
         let mut best: Option<(f64, f64, f64)> = None; // (nll, l, g)
         let consider = |l: f64, g: f64, best: &mut Option<(f64, f64, f64)>| {
-            if let Some((nll, ..)) = profile(&sites, &e, l, g) {
+            if let Some((nll, ..)) = profile(&distances, &e, l, g) {
                 if best.is_none_or(|b| nll < b.0) {
                     *best = Some((nll, l, g));
                 }
@@ -125,9 +139,9 @@ impl Kriging {
         }
         // One refinement around the best node (half a grid step each way, in log scale).
         if let Some((_, l0, g0)) = best {
-            let step_l = 200f64.powf(1.0 / 18.0);
+            let step_l = 200f64.powf(1.0 / 12.0);
             for fl in [1.0 / step_l, 1.0, step_l] {
-                for fg in [0.5, 1.0, 2.0] {
+                for fg in [1.0 / 3.0, 1.0, 3.0] {
                     if fl != 1.0 || fg != 1.0 {
                         consider(l0 * fl, (g0 * fg).min(1.0), &mut best);
                     }
@@ -140,7 +154,7 @@ impl Kriging {
                 "check the probe file for repeated points with different values",
             )
         })?;
-        let (_, mean, variance, weights) = profile(&sites, &e, length_mm, nugget_ratio)
+        let (_, mean, variance, weights) = profile(&distances, &e, length_mm, nugget_ratio)
             .ok_or_else(|| Error::Internal("kriging refit failed".into()))?;
         Ok(Kriging {
             sites,

@@ -61,6 +61,9 @@ pub struct WebPlateSpec {
     pub nominal_columns: bool,
     /// Training epochs written into the job's `[model]` table.
     pub epochs: u32,
+    /// `Some(n)`: the job starts each part from the family network and trains it n steps
+    /// (`warm_start = "family"`, unsharded runs only).
+    pub warm_epochs: Option<u32>,
 }
 
 impl Default for WebPlateSpec {
@@ -80,6 +83,7 @@ impl Default for WebPlateSpec {
             outlier_um: 40.0,
             nominal_columns: false,
             epochs: 400,
+            warm_epochs: None,
         }
     }
 }
@@ -507,8 +511,9 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          epochs = {epochs}\n\
          seed = {seed}\n\
          holdout_fraction = 0.1\n\
-         # auto: a hardware GPU when there is one, else the CPU trainer.\n\
+         # auto: the fastest trainer this machine has, measured once and cached (errmap gpu-info).\n\
          backend = \"auto\"\n\
+         {warm}\
          \n\
          [toolpaths]\n\
          files = [\"finish.ngc\"]\n\
@@ -518,6 +523,10 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
          chord_tol_mm = 0.005\n\
          map = \"family\"\n",
         family = spec.family,
+        warm = spec.warm_epochs.map_or(String::new(), |n| format!(
+            "# The family network trains first; each part starts from it and trains {n} steps.\n\
+             warm_start = \"family\"\nwarm_epochs = {n}\n"
+        )),
         epochs = spec.epochs,
         seed = spec.seed,
         zlo = z - 1.0,

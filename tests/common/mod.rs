@@ -19,8 +19,15 @@ pub struct Run {
 }
 
 /// A `Command` for the binary under test, for tests that need to drive the process themselves.
+/// errmap's cache (the `auto` probe's figures) is private to the test process, so a user's
+/// cached choice never steers a test.
 pub fn command() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_errmap"))
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_errmap"));
+    cmd.env(
+        "ERRMAP_CACHE_DIR",
+        std::env::temp_dir().join(format!("errmap-test-cache-{}", std::process::id())),
+    );
+    cmd
 }
 
 /// Run `errmap args…` in `dir` and wait for it.
