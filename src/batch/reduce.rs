@@ -31,6 +31,11 @@ struct ReduceFile {
     train_nodes_bits: Vec<Option<String>>,
     /// The delivered network's map on the output grid (µm), u fastest.
     map_e_um_bits: Vec<String>,
+    /// The part's measured domain (`model.json`'s `hull_mm`, `surface_mm`), for the family's.
+    #[serde(default)]
+    hull_mm: Option<Vec<[f64; 2]>>,
+    #[serde(default)]
+    surface_mm: Option<[f64; 2]>,
 }
 
 /// One part's contribution to the family.
@@ -40,6 +45,8 @@ pub struct PartReduce {
     pub holdout_fit: bool,
     pub train_nodes: Vec<Option<f64>>,
     pub map_e_um: Vec<f64>,
+    pub hull_mm: Option<Vec<[f64; 2]>>,
+    pub surface_mm: Option<[f64; 2]>,
 }
 
 fn bits(v: f64) -> String {
@@ -54,6 +61,8 @@ impl PartReduce {
             holdout_fit: self.holdout_fit,
             train_nodes_bits: self.train_nodes.iter().map(|v| v.map(bits)).collect(),
             map_e_um_bits: self.map_e_um.iter().map(|&v| bits(v)).collect(),
+            hull_mm: self.hull_mm.clone(),
+            surface_mm: self.surface_mm,
         };
         crate::io::write_json(&dir.join(REDUCE_FILE), &file)
     }
@@ -93,6 +102,8 @@ impl PartReduce {
                 .iter()
                 .map(|v| parse(v))
                 .collect::<Result<_>>()?,
+            hull_mm: file.hull_mm,
+            surface_mm: file.surface_mm,
         })
     }
 }
@@ -150,7 +161,11 @@ pub fn reduce_family(
         .train_from(vec![initial], std::slice::from_ref(&set), &s.model)?
         .pop()
         .ok_or_else(|| Error::Internal("the trainer returned no family network".into()))?;
-    let model = FittedModel::new("family", s.normal, *domain, norm, net);
+    let domains: Vec<_> = parts
+        .iter()
+        .map(|p| (p.hull_mm.as_ref(), p.surface_mm))
+        .collect();
+    let model = FittedModel::new("family", s.normal, *domain, norm, net).with_domains(&domains);
     let maps: Vec<ErrorMap> = parts
         .iter()
         .map(|p| ErrorMap {

@@ -830,6 +830,8 @@ fn write_part(
             holdout_fit: p.holdout_nodes.is_some(),
             train_nodes: p.full_nodes.clone(),
             map_e_um: map.values.clone(),
+            hull_mm: model.hull_mm.clone(),
+            surface_mm: model.surface_mm,
         }
         .write(dir)?;
     }

@@ -85,9 +85,18 @@ impl FittedModel {
 
     /// Record the union of the parts' measured domains and surfaces (for a family map); none
     /// if a part lacks one.
-    pub fn with_parts(mut self, parts: &[&FittedModel]) -> Self {
-        let hulls: Option<Vec<&Vec<[f64; 2]>>> = parts.iter().map(|m| m.hull_mm.as_ref()).collect();
-        let surfaces: Option<Vec<[f64; 2]>> = parts.iter().map(|m| m.surface_mm).collect();
+    pub fn with_parts(self, parts: &[&FittedModel]) -> Self {
+        let domains: Vec<(Option<&Vec<[f64; 2]>>, Option<[f64; 2]>)> = parts
+            .iter()
+            .map(|m| (m.hull_mm.as_ref(), m.surface_mm))
+            .collect();
+        self.with_domains(&domains)
+    }
+
+    /// [`FittedModel::with_parts`] from each part's (hull, surface) alone.
+    pub fn with_domains(mut self, parts: &[(Option<&Vec<[f64; 2]>>, Option<[f64; 2]>)]) -> Self {
+        let hulls: Option<Vec<&Vec<[f64; 2]>>> = parts.iter().map(|p| p.0).collect();
+        let surfaces: Option<Vec<[f64; 2]>> = parts.iter().map(|p| p.1).collect();
         if let (Some(h), Some(s), false) = (hulls, surfaces, parts.is_empty()) {
             let all: Vec<[f64; 2]> = h.into_iter().flatten().copied().collect();
             self.hull_mm = Some(crate::geom::convex_hull(&all));
