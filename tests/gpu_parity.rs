@@ -405,7 +405,7 @@ fn backend_selection_follows_the_documented_order() {
             gpu: measure("gpu", gpu_rate),
             cached: false,
         };
-        let planted = std::collections::BTreeMap::from([(probe_key(&gpu, &config), verdict)]);
+        let planted = std::collections::BTreeMap::from([(probe_key(gpu, &config), verdict)]);
         std::fs::write(&cache, serde_json::to_string(&planted).unwrap()).unwrap();
         let auto = select(Backend::Auto, Some(cache.clone())).unwrap();
         assert_eq!(auto.backend, expected, "{}", auto.reason);
@@ -424,11 +424,11 @@ fn backend_selection_follows_the_documented_order() {
     // The probe (what `errmap gpu-info` runs) measures both and records its figures.
     let _ = std::fs::remove_file(&cache);
     let verdict =
-        errmap::backend::probe::compare_cached_in(&gpu, &config, Some(cache.clone())).unwrap();
+        errmap::backend::probe::compare_cached_in(gpu, &config, Some(cache.clone())).unwrap();
     assert!(!verdict.cached);
     let recorded: std::collections::BTreeMap<String, Verdict> =
         serde_json::from_str(&std::fs::read_to_string(&cache).unwrap()).unwrap();
-    let stored = &recorded[&probe_key(&gpu, &config)];
+    let stored = &recorded[&probe_key(gpu, &config)];
     assert!(stored.cpu.sample_epochs_per_s > 0.0 && stored.gpu.sample_epochs_per_s > 0.0);
     assert_eq!(stored.cpu, verdict.cpu);
     let auto = select(Backend::Auto, Some(cache.clone())).unwrap();

@@ -209,6 +209,8 @@ mod tests {
                 Some(f64::MIN_POSITIVE),
             ],
             map_e_um: vec![1.0 / 3.0, -0.0, 12_345.678_901_234_567],
+            hull_mm: Some(vec![[0.1, 0.2], [600.0 / 7.0, 1.0 / 3.0], [5.5, 290.0]]),
+            surface_mm: Some([4.999_999_999_999_999, 5.0]),
         };
         p.write(dir.path()).unwrap();
         let back = PartReduce::read(&dir.path().join(REDUCE_FILE)).unwrap();

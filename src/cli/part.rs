@@ -289,9 +289,8 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
         backend: args.backend,
         wait: args.wait.map(std::time::Duration::from_secs),
     };
-    let quiet = globals.quiet;
     let trainer_for = |b: Backend| -> errmap::Result<Box<dyn errmap::nn::Trainer>> {
-        let notes = super::notes(super::Globals { quiet, ..globals });
+        let notes = super::notes(globals);
         Ok(errmap::backend::select_trainer(b, &ModelConfig::default(), notes)?.trainer)
     };
     let run = batch::merge_job(&req, &trainer_for)?;

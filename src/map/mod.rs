@@ -16,6 +16,10 @@ use std::path::Path;
 /// Format tag written into every `model.json`.
 pub const MODEL_FORMAT: &str = "errmap-map-model/1";
 
+/// A part's measured domain: its probes' hull (plane axes, mm) and surface extent along the
+/// normal, when recorded.
+pub type PartDomain<'a> = (Option<&'a Vec<[f64; 2]>>, Option<[f64; 2]>);
+
 /// A fitted map: `E(u, v) = unscale(net(scale(u, v)))` µm over `domain` (the file `model.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -86,7 +90,7 @@ impl FittedModel {
     /// Record the union of the parts' measured domains and surfaces (for a family map); none
     /// if a part lacks one.
     pub fn with_parts(self, parts: &[&FittedModel]) -> Self {
-        let domains: Vec<(Option<&Vec<[f64; 2]>>, Option<[f64; 2]>)> = parts
+        let domains: Vec<PartDomain> = parts
             .iter()
             .map(|m| (m.hull_mm.as_ref(), m.surface_mm))
             .collect();
@@ -94,7 +98,7 @@ impl FittedModel {
     }
 
     /// [`FittedModel::with_parts`] from each part's (hull, surface) alone.
-    pub fn with_domains(mut self, parts: &[(Option<&Vec<[f64; 2]>>, Option<[f64; 2]>)]) -> Self {
+    pub fn with_domains(mut self, parts: &[PartDomain]) -> Self {
         let hulls: Option<Vec<&Vec<[f64; 2]>>> = parts.iter().map(|p| p.0).collect();
         let surfaces: Option<Vec<[f64; 2]>> = parts.iter().map(|p| p.1).collect();
         if let (Some(h), Some(s), false) = (hulls, surfaces, parts.is_empty()) {

@@ -65,13 +65,10 @@ impl Trainer for FastCpuTrainer {
                     Optimizer::Adam => train_adam(&mut net, set, config, k)?,
                     Optimizer::Lbfgs => {
                         let mut grad = FastGradient::new(&net, set);
-                        let (loss, _) = super::lbfgs::fit_network(&mut net, config.epochs, |p| {
+                        super::lbfgs::fit_network_checked(&mut net, config, k, |p| {
                             let loss = grad.compute(p, set);
                             (loss, grad.sum.clone())
-                        });
-                        if !loss.is_finite() {
-                            return Err(diverged(k, config.epochs));
-                        }
+                        })?
                     }
                 }
                 Ok(net)
@@ -317,7 +314,7 @@ fn tanh_v(x: V) -> V {
     ];
     const CLAMP: f32 = f32::from_bits(0x40fc_f84f);
     const TINY: f32 = f32::from_bits(0x39d1_b717);
-    let x = x.map(|v| v.max(-CLAMP).min(CLAMP));
+    let x = x.map(|v| v.clamp(-CLAMP, CLAMP));
     let x2 = mul(x, x);
     let mut p = fma(x2, splat(A[6]), splat(A[5]));
     for a in A[..5].iter().rev() {

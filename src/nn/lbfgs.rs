@@ -169,5 +169,21 @@ pub fn fit_network(
     (result.value, result.stop)
 }
 
+/// [`fit_network`] for network `k` of a batch with at most `config.epochs` evaluations; a
+/// fit that ends on a non-finite loss is the usual divergence error.
+pub fn fit_network_checked(
+    net: &mut super::Mlp,
+    config: &super::ModelConfig,
+    k: usize,
+    loss_gradient: impl FnMut(&[f32]) -> (f64, Vec<f32>),
+) -> crate::Result<()> {
+    let (loss, _) = fit_network(net, config.epochs, loss_gradient);
+    if loss.is_finite() {
+        Ok(())
+    } else {
+        Err(super::diverged(k, config.epochs))
+    }
+}
+
 /// ‖∇MSE‖ at which a fit counts as converged (targets are standardised to unit spread).
 pub const GRADIENT_TOLERANCE: f64 = 1e-7;

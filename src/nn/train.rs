@@ -235,13 +235,10 @@ impl Trainer for CpuTrainer {
                     Optimizer::Lbfgs => {
                         let mut ws = GradientWorkspace::new(&net, self.lanes);
                         let activation = net.activation;
-                        let (loss, _) = super::lbfgs::fit_network(&mut net, config.epochs, |p| {
+                        super::lbfgs::fit_network_checked(&mut net, config, k, |p| {
                             let loss = ws.gradient(p, activation, set);
                             (loss, ws.lanes[..p.len()].to_vec())
-                        });
-                        if !loss.is_finite() {
-                            return Err(diverged(k, config.epochs));
-                        }
+                        })?
                     }
                 }
                 Ok(net)
