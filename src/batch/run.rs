@@ -419,11 +419,20 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         };
         if !sets.is_empty() {
             if !quiet {
+                let warm = s.model.warm_start == crate::nn::WarmStart::Family
+                    && roles.contains(&Role::Family);
+                let epochs = if warm {
+                    format!(
+                        "the family network {} epochs, then the parts {} epochs from it",
+                        s.model.epochs, s.model.warm_epochs
+                    )
+                } else {
+                    format!("{} epochs", s.model.epochs)
+                };
                 eprintln!(
-                    "training {} networks ({} points each at most, {} epochs) on {}",
+                    "training {} networks ({} points each at most; {epochs}) on {}",
                     sets.len(),
                     sets.iter().map(|t| t.len()).max().unwrap_or(0),
-                    s.model.epochs,
                     trainer.name()
                 );
             }
