@@ -182,6 +182,49 @@ fn every_file_of_2_3_7_shards_equals_the_unsharded_run() {
 }
 
 #[test]
+fn shards_that_warm_start_from_the_family_network_equal_the_unsharded_run() {
+    // Each shard rebuilds the family network from every part, as the whole run does, so its
+    // parts start from the same network and every file matches.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    run_ok(
+        d,
+        &[
+            "synth",
+            "web-plate",
+            "--parts",
+            "5",
+            "--epochs",
+            "20",
+            "--warm-epochs",
+            "10",
+            "--out",
+            "data",
+        ],
+    );
+    batch(d, "single", &[]).expect_code(0);
+    for n in [2, 3] {
+        let out = format!("sharded-{n}");
+        sharded(d, &out, n);
+        let diffs = compare_runs(&d.join("single"), &d.join(&out), true);
+        assert!(diffs.is_empty(), "{n} shards: {diffs:?} differ");
+    }
+    // And the warm start made a difference: a run from scratch gives other part networks.
+    let job = std::fs::read_to_string(d.join("data/job.toml")).unwrap();
+    std::fs::write(
+        d.join("data/job.toml"),
+        job.replace("warm_start = \"family\"", "warm_start = \"none\""),
+    )
+    .unwrap();
+    batch(d, "cold", &[]).expect_code(0);
+    assert!(
+        std::fs::read(d.join("single/p01/model.json")).unwrap()
+            != std::fs::read(d.join("cold/p01/model.json")).unwrap(),
+        "p01's network is the same with and without the warm start"
+    );
+}
+
+#[test]
 fn a_killed_shard_is_reported_by_merge_and_its_rerun_completes_the_job() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

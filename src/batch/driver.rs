@@ -106,10 +106,15 @@ pub fn run_job(
         Some(prev) => reuse_parts(prev, &target, &dir, &plan, &input_hashes)?,
         None => Vec::new(),
     };
+    let all_parts = plan.parts.clone();
     plan.parts.retain(|p| !reused.contains(&p.name));
     if !reused.is_empty() {
-        // The family needs every part: the reduce builds it below.
+        // The family needs every part: the reduce builds it below. Parts that start from the
+        // family network get it rebuilt from every part, as the whole run builds it.
         plan.family_dir = None;
+        if plan.family_parts.is_empty() {
+            plan.family_parts = all_parts;
+        }
     }
     let mut summary = super::execute(&plan, trainer, quiet)?;
     relocate_summary(&mut summary, &dir, &target);

@@ -152,27 +152,32 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
     let job = &file.job;
     let files = file.probe_files()?;
     let names = part_names(&files);
-    let parts: Vec<PartInput> = files
+    let all_parts: Vec<PartInput> = files
         .iter()
         .zip(&names)
-        .enumerate()
-        .filter(|(i, _)| opts.shard.is_none_or(|s| s.takes(*i)))
-        .map(|(_, (f, n))| PartInput {
+        .map(|(f, n)| PartInput {
             name: n.clone(),
             probe_file: f.clone(),
             out_dir: out.join(n),
         })
         .collect();
+    let parts: Vec<PartInput> = all_parts
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| opts.shard.is_none_or(|s| s.takes(*i)))
+        .map(|(_, p)| p.clone())
+        .collect();
     let mut model = job.model.clone();
     if let Some(b) = opts.backend {
         model.backend = b;
     }
-    if opts.shard.is_some() && model.warm_start == crate::nn::WarmStart::Family {
-        return Err(Error::usage(
-            "model.warm_start = \"family\" needs the whole family in one run, and this run is a shard",
-            "run the job unsharded, or set warm_start = \"none\" for sharded runs",
-        ));
-    }
+    // A shard that warm-starts its parts needs the family network: it rebuilds it from every
+    // part of the job, exactly as the unsharded run does.
+    let family_parts = if opts.shard.is_some() && model.warm_start == crate::nn::WarmStart::Family {
+        all_parts
+    } else {
+        Vec::new()
+    };
     let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
         files: file.toolpath_files(),
         settings: crate::toolpath::CompensationSettings {
@@ -211,6 +216,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
             reduce_inputs: true,
         },
         parts,
+        family_parts,
         family_dir,
         toolpaths,
         job: Some(file.path.clone()),

@@ -61,6 +61,10 @@ pub struct ToolpathPlan {
 pub struct Plan {
     pub settings: Settings,
     pub parts: Vec<PartInput>,
+    /// Every part of the family in batch order, when this run maps only some of them (a shard,
+    /// a resumed run) and its parts start from the family network: the family network is then
+    /// rebuilt from all of them, as the whole run builds it. Empty otherwise.
+    pub family_parts: Vec<PartInput>,
     /// Folder of the family maps; `None` for a single part.
     pub family_dir: Option<PathBuf>,
     pub toolpaths: Option<ToolpathPlan>,
@@ -276,6 +280,39 @@ fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
     Some((sq / prep.holdout.len() as f64).sqrt())
 }
 
+/// The training-grid values of the parts the family network is fitted to, in batch order:
+/// this run's parts when it maps the whole family; every part of the family (those of other
+/// shards read and interpolated here, failures left out as the whole run leaves them out) when
+/// only some are mapped but they start from the family network; none otherwise.
+fn family_members(
+    plan: &Plan,
+    interpolated: &[Interpolated],
+    s: &Settings,
+    train_grid: &Grid,
+) -> Vec<Vec<Option<f64>>> {
+    if plan.family_dir.is_some() {
+        return interpolated.iter().map(|p| p.full_nodes.clone()).collect();
+    }
+    if plan.family_parts.is_empty() || s.model.warm_start != crate::nn::WarmStart::Family {
+        return Vec::new();
+    }
+    plan.family_parts
+        .par_iter()
+        .map(
+            |part| match interpolated.iter().find(|p| p.prep.input.name == part.name) {
+                Some(p) => Some(p.full_nodes.clone()),
+                None => prepare(part.clone(), s)
+                    .ok()
+                    .and_then(|prep| interpolate(prep, s, train_grid).ok())
+                    .map(|p| p.full_nodes),
+            },
+        )
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
 /// A training set from node values: the nodes that have a value.
 pub(crate) fn training_set(
     grid: &Grid,
@@ -397,11 +434,11 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             roles.push(Role::Delivered(name.clone()));
             slots.push((h, sets.len() - 1));
         }
-        let family_slot = if plan.family_dir.is_some() && !interpolated.is_empty() {
+        let members = family_members(plan, &interpolated, s, &train_grid);
+        let family_slot = if !members.is_empty() {
             let mean: Vec<Option<f64>> = (0..train_grid.len())
                 .map(|k| {
-                    let vals: Option<Vec<f64>> =
-                        interpolated.iter().map(|p| p.full_nodes[k]).collect();
+                    let vals: Option<Vec<f64>> = members.iter().map(|p| p[k]).collect();
                     vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
                 })
                 .collect();
@@ -459,7 +496,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 }
             }
             let mut eval_slots: Vec<usize> = slots.iter().map(|&(_, d)| d).collect();
-            eval_slots.extend(family_slot);
+            eval_slots.extend(family_slot.filter(|_| plan.family_dir.is_some()));
             let eval_nets: Vec<_> = eval_slots.iter().map(|&k| nets[k].clone()).collect();
             let outputs = trainer.evaluate_batch(&eval_nets, &inputs)?;
             let to_map = |slot: usize, out: &[f32]| ErrorMap {

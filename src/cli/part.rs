@@ -261,6 +261,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
             probe_file: args.probes.clone(),
             out_dir: args.out.clone(),
         }],
+        family_parts: Vec::new(),
         family_dir: None,
         toolpaths: None,
         job: None,

@@ -40,7 +40,7 @@ pub struct SynthWebPlateArgs {
     #[arg(long, default_value_t = WebPlateSpec::default().epochs)]
     pub epochs: u32,
     /// Start each part from the family network and train it N steps (warm_start = "family" in
-    /// job.toml; such a job runs unsharded).
+    /// job.toml).
     #[arg(long, value_name = "N")]
     pub warm_epochs: Option<u32>,
     /// Family name written into job.toml.

@@ -62,7 +62,7 @@ pub struct WebPlateSpec {
     /// Training epochs written into the job's `[model]` table.
     pub epochs: u32,
     /// `Some(n)`: the job starts each part from the family network and trains it n steps
-    /// (`warm_start = "family"`, unsharded runs only).
+    /// (`warm_start = "family"`).
     pub warm_epochs: Option<u32>,
 }
 

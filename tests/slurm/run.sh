@@ -18,8 +18,6 @@ export SLURM_CONF
 rm -rf "$work/data"
 cp -r "$repo/data/web-plate" "$work/data"
 sed -i 's/^epochs = .*/epochs = 40/' "$work/data/job.toml"
-# A warm start from the family network needs the whole family in one process: shards train from scratch.
-sed -i '/^warm_start/d; /^warm_epochs/d' "$work/data/job.toml"
 cd "$work"
 
 read -r array_id merge_id < <("$errmap" slurm data/job.toml --shards 4 --backend cpu --out sharded --submit --quiet)
