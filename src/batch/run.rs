@@ -205,18 +205,22 @@ fn prepare(
     })
 }
 
+/// The part's training-grid values from all its clean points (`None` outside their hull).
+fn full_nodes(prep: &Prepared, s: &Settings, train_grid: &Grid) -> Result<Vec<Option<f64>>> {
+    let surface = Surface::new(&probe::uve(&prep.clean))?;
+    if s.method == Method::Kriging {
+        surface.kriging()?;
+    }
+    Ok(interp::resample(&surface, s.method, train_grid))
+}
+
 fn interpolate(
     prep: Prepared,
     s: &Settings,
     train_grid: &Grid,
 ) -> std::result::Result<Interpolated, Box<(PartInput, Error)>> {
-    let full = match Surface::new(&probe::uve(&prep.clean)) {
-        Ok(surface) => {
-            if let (Method::Kriging, Err(e)) = (s.method, surface.kriging()) {
-                return Err(Box::new((prep.input, e)));
-            }
-            interp::resample(&surface, s.method, train_grid)
-        }
+    let full = match full_nodes(&prep, s, train_grid) {
+        Ok(nodes) => nodes,
         Err(e) => return Err(Box::new((prep.input, e))),
     };
     let kriging_holdout_rmse_um = kriging_holdout_rmse(&prep);
@@ -301,10 +305,10 @@ fn family_members(
         .map(
             |part| match interpolated.iter().find(|p| p.prep.input.name == part.name) {
                 Some(p) => Some(p.full_nodes.clone()),
+                // Only its training-grid values: no hold-out fits for a part mapped elsewhere.
                 None => prepare(part.clone(), s)
                     .ok()
-                    .and_then(|prep| interpolate(prep, s, train_grid).ok())
-                    .map(|p| p.full_nodes),
+                    .and_then(|prep| full_nodes(&prep, s, train_grid).ok()),
             },
         )
         .collect::<Vec<_>>()

@@ -11,7 +11,7 @@
 
 use std::fmt::Write;
 
-use crate::nn::{layer_spans, Activation, LayerSpan, GRAD_LANES};
+use crate::nn::{layer_spans, unit_offsets, Activation, GRAD_LANES};
 
 /// Widest layer input the row kernel holds in registers and workgroup memory
 /// ((inputs + 1) · 64 floats of workgroup memory: 16 KiB at 63 inputs).
@@ -251,17 +251,4 @@ pub fn forward_rows_source(layer_sizes: &[usize], activation: Activation) -> Opt
     line("    }".into());
     line("}".into());
     Some(w)
-}
-
-/// First unit of each layer in the per-sample unit storage (`acts`, `deltas`): the running sum
-/// of the earlier layers' output counts.
-fn unit_offsets(spans: &[LayerSpan]) -> Vec<usize> {
-    spans
-        .iter()
-        .scan(0usize, |units, span| {
-            let first = *units;
-            *units += span.outputs;
-            Some(first)
-        })
-        .collect()
 }

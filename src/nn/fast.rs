@@ -9,9 +9,9 @@
 
 use rayon::prelude::*;
 
-use super::config::{Activation, ModelConfig, Optimizer};
-use super::mlp::{layer_spans, LayerSpan, Mlp};
-use super::train::{adam_update, check_batch, check_nets, diverged, AdamScalars, REFERENCE_LANES};
+use super::config::{Activation, ModelConfig};
+use super::mlp::{layer_spans, unit_offsets, LayerSpan, Mlp};
+use super::train::{fit_one, train_each, REFERENCE_LANES};
 use super::{CpuTrainer, Trainer, TrainingSet};
 use crate::Result;
 
@@ -55,53 +55,20 @@ impl Trainer for FastCpuTrainer {
         sets: &[TrainingSet],
         config: &ModelConfig,
     ) -> Result<Vec<Mlp>> {
-        check_batch(&initial, sets, config)?;
-        initial
-            .into_par_iter()
-            .zip(sets.par_iter())
-            .enumerate()
-            .map(|(k, (mut net, set))| {
-                match config.optimizer {
-                    Optimizer::Adam => train_adam(&mut net, set, config, k)?,
-                    Optimizer::Lbfgs => {
-                        let mut grad = FastGradient::new(&net, set);
-                        super::lbfgs::fit_network_checked(&mut net, config, k, |p| {
-                            let loss = grad.compute(p, set);
-                            (loss, grad.sum.clone())
-                        })?
-                    }
-                }
-                Ok(net)
+        train_each(initial, sets, config, |net, set, k| {
+            let mut fast = FastGradient::new(net, set);
+            fit_one(net, config, k, |params, grad| {
+                let loss = fast.compute(params, set);
+                grad.copy_from_slice(&fast.sum);
+                loss
             })
-            .collect()
+        })
     }
 
     fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
-        check_nets(nets)?;
+        // The reference's blocked evaluator (it checks the networks).
         CpuTrainer::reference().evaluate_batch(nets, inputs)
     }
-}
-
-/// Full-batch Adam on one network with the fast gradient.
-fn train_adam(net: &mut Mlp, set: &TrainingSet, config: &ModelConfig, k: usize) -> Result<()> {
-    let mut grad = FastGradient::new(net, set);
-    let mut m = vec![0.0f32; net.params.len()];
-    let mut v = vec![0.0f32; net.params.len()];
-    for epoch in 0..config.epochs {
-        let loss = grad.compute(&net.params, set);
-        if ((epoch + 1) % config.loss_every == 0 || epoch + 1 == config.epochs) && !loss.is_finite()
-        {
-            return Err(diverged(k, epoch));
-        }
-        let scalars = AdamScalars::at(config, epoch);
-        for (((p, mi), vi), &g) in net.params.iter_mut().zip(&mut m).zip(&mut v).zip(&grad.sum) {
-            adam_update(p, mi, vi, g, &scalars);
-        }
-    }
-    if net.params.iter().any(|p| !p.is_finite()) {
-        return Err(diverged(k, config.epochs));
-    }
-    Ok(())
 }
 
 /// The network's shape as the blocked pass needs it.
@@ -136,12 +103,8 @@ pub struct FastGradient {
 impl FastGradient {
     pub fn new(net: &Mlp, set: &TrainingSet) -> FastGradient {
         let spans = layer_spans(&net.layer_sizes);
-        let mut unit_offset = Vec::with_capacity(spans.len());
-        let mut units = 0;
-        for span in &spans {
-            unit_offset.push(units);
-            units += span.outputs;
-        }
+        let unit_offset = unit_offsets(&spans);
+        let units: usize = spans.iter().map(|s| s.outputs).sum();
         let params = net.params.len();
         let blocks = set.len().div_ceil(W);
         let chunks = (0..blocks.div_ceil(CHUNK_BLOCKS))

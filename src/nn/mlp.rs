@@ -48,6 +48,19 @@ pub fn layer_spans(layer_sizes: &[usize]) -> Vec<LayerSpan> {
 }
 
 /// Number of parameters of a network with these sizes.
+/// First unit of each layer's outputs when a network's units are numbered layer after layer
+/// (the activation and delta layout of the trainers and the shaders).
+pub fn unit_offsets(spans: &[LayerSpan]) -> Vec<usize> {
+    spans
+        .iter()
+        .scan(0usize, |units, span| {
+            let first = *units;
+            *units += span.outputs;
+            Some(first)
+        })
+        .collect()
+}
+
 pub fn param_count(layer_sizes: &[usize]) -> usize {
     layer_sizes.windows(2).map(|w| w[0] * w[1] + w[1]).sum()
 }

@@ -16,7 +16,7 @@ pub use config::{
     MAX_HIDDEN_LAYERS, MAX_WIDTH,
 };
 pub use fast::{FastCpuTrainer, FastGradient, CHUNK_BLOCKS};
-pub use mlp::{layer_spans, param_count, LayerSpan, Mlp};
+pub use mlp::{layer_spans, param_count, unit_offsets, LayerSpan, Mlp};
 pub use norm::Normalisation;
 pub(crate) use train::diverged;
 pub use train::{

@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::config::{network_seed, Activation, ModelConfig, Optimizer};
-use super::mlp::{layer_spans, param_count, LayerSpan, Mlp};
+use super::mlp::{layer_spans, param_count, unit_offsets, LayerSpan, Mlp};
 use crate::{Error, Result};
 
 /// Samples of one network: inputs scaled to [-1, 1]², targets standardised
@@ -222,28 +222,10 @@ impl Trainer for CpuTrainer {
         sets: &[TrainingSet],
         config: &ModelConfig,
     ) -> Result<Vec<Mlp>> {
-        check_batch(&initial, sets, config)?;
-        initial
-            .into_par_iter()
-            .zip(sets.par_iter())
-            .enumerate()
-            .map(|(k, (mut net, set))| {
-                match config.optimizer {
-                    Optimizer::Adam => {
-                        train_network_with_lanes(&mut net, set, config, k, self.lanes)?
-                    }
-                    Optimizer::Lbfgs => {
-                        let mut ws = GradientWorkspace::new(&net, self.lanes);
-                        let activation = net.activation;
-                        super::lbfgs::fit_network_checked(&mut net, config, k, |p| {
-                            let loss = ws.gradient(p, activation, set);
-                            (loss, ws.lanes[..p.len()].to_vec())
-                        })?
-                    }
-                }
-                Ok(net)
-            })
-            .collect()
+        let lanes = self.lanes;
+        train_each(initial, sets, config, |net, set, k| {
+            fit_reference(net, set, config, k, lanes)
+        })
     }
 
     fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {
@@ -394,12 +376,8 @@ struct GradientWorkspace {
 impl GradientWorkspace {
     fn new(net: &Mlp, lane_count: usize) -> Self {
         let spans = layer_spans(&net.layer_sizes);
-        let mut unit_offset = Vec::with_capacity(spans.len());
-        let mut units = 0;
-        for span in &spans {
-            unit_offset.push(units);
-            units += span.outputs;
-        }
+        let unit_offset = unit_offsets(&spans);
+        let units: usize = spans.iter().map(|s| s.outputs).sum();
         let width = net.layer_sizes.iter().copied().max().unwrap_or(2);
         let scratch = (0..lane_count / BLOCK)
             .map(|_| BlockScratch {
@@ -607,7 +585,7 @@ pub fn train_network(
     train_network_with_lanes(net, set, config, k, REFERENCE_LANES)
 }
 
-/// [`train_network`] with `lanes` gradient lanes.
+/// [`train_network`] with `lanes` gradient lanes (and `config.optimizer`).
 fn train_network_with_lanes(
     net: &mut Mlp,
     set: &TrainingSet,
@@ -616,17 +594,74 @@ fn train_network_with_lanes(
     lanes: usize,
 ) -> Result<()> {
     check_batch(std::slice::from_ref(net), std::slice::from_ref(set), config)?;
+    fit_reference(net, set, config, k, lanes)
+}
+
+/// One checked network fitted with the reference gradient.
+fn fit_reference(
+    net: &mut Mlp,
+    set: &TrainingSet,
+    config: &ModelConfig,
+    k: usize,
+    lanes: usize,
+) -> Result<()> {
     let mut ws = GradientWorkspace::new(net, lanes);
-    let mut m = vec![0.0f32; net.params.len()];
-    let mut v = vec![0.0f32; net.params.len()];
+    let activation = net.activation;
+    fit_one(net, config, k, |params, grad| {
+        let loss = ws.gradient(params, activation, set);
+        grad.copy_from_slice(&ws.lanes[..params.len()]);
+        loss
+    })
+}
+
+/// Every network of a checked batch fitted by `fit(net, set, k)`, networks in parallel.
+pub(crate) fn train_each(
+    initial: Vec<Mlp>,
+    sets: &[TrainingSet],
+    config: &ModelConfig,
+    fit: impl Fn(&mut Mlp, &TrainingSet, usize) -> Result<()> + Sync + Send,
+) -> Result<Vec<Mlp>> {
+    check_batch(&initial, sets, config)?;
+    initial
+        .into_par_iter()
+        .zip(sets.par_iter())
+        .enumerate()
+        .map(|(k, (mut net, set))| {
+            fit(&mut net, set, k)?;
+            Ok(net)
+        })
+        .collect()
+}
+
+/// Fits network `k` with `config.optimizer`, given its loss gradient: `loss_gradient(params,
+/// grad)` writes the gradient of the mean squared error at `params` into `grad` and returns
+/// the error. Adam: `config.epochs` steps; L-BFGS: at most `config.epochs` evaluations. A loss
+/// that stops being finite is a divergence error.
+pub(crate) fn fit_one(
+    net: &mut Mlp,
+    config: &ModelConfig,
+    k: usize,
+    mut loss_gradient: impl FnMut(&[f32], &mut [f32]) -> f64,
+) -> Result<()> {
+    let n_params = net.params.len();
+    if config.optimizer == Optimizer::Lbfgs {
+        return super::lbfgs::fit_network_checked(net, config, k, |params| {
+            let mut grad = vec![0.0f32; n_params];
+            let loss = loss_gradient(params, &mut grad);
+            (loss, grad)
+        });
+    }
+    let mut grad = vec![0.0f32; n_params];
+    let mut m = vec![0.0f32; n_params];
+    let mut v = vec![0.0f32; n_params];
     for epoch in 0..config.epochs {
-        let loss = ws.gradient(&net.params, net.activation, set);
+        let loss = loss_gradient(&net.params, &mut grad);
         if ((epoch + 1) % config.loss_every == 0 || epoch + 1 == config.epochs) && !loss.is_finite()
         {
             return Err(diverged(k, epoch));
         }
         let scalars = AdamScalars::at(config, epoch);
-        for (((p, mi), vi), &g) in net.params.iter_mut().zip(&mut m).zip(&mut v).zip(&ws.lanes) {
+        for (((p, mi), vi), &g) in net.params.iter_mut().zip(&mut m).zip(&mut v).zip(&grad) {
             adam_update(p, mi, vi, g, &scalars);
         }
     }
