@@ -64,7 +64,7 @@ pub struct MapArgs {
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     pub nominal_plane: Option<f64>,
     /// Map domain UMIN,VMIN,UMAX,VMAX in mm (default: the probes' bounding box).
-    #[arg(long, value_parser = parse_domain, allow_hyphen_values = true)]
+    #[arg(long, value_name = "UMIN,VMIN,UMAX,VMAX", value_parser = parse_domain, allow_hyphen_values = true)]
     pub domain: Option<Domain>,
     /// Step of the output grid, mm.
     #[arg(long, value_name = "MM", default_value_t = 5.0)]

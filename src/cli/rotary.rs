@@ -107,19 +107,19 @@ pub struct SynthRotaryArgs {
     )]
     pub old_out: Option<PathBuf>,
     /// Seed of the probe noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Rotary axis: A, B or C.
-    #[arg(long, default_value = "C", value_parser = parse_axis)]
+    #[arg(long, value_name = "AXIS", default_value = "C", value_parser = parse_axis)]
     pub axis: RotaryAxis,
     /// Angle step of the runs (divides 360).
     #[arg(long, value_name = "DEG", default_value_t = 15.0)]
     pub step_deg: f64,
     /// Runs in each direction.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3)]
     pub repeats: u32,
     /// Touch points per sphere and position.
-    #[arg(long, default_value_t = 25)]
+    #[arg(long, value_name = "N", default_value_t = 25)]
     pub points: usize,
     /// Probe noise (standard deviation along the surface normal).
     #[arg(long, value_name = "UM", default_value_t = 0.5)]

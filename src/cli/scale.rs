@@ -15,11 +15,12 @@ pub struct SlurmArgs {
     /// Number of shards = array tasks.
     #[arg(long, value_name = "N")]
     pub shards: usize,
-    /// Slurm partition of both jobs.
-    #[arg(long)]
+    /// Slurm partition of both jobs (default: the cluster's default partition).
+    #[arg(long, value_name = "NAME")]
     pub partition: Option<String>,
-    /// Time limit of each task and of the merge (Slurm format, e.g. 00:30:00).
-    #[arg(long)]
+    /// Time limit of each task and of the merge (Slurm format, e.g. 00:30:00; default: the
+    /// partition's limit).
+    #[arg(long, value_name = "HH:MM:SS")]
     pub time: Option<String>,
     /// Output folder (default: the job's output): DIR/shard-I-of-N/, DIR/family/, DIR/slurm/.
     #[arg(long, value_name = "DIR")]
@@ -63,7 +64,7 @@ pub struct K8sArgs {
     #[arg(long, value_name = "NAME")]
     pub pvc: String,
     /// Mount path of the claim in the containers (their working directory).
-    #[arg(long, default_value = "/work")]
+    #[arg(long, value_name = "PATH", default_value = "/work")]
     pub mount: String,
     /// Output folder of the job inside the volume (default: the job's output).
     #[arg(long, value_name = "DIR")]
@@ -83,7 +84,7 @@ pub struct K8sArgs {
     #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
     pub wait: u64,
     /// Retries per shard index and for the merge.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 2)]
     pub retries: u32,
     /// Folder the manifests are written to (default: <out-dir>/k8s, relative to the current folder).
     #[arg(long, value_name = "DIR")]

@@ -24,35 +24,35 @@ pub struct SynthWebPlateArgs {
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Plate size XxY in mm.
-    #[arg(long, default_value = "600x300", value_parser = parse_pair_x)]
+    #[arg(long, value_name = "XxY", default_value = "600x300", value_parser = parse_pair_x)]
     pub size: (f64, f64),
     /// Lower-left corner of the plate X,Y in mm.
-    #[arg(long, default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y", default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
     pub origin: (f64, f64),
     /// Regular probe grid NXxNY, points along X and Y (default 12x12).
-    #[arg(long, value_parser = parse_grid, conflicts_with = "irregular")]
+    #[arg(long, value_name = "NXxNY", value_parser = parse_grid, conflicts_with = "irregular")]
     pub grid: Option<(usize, usize)>,
     /// Scattered probe layout of N points (plus the 4 corners of the probed rectangle) instead of a grid.
-    #[arg(long)]
+    #[arg(long, value_name = "N")]
     pub irregular: Option<usize>,
     /// Probe noise, 1σ, µm.
     #[arg(long, value_name = "UM", default_value_t = 1.0)]
     pub noise_um: f64,
     /// Gross outliers (+40 µm chips) planted per part.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3)]
     pub outliers: usize,
     /// Write per-point nominal columns nx_mm,ny_mm,nz_mm (the job then has no nominal plane).
     #[arg(long)]
     pub nominal_columns: bool,
     /// Training epochs written into job.toml.
-    #[arg(long, default_value_t = WebPlateSpec::default().epochs)]
+    #[arg(long, value_name = "N", default_value_t = WebPlateSpec::default().epochs)]
     pub epochs: u32,
     /// Start each part from the family network and train it N steps (warm_start = "family" in
     /// job.toml).
     #[arg(long, value_name = "N")]
     pub warm_epochs: Option<u32>,
     /// Family name written into job.toml.
-    #[arg(long, default_value = "web-plate")]
+    #[arg(long, value_name = "NAME", default_value = "web-plate")]
     pub family: String,
 }
 

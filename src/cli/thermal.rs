@@ -223,10 +223,10 @@ pub struct SynthThermalArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Number of campaigns (coolant alternates off, on, …).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, value_name = "N", default_value_t = 4)]
     pub campaigns: usize,
     /// Bidirectional runs per measurement.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 2)]
     pub repeats: u32,
     /// Time between measurements, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 900.0)]
