@@ -294,7 +294,7 @@ fn synth_circular_terms_are_recovered_within_5_percent_with_0_2_um_noise() {
     let d = dir.path();
     ok(
         d,
-        &["synth", "circular", "--out", "set", "--seed", "7", "-q"],
+        &["synth", "circular", "--out-dir", "set", "--seed", "7", "-q"],
     );
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("set/truth.json")).unwrap()).unwrap();
@@ -440,7 +440,7 @@ fn two_axis_form_with_a_centre_and_sorted_rows_gives_the_same_terms() {
         &[
             "synth",
             "circular",
-            "--out",
+            "--out-dir",
             "t",
             "--form",
             "two-axis",
@@ -523,7 +523,15 @@ fn json_has_the_keys_the_issue_lists_and_the_chart_has_both_directions() {
     let d = dir.path();
     ok(
         d,
-        &["synth", "circular", "--out", "s", "--step-deg", "0.5", "-q"],
+        &[
+            "synth",
+            "circular",
+            "--out-dir",
+            "s",
+            "--step-deg",
+            "0.5",
+            "-q",
+        ],
     );
     let doc = json(&ok(
         d,
@@ -587,7 +595,7 @@ fn one_direction_or_no_feed_leaves_servo_mismatch_empty_with_a_note() {
         &[
             "synth",
             "circular",
-            "--out",
+            "--out-dir",
             "one",
             "--only",
             "ccw",
@@ -624,7 +632,7 @@ fn one_direction_or_no_feed_leaves_servo_mismatch_empty_with_a_note() {
         &[
             "synth",
             "circular",
-            "--out",
+            "--out-dir",
             "two",
             "--step-deg",
             "0.5",

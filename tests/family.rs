@@ -33,22 +33,22 @@ fn run_expect(args: &[&str], cwd: &Path, code: i32) -> Run {
     run
 }
 
-/// `errmap synth web-plate --parts <parts> --out data <extra…>`, which must succeed.
+/// `errmap synth web-plate --parts <parts> --out-dir data <extra…>`, which must succeed.
 #[track_caller]
 fn synth_family(cwd: &Path, parts: &str, extra: &[&str]) {
-    let mut args = vec!["synth", "web-plate", "--parts", parts, "--out", "data"];
+    let mut args = vec!["synth", "web-plate", "--parts", parts, "--out-dir", "data"];
     args.extend_from_slice(extra);
     run_expect(&args, cwd, 0);
 }
 
-/// `errmap batch data/job.toml --backend <backend> --out <out> --quiet <extra…>`.
+/// `errmap batch data/job.toml --backend <backend> --out-dir <out> --quiet <extra…>`.
 fn batch_args<'a>(backend: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec![
         "batch",
         "data/job.toml",
         "--backend",
         backend,
-        "--out",
+        "--out-dir",
         out,
         "--quiet",
     ];
@@ -288,7 +288,7 @@ fn committed_sample_is_what_its_readme_command_makes() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let readme = std::fs::read_to_string(sample_dir().join("README.md")).unwrap();
-    let command = "errmap synth web-plate --parts 8 --warm-epochs 60 --out data/web-plate";
+    let command = "errmap synth web-plate --parts 8 --warm-epochs 60 --out-dir data/web-plate";
     assert!(readme.contains(command), "{readme}");
     let args: Vec<&str> = command.split(' ').skip(1).collect();
     run_expect(&args, d, 0);
@@ -311,7 +311,15 @@ fn sample_family_rejects_outliers_matches_truth_and_compensation_removes_the_err
     let job = sample_dir().join("job.toml");
     let job = job.to_str().unwrap();
     let out = run_expect(
-        &["batch", job, "--backend", "cpu", "--out", "out", "--quiet"],
+        &[
+            "batch",
+            job,
+            "--backend",
+            "cpu",
+            "--out-dir",
+            "out",
+            "--quiet",
+        ],
         d,
         0,
     );
@@ -539,7 +547,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         &[
             "map",
             "data/probes/p01.csv",
-            "--out",
+            "--out-dir",
             "one",
             "--nominal-plane",
             "5",
@@ -589,7 +597,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
             "x",
             "--nominal-plane",
             "100",
-            "--out",
+            "--out-dir",
             "wall",
             "--grid-step",
             "4",
@@ -618,7 +626,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         &[
             "map",
             "bad.csv",
-            "--out",
+            "--out-dir",
             "bad",
             "--nominal-plane",
             "5",

@@ -36,7 +36,7 @@ fn manifests_are_batch_v1_jobs_with_the_shards_image_claim_and_merge_asked_for()
             "web-plate",
             "--parts",
             "3",
-            "--out",
+            "--out-dir",
             "data",
             "--epochs",
             "20",
@@ -70,7 +70,7 @@ fn manifests_are_batch_v1_jobs_with_the_shards_image_claim_and_merge_asked_for()
     let cmd = c.command.as_ref().unwrap().join(" ");
     assert_eq!(
         cmd,
-        "errmap batch data/job.toml --shards 5 --out out/web-plate --quiet --backend cpu"
+        "errmap batch data/job.toml --shards 5 --out-dir out/web-plate --quiet --backend cpu"
     );
     let claim = |p: &k8s_openapi::api::core::v1::PodSpec| {
         p.volumes.as_ref().unwrap()[0]

@@ -467,11 +467,11 @@ fn synthetic_runs_recover_their_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
     ok(
         dir.path(),
-        &["synth", "linear", "--out", "s", "--seed", "7", "-q"],
+        &["synth", "linear", "--out-dir", "s", "--seed", "7", "-q"],
     );
     ok(
         dir.path(),
-        &["synth", "linear", "--out", "s2", "--seed", "7", "-q"],
+        &["synth", "linear", "--out-dir", "s2", "--seed", "7", "-q"],
     );
     let runs = std::fs::read(dir.path().join("s/runs.csv")).unwrap();
     assert_eq!(

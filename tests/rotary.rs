@@ -31,7 +31,7 @@ fn synthetic_axis_is_recovered_within_1_arcsec_rms_and_2_arcsec_tilt() {
     let d = dir.path();
     errmap(
         d,
-        &["synth", "rotary", "--out", "set", "--seed", "11", "-q"],
+        &["synth", "rotary", "--out-dir", "set", "--seed", "11", "-q"],
     )
     .expect_code(0);
     let truth: serde_json::Value =
@@ -344,7 +344,10 @@ fn every_rejection_names_the_place_and_exits_2() {
     assert!(run.stderr.contains("gap"), "{}", run.stderr);
     assert!(!d.join("t.csv").exists());
     // An infinite probe noise is refused, not generated as no noise.
-    let run = errmap(d, &["synth", "rotary", "--out", "inf", "--noise-um", "inf"]);
+    let run = errmap(
+        d,
+        &["synth", "rotary", "--out-dir", "inf", "--noise-um", "inf"],
+    );
     run.expect_code(2);
     assert!(run.stderr.contains("--noise-um"), "{}", run.stderr);
     assert!(!d.join("inf").exists());
@@ -470,7 +473,7 @@ fn golden_tables_in_every_format() {
                 "--step-deg",
                 step,
             ],
-            vec!["synth", "rotary", "--out", "s", "--step-deg", step],
+            vec!["synth", "rotary", "--out-dir", "s", "--step-deg", step],
         ] {
             let run = errmap(d, &args);
             run.expect_code(2);

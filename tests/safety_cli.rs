@@ -58,7 +58,7 @@ fn every_command_refuses_an_output_that_is_one_of_its_inputs() {
         args.extend(["-o", out]);
         refused(d, &args, "p.csv");
     }
-    // map --out . beside a probe file named like one of its outputs: nothing is written.
+    // map --out-dir . beside a probe file named like one of its outputs: nothing is written.
     std::fs::create_dir(d.join("m")).unwrap();
     std::fs::write(d.join("m/clean.csv"), probe_text()).unwrap();
     let md = d.join("m");
@@ -67,7 +67,7 @@ fn every_command_refuses_an_output_that_is_one_of_its_inputs() {
         &[
             "map",
             "clean.csv",
-            "--out",
+            "--out-dir",
             ".",
             "--epochs",
             "5",
@@ -83,7 +83,7 @@ fn every_command_refuses_an_output_that_is_one_of_its_inputs() {
     );
 
     // Linear: analyze --chart and table -o over the runs file.
-    ok(d, &["synth", "linear", "--out", "lin", "-q"]);
+    ok(d, &["synth", "linear", "--out-dir", "lin", "-q"]);
     let runs = "lin/runs.csv";
     let analyze = ["linear", "analyze", runs, "--standard", "vdi3441"];
     refused(d, &[&analyze[..], &["--chart", runs]].concat(), runs);
@@ -103,7 +103,7 @@ fn every_command_refuses_an_output_that_is_one_of_its_inputs() {
         runs,
     );
     // Rotary: analyze --chart and table -o over the measurement.
-    ok(d, &["synth", "rotary", "--out", "rot", "-q"]);
+    ok(d, &["synth", "rotary", "--out-dir", "rot", "-q"]);
     let meas = "rot/centres.csv";
     refused(d, &["rotary", "analyze", meas, "--chart", meas], meas);
     refused(
@@ -112,7 +112,7 @@ fn every_command_refuses_an_output_that_is_one_of_its_inputs() {
         meas,
     );
     // Thermal: calibrate -o over the log, fit -o over a campaign file, compensate -o over the log.
-    ok(d, &["synth", "thermal", "--out", "th", "-q"]);
+    ok(d, &["synth", "thermal", "--out-dir", "th", "-q"]);
     let cal = "th/calibration.csv";
     refused(
         d,
@@ -181,7 +181,7 @@ fn batch_merge_and_compensate_refuse_their_inputs_too() {
         &[
             "synth",
             "web-plate",
-            "--out",
+            "--out-dir",
             "wp",
             "--parts",
             "2",
@@ -200,7 +200,7 @@ fn batch_merge_and_compensate_refuse_their_inputs_too() {
             "job.toml",
             "--backend",
             "cpu",
-            "--out",
+            "--out-dir",
             "out",
             "-q",
         ],
@@ -272,7 +272,7 @@ fn part_names_stay_in_the_output_folder_and_never_collide() {
         &[
             "synth",
             "web-plate",
-            "--out",
+            "--out-dir",
             "wp",
             "--parts",
             "3",
@@ -298,7 +298,14 @@ fn part_names_stay_in_the_output_folder_and_never_collide() {
     std::fs::write(wp.join("job.toml"), job).unwrap();
     let run = errmap(
         &wp,
-        &["batch", "job.toml", "--backend", "cpu", "--out", "out/x"],
+        &[
+            "batch",
+            "job.toml",
+            "--backend",
+            "cpu",
+            "--out-dir",
+            "out/x",
+        ],
     );
     run.expect_code(0);
     for note in [
@@ -383,7 +390,7 @@ fn a_closed_pipe_ends_every_printing_command_quietly() {
         "length_mm = 500.0\n[thermal]\nexpansion_ppm_per_k = 10.0\ntemp_uncertainty_c = 0.1\n",
     )
     .unwrap();
-    ok(d, &["synth", "linear", "--out", "lin", "-q"]);
+    ok(d, &["synth", "linear", "--out-dir", "lin", "-q"]);
     let air = [
         "linear",
         "air-index",
@@ -418,7 +425,7 @@ fn a_closed_pipe_ends_every_printing_command_quietly() {
     let map = [
         "map",
         "p.csv",
-        "--out",
+        "--out-dir",
         "m",
         "--nominal-plane",
         "5",
@@ -431,7 +438,7 @@ fn a_closed_pipe_ends_every_printing_command_quietly() {
         &[
             "synth",
             "web-plate",
-            "--out",
+            "--out-dir",
             "wp",
             "--parts",
             "2",
@@ -464,12 +471,12 @@ fn sizes_that_follow_from_user_numbers_are_bounded() {
     let d = dir.path();
     let run = errmap(
         d,
-        &["synth", "rotary", "--out", "r", "--step-deg", "1e-300"],
+        &["synth", "rotary", "--out-dir", "r", "--step-deg", "1e-300"],
     );
     run.expect_code(2);
     assert!(run.stderr.contains("smallest step"), "{}", run.report());
     assert!(!d.join("r").exists());
-    ok(d, &["synth", "linear", "--out", "lin", "-q"]);
+    ok(d, &["synth", "linear", "--out-dir", "lin", "-q"]);
     let run = errmap(
         d,
         &[
@@ -497,7 +504,7 @@ fn sizes_that_follow_from_user_numbers_are_bounded() {
         &[
             "map",
             "p.csv",
-            "--out",
+            "--out-dir",
             "m",
             "--nominal-plane",
             "5",
@@ -636,7 +643,7 @@ fn unit_slips_are_refused_with_the_likely_cause() {
         &[
             "map",
             "far.csv",
-            "--out",
+            "--out-dir",
             "m",
             "--nominal-plane",
             "5",
@@ -690,7 +697,7 @@ fn a_single_part_failure_keeps_its_kind_and_exit_code() {
         &[
             "map",
             "bad.csv",
-            "--out",
+            "--out-dir",
             "m",
             "--nominal-plane",
             "5",

@@ -30,7 +30,7 @@ fn campaigns(dir: &Path) -> Vec<String> {
 
 /// synth → calibrate: a folder of campaigns with calibrated sensors.
 fn synth(dir: &Path, extra: &[&str]) -> PathBuf {
-    let mut args = vec!["synth", "thermal", "--out", "syn"];
+    let mut args = vec!["synth", "thermal", "--out-dir", "syn"];
     args.extend_from_slice(extra);
     run(dir, &args, 0);
     run(
@@ -499,7 +499,7 @@ fn synth_is_deterministic_and_seeded() {
             &[
                 "synth",
                 "thermal",
-                "--out",
+                "--out-dir",
                 out,
                 "--seed",
                 seed,
@@ -533,7 +533,12 @@ fn synth_is_deterministic_and_seeded() {
     // A noise level that is not a finite number ≥ 0 is refused, not generated as no noise.
     for bad in ["nan", "inf", "-0.5"] {
         let flag = format!("--laser-noise-um={bad}");
-        let msg = run(tmp.path(), &["synth", "thermal", "--out", "bad", &flag], 2).stderr;
+        let msg = run(
+            tmp.path(),
+            &["synth", "thermal", "--out-dir", "bad", &flag],
+            2,
+        )
+        .stderr;
         assert!(msg.contains("--laser-noise-um"), "{msg}");
         assert!(!tmp.path().join("bad").exists());
     }

@@ -167,7 +167,7 @@ fn check_replaceable(target: &Path) -> Result<()> {
     if !target.is_dir() {
         return Err(Error::usage(
             format!("output folder {} is a file", target.display()),
-            "pass --out a folder name",
+            "pass --out-dir a folder name",
         ));
     }
     if target.join(RUN_MANIFEST).is_file() {
@@ -183,7 +183,7 @@ fn check_replaceable(target: &Path) -> Result<()> {
                 "output folder {} is not empty and holds no errmap run ({RUN_MANIFEST})",
                 target.display()
             ),
-            "a run replaces its output folder as a whole: pass --out a new or empty folder, or remove this one",
+            "a run replaces its output folder as a whole: pass --out-dir a new or empty folder, or remove this one",
         ));
     }
     Ok(())
@@ -225,7 +225,7 @@ pub fn check_inputs_outside(target: &Path, inputs: &[PathBuf]) -> Result<()> {
                     input.display(),
                     target.display()
                 ),
-                "a run replaces its output folder as a whole: pass --out a folder that holds no input",
+                "a run replaces its output folder as a whole: pass --out-dir a folder that holds no input",
             ));
         }
     }

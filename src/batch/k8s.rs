@@ -84,7 +84,7 @@ impl K8sPlan {
             self.job.clone(),
             "--shards".to_string(),
             self.shards.to_string(),
-            "--out".to_string(),
+            "--out-dir".to_string(),
             self.out.clone(),
             "--quiet".to_string(),
         ];

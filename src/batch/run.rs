@@ -459,7 +459,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             None
         };
         if !sets.is_empty() {
-            if !quiet {
+            if crate::progress::verbosity() == crate::progress::Verbosity::Verbose {
                 let warm = s.model.warm_start == crate::nn::WarmStart::Family
                     && roles.contains(&Role::Family);
                 let epochs = if warm {
@@ -470,12 +470,12 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 } else {
                     format!("{} epochs", s.model.epochs)
                 };
-                eprintln!(
+                crate::progress::detail(&format!(
                     "training {} networks ({} points each at most; {epochs}) on {}",
                     sets.len(),
                     sets.iter().map(|t| t.len()).max().unwrap_or(0),
                     trainer.name()
-                );
+                ));
             }
             // One call trains every network; the bar ticks so a terminal shows it is alive.
             let bar = crate::progress::bar(1, "train", quiet);

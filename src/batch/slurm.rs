@@ -71,7 +71,7 @@ impl SlurmPlan {
         s.push_str("# One shard of the batch per array task; the task id is the shard index.\n");
         s.push_str("set -euo pipefail\n");
         s.push_str(&format!(
-            "exec {} batch {} --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\" --out {}{} --quiet\n",
+            "exec {} batch {} --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\" --out-dir {}{} --quiet\n",
             q(&self.errmap),
             q(&self.job),
             self.shards,
@@ -171,7 +171,7 @@ mod tests {
         assert!(s.contains("#SBATCH --partition=cpu\n#SBATCH --time=00:30:00\n"));
         assert!(s.contains("#SBATCH --output=/scratch/out/slurm/shard-%a.log\n"));
         assert!(s.contains(
-            "exec /opt/errmap/bin/errmap batch '/data/web plate/job.toml' --shard \"${SLURM_ARRAY_TASK_ID}/4\" --out /scratch/out --backend cpu --quiet\n"
+            "exec /opt/errmap/bin/errmap batch '/data/web plate/job.toml' --shard \"${SLURM_ARRAY_TASK_ID}/4\" --out-dir /scratch/out --backend cpu --quiet\n"
         ), "{s}");
         let m = p.merge_script();
         assert!(m.contains("merge /scratch/out --shards 4 --job '/data/web plate/job.toml'"));

@@ -7,28 +7,33 @@ use errmap::Result;
 
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCommand {
-    /// Train N networks of the default architecture on synthetic web-plate data for E
-    /// full-batch Adam epochs and print the throughput (sample·epochs/s, training only).
+    /// Time the training of N networks (one per part, the default network size) on synthetic
+    /// web-plate data and print the throughput in sample·epochs/s (training only).
     Training(TrainingArgs),
 }
 
 #[derive(Debug, clap::Args)]
 pub struct TrainingArgs {
     /// Networks trained together (one per part of a family).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, value_name = "N", default_value_t = 8)]
     pub parts: usize,
-    /// Samples per network.
-    #[arg(long, default_value_t = 1536)]
+    /// Training points per network.
+    #[arg(long, value_name = "N", default_value_t = 1536)]
     pub samples: usize,
-    /// Full-batch Adam epochs.
-    #[arg(long, default_value_t = 100)]
+    /// Training epochs (passes over all of a network's points).
+    #[arg(long, value_name = "N", default_value_t = 100)]
     pub epochs: u32,
-    /// auto: the fastest this machine has; gpu: any wgpu adapter (software included);
-    /// cpu: the fast CPU trainer; cpu-reference: the reference trainer.
+    /// auto: the fastest this machine has; gpu: any GPU adapter (software included);
+    /// cpu: the fast CPU trainer; cpu-reference: the slow reference trainer.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
-    /// Hidden layer widths, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "32,32")]
+    /// Network size: neurons in each hidden layer, comma-separated.
+    #[arg(
+        long,
+        value_name = "N,N",
+        value_delimiter = ',',
+        default_value = "32,32"
+    )]
     pub hidden: Vec<usize>,
     /// Print one JSON object instead of text.
     #[arg(long)]

@@ -48,8 +48,16 @@ fn parse_pair(s: &str) -> std::result::Result<[f64; 2], String> {
 #[derive(Debug, clap::Args)]
 pub struct SynthCircularArgs {
     /// Output folder (run.csv, truth.json).
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -200,7 +208,7 @@ fn human_report(e: &Evaluation) -> String {
     s
 }
 
-pub fn run_synth(args: SynthCircularArgs, globals: Globals) -> Result<i32> {
+pub fn run_synth(args: SynthCircularArgs, _globals: Globals) -> Result<i32> {
     let steps = 360.0 / args.step_deg;
     if !(args.step_deg.is_finite() && args.step_deg > 0.0 && args.step_deg <= 10.0)
         || (steps - steps.round()).abs() > 1e-9
@@ -235,11 +243,10 @@ pub fn run_synth(args: SynthCircularArgs, globals: Globals) -> Result<i32> {
         cw: !matches!(args.only, Some(OnlyDirection::Ccw)),
         ..Default::default()
     };
-    let written = write_set(&args.out, &config)?;
-    if !globals.quiet {
-        for p in written {
-            eprintln!("wrote {}", p.display());
-        }
+    let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
+    let written = write_set(&out_dir, &config)?;
+    for p in written {
+        info!("wrote {}", p.display());
     }
     Ok(0)
 }

@@ -63,8 +63,8 @@ pub struct CompensateArgs {
     pub chord_tol: f64,
     /// The toolpath to compensate: G-code (.ngc, .nc, …) or CSV (x_mm,y_mm,z_mm).
     pub input: PathBuf,
-    /// Where to write the compensated toolpath.
-    #[arg(short = 'o', long = "output", value_name = "OUT")]
+    /// Where to write the compensated toolpath (a new file; never the input).
+    #[arg(short = 'o', long = "output", value_name = "FILE")]
     pub output: PathBuf,
     /// Print the report as one JSON document on stdout.
     #[arg(long)]

@@ -53,7 +53,7 @@ fn rounded(x: f64, scale: f64) -> f64 {
     }
 }
 
-pub fn run(args: GridArgs, globals: Globals) -> Result<i32> {
+pub fn run(args: GridArgs, _globals: Globals) -> Result<i32> {
     let domain = args.domain.as_deref().map(parse_domain).transpose()?;
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     let spec = ProbeSpec {
@@ -102,18 +102,16 @@ pub fn run(args: GridArgs, globals: Globals) -> Result<i32> {
         }
         Ok(())
     })?;
-    if !globals.quiet {
-        eprintln!(
-            "errmap grid: {} probe points → {} of {} nodes ({} × {}, step {} mm) inside their hull, {} → {}",
-            set.points.len(),
-            inside,
-            grid.len(),
-            grid.nu,
-            grid.nv,
-            grid.step_mm,
-            args.method,
-            args.output.display()
-        );
-    }
+    info!(
+        "errmap grid: {} probe points → {} of {} nodes ({} × {}, step {} mm) inside their hull, {} → {}",
+        set.points.len(),
+        inside,
+        grid.len(),
+        grid.nu,
+        grid.nv,
+        grid.step_mm,
+        args.method,
+        args.output.display()
+    );
     Ok(0)
 }

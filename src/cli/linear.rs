@@ -17,7 +17,7 @@ pub enum LinearCommand {
     Analyze(AnalyzeArgs),
     /// Refractive index of air (Ciddor 1996 or modified Edlén), as NIST's metrology toolbox computes it.
     AirIndex(AirIndexArgs),
-    /// Error budget of the laser set-up (seed 002): each term and the root-sum-square total.
+    /// Error budget of the laser set-up: each term and the root-sum-square total (µm).
     Budget(BudgetArgs),
     /// Write a bidirectional pitch-error compensation table for a controller.
     Table(TableArgs),
@@ -71,7 +71,7 @@ pub struct AnalyzeArgs {
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Write a chart (PNG).
+    /// Also draw the deviations as a chart (PNG file).
     #[arg(long, value_name = "PNG")]
     pub chart: Option<PathBuf>,
     #[command(flatten)]
@@ -150,10 +150,18 @@ pub struct TableArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct SynthLinearArgs {
-    /// Output folder.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Random seed.
+    /// Output folder (runs.csv, truth.json).
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
+    /// Seed of the noise and the planted errors.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
@@ -167,18 +175,17 @@ pub fn run(cmd: LinearCommand, globals: Globals) -> Result<i32> {
     }
 }
 
-pub fn run_synth(args: SynthLinearArgs, globals: Globals) -> Result<i32> {
+pub fn run_synth(args: SynthLinearArgs, _globals: Globals) -> Result<i32> {
+    let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
     let (truth, rows) = errmap::synth::linear::generate(args.seed)?;
-    errmap::synth::linear::write(&args.out, &truth, &rows)?;
-    if !globals.quiet {
-        eprintln!(
-            "wrote {} readings ({} targets × 2 directions × {} runs) to {}",
-            rows.len(),
-            truth.targets_mm.len(),
-            truth.runs,
-            args.out.display()
-        );
-    }
+    errmap::synth::linear::write(&out_dir, &truth, &rows)?;
+    info!(
+        "wrote {} readings ({} targets × 2 directions × {} runs) to {}",
+        rows.len(),
+        truth.targets_mm.len(),
+        truth.runs,
+        out_dir.display()
+    );
     Ok(0)
 }
 
@@ -356,7 +363,7 @@ fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
     Ok(())
 }
 
-fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
+fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
     let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
     let samples = file.samples();
@@ -434,8 +441,8 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
             print_evaluation(&format!("after applying {}", path.display()), after_ev)?;
         }
     }
-    if let (Some(png), false) = (&args.chart, globals.quiet || args.json) {
-        eprintln!("chart written to {}", png.display());
+    if let (Some(png), false) = (&args.chart, args.json) {
+        info!("chart written to {}", png.display());
     }
     Ok(0)
 }
@@ -497,13 +504,13 @@ fn budget(args: BudgetArgs) -> Result<i32> {
     Ok(0)
 }
 
-fn table(args: TableArgs, globals: Globals) -> Result<i32> {
+fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
     let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
     let table = CompTable::from_evaluation(&ev, args.spacing)?;
-    if let (Some(d), false) = (ev.unidirectional, globals.quiet) {
-        eprintln!(
+    if let Some(d) = ev.unidirectional {
+        info!(
             "unidirectional runs (direction {} only): the table carries the same values for both directions",
             d.symbol()
         );
@@ -511,22 +518,18 @@ fn table(args: TableArgs, globals: Globals) -> Result<i32> {
     let opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
     for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
         errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
-        if !globals.quiet {
-            eprintln!(
-                "wrote {} ({} points, {} format)",
-                path.display(),
-                table.positions_mm.len(),
-                args.format.name()
-            );
-        }
+        info!(
+            "wrote {} ({} points, {} format)",
+            path.display(),
+            table.positions_mm.len(),
+            args.format.name()
+        );
     }
-    if !globals.quiet {
-        for n in &notes {
-            eprintln!("{n}");
-        }
-        if args.format == TableFormat::Fanuc && ev.unidirectional.is_none() {
-            eprintln!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
-        }
+    for n in &notes {
+        info!("{n}");
+    }
+    if args.format == TableFormat::Fanuc && ev.unidirectional.is_none() {
+        info!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
     }
     Ok(0)
 }

@@ -19,9 +19,17 @@ macro_rules! out {
     };
 }
 
+/// An informational line on stderr ("wrote …"), hidden by `--quiet`.
+macro_rules! info {
+    ($($arg:tt)*) => {
+        errmap::progress::info(&format!($($arg)*))
+    };
+}
+
 mod bench;
 mod circular;
 mod compensate;
+mod deprecated;
 mod gpu;
 mod grid;
 mod linear;
@@ -38,9 +46,12 @@ use errmap::Result;
 #[derive(Debug, Parser)]
 #[command(name = "errmap", version, about, long_about = None, propagate_version = true)]
 pub struct Cli {
-    /// No progress bars or informational lines on stderr.
-    #[arg(long, short, global = true)]
+    /// Print only results, warnings and errors: no progress bars, no "wrote …" lines.
+    #[arg(long, short, global = true, conflicts_with = "verbose")]
     pub quiet: bool,
+    /// Also print which trainer (CPU or GPU) runs and why, and how much it trains.
+    #[arg(long, short, global = true)]
+    pub verbose: bool,
     /// Largest file any one output may grow to, MB; outputs whose size follows from your
     /// numbers (grid steps, segment lengths, spacings) stop with exit 2 beyond it.
     #[arg(long, global = true, value_name = "MB", default_value_t = errmap::io::safety::DEFAULT_MAX_OUTPUT_MB)]
@@ -61,7 +72,7 @@ pub enum Command {
     Batch(part::BatchArgs),
     /// Map one part from its probe file, without a job file.
     Map(part::MapArgs),
-    /// Reduce a sharded batch: check the shards, join their summaries, build the family (maps, network, toolpaths).
+    /// Join a sharded batch: check the shards, join their summaries, build the family (maps, network, toolpaths).
     Merge(part::MergeArgs),
     /// Run a job on Slurm: an array job of shards and a merge job after it (write, print or submit).
     Slurm(scale::SlurmArgs),
@@ -106,14 +117,9 @@ pub enum SynthCommand {
     Circular(circular::SynthCircularArgs),
 }
 
-/// Notes from the library go to stderr unless `--quiet`.
-pub fn notes(globals: Globals) -> errmap::backend::Notes {
-    let quiet = globals.quiet;
-    std::sync::Arc::new(move |line: &str| {
-        if !quiet {
-            eprintln!("{line}");
-        }
-    })
+/// Notes from the library (a trainer falling back to the CPU) go to stderr unless `--quiet`.
+pub fn notes(_globals: Globals) -> errmap::backend::Notes {
+    std::sync::Arc::new(|line: &str| errmap::progress::info(line))
 }
 
 /// Write text to stdout and flush it; an error (a closed pipe) is returned, never a panic.
@@ -150,6 +156,12 @@ pub fn run(cli: Cli) -> Result<i32> {
     }
     errmap::io::safety::set_max_output_mb(cli.max_output_mb);
     let globals = Globals { quiet: cli.quiet };
+    use errmap::progress::{set_verbosity, Verbosity};
+    set_verbosity(match (cli.quiet, cli.verbose) {
+        (true, _) => Verbosity::Quiet,
+        (false, true) => Verbosity::Verbose,
+        (false, false) => Verbosity::Normal,
+    });
     match cli.command {
         Command::Batch(args) => part::run_batch(args, globals),
         Command::Map(args) => part::run_map(args, globals),

@@ -23,9 +23,17 @@ pub struct BatchArgs {
     /// Number of shards when the index comes from SLURM_ARRAY_TASK_ID or JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "COUNT")]
     pub shards: Option<usize>,
-    /// Output folder instead of the job's `output` (default out/<family>); a shard writes into its own OUT/shard-I-of-N/.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder instead of the job's `output` (default out/<family>); a shard writes into its own DIR/shard-I-of-N/.
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Keep the parts of the folder's last run whose probe file and outputs still match its run.json; redo the rest.
     #[arg(long)]
     pub resume: bool,
@@ -39,8 +47,16 @@ pub struct MapArgs {
     /// The probe file (CSV: x_mm,y_mm,z_mm [,nx_mm,ny_mm,nz_mm] [,id]).
     pub probes: PathBuf,
     /// Output folder (map.csv, map.png, model.json, clean.csv, rejected.csv, summary.json).
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Error direction: z maps E over x,y; x over y,z; y over z,x.
     #[arg(long, default_value = "z", value_parser = parse_axis)]
     pub normal: Axis,
@@ -48,7 +64,7 @@ pub struct MapArgs {
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     pub nominal_plane: Option<f64>,
     /// Map domain UMIN,VMIN,UMAX,VMAX in mm (default: the probes' bounding box).
-    #[arg(long, value_parser = parse_domain, allow_hyphen_values = true)]
+    #[arg(long, value_name = "UMIN,VMIN,UMAX,VMAX", value_parser = parse_domain, allow_hyphen_values = true)]
     pub domain: Option<Domain>,
     /// Step of the output grid, mm.
     #[arg(long, value_name = "MM", default_value_t = 5.0)]
@@ -59,14 +75,14 @@ pub struct MapArgs {
     /// Spacing of the training set, mm.
     #[arg(long, value_name = "MM", default_value_t = 10.0)]
     pub spacing: f64,
-    /// Gross-error threshold k (reject |residual| > k·σ).
-    #[arg(long, default_value_t = 3.0)]
+    /// Gross-error threshold k: probes with |residual| > k·σ are rejected.
+    #[arg(long, value_name = "K", default_value_t = 3.0)]
     pub k_sigma: f64,
-    /// Training epochs (default: the [model] default).
-    #[arg(long)]
+    /// Training epochs (default: the job file's [model] default, see docs/job.md).
+    #[arg(long, value_name = "N")]
     pub epochs: Option<u32>,
-    /// Seed of the network weights and the hold-out draw.
-    #[arg(long)]
+    /// Seed of the random choices (network start weights, hold-out points); same seed, same map.
+    #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
     /// Trainer: auto, gpu, cpu or cpu-reference (see errmap batch --help).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -151,20 +167,19 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     let opts = BatchOptions {
         backend: args.backend,
         shard,
-        output: args.out,
+        output: super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir"),
         resume: args.resume,
     };
-    if !globals.quiet {
-        for note in batch::renamed_parts(&file.probe_files()?) {
-            eprintln!("note: {note}");
-        }
+    for note in batch::renamed_parts(&file.probe_files()?) {
+        info!("note: {note}");
     }
     let backend = args.backend.unwrap_or(file.job.model.backend);
     let selection =
         errmap::backend::select_trainer(backend, &file.job.model, super::notes(globals))?;
+    errmap::progress::detail(&format!("trainer: {}", selection.reason));
     let run = batch::run_job(&file, &opts, selection.trainer.as_ref(), globals.quiet)?;
-    if args.resume && !globals.quiet && !args.json {
-        eprintln!(
+    if args.resume && !args.json {
+        info!(
             "resume: kept {} part(s) of the previous run{}",
             run.reused.len(),
             if run.reused.is_empty() {
@@ -206,6 +221,7 @@ fn protect_plan(plan: &Plan) -> Result<()> {
 }
 
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
+    let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
     if let Some(z) = args.nominal_plane {
         if !z.is_finite() {
             return Err(Error::usage(
@@ -259,7 +275,7 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         parts: vec![PartInput {
             name,
             probe_file: args.probes.clone(),
-            out_dir: args.out.clone(),
+            out_dir: out_dir.clone(),
         }],
         family_parts: Vec::new(),
         family_dir: None,
@@ -267,17 +283,18 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         job: None,
         shard: None,
     };
-    errmap::io::safety::confine_to(&args.out)?;
+    errmap::io::safety::confine_to(&out_dir)?;
     protect_plan(&plan)?;
     let selection =
         errmap::backend::select_trainer(args.backend, &plan.settings.model, super::notes(globals))?;
+    errmap::progress::detail(&format!("trainer: {}", selection.reason));
     let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
     // A single part has no batch to finish: its failure is the command's error, with its
     // kind (and exit code), place and fix.
     if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
         return Err(err.into_error());
     }
-    let path = args.out.join("summary.json");
+    let path = out_dir.join("summary.json");
     report(&summary, &path, args.json, globals.quiet)?;
     Ok(0)
 }
@@ -292,7 +309,9 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
     };
     let trainer_for = |b: Backend| -> errmap::Result<Box<dyn errmap::nn::Trainer>> {
         let notes = super::notes(globals);
-        Ok(errmap::backend::select_trainer(b, &ModelConfig::default(), notes)?.trainer)
+        let selection = errmap::backend::select_trainer(b, &ModelConfig::default(), notes)?;
+        errmap::progress::detail(&format!("trainer: {}", selection.reason));
+        Ok(selection.trainer)
     };
     let run = batch::merge_job(&req, &trainer_for)?;
     super::ignore_closed_pipe(report(

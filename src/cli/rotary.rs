@@ -75,7 +75,7 @@ pub struct AnalyzeArgs {
 pub struct TableArgs {
     #[command(flatten)]
     pub measurement: MeasurementArgs,
-    /// Output format.
+    /// Table format.
     #[arg(long, value_enum, default_value = "csv")]
     pub format: TableFormat,
     /// Output file.
@@ -96,22 +96,30 @@ pub struct TableArgs {
 #[derive(Debug, clap::Args)]
 pub struct SynthRotaryArgs {
     /// Output folder (touch_points.csv, centres.csv, truth.json).
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Seed of the probe noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Rotary axis: A, B or C.
-    #[arg(long, default_value = "C", value_parser = parse_axis)]
+    #[arg(long, value_name = "AXIS", default_value = "C", value_parser = parse_axis)]
     pub axis: RotaryAxis,
     /// Angle step of the runs (divides 360).
     #[arg(long, value_name = "DEG", default_value_t = 15.0)]
     pub step_deg: f64,
     /// Runs in each direction.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3)]
     pub repeats: u32,
     /// Touch points per sphere and position.
-    #[arg(long, default_value_t = 25)]
+    #[arg(long, value_name = "N", default_value_t = 25)]
     pub points: usize,
     /// Probe noise (standard deviation along the surface normal).
     #[arg(long, value_name = "UM", default_value_t = 0.5)]
@@ -280,7 +288,7 @@ const MIN_SYNTH_STEP_DEG: f64 = 0.01;
 /// Most probe points `synth rotary` generates (positions × repeats × 2 spheres × points).
 const MAX_SYNTH_SAMPLES: f64 = 1e7;
 
-pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
+pub fn run_synth(args: SynthRotaryArgs, _globals: Globals) -> Result<i32> {
     if args.step_deg > 0.0 && args.step_deg < MIN_SYNTH_STEP_DEG {
         return Err(Error::usage(
             format!(
@@ -323,11 +331,10 @@ pub fn run_synth(args: SynthRotaryArgs, globals: Globals) -> Result<i32> {
         probe_noise_um: args.noise_um,
         ..Default::default()
     };
-    let written = write_set(&args.out, &config)?;
-    if !globals.quiet {
-        for p in written {
-            eprintln!("wrote {}", p.display());
-        }
+    let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
+    let written = write_set(&out_dir, &config)?;
+    for p in written {
+        info!("wrote {}", p.display());
     }
     Ok(0)
 }

@@ -15,15 +15,24 @@ pub struct SlurmArgs {
     /// Number of shards = array tasks.
     #[arg(long, value_name = "N")]
     pub shards: usize,
-    /// Slurm partition of both jobs.
-    #[arg(long)]
+    /// Slurm partition of both jobs (default: the cluster's default partition).
+    #[arg(long, value_name = "NAME")]
     pub partition: Option<String>,
-    /// Time limit of each task and of the merge (Slurm format, e.g. 00:30:00).
-    #[arg(long)]
+    /// Time limit of each task and of the merge (Slurm format, e.g. 00:30:00; default: the
+    /// partition's limit).
+    #[arg(long, value_name = "HH:MM:SS")]
     pub time: Option<String>,
-    /// Output folder (default: the job's output): OUT/shard-I-of-N/, OUT/family/, OUT/slurm/.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder (default: the job's output): DIR/shard-I-of-N/, DIR/family/, DIR/slurm/.
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Trainer for every task and the merge (recorded in the job hash).
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
@@ -55,11 +64,19 @@ pub struct K8sArgs {
     #[arg(long, value_name = "NAME")]
     pub pvc: String,
     /// Mount path of the claim in the containers (their working directory).
-    #[arg(long, default_value = "/work")]
+    #[arg(long, value_name = "PATH", default_value = "/work")]
     pub mount: String,
-    /// Output folder inside the volume (default: the job's output).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder of the job inside the volume (default: the job's output).
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Trainer for every shard and the merge.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
@@ -67,11 +84,20 @@ pub struct K8sArgs {
     #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
     pub wait: u64,
     /// Retries per shard index and for the merge.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 2)]
     pub retries: u32,
-    /// Folder of the manifests (default: OUT/k8s beside here).
-    #[arg(long, short)]
-    pub output: Option<PathBuf>,
+    /// Folder the manifests are written to (default: <out-dir>/k8s, relative to the current folder).
+    #[arg(long, value_name = "DIR")]
+    pub manifest_dir: Option<PathBuf>,
+    /// Old spelling of --manifest-dir.
+    #[arg(
+        long = "output",
+        short = 'o',
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "manifest_dir"
+    )]
+    pub old_output: Option<PathBuf>,
     /// Print the manifests instead of writing them.
     #[arg(long)]
     pub dry_run: bool,
@@ -96,7 +122,7 @@ fn absolute(p: &Path) -> Result<PathBuf> {
     std::path::absolute(p).map_err(|e| Error::read(p, e))
 }
 
-pub fn run_slurm(args: SlurmArgs, globals: Globals) -> Result<i32> {
+pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
     check_shards(args.shards)?;
     let file = Job::read(&args.job)?;
     if file.job.domain.is_none() {
@@ -129,7 +155,10 @@ pub fn run_slurm(args: SlurmArgs, globals: Globals) -> Result<i32> {
             .job
             .canonicalize()
             .map_err(|e| Error::read(&args.job, e))?,
-        out: absolute(&args.out.unwrap_or_else(|| file.output_dir()))?,
+        out: absolute(
+            &super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
+                .unwrap_or_else(|| file.output_dir()),
+        )?,
         family: file.job.family.clone(),
         shards: args.shards,
         partition: args.partition,
@@ -171,12 +200,10 @@ pub fn run_slurm(args: SlurmArgs, globals: Globals) -> Result<i32> {
     }
     let array_id = sbatch(&plan.sbatch_shards_args(args.array.as_deref()))?;
     let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
-    if !globals.quiet {
-        eprintln!(
-            "slurm: array job {array_id} ({} shards), merge job {merge_id} after it",
-            args.shards
-        );
-    }
+    info!(
+        "slurm: array job {array_id} ({} shards), merge job {merge_id} after it",
+        args.shards
+    );
     println!("{array_id} {merge_id}");
     Ok(0)
 }
@@ -207,7 +234,7 @@ fn sbatch(args: &[String]) -> Result<String> {
     }
 }
 
-pub fn run_k8s(args: K8sArgs, globals: Globals) -> Result<i32> {
+pub fn run_k8s(args: K8sArgs, _globals: Globals) -> Result<i32> {
     check_shards(args.shards)?;
     let file = Job::read(&args.job)?;
     if file.job.domain.is_none() {
@@ -219,7 +246,14 @@ pub fn run_k8s(args: K8sArgs, globals: Globals) -> Result<i32> {
             "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
         ));
     }
-    let out = args.out.unwrap_or_else(|| file.output_dir());
+    let out = super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
+        .unwrap_or_else(|| file.output_dir());
+    let manifest_dir = super::deprecated::old_output_folder(
+        args.manifest_dir,
+        args.old_output,
+        "--manifest-dir",
+        "shards-job.json and merge-job.json",
+    )?;
     let plan = K8sPlan {
         family: file.job.family.clone(),
         shards: args.shards,
@@ -245,13 +279,11 @@ pub fn run_k8s(args: K8sArgs, globals: Globals) -> Result<i32> {
         }
         return Ok(0);
     }
-    let dir = args.output.unwrap_or_else(|| out.join("k8s"));
+    let dir = manifest_dir.unwrap_or_else(|| out.join("k8s"));
     for (name, doc) in &docs {
         errmap::io::write_atomic_bytes(&dir.join(name), format!("{}\n", to_text(doc)?).as_bytes())?;
     }
-    if !globals.quiet {
-        eprintln!("apply with: kubectl apply -f {}", dir.display());
-    }
+    info!("apply with: kubectl apply -f {}", dir.display());
     println!("{}", dir.join("shards-job.json").display());
     println!("{}", dir.join("merge-job.json").display());
     Ok(0)

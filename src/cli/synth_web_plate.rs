@@ -7,44 +7,52 @@ use errmap::{Error, Result};
 #[derive(Debug, clap::Args)]
 pub struct SynthWebPlateArgs {
     /// Output folder (probes/, job.toml, finish.ngc, truth.json, outliers.csv, README.md).
-    #[arg(long)]
-    pub out: std::path::PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<std::path::PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<std::path::PathBuf>,
     /// Number of parts in the family.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, value_name = "N", default_value_t = 8)]
     pub parts: usize,
     /// Seed of every random choice (noise, part variation, outliers, layout).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Plate size XxY in mm.
-    #[arg(long, default_value = "600x300", value_parser = parse_pair_x)]
+    #[arg(long, value_name = "XxY", default_value = "600x300", value_parser = parse_pair_x)]
     pub size: (f64, f64),
     /// Lower-left corner of the plate X,Y in mm.
-    #[arg(long, default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y", default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
     pub origin: (f64, f64),
-    /// Regular probe grid NXxNY (seed 001: 12x12).
-    #[arg(long, value_parser = parse_grid, conflicts_with = "irregular")]
+    /// Regular probe grid NXxNY, points along X and Y (default 12x12).
+    #[arg(long, value_name = "NXxNY", value_parser = parse_grid, conflicts_with = "irregular")]
     pub grid: Option<(usize, usize)>,
     /// Scattered probe layout of N points (plus the 4 corners of the probed rectangle) instead of a grid.
-    #[arg(long)]
+    #[arg(long, value_name = "N")]
     pub irregular: Option<usize>,
     /// Probe noise, 1σ, µm.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_name = "UM", default_value_t = 1.0)]
     pub noise_um: f64,
     /// Gross outliers (+40 µm chips) planted per part.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3)]
     pub outliers: usize,
     /// Write per-point nominal columns nx_mm,ny_mm,nz_mm (the job then has no nominal plane).
     #[arg(long)]
     pub nominal_columns: bool,
     /// Training epochs written into job.toml.
-    #[arg(long, default_value_t = WebPlateSpec::default().epochs)]
+    #[arg(long, value_name = "N", default_value_t = WebPlateSpec::default().epochs)]
     pub epochs: u32,
     /// Start each part from the family network and train it N steps (warm_start = "family" in
     /// job.toml).
     #[arg(long, value_name = "N")]
     pub warm_epochs: Option<u32>,
     /// Family name written into job.toml.
-    #[arg(long, default_value = "web-plate")]
+    #[arg(long, value_name = "NAME", default_value = "web-plate")]
     pub family: String,
 }
 
@@ -87,7 +95,8 @@ fn parse_grid(text: &str) -> std::result::Result<(usize, usize), String> {
     Ok((a, b))
 }
 
-pub fn run(args: SynthWebPlateArgs, globals: Globals) -> Result<i32> {
+pub fn run(args: SynthWebPlateArgs, _globals: Globals) -> Result<i32> {
+    let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
     if !(args.noise_um.is_finite() && args.noise_um >= 0.0) {
         return Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1"));
     }
@@ -116,15 +125,13 @@ pub fn run(args: SynthWebPlateArgs, globals: Globals) -> Result<i32> {
         .chain(std::env::args().skip(1))
         .collect::<Vec<_>>()
         .join(" ");
-    let generated = web_plate::generate(&spec, &args.out, &command)?;
-    if !globals.quiet {
-        eprintln!(
-            "wrote {} parts × {} points, {} planted outliers, to {}",
-            spec.parts,
-            generated.points_per_part,
-            generated.truth.outliers.len(),
-            args.out.display()
-        );
-    }
+    let generated = web_plate::generate(&spec, &out_dir, &command)?;
+    info!(
+        "wrote {} parts × {} points, {} planted outliers, to {}",
+        spec.parts,
+        generated.points_per_part,
+        generated.truth.outliers.len(),
+        out_dir.display()
+    );
     Ok(0)
 }

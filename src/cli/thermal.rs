@@ -20,12 +20,13 @@ pub enum ThermalCommand {
     /// Calibrate every sensor against the reference sensor (offset and scale by least squares)
     /// and store the result in the sensor table.
     Calibrate(CalibrateArgs),
-    /// Seed 000: thermal error Et = E − Es of every time against the cold measurement, with the
-    /// thermal error line of each time (table, CSV and chart).
+    /// Thermal error Et = E − Es at every measurement time against the cold measurement, with
+    /// a fitted straight error line per time (table, CSV and chart).
     Difference(DifferenceArgs),
     /// Add campaigns to the temperature-history store (one transaction per campaign).
     Ingest(IngestArgs),
-    /// Seed 004: fit the composite geometric + thermal model to campaigns.
+    /// Fit the thermal error model to campaigns: the geometric error plus the growth driven by
+    /// the temperature sensors.
     Fit(FitArgs),
     /// List the model versions in the store.
     Models(ModelsArgs),
@@ -37,22 +38,22 @@ pub enum ThermalCommand {
 
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
-    /// Sensor table to calibrate.
-    #[arg(long)]
+    /// Sensor table to calibrate (CSV).
+    #[arg(long, value_name = "FILE")]
     pub sensors: PathBuf,
     /// Temperature log of the calibration period (all sensors beside the reference).
     pub log: PathBuf,
-    /// Start of the calibration period (s); default: the start of the log.
-    #[arg(long)]
+    /// Start of the calibration period, seconds of the log; default: the start of the log.
+    #[arg(long, value_name = "SECONDS")]
     pub from: Option<f64>,
-    /// End of the calibration period (s); default: the end of the log.
-    #[arg(long)]
+    /// End of the calibration period, seconds of the log; default: the end of the log.
+    #[arg(long, value_name = "SECONDS")]
     pub to: Option<f64>,
     /// Below this span of readings (°C) only the offset is fitted (scale kept at 1).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_name = "DEG_C", default_value_t = 1.0)]
     pub min_span_c: f64,
-    /// Write the calibrated table here instead of updating --sensors in place.
-    #[arg(short, long)]
+    /// Write the calibrated table to this file instead of updating --sensors in place.
+    #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Print one JSON document instead of the table.
     #[arg(long)]
@@ -64,8 +65,17 @@ pub struct DifferenceArgs {
     /// Campaign folder (or its campaign.toml).
     pub campaign: PathBuf,
     /// Output folder for difference.csv, lines.csv and fan.png (default: <campaign>/difference).
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        short = 'o',
+        long = "output",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_output: Option<PathBuf>,
     /// Print one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -77,7 +87,7 @@ pub struct IngestArgs {
     #[arg(required = true)]
     pub campaigns: Vec<PathBuf>,
     /// Store file (default: thermal.sqlite beside the first campaign's folder).
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
     /// Replace a stored campaign of the same name.
     #[arg(long)]
@@ -98,8 +108,8 @@ pub struct FitArgs {
     /// Campaign folders (or campaign.toml files). With --from-store they only locate the
     /// default store (thermal.sqlite beside them).
     pub campaigns: Vec<PathBuf>,
-    /// Write the model here.
-    #[arg(short, long)]
+    /// Write the model to this file (JSON).
+    #[arg(short, long, value_name = "MODEL.json")]
     pub output: PathBuf,
     /// Fit every campaign in the store (or those named with --campaign) and save the model as
     /// a new version there.
@@ -110,7 +120,7 @@ pub struct FitArgs {
     pub campaign_names: Vec<String>,
     /// Store file (default: thermal.sqlite beside the first campaign, or in the current folder).
     /// Given without --from-store, the model is also saved there as a new version.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
     /// Model name in the store (default: the axis).
     #[arg(long)]
@@ -118,17 +128,17 @@ pub struct FitArgs {
     /// Sensors driving tanβ, comma-separated (default: the nut and bearing sensors).
     #[arg(long, value_delimiter = ',')]
     pub sensors: Option<Vec<String>>,
-    /// Polynomial order of Er(x) (default: chosen by cross-validation).
-    #[arg(long)]
+    /// Polynomial order of the geometric error Er(x) (default: chosen by cross-validation).
+    #[arg(long, value_name = "N")]
     pub order: Option<usize>,
     /// Highest order cross-validation may choose.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, value_name = "N", default_value_t = 8)]
     pub max_order: usize,
     /// Ambient coefficient ρ in µm/m/K (default: fitted when there is an ambient sensor).
-    #[arg(long)]
+    #[arg(long, value_name = "UM_PER_M_K")]
     pub rho: Option<f64>,
     /// Reference point Px in mm (default: reference_point_mm of the campaigns).
-    #[arg(long)]
+    #[arg(long, value_name = "MM")]
     pub reference_mm: Option<f64>,
     /// Skip the leave-one-campaign-out cross-validation.
     #[arg(long)]
@@ -146,7 +156,7 @@ pub struct FitArgs {
 #[derive(Debug, clap::Args)]
 pub struct ModelsArgs {
     /// Store file (default: thermal.sqlite in the current folder).
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
     /// Print one JSON document.
     #[arg(long)]
@@ -160,8 +170,8 @@ pub struct CompensateArgs {
     pub model: PathBuf,
     /// Machine log: time_s,position_mm,direction,<sensor…>,ambient_c,coolant.
     pub log: PathBuf,
-    /// Output CSV: time_s,position_mm,direction,error_um,compensation_um.
-    #[arg(short, long)]
+    /// Output CSV file: time_s,position_mm,direction,error_um,compensation_um.
+    #[arg(short, long, value_name = "FILE.csv")]
     pub output: PathBuf,
     /// Print the summary as one JSON document.
     #[arg(long)]
@@ -179,9 +189,18 @@ pub struct EvaluateArgs {
     /// Evaluation standard.
     #[arg(long, value_enum, default_value = "iso230-2:2014")]
     pub standard: Standard,
-    /// Output folder for evaluate.csv and evaluate.png (default: beside the model).
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
+    /// Output folder for evaluate.csv and evaluate.png (default: the model's folder).
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        short = 'o',
+        long = "output",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_output: Option<PathBuf>,
     /// Print one JSON document instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -189,23 +208,31 @@ pub struct EvaluateArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct SynthThermalArgs {
-    /// Output folder.
-    #[arg(long)]
-    pub out: PathBuf,
+    /// Output folder (campaign folders, sensors.csv, calibration.csv, truth.json).
+    #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
+    pub out_dir: Option<PathBuf>,
+    /// Old spelling of --out-dir.
+    #[arg(
+        long = "out",
+        value_name = "DIR",
+        hide = true,
+        conflicts_with = "out_dir"
+    )]
+    pub old_out: Option<PathBuf>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Number of campaigns (coolant alternates off, on, …).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, value_name = "N", default_value_t = 4)]
     pub campaigns: usize,
     /// Bidirectional runs per measurement.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 2)]
     pub repeats: u32,
-    /// Time between measurements (s).
-    #[arg(long, default_value_t = 900.0)]
+    /// Time between measurements, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 900.0)]
     pub every_s: f64,
-    /// Laser noise, one sigma (µm).
-    #[arg(long, default_value_t = 0.5)]
+    /// Laser noise, one sigma, µm.
+    #[arg(long, value_name = "UM", default_value_t = 0.5)]
     pub laser_noise_um: f64,
     /// Start the machine program during the cold measurement of each campaign (at a time
     /// drawn from the seed), so the cold state already holds a small rise.
@@ -236,7 +263,7 @@ fn opt(v: Option<f64>) -> String {
     v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into())
 }
 
-fn run_calibrate(a: CalibrateArgs, g: Globals) -> Result<i32> {
+fn run_calibrate(a: CalibrateArgs, _g: Globals) -> Result<i32> {
     let mut table = SensorTable::read(&a.sensors)?;
     let log = TemperatureLog::read(&a.log, &table)?;
     let from = a.from.unwrap_or(f64::NEG_INFINITY);
@@ -272,17 +299,21 @@ fn run_calibrate(a: CalibrateArgs, g: Globals) -> Result<i32> {
                 }
             );
         }
-        if !g.quiet {
-            eprintln!("calibrated table written to {}", out.display());
-        }
+        info!("calibrated table written to {}", out.display());
     }
     Ok(0)
 }
 
-fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
+fn run_difference(a: DifferenceArgs, _g: Globals) -> Result<i32> {
     let campaign = Campaign::read(&a.campaign)?;
     let d = difference(&campaign)?;
-    let out = a.output.unwrap_or_else(|| campaign.dir.join("difference"));
+    let out = super::deprecated::old_output_folder(
+        a.out_dir,
+        a.old_output,
+        "--out-dir",
+        "difference.csv, lines.csv and fan.png",
+    )?
+    .unwrap_or_else(|| campaign.dir.join("difference"));
     write_atomic(&out.join("difference.csv"), |w| {
         writeln!(w, "time_s,direction,target_mm,e_um,es_um,et_um")?;
         for r in &d.rows {
@@ -347,12 +378,10 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
                 l.rms_um
             );
         }
-        if !g.quiet {
-            eprintln!(
-                "wrote difference.csv, lines.csv, fan.png in {}",
-                out.display()
-            );
-        }
+        info!(
+            "wrote difference.csv, lines.csv, fan.png in {}",
+            out.display()
+        );
     }
     Ok(0)
 }
@@ -375,7 +404,7 @@ fn store_beside(campaign: &Path) -> PathBuf {
         .unwrap_or_else(|| dir.join(DEFAULT_STORE))
 }
 
-fn run_ingest(a: IngestArgs, g: Globals) -> Result<i32> {
+fn run_ingest(a: IngestArgs, _g: Globals) -> Result<i32> {
     let db =
         a.db.clone()
             .unwrap_or_else(|| store_beside(&a.campaigns[0]));
@@ -402,13 +431,13 @@ fn run_ingest(a: IngestArgs, g: Globals) -> Result<i32> {
     }
     if a.json {
         print_json(&serde_json::json!({ "store": db, "ingested": summaries }))?;
-    } else if !g.quiet {
-        eprintln!("store: {}", db.display());
+    } else {
+        info!("store: {}", db.display());
     }
     Ok(0)
 }
 
-fn run_fit(a: FitArgs, g: Globals) -> Result<i32> {
+fn run_fit(a: FitArgs, _g: Globals) -> Result<i32> {
     let db = a.db.clone().or_else(|| {
         a.from_store.then(|| {
             a.campaigns
@@ -477,14 +506,12 @@ fn run_fit(a: FitArgs, g: Globals) -> Result<i32> {
         return Ok(0);
     }
     print_model(&model)?;
-    if !g.quiet {
-        eprintln!("model written to {}", a.output.display());
-        if let Some((db, name, version)) = saved {
-            eprintln!(
-                "saved as model '{name}' version {version} in {}",
-                db.display()
-            );
-        }
+    info!("model written to {}", a.output.display());
+    if let Some((db, name, version)) = saved {
+        info!(
+            "saved as model '{name}' version {version} in {}",
+            db.display()
+        );
     }
     Ok(0)
 }
@@ -606,7 +633,7 @@ fn run_models(a: ModelsArgs) -> Result<i32> {
     Ok(0)
 }
 
-fn run_compensate(a: CompensateArgs, g: Globals) -> Result<i32> {
+fn run_compensate(a: CompensateArgs, _g: Globals) -> Result<i32> {
     let model = ThermalModel::read(&a.model)?;
     let s = compensate_file(&model, &a.log, &a.output)?;
     if a.json {
@@ -620,14 +647,12 @@ fn run_compensate(a: CompensateArgs, g: Globals) -> Result<i32> {
             model.x_min_mm,
             model.x_max_mm
         );
-        if !g.quiet {
-            eprintln!("wrote {}", a.output.display());
-        }
+        info!("wrote {}", a.output.display());
     }
     Ok(0)
 }
 
-fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
+fn run_evaluate(a: EvaluateArgs, _g: Globals) -> Result<i32> {
     let model = ThermalModel::read(&a.model)?;
     let campaigns: Vec<Campaign> = a
         .campaigns
@@ -635,7 +660,13 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
         .map(|p| Campaign::read(p))
         .collect::<Result<_>>()?;
     let report = evaluate_campaigns(&model, &campaigns, a.standard)?;
-    let out = a.output.unwrap_or_else(|| {
+    let out_dir = super::deprecated::old_output_folder(
+        a.out_dir,
+        a.old_output,
+        "--out-dir",
+        "evaluate.csv and evaluate.png",
+    )?;
+    let out = out_dir.unwrap_or_else(|| {
         a.model
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
@@ -691,13 +722,11 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
             opt(t.after.B)
         );
     }
-    if !g.quiet {
-        eprintln!("wrote evaluate.csv, evaluate.png in {}", out.display());
-    }
+    info!("wrote evaluate.csv, evaluate.png in {}", out.display());
     Ok(0)
 }
 
-pub fn run_synth(a: SynthThermalArgs, g: Globals) -> Result<i32> {
+pub fn run_synth(a: SynthThermalArgs, _g: Globals) -> Result<i32> {
     if a.campaigns == 0 || a.repeats == 0 || !(a.every_s.is_finite() && a.every_s > 0.0) {
         return Err(Error::usage(
             "campaigns, repeats and --every-s must be positive",
@@ -719,13 +748,12 @@ pub fn run_synth(a: SynthThermalArgs, g: Globals) -> Result<i32> {
         warm_start: a.warm_start,
         ..Default::default()
     };
-    let truth = write_campaigns(&a.out, &options)?;
-    if !g.quiet {
-        eprintln!(
-            "wrote {} campaigns, sensors.csv, calibration.csv and truth.json in {}",
-            truth.campaigns.len(),
-            a.out.display()
-        );
-    }
+    let out_dir = super::deprecated::required(a.out_dir, a.old_out, "--out", "--out-dir")?;
+    let truth = write_campaigns(&out_dir, &options)?;
+    info!(
+        "wrote {} campaigns, sensors.csv, calibration.csv and truth.json in {}",
+        truth.campaigns.len(),
+        out_dir.display()
+    );
     Ok(0)
 }

@@ -20,7 +20,7 @@ cp -r "$repo/data/web-plate" "$work/data"
 sed -i 's/^epochs = .*/epochs = 40/' "$work/data/job.toml"
 cd "$work"
 
-read -r array_id merge_id < <("$errmap" slurm data/job.toml --shards 4 --backend cpu --out sharded --submit --quiet)
+read -r array_id merge_id < <("$errmap" slurm data/job.toml --shards 4 --backend cpu --out-dir sharded --submit --quiet)
 echo "slurm: array job $array_id, merge job $merge_id"
 for _ in $(seq 600); do
     if [ -z "$(squeue -h -j "$array_id,$merge_id" 2>/dev/null)" ]; then break; fi
@@ -33,4 +33,4 @@ if [ ! -s sharded/run.json ]; then
     tail -n 30 sharded/slurm/*.log "$work/cluster/slurmctld.log" >&2 || true
     exit 1
 fi
-"$errmap" batch data/job.toml --backend cpu --out single --quiet >/dev/null
+"$errmap" batch data/job.toml --backend cpu --out-dir single --quiet >/dev/null
