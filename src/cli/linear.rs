@@ -1,6 +1,7 @@
 //! CLI of `errmap linear …` and `errmap synth linear`: analyse laser runs, air index, error budget, compensation tables, sample data.
 
 use super::Globals;
+use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
     read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
@@ -56,9 +57,24 @@ pub struct TableOptionArgs {
     /// Fanuc detection unit in µm (1 = IS-B, 0.1 = IS-C).
     #[arg(long, default_value_t = 1.0)]
     pub fanuc_unit_um: f64,
-    /// Fanuc reference position (mm), a table point; default: the first target.
-    #[arg(long)]
+    /// Reference position (mm), a table point: Fanuc's reference point (3620) and the point
+    /// where the Sinumerik LEC is zero; default: the first target.
+    #[arg(long, allow_negative_numbers = true)]
     pub reference_mm: Option<f64>,
+}
+
+/// Controller limits and options of `linear table` and `rotary table`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ControllerArgs {
+    /// Fanuc control series whose parameter ranges are checked (0i-F or 30i-B).
+    #[arg(long, value_enum, default_value = "0i-F")]
+    pub fanuc_series: FanucSeries,
+    /// Fanuc pitch-error compensation magnification (parameter 3623), 1 ... 100.
+    #[arg(long, default_value_t = 1)]
+    pub fanuc_magnification: u32,
+    /// Interpolation points per Sinumerik table, as configured in MD38000 (LEC) and MD18342 (CEC).
+    #[arg(long, default_value_t = SINUMERIK_DEFAULT_MAX_POINTS)]
+    pub sinumerik_max_points: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -146,6 +162,8 @@ pub struct TableArgs {
     pub corrections: CorrectionArgs,
     #[command(flatten)]
     pub table_options: TableOptionArgs,
+    #[command(flatten)]
+    pub controller: ControllerArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -217,6 +235,16 @@ fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> T
         fanuc_unit_um: t.fanuc_unit_um,
         reference_mm: t.reference_mm,
         cec_table,
+        ..TableOptions::default()
+    }
+}
+
+impl ControllerArgs {
+    /// Copy the options into the writers' options.
+    pub fn apply(&self, opts: &mut TableOptions) {
+        opts.fanuc_series = self.fanuc_series;
+        opts.fanuc_magnification = self.fanuc_magnification;
+        opts.sinumerik_max_points = self.sinumerik_max_points;
     }
 }
 
@@ -508,7 +536,11 @@ fn table(args: TableArgs, globals: Globals) -> Result<i32> {
             d.symbol()
         );
     }
-    let opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
+    let mut opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
+    args.controller.apply(&mut opts);
+    for note in &table.notes {
+        notes.push(note.clone());
+    }
     for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
         errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
         if !globals.quiet {
