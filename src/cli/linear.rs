@@ -2,6 +2,7 @@
 
 use super::Globals;
 use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
+use errmap::linear::ColumnMap;
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
     read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
@@ -84,6 +85,10 @@ pub struct AnalyzeArgs {
     /// Evaluation standard.
     #[arg(long, value_enum)]
     pub standard: Standard,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… e.g.
+    /// target=Position,deviation=Error[mm],direction=Dir (see docs/linear.md).
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
@@ -146,6 +151,9 @@ pub struct TableArgs {
     /// Controller format.
     #[arg(long, value_enum)]
     pub format: TableFormat,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… (see `analyze --columns`).
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
     /// Spacing of the table points (mm), from the first target.
     #[arg(long, value_name = "MM")]
     pub spacing: f64,
@@ -201,8 +209,16 @@ pub fn run_synth(args: SynthLinearArgs, globals: Globals) -> Result<i32> {
 }
 
 /// Read the runs and apply the requested corrections; notes go to `notes`.
-fn load_runs(path: &Path, c: &CorrectionArgs, notes: &mut Vec<String>) -> Result<RunFile> {
-    let mut file = read_runs(path)?;
+fn load_runs(
+    path: &Path,
+    columns: Option<&str>,
+    c: &CorrectionArgs,
+    notes: &mut Vec<String>,
+) -> Result<RunFile> {
+    let mut file = match columns {
+        Some(spec) => errmap::linear::read_runs_mapped(path, &ColumnMap::parse(spec)?)?,
+        None => read_runs(path)?,
+    };
     if c.correct_air {
         let (corrected, n) = correct_air(
             &file,
@@ -386,7 +402,12 @@ fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
 
 fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
-    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let file = load_runs(
+        &args.runs,
+        args.columns.as_deref(),
+        &args.corrections,
+        &mut notes,
+    )?;
     let samples = file.samples();
     let ev = evaluate(&samples, args.standard)?;
     let fit = match args.fit_pitch {
@@ -527,7 +548,12 @@ fn budget(args: BudgetArgs) -> Result<i32> {
 
 fn table(args: TableArgs, globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
-    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let file = load_runs(
+        &args.runs,
+        args.columns.as_deref(),
+        &args.corrections,
+        &mut notes,
+    )?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
     let table = CompTable::from_evaluation(&ev, args.spacing)?;
     if let (Some(d), false) = (ev.unidirectional, globals.quiet) {

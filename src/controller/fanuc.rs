@@ -1,6 +1,6 @@
 //! Fanuc pitch-error compensation writer: parameters 3620-3627 and incremental compensation points on a `%` tape, checked against the value ranges of the chosen control series.
 
-use super::{fixed, AxisKind, ControllerTable, TableOptions};
+use super::{fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 
@@ -106,10 +106,7 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
             ),
             format!(
                 "choose a spacing of at least {} {} (each direction needs its own block of points)",
-                fixed(
-                    (t.end() - t.start) / ((lim.max_point_number + 1) / 2 - 1) as f64,
-                    4
-                ),
+                min_spacing(t.end() - t.start, ((lim.max_point_number + 1) / 2) as usize),
                 t.kind.position_unit()
             ),
         ));

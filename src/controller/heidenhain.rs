@@ -1,6 +1,6 @@
 //! Heidenhain TNC writer: the `.COM` compensation-value table (NR, AXISPOS, axis column, BACKLASH) and the `.CMA` table that assigns it to the axis, within the TNC's limits on entries and spacing.
 
-use super::{check_name, fixed, AxisKind, ControllerTable, TableOptions};
+use super::{check_name, fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ fn check_limits(t: &ControllerTable) -> Result<()> {
             ),
             format!(
                 "choose a spacing of at least {} {u}",
-                fixed((t.end() - t.start) / (HEIDENHAIN_MAX_ENTRIES - 1) as f64, 4)
+                min_spacing(t.end() - t.start, HEIDENHAIN_MAX_ENTRIES)
             ),
         ));
     }

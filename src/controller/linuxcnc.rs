@@ -1,6 +1,6 @@
 //! LinuxCNC `[JOINT_n]COMP_FILE` writer: `nominal forward reverse` triplets, ascending, nothing else in the file.
 
-use super::{fixed, AxisKind, ControllerTable, TableOptions};
+use super::{fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 
@@ -18,7 +18,7 @@ pub(super) fn write(t: &ControllerTable, opts: &TableOptions) -> Result<String> 
             ),
             format!(
                 "choose a spacing of at least {} {} (or split the travel)",
-                fixed((t.end() - t.start) / (LINUXCNC_MAX_LINES - 1) as f64, 4),
+                min_spacing(t.end() - t.start, LINUXCNC_MAX_LINES),
                 t.kind.position_unit()
             ),
         ));

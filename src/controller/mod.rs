@@ -238,6 +238,12 @@ pub(crate) fn check_name(name: &str, what: &str, example: &str) -> Result<()> {
     Ok(())
 }
 
+/// The smallest spacing (4 decimals, rounded up) that puts `span` into at most `entries` entries.
+pub(crate) fn min_spacing(span: f64, entries: usize) -> String {
+    let s = span / (entries.max(2) - 1) as f64;
+    fixed(((s * 1e4) - 1e-6).ceil() / 1e4, 4)
+}
+
 /// Fixed-point text with `digits` decimals and no "-0.000".
 pub fn fixed(v: f64, digits: usize) -> String {
     let text = format!("{v:.digits$}");

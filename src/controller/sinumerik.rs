@@ -1,6 +1,6 @@
 //! Sinumerik writer: the leadscrew/measuring-system error compensation (LEC, `%_N_AX_EEC_INI`) zero at the reference point, and the direction-dependent part as two interpolatory (CEC, `%_N_NC_CEC_INI`) tables.
 
-use super::{check_name, fixed, AxisKind, ControllerTable, TableOptions};
+use super::{check_name, fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -51,7 +51,7 @@ pub(super) fn write(t: &ControllerTable, opts: &TableOptions) -> Result<(String,
             ),
             format!(
                 "choose a spacing of at least {} {}, or give --sinumerik-max-points as configured in MD38000 and MD18342",
-                fixed((t.end() - t.start) / (opts.sinumerik_max_points.max(2) - 1) as f64, 4),
+                min_spacing(t.end() - t.start, opts.sinumerik_max_points),
                 t.kind.position_unit()
             ),
         ));
