@@ -215,6 +215,27 @@ impl CsvTable {
         })
     }
 
+    /// A table from a header and records already read (an instrument export mapped onto
+    /// errmap's columns); a header named twice is an error.
+    pub fn from_records(path: &Path, headers: Vec<String>, rows: Vec<CsvRow>) -> Result<CsvTable> {
+        let mut index = HashMap::new();
+        for (i, h) in headers.iter().enumerate() {
+            if index.insert(h.clone(), i).is_some() {
+                return Err(Error::input(
+                    Location::cell(path, 1, h.clone()),
+                    format!("column '{h}' appears twice in the header"),
+                    "keep one column of each name",
+                ));
+            }
+        }
+        Ok(CsvTable {
+            path: path.to_path_buf(),
+            headers,
+            rows,
+            index,
+        })
+    }
+
     /// Index of a column, if the header has it.
     pub fn column(&self, name: &str) -> Option<usize> {
         self.index.get(name).copied()

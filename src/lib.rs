@@ -13,6 +13,7 @@
 pub mod backend;
 pub mod batch;
 pub mod circular;
+pub mod controller;
 pub mod error;
 pub mod geom;
 pub mod gpu;

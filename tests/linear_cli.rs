@@ -311,7 +311,8 @@ fn tables_match_hand_written_golden_files() {
     // e↓ = −1, 1, 3, 4.5, 6 (linear between targets).
     //  linuxcnc type 0: actual positions x + e (mm), e.g. "50.000000 50.004000 50.001000";
     //  type 1: trims nominal − actual = −e, e.g. "50.000000 -0.004000 -0.001000";
-    //  sinumerik LEC: mean (e↑ + e↓)/2 = 0.5, 2.5, 4.5, 6.25, 8 µm; CEC ↑: −(e↑ − mean) = −1.5 …
+    //  sinumerik LEC: mean (e↑ + e↓)/2 = 0.5, 2.5, 4.5, 6.25, 8 µm less its value at the
+    //  reference point 0 mm: 0, 2, 4, 5.75, 7.5 µm; CEC ↑: −(e↑ − mean) = −1.5 …
     //  −2 µm with DIRECTION 1, CEC ↓: +1.5 … +2 µm with DIRECTION −1;
     //  fanuc (1 µm units): C↑ = round(−e↑) = −2, −4, −6, −8, −10 → increments 0, −2, −2, −2, −2;
     //  C↓ = 1, −1, −3, −5 (−4.5 rounds away from zero), −6 → 0, −2, −2, −2, −1;
@@ -333,7 +334,7 @@ fn tables_match_hand_written_golden_files() {
             &["x_lec.ini", "x_lec_cec.ini"],
         ),
         ("x_fanuc.txt", &["--format", "fanuc"], &["x_fanuc.txt"]),
-        ("x.com", &["--format", "heidenhain"], &["x.com"]),
+        ("x.com", &["--format", "heidenhain"], &["x.com", "x.cma"]),
         ("x.csv", &["--format", "csv"], &["x.csv"]),
     ];
     for (output, flags, files) in cases {
@@ -353,6 +354,7 @@ fn tables_match_hand_written_golden_files() {
             let got = std::fs::read_to_string(dir.path().join(f)).unwrap();
             let want = std::fs::read_to_string(golden(f)).unwrap();
             assert_eq!(got, want, "{f} differs from tests/golden/linear/{f}");
+            assert!(got.is_ascii(), "{f} is not ASCII");
         }
     }
     // LinuxCNC reads at most 256 triplets: 200 mm at 0.5 mm spacing is 401 lines.
@@ -383,7 +385,8 @@ fn applying_each_table_removes_the_errors_it_encodes() {
     for (file, extra, residual) in [
         ("x_type0.comp", vec![], 0.0),
         ("x_type1.comp", vec!["--linuxcnc-type", "1"], 0.0),
-        ("x_lec.ini", vec![], 0.0),
+        // The LEC is zero at the reference point (0 mm, mean 0.5 µm): 0.5 µm remain everywhere.
+        ("x_lec.ini", vec![], 0.5),
         ("x.com", vec![], 0.0),
         ("x.csv", vec![], 0.0),
         // Fanuc compensates relative to the reference point (0 mm, e↑ = 2 µm): 2 µm remain everywhere.

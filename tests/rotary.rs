@@ -361,10 +361,19 @@ fn golden_tables_in_every_format() {
     let d = dir.path();
     let meas = golden_dir().join("meas.csv");
     let meas = meas.to_str().unwrap();
-    for (format, name) in [
-        ("csv", "table.csv"),
-        ("linuxcnc", "table.linuxcnc"),
-        ("sinumerik", "table.sinumerik"),
+    // Hand values (see the independent checks below): Fanuc in 0.001 deg steps C = round(err/3.6)
+    // with increments, point 0 = the last point's increment (the turn closes); Heidenhain
+    // e = -err/3600 deg in C and BACKLASH; Sinumerik LEC zero at 0 deg, CEC -(e - mean).
+    for (format, name, files) in [
+        ("csv", "table.csv", &["table.csv"][..]),
+        ("linuxcnc", "table.linuxcnc", &["table.linuxcnc"][..]),
+        (
+            "sinumerik",
+            "table.sinumerik",
+            &["table.sinumerik", "table_cec.sinumerik"][..],
+        ),
+        ("fanuc", "table.fanuc", &["table.fanuc"][..]),
+        ("heidenhain", "table.com", &["table.com", "table.cma"][..]),
     ] {
         errmap(
             d,
@@ -381,13 +390,16 @@ fn golden_tables_in_every_format() {
             ],
         )
         .expect_code(0);
-        let got = std::fs::read_to_string(d.join(name)).unwrap();
-        let golden = golden_dir().join(name);
-        if std::env::var_os("ERRMAP_BLESS").is_some() {
-            std::fs::write(&golden, &got).unwrap();
+        for name in files {
+            let got = std::fs::read_to_string(d.join(name)).unwrap();
+            let golden = golden_dir().join(name);
+            if std::env::var_os("ERRMAP_BLESS").is_some() {
+                std::fs::write(&golden, &got).unwrap();
+            }
+            let want = std::fs::read_to_string(&golden).unwrap();
+            assert_eq!(got, want, "{format} differs from {}", golden.display());
+            assert!(got.is_ascii(), "{name} is not ASCII");
         }
-        let want = std::fs::read_to_string(&golden).unwrap();
-        assert_eq!(got, want, "{format} differs from {}", golden.display());
     }
 
     // Independent check of the values: planted + 0:0 90:10 180:−5 270:20, − 0:3 90:12
@@ -419,7 +431,8 @@ fn golden_tables_in_every_format() {
         assert!((r[2] - (r[0] - rev[i] / 3600.0)).abs() < 1e-7, "{r:?}");
     }
     assert_eq!(l[0][1] + 360.0, l[8][1]);
-    // Sinumerik: value = −(mean of ± err)/3600 degrees; a positive value moves the axis negative.
+    // Sinumerik: value = −(mean of ± err − its value at the 0° reference)/3600 degrees; a
+    // positive value moves the axis negative; the reference point is zero.
     let sin = std::fs::read_to_string(golden_dir().join("table.sinumerik")).unwrap();
     let v = |i: usize| -> f64 {
         let key = format!("$AA_ENC_COMP[0,{i},C1]=");
@@ -428,10 +441,11 @@ fn golden_tables_in_every_format() {
     };
     for i in 0..9 {
         assert!(
-            (v(i) + 0.5 * (fwd[i] + rev[i]) / 3600.0).abs() < 1e-7,
+            (v(i) + (0.5 * (fwd[i] + rev[i]) - 0.5 * (fwd[0] + rev[0])) / 3600.0).abs() < 1e-7,
             "entry {i}"
         );
     }
+    assert_eq!(v(0), 0.0);
     assert_eq!(v(0), v(8));
     assert!(sin.contains("$AA_ENC_COMP_IS_MODULO[0,C1]=1") && sin.starts_with("%_N_AX_EEC_INI"));
 

@@ -1,6 +1,8 @@
 //! CLI of `errmap linear …` and `errmap synth linear`: analyse laser runs, air index, error budget, compensation tables, sample data.
 
 use super::Globals;
+use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
+use errmap::linear::ColumnMap;
 use errmap::linear::{
     compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
     read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
@@ -56,9 +58,24 @@ pub struct TableOptionArgs {
     /// Fanuc detection unit in µm (1 = IS-B, 0.1 = IS-C).
     #[arg(long, default_value_t = 1.0)]
     pub fanuc_unit_um: f64,
-    /// Fanuc reference position (mm), a table point; default: the first target.
-    #[arg(long)]
+    /// Reference position (mm), a table point: Fanuc's reference point (3620) and the point
+    /// where the Sinumerik LEC is zero; default: the first target.
+    #[arg(long, allow_negative_numbers = true)]
     pub reference_mm: Option<f64>,
+}
+
+/// Controller limits and options of `linear table` and `rotary table`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ControllerArgs {
+    /// Fanuc control series whose parameter ranges are checked (0i-F or 30i-B).
+    #[arg(long, value_enum, default_value = "0i-F")]
+    pub fanuc_series: FanucSeries,
+    /// Fanuc pitch-error compensation magnification (parameter 3623), 1 ... 100.
+    #[arg(long, default_value_t = 1)]
+    pub fanuc_magnification: u32,
+    /// Interpolation points per Sinumerik table, as configured in MD38000 (LEC) and MD18342 (CEC).
+    #[arg(long, default_value_t = SINUMERIK_DEFAULT_MAX_POINTS)]
+    pub sinumerik_max_points: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -68,6 +85,10 @@ pub struct AnalyzeArgs {
     /// Evaluation standard.
     #[arg(long, value_enum)]
     pub standard: Standard,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… e.g.
+    /// target=Position,deviation=Error[mm],direction=Dir (see docs/linear.md).
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
@@ -130,6 +151,9 @@ pub struct TableArgs {
     /// Controller format.
     #[arg(long, value_enum)]
     pub format: TableFormat,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… (see `analyze --columns`).
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
     /// Spacing of the table points (mm), from the first target.
     #[arg(long, value_name = "MM")]
     pub spacing: f64,
@@ -146,6 +170,8 @@ pub struct TableArgs {
     pub corrections: CorrectionArgs,
     #[command(flatten)]
     pub table_options: TableOptionArgs,
+    #[command(flatten)]
+    pub controller: ControllerArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -190,8 +216,16 @@ pub fn run_synth(args: SynthLinearArgs, _globals: Globals) -> Result<i32> {
 }
 
 /// Read the runs and apply the requested corrections; notes go to `notes`.
-fn load_runs(path: &Path, c: &CorrectionArgs, notes: &mut Vec<String>) -> Result<RunFile> {
-    let mut file = read_runs(path)?;
+fn load_runs(
+    path: &Path,
+    columns: Option<&str>,
+    c: &CorrectionArgs,
+    notes: &mut Vec<String>,
+) -> Result<RunFile> {
+    let mut file = match columns {
+        Some(spec) => errmap::linear::read_runs_mapped(path, &ColumnMap::parse(spec)?)?,
+        None => read_runs(path)?,
+    };
     if c.correct_air {
         let (corrected, n) = correct_air(
             &file,
@@ -224,6 +258,16 @@ fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> T
         fanuc_unit_um: t.fanuc_unit_um,
         reference_mm: t.reference_mm,
         cec_table,
+        ..TableOptions::default()
+    }
+}
+
+impl ControllerArgs {
+    /// Copy the options into the writers' options.
+    pub fn apply(&self, opts: &mut TableOptions) {
+        opts.fanuc_series = self.fanuc_series;
+        opts.fanuc_magnification = self.fanuc_magnification;
+        opts.sinumerik_max_points = self.sinumerik_max_points;
     }
 }
 
@@ -365,7 +409,12 @@ fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
 
 fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
-    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let file = load_runs(
+        &args.runs,
+        args.columns.as_deref(),
+        &args.corrections,
+        &mut notes,
+    )?;
     let samples = file.samples();
     let ev = evaluate(&samples, args.standard)?;
     let fit = match args.fit_pitch {
@@ -506,7 +555,12 @@ fn budget(args: BudgetArgs) -> Result<i32> {
 
 fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
     let mut notes = Vec::new();
-    let file = load_runs(&args.runs, &args.corrections, &mut notes)?;
+    let file = load_runs(
+        &args.runs,
+        args.columns.as_deref(),
+        &args.corrections,
+        &mut notes,
+    )?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
     let table = CompTable::from_evaluation(&ev, args.spacing)?;
     if let Some(d) = ev.unidirectional {
@@ -515,7 +569,11 @@ fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
             d.symbol()
         );
     }
-    let opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
+    let mut opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
+    args.controller.apply(&mut opts);
+    for note in &table.notes {
+        notes.push(note.clone());
+    }
     for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
         errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
         info!(

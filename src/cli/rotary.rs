@@ -4,7 +4,7 @@ use super::Globals;
 use errmap::error::Error;
 use errmap::rotary::{
     analyze, build_table, chart::save_error_chart, read_measurement, render, table::fixed,
-    Analysis, AnalyzeOptions, RotaryAxis, TableFormat,
+    Analysis, AnalyzeOptions, RotaryAxis, TableFormat, TableOptions,
 };
 use errmap::synth::rotary::{write_set, RotarySynthConfig};
 use errmap::Result;
@@ -15,7 +15,7 @@ use std::path::PathBuf;
 pub enum RotaryCommand {
     /// Angular error err = α − β of a rotary axis from two spheres on a bar (centres or touch points).
     Analyze(AnalyzeArgs),
-    /// Compensation table over the full turn for a controller (LinuxCNC, Sinumerik) or as CSV.
+    /// Compensation table over the full turn for a controller (LinuxCNC, Sinumerik, Fanuc, Heidenhain) or as CSV.
     Table(TableArgs),
 }
 
@@ -88,9 +88,22 @@ pub struct TableArgs {
     /// are equally spaced, else 0).
     #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub start_deg: Option<f64>,
-    /// Sinumerik machine axis name used in $AA_ENC_COMP[0,N,<name>] (default: axis letter + 1, e.g. C1).
+    /// Controller axis: Sinumerik machine axis in $AA_ENC_COMP[0,N,<name>] and (<name>) of the
+    /// CEC tables (default: axis letter + 1, e.g. C1), Heidenhain column (default: the axis
+    /// letter), Fanuc axis number (default 1).
     #[arg(long, value_name = "NAME")]
     pub machine_axis: Option<String>,
+    /// LinuxCNC COMP_FILE_TYPE: 0 = nominal/actual positions, 1 = trims.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=1))]
+    pub linuxcnc_type: u8,
+    /// Fanuc detection unit in 0.001 deg (1 = IS-B, 0.1 = IS-C).
+    #[arg(long, default_value_t = 1.0)]
+    pub fanuc_unit_um: f64,
+    /// First Sinumerik CEC table index for the direction-dependent part (uses it and the next).
+    #[arg(long, default_value_t = 0)]
+    pub cec_table: u32,
+    #[command(flatten)]
+    pub controller: super::linear::ControllerArgs,
 }
 
 #[derive(Debug, clap::Args)]
@@ -149,17 +162,24 @@ pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
         RotaryCommand::Table(args) => {
             let analysis = args.measurement.analyze()?;
             let table = build_table(&analysis, args.step_deg, args.start_deg)?;
-            let axis_name = args
-                .machine_axis
-                .clone()
-                .unwrap_or_else(|| format!("{}1", analysis.axis));
-            let text = render(&table, args.format, &axis_name)?;
-            errmap::io::write_atomic_bytes(&args.output, text.as_bytes())?;
+            let mut opts = TableOptions {
+                linuxcnc_type: args.linuxcnc_type,
+                axis: args.machine_axis.clone(),
+                fanuc_unit_um: args.fanuc_unit_um,
+                cec_table: args.cec_table,
+                ..TableOptions::default()
+            };
+            args.controller.apply(&mut opts);
+            let files = render(&table, args.format, &opts, &args.output)?;
+            for (path, text) in &files {
+                errmap::io::write_atomic_bytes(path, text.as_bytes())?;
+            }
+            let names: Vec<String> = files.iter().map(|f| f.0.display().to_string()).collect();
             print_stdout(&format!(
                 "{} entries, 0° … 360° every {}°, written to {}\n{}\nvalues: {}\n",
                 table.angles_deg.len(),
                 table.step_deg,
-                args.output.display(),
+                names.join(" and "),
                 table.grid_note,
                 errmap::rotary::INTERPOLATION,
             ))?;

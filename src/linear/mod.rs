@@ -3,6 +3,7 @@
 mod air;
 mod budget;
 mod chart;
+mod columns;
 mod correct;
 mod eval;
 mod pitch;
@@ -18,6 +19,7 @@ pub use budget::{
     BudgetTerm, ThermalSetup,
 };
 pub use chart::{save_chart, ChartInput};
+pub use columns::ColumnMap;
 pub use correct::{correct_air, normalise_material, AirCorrection, REFERENCE_TEMP_C};
 pub use eval::{
     evaluate, mean, std_dev, target_symbols, AxisFigures, Evaluation, Figure, Standard,
@@ -25,7 +27,7 @@ pub use eval::{
 };
 pub use pitch::{fit_pitch, PitchFit};
 pub use runs::{
-    parse_runs, read_runs, Direction, Env, RunFile, RunRow, Sample, RUN_COLUMNS,
+    parse_runs, read_runs, read_runs_mapped, Direction, Env, RunFile, RunRow, Sample, RUN_COLUMNS,
     TARGET_TOLERANCE_MM,
 };
 pub use table::{

@@ -1,5 +1,6 @@
 //! Laser-interferometer run files: reading, validating and flattening `run,direction,target_mm,…` CSV into samples.
 
+use super::columns::ColumnMap;
 use crate::error::{Error, Location, Result};
 use crate::io::CsvTable;
 use std::collections::{BTreeMap, BTreeSet};
@@ -24,11 +25,14 @@ impl Direction {
         }
     }
 
-    /// Parse `+`/`-` (also `up`/`down`, `forward`/`reverse`, `fwd`/`rev`, any case).
+    /// Parse `+`/`-` (also `up`/`down`, `forward`/`reverse`/`backward`, `fwd`/`rev`/`bwd`,
+    /// `pos`/`neg`, any case).
     pub fn parse(text: &str) -> Option<Direction> {
         match text.trim().to_ascii_lowercase().as_str() {
-            "+" | "up" | "forward" | "fwd" => Some(Direction::Forward),
-            "-" | "down" | "reverse" | "rev" => Some(Direction::Reverse),
+            "+" | "up" | "forward" | "fwd" | "pos" | "positive" => Some(Direction::Forward),
+            "-" | "down" | "reverse" | "rev" | "backward" | "bwd" | "neg" | "negative" => {
+                Some(Direction::Reverse)
+            }
             _ => None,
         }
     }
@@ -114,6 +118,13 @@ pub const TARGET_TOLERANCE_MM: f64 = 1e-6;
 pub fn read_runs(path: &Path) -> Result<RunFile> {
     let table = CsvTable::read(path)?;
     parse_table(&table)
+}
+
+/// Read an instrument's CSV export through a column mapping (see [`ColumnMap`]): the mapped
+/// columns become a run file's, in its units, and are validated like one.
+pub fn read_runs_mapped(path: &Path, map: &ColumnMap) -> Result<RunFile> {
+    let table = CsvTable::read(path)?;
+    parse_table(&super::columns::map_table(&table, map)?)
 }
 
 /// [`read_runs`] on CSV text already in memory (`path` is only used in messages).

@@ -1,88 +1,33 @@
-//! Bidirectional pitch-error compensation tables for real controllers (LinuxCNC, Sinumerik, Fanuc, Heidenhain, CSV): writing them from the mean error of each direction, and reading them back.
+//! Linear pitch-error compensation tables: the mean error of each direction resampled on equally spaced points, written through the controller writers of [`crate::controller`], and read back from any controller's file.
 //!
-//! Internally a table holds the axis error e(x) = actual − nominal (µm) of each direction at
-//! equally spaced positions; each format converts to its controller's own sign and unit:
-//!
-//! | format | file | value written | sign |
-//! |---|---|---|---|
-//! | `linuxcnc` type 0 | `nominal forward reverse` (mm) | x + e↑, x + e↓: the actual positions | LinuxCNC converts to trims nominal − actual (usrmotLoadComp) |
-//! | `linuxcnc` type 1 | `nominal forward_trim reverse_trim` (mm) | −e↑, −e↓ | trim = nominal − actual, added to the command |
-//! | `sinumerik` LEC | `$AA_ENC_COMP[0,i,AXIS]` (mm), `_N_AX_EEC_INI` | ē = (e↑ + e↓)/2 | +e: "a positive compensation value moves the axis in the negative direction" (Siemens LEC) |
-//! | `sinumerik` CEC | `$AN_CEC[t,i]` (mm), `_N_NC_CEC_INI`, second file | −(e↑ − ē), −(e↓ − ē) with `$AN_CEC_DIRECTION` 1 / −1 | CEC is added to the setpoint: −e |
-//! | `fanuc` | `N1xxxx P…` per point (detection units), parameters 3620–3624, 3626, 3627 | incremental −Δe per interval | compensation pulses: −e |
-//! | `heidenhain` | `.COM` table, columns NR, AXISPOS, axis, BACKLASH (mm) | e↑ in the axis column, e↓ in BACKLASH | the measured error, positive when the travel is too long (TNC 407 manual, MP720), which the control compensates |
-//! | `csv` | `position_mm,forward_um,reverse_um` | e↑, e↓ (µm) | the error itself |
+//! Internally a table holds the axis error e(x) = actual - nominal (µm) of each direction at
+//! equally spaced positions; each controller writer converts to its own sign and unit (see
+//! [`crate::controller`] and docs/linear.md).
 
 use super::eval::Evaluation;
 use super::runs::Direction;
+use crate::controller::{self, AxisKind, ControllerTable};
+pub use crate::controller::{sinumerik_cec_path, TableFormat, TableOptions, LINUXCNC_MAX_LINES};
 use crate::error::{Error, Location, Result};
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Controller file format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TableFormat {
-    Linuxcnc,
-    Sinumerik,
-    Fanuc,
-    Heidenhain,
-    Csv,
-}
-
-impl TableFormat {
-    pub fn name(self) -> &'static str {
-        match self {
-            TableFormat::Linuxcnc => "linuxcnc",
-            TableFormat::Sinumerik => "sinumerik",
-            TableFormat::Fanuc => "fanuc",
-            TableFormat::Heidenhain => "heidenhain",
-            TableFormat::Csv => "csv",
-        }
-    }
-}
+/// Most Fanuc compensation points any supported series reads back (30i-B: 0 ... 1535).
+pub const FANUC_MAX_POINTS: usize = 1536;
 
 /// Axis error of each direction at equally spaced positions.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct CompTable {
     pub positions_mm: Vec<f64>,
     /// e↑ = actual − nominal, forward approach (µm).
     pub forward_um: Vec<f64>,
     /// e↓, reverse approach (µm).
     pub reverse_um: Vec<f64>,
+    /// Whether both directions were measured (a unidirectional table repeats one direction).
+    pub bidirectional: bool,
+    /// How the table was made where a user should know (ASCII): e.g. a travel extended to the
+    /// next whole spacing.
+    pub notes: Vec<String>,
 }
-
-/// Options of the controller formats.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TableOptions {
-    /// LinuxCNC COMP_FILE_TYPE: 0 positions, 1 trims.
-    pub linuxcnc_type: u8,
-    /// Axis name: Sinumerik machine axis (AX1, X1), Heidenhain column (X), Fanuc axis number (1).
-    pub axis: Option<String>,
-    /// Fanuc detection unit (µm per count); also the unit of parameter 3624.
-    pub fanuc_unit_um: f64,
-    /// Machine position of the reference point (Fanuc 3620); defaults to the first position.
-    pub reference_mm: Option<f64>,
-    /// First Sinumerik CEC table index for the direction-dependent part (uses t and t + 1).
-    pub cec_table: u32,
-}
-
-impl Default for TableOptions {
-    fn default() -> Self {
-        TableOptions {
-            linuxcnc_type: 0,
-            axis: None,
-            fanuc_unit_um: 1.0,
-            reference_mm: None,
-            cec_table: 0,
-        }
-    }
-}
-
-/// LinuxCNC's limit on triplets per joint.
-pub const LINUXCNC_MAX_LINES: usize = 256;
-/// Fanuc pitch-error compensation points (data numbers 0…1023).
-pub const FANUC_MAX_POINTS: usize = 1024;
 
 fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     match xs.len() {
@@ -105,8 +50,10 @@ fn interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
 }
 
 impl CompTable {
-    /// Resample the mean deviation of each direction to positions first target + k·spacing
-    /// (≤ last target), linearly between targets.
+    /// Resample the mean deviation of each direction to positions first target + k·spacing,
+    /// linearly between targets. The table always covers the whole measured travel: when the
+    /// spacing does not divide it, one more point past the last target holds the last target's
+    /// error (as a controller holds its last entry), and a note says so.
     pub fn from_evaluation(ev: &Evaluation, spacing_mm: f64) -> Result<CompTable> {
         if !(spacing_mm.is_finite() && spacing_mm > 0.0) {
             return Err(Error::usage(
@@ -125,18 +72,27 @@ impl CompTable {
             _ => return Err(Error::numeric("no targets", "measure at least two targets")),
         };
         // Count in f64 first: a tiny spacing must not wrap a usize.
-        let count_f = ((last - first) / spacing_mm + 1e-9).floor() + 1.0;
-        if count_f.is_nan() || count_f > 100_000.0 {
+        let intervals = ((last - first) / spacing_mm - 1e-9).ceil().max(0.0);
+        if intervals.is_nan() || intervals + 1.0 > 100_000.0 {
             return Err(Error::usage(
                 format!(
-                    "spacing {spacing_mm:?} mm over {} mm gives {count_f:.3e} table points, more than 100000",
-                    last - first
+                    "spacing {spacing_mm:?} mm over {} mm gives {:.3e} table points, more than 100000",
+                    last - first,
+                    intervals + 1.0
                 ),
                 "choose a coarser spacing",
             ));
         }
-        let count = count_f as usize;
+        let count = intervals as usize + 1;
         let positions_mm: Vec<f64> = (0..count).map(|k| first + k as f64 * spacing_mm).collect();
+        let mut notes = Vec::new();
+        let end = positions_mm[count - 1];
+        if end > last + 1e-6 {
+            notes.push(format!(
+                "spacing {spacing_mm} mm does not divide the travel {first} ... {last} mm: the table runs to {} mm, its last point holding the error measured at {last} mm",
+                controller::fixed(end, 4)
+            ));
+        }
         Ok(CompTable {
             forward_um: positions_mm.iter().map(|&x| interp(&xs, &up, x)).collect(),
             reverse_um: positions_mm
@@ -144,6 +100,25 @@ impl CompTable {
                 .map(|&x| interp(&xs, &down, x))
                 .collect(),
             positions_mm,
+            bidirectional: ev.unidirectional.is_none(),
+            notes,
+        })
+    }
+
+    /// The table in the controller writers' model; the reference position is
+    /// `opts.reference_mm` or the first point.
+    pub fn to_controller(&self, opts: &TableOptions) -> Result<ControllerTable> {
+        let start = self.positions_mm.first().copied().unwrap_or(0.0);
+        Ok(ControllerTable {
+            kind: AxisKind::Linear,
+            axis: opts.axis.clone().unwrap_or_else(|| "X".into()),
+            start,
+            step: self.spacing_mm(),
+            forward: self.forward_um.clone(),
+            reverse: self.reverse_um.clone(),
+            bidirectional: self.bidirectional,
+            reference: opts.reference_mm.unwrap_or(start),
+            notes: self.notes.clone(),
         })
     }
 
@@ -164,274 +139,14 @@ impl CompTable {
     }
 }
 
-/// Path of the second Sinumerik file (direction-dependent CEC tables) beside `path`.
-pub fn sinumerik_cec_path(path: &Path) -> PathBuf {
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let name = match path.extension() {
-        Some(ext) => format!("{stem}_cec.{}", ext.to_string_lossy()),
-        None => format!("{stem}_cec"),
-    };
-    path.with_file_name(name)
-}
-
-/// The rendered file(s) of a table: `(path, text)` pairs (Sinumerik writes two).
+/// The rendered file(s) of a table: `(path, text)` pairs (Sinumerik and Heidenhain write two).
 pub fn render_table(
     table: &CompTable,
     format: TableFormat,
     opts: &TableOptions,
     path: &Path,
 ) -> Result<Vec<(PathBuf, String)>> {
-    if table.positions_mm.len() < 2 {
-        return Err(Error::usage(
-            "a compensation table needs at least two points",
-            "use a smaller --spacing or measure a longer travel",
-        ));
-    }
-    Ok(match format {
-        TableFormat::Linuxcnc => vec![(path.to_path_buf(), linuxcnc(table, opts)?)],
-        TableFormat::Sinumerik => {
-            let (lec, cec) = sinumerik(table, opts);
-            vec![(path.to_path_buf(), lec), (sinumerik_cec_path(path), cec)]
-        }
-        TableFormat::Fanuc => vec![(path.to_path_buf(), fanuc(table, opts)?)],
-        TableFormat::Heidenhain => vec![(path.to_path_buf(), heidenhain(table, opts, path))],
-        TableFormat::Csv => vec![(path.to_path_buf(), csv(table))],
-    })
-}
-
-fn linuxcnc(t: &CompTable, opts: &TableOptions) -> Result<String> {
-    if t.positions_mm.len() > LINUXCNC_MAX_LINES {
-        return Err(Error::usage(
-            format!(
-                "{} points, but LinuxCNC reads at most {LINUXCNC_MAX_LINES} per joint",
-                t.positions_mm.len()
-            ),
-            "choose a larger --spacing",
-        ));
-    }
-    let mut out = String::new();
-    for ((x, f), r) in t.positions_mm.iter().zip(&t.forward_um).zip(&t.reverse_um) {
-        // Machine units (mm); nothing but the triplets: LinuxCNC stops at the first other line.
-        let (a, b) = match opts.linuxcnc_type {
-            0 => (x + f * 1e-3, x + r * 1e-3),
-            1 => (-f * 1e-3, -r * 1e-3),
-            other => {
-                return Err(Error::usage(
-                    format!("LinuxCNC COMP_FILE_TYPE {other} does not exist"),
-                    "use --linuxcnc-type 0 (positions) or 1 (trims)",
-                ))
-            }
-        };
-        let _ = writeln!(out, "{x:.6} {a:.6} {b:.6}");
-    }
-    Ok(out)
-}
-
-fn fmt_mm(v_um: f64) -> String {
-    let v = v_um * 1e-3;
-    // Avoid "-0.000000".
-    let v = if v.abs() < 5e-7 { 0.0 } else { v };
-    format!("{v:.6}")
-}
-
-fn sinumerik(t: &CompTable, opts: &TableOptions) -> (String, String) {
-    let axis = opts.axis.clone().unwrap_or_else(|| "AX1".to_string());
-    let n = t.positions_mm.len();
-    let step = t.spacing_mm();
-    let min = t.positions_mm[0];
-    let max = t.positions_mm[n - 1];
-    let mean: Vec<f64> = t
-        .forward_um
-        .iter()
-        .zip(&t.reverse_um)
-        .map(|(f, r)| (f + r) / 2.0)
-        .collect();
-    let mut lec = String::new();
-    let _ = writeln!(lec, "%_N_AX_EEC_INI");
-    let _ = writeln!(lec, "CHANDATA(1)");
-    let _ = writeln!(
-        lec,
-        "; errmap LEC, axis {axis}: mean of both directions, +error in mm (positive moves the axis negative)"
-    );
-    for (i, v) in mean.iter().enumerate() {
-        let _ = writeln!(lec, "$AA_ENC_COMP[0,{i},{axis}]={}", fmt_mm(*v));
-    }
-    let _ = writeln!(lec, "$AA_ENC_COMP_STEP[0,{axis}]={step:.6}");
-    let _ = writeln!(lec, "$AA_ENC_COMP_MIN[0,{axis}]={min:.6}");
-    let _ = writeln!(lec, "$AA_ENC_COMP_MAX[0,{axis}]={max:.6}");
-    let _ = writeln!(lec, "$AA_ENC_COMP_IS_MODULO[0,{axis}]=0");
-    let _ = writeln!(lec, "M17");
-
-    let mut cec = String::new();
-    let _ = writeln!(cec, "%_N_NC_CEC_INI");
-    let _ = writeln!(cec, "CHANDATA(1)");
-    let _ = writeln!(
-        cec,
-        "; errmap direction-dependent LEC, axis {axis}: −(e − mean) in mm, added to the setpoint"
-    );
-    for (k, (dir, ys)) in [(1, &t.forward_um), (-1, &t.reverse_um)]
-        .into_iter()
-        .enumerate()
-    {
-        let tab = opts.cec_table + k as u32;
-        for (i, (v, m)) in ys.iter().zip(&mean).enumerate() {
-            let _ = writeln!(cec, "$AN_CEC[{tab},{i}]={}", fmt_mm(-(v - m)));
-        }
-        let _ = writeln!(cec, "$AN_CEC_INPUT_AXIS[{tab}]={axis}");
-        let _ = writeln!(cec, "$AN_CEC_OUTPUT_AXIS[{tab}]={axis}");
-        let _ = writeln!(cec, "$AN_CEC_STEP[{tab}]={step:.6}");
-        let _ = writeln!(cec, "$AN_CEC_MIN[{tab}]={min:.6}");
-        let _ = writeln!(cec, "$AN_CEC_MAX[{tab}]={max:.6}");
-        let _ = writeln!(cec, "$AN_CEC_DIRECTION[{tab}]={dir}");
-        let _ = writeln!(cec, "$AN_CEC_MULT_BY_TABLE[{tab}]=0");
-        let _ = writeln!(cec, "$AN_CEC_IS_MODULO[{tab}]=0");
-    }
-    let _ = writeln!(cec, "M17");
-    (lec, cec)
-}
-
-/// Fanuc layout: forward points 0…n−1, reverse points n…2n−1, reference = nearest position.
-struct FanucLayout {
-    axis: u32,
-    unit_um: f64,
-    reference_index: usize,
-    interval_counts: i64,
-}
-
-fn fanuc_layout(t: &CompTable, opts: &TableOptions) -> Result<FanucLayout> {
-    let axis: u32 = match &opts.axis {
-        None => 1,
-        Some(a) => a.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
-            Error::usage(
-                format!("Fanuc axis '{a}' is not an axis number"),
-                "give the controlled-axis number, e.g. --axis 1 for X",
-            )
-        })?,
-    };
-    let unit_um = opts.fanuc_unit_um;
-    if !(unit_um.is_finite() && unit_um > 0.0) {
-        return Err(Error::usage(
-            format!("Fanuc detection unit {unit_um} µm is not positive"),
-            "use --fanuc-unit-um 1 for IS-B (0.001 mm), 0.1 for IS-C",
-        ));
-    }
-    let n = t.positions_mm.len();
-    if 2 * n > FANUC_MAX_POINTS {
-        return Err(Error::usage(
-            format!(
-                "{} compensation points exceed Fanuc's {FANUC_MAX_POINTS}",
-                2 * n
-            ),
-            "choose a larger --spacing",
-        ));
-    }
-    let spacing_counts = t.spacing_mm() * 1e3 / unit_um;
-    let interval_counts = spacing_counts.round() as i64;
-    if (spacing_counts - interval_counts as f64).abs() > 1e-6 || interval_counts <= 0 {
-        return Err(Error::usage(
-            format!(
-                "spacing {} mm is not a whole number of detection units of {unit_um} µm",
-                t.spacing_mm()
-            ),
-            "choose a spacing that is a multiple of the detection unit",
-        ));
-    }
-    let reference_mm = opts.reference_mm.unwrap_or(t.positions_mm[0]);
-    let reference_index = t
-        .positions_mm
-        .iter()
-        .position(|&x| (x - reference_mm).abs() < 1e-6)
-        .ok_or_else(|| {
-            Error::usage(
-                format!("reference position {reference_mm} mm is not a table point"),
-                "give --reference-mm equal to the first target plus a multiple of --spacing",
-            )
-        })?;
-    Ok(FanucLayout {
-        axis,
-        unit_um,
-        reference_index,
-        interval_counts,
-    })
-}
-
-fn fanuc(t: &CompTable, opts: &TableOptions) -> Result<String> {
-    let l = fanuc_layout(t, opts)?;
-    let n = t.positions_mm.len();
-    // Absolute compensation in counts, C = round(−e / unit); increments C_k − C_{k−1} so that
-    // rounding never accumulates. Point 0 of each block covers the section below the table: 0.
-    let counts =
-        |ys: &[f64]| -> Vec<i64> { ys.iter().map(|e| (-e / l.unit_um).round() as i64).collect() };
-    let up = counts(&t.forward_um);
-    let down = counts(&t.reverse_um);
-    let a = l.axis;
-    let mut out = String::from("%\n");
-    let _ = writeln!(out, "N3620A{a}P{}", l.reference_index);
-    let _ = writeln!(out, "N3621A{a}P0");
-    let _ = writeln!(out, "N3622A{a}P{}", n - 1);
-    let _ = writeln!(out, "N3623A{a}P1");
-    let _ = writeln!(out, "N3624A{a}P{}", l.interval_counts);
-    let _ = writeln!(out, "N3626A{a}P{n}");
-    let _ = writeln!(
-        out,
-        "N3627A{a}P{}",
-        down[l.reference_index] - up[l.reference_index]
-    );
-    for (block, c) in [(0, &up), (n, &down)] {
-        for k in 0..n {
-            let v = if k == 0 { 0 } else { c[k] - c[k - 1] };
-            let _ = writeln!(out, "N{}P{v}", 10000 + block + k);
-        }
-    }
-    out.push_str("%\n");
-    Ok(out)
-}
-
-fn heidenhain(t: &CompTable, opts: &TableOptions, path: &Path) -> String {
-    let axis = opts.axis.clone().unwrap_or_else(|| "X".to_string());
-    let name = path
-        .file_name()
-        .map(|s| s.to_string_lossy().to_uppercase())
-        .unwrap_or_else(|| format!("{axis}.COM"));
-    let mut out = String::new();
-    let _ = writeln!(out, "BEGIN {name} MM");
-    let _ = writeln!(
-        out,
-        "{:<6}{:<16}{:<16}{:<16}",
-        "NR", "AXISPOS", axis, "BACKLASH"
-    );
-    for (i, ((x, f), r)) in t
-        .positions_mm
-        .iter()
-        .zip(&t.forward_um)
-        .zip(&t.reverse_um)
-        .enumerate()
-    {
-        let sign = |v: f64| format!("{}{}", if v < 0.0 { "" } else { "+" }, v);
-        let _ = writeln!(
-            out,
-            "{:<6}{:<16}{:<16}{:<16}",
-            i,
-            sign((x * 1e4).round() / 1e4),
-            sign(fmt_mm(*f).parse().unwrap_or(0.0)),
-            sign(fmt_mm(*r).parse().unwrap_or(0.0))
-        );
-    }
-    let _ = writeln!(out, "[END]");
-    out
-}
-
-fn csv(t: &CompTable) -> String {
-    let mut out = String::from(
-        "# errmap compensation table: axis error e = actual - nominal per direction (um); a controller applies -e\nposition_mm,forward_um,reverse_um\n",
-    );
-    for ((x, f), r) in t.positions_mm.iter().zip(&t.forward_um).zip(&t.reverse_um) {
-        let _ = writeln!(out, "{x:.6},{f:.4},{r:.4}");
-    }
-    out
+    controller::render(&table.to_controller(opts)?, format, opts, path)
 }
 
 /// Guess a table file's format from its content.
@@ -513,11 +228,7 @@ pub fn read_table(
 }
 
 fn read_linuxcnc(path: &Path, text: &str, kind: u8) -> Result<CompTable> {
-    let mut t = CompTable {
-        positions_mm: vec![],
-        forward_um: vec![],
-        reverse_um: vec![],
-    };
+    let mut t = CompTable::default();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
@@ -652,6 +363,7 @@ fn read_sinumerik(path: &Path, text: &str) -> Result<CompTable> {
         positions_mm,
         forward_um: fwd,
         reverse_um: rev,
+        ..CompTable::default()
     })
 }
 
@@ -766,6 +478,7 @@ fn read_fanuc(path: &Path, text: &str, opts: &TableOptions) -> Result<CompTable>
         positions_mm,
         forward_um: fwd,
         reverse_um: rev,
+        ..CompTable::default()
     })
 }
 
@@ -801,11 +514,7 @@ fn read_heidenhain(path: &Path, text: &str) -> Result<CompTable> {
                 "name the compensated axis, e.g. X",
             )
         })?;
-    let mut t = CompTable {
-        positions_mm: vec![],
-        forward_um: vec![],
-        reverse_um: vec![],
-    };
+    let mut t = CompTable::default();
     for (i, line) in lines {
         if line.trim().starts_with("[END]") {
             break;
@@ -838,11 +547,7 @@ fn read_csv(path: &Path, text: &str) -> Result<CompTable> {
         table.require("forward_um")?,
         table.require("reverse_um")?,
     );
-    let mut t = CompTable {
-        positions_mm: vec![],
-        forward_um: vec![],
-        reverse_um: vec![],
-    };
+    let mut t = CompTable::default();
     for row in &table.rows {
         t.positions_mm.push(table.f64(row, cx)?);
         t.forward_um.push(table.f64(row, cf)?);

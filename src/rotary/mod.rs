@@ -18,4 +18,6 @@ pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
 pub use axis_fit::{fit_axis, AxisFit, CircleFit};
 pub use input::{read_measurement, Direction, Measurement, Position, RotaryAxis};
 pub use sphere::{fit_sphere, SphereFit, SphereFitError};
-pub use table::{build_table, render, table_from_rows, CompTable, TableFormat, INTERPOLATION};
+pub use table::{
+    build_table, render, table_from_rows, CompTable, TableFormat, TableOptions, INTERPOLATION,
+};

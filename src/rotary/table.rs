@@ -1,24 +1,14 @@
-//! Compensation tables over the full turn of a modulo rotary axis: errmap CSV, LinuxCNC COMP_FILE and Sinumerik LEC.
+//! Compensation tables over the full turn of a modulo rotary axis, written for every controller (LinuxCNC, Sinumerik, Fanuc, Heidenhain, CSV) through [`crate::controller`].
 
 use super::analysis::{modulo_deg, Analysis, TableRow};
 use super::input::Direction;
+use crate::controller::{AxisKind, ControllerTable};
 use crate::error::{Error, Result};
-use std::fmt::Write;
+use std::path::{Path, PathBuf};
 
-/// Output format of `rotary table`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TableFormat {
-    /// `angle_deg,error_forward_arcsec,error_reverse_arcsec` (err = α − β).
-    Csv,
-    /// LinuxCNC `[JOINT_n]COMP_FILE` with `COMP_FILE_TYPE = 0`: nominal, actual forward, actual reverse (degrees).
-    Linuxcnc,
-    /// Sinumerik 840D measuring-system error compensation (`%_N_AX_EEC_INI`, `$AA_ENC_COMP`).
-    Sinumerik,
-}
-
+pub use crate::controller::{fixed, TableFormat, TableOptions};
 /// LinuxCNC reads at most 256 triplets per joint (ini-config, `COMP_FILE`).
-pub const LINUXCNC_MAX_ENTRIES: usize = 256;
+pub const LINUXCNC_MAX_ENTRIES: usize = crate::controller::LINUXCNC_MAX_LINES;
 /// Most entries per turn a table may have (0.01° steps).
 pub const MAX_ENTRIES: usize = 36_000;
 /// Largest gap between measured angles the table will interpolate across.
@@ -260,112 +250,33 @@ fn periodic_interp(c: &[(f64, f64)], g: f64) -> f64 {
     lo.1 + t * (hi.1 - lo.1)
 }
 
-fn deg(arcsec: f64) -> f64 {
-    arcsec / 3600.0
-}
-
-/// Fixed-point text with `digits` decimals and no "-0.000".
-pub fn fixed(v: f64, digits: usize) -> String {
-    let text = format!("{v:.digits$}");
-    if text
-        .trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        text.trim_start_matches('-').to_string()
-    } else {
-        text
-    }
-}
-
-/// Render the table in `format`. `machine_axis` names the Sinumerik machine axis (e.g. `C1`).
-pub fn render(table: &CompTable, format: TableFormat, machine_axis: &str) -> Result<String> {
-    let mut s = String::new();
-    match format {
-        TableFormat::Csv => {
-            let _ = writeln!(
-                s,
-                "# errmap rotary table, axis {}: err = alpha - beta (commanded - measured), arcsec; add err to the command to correct",
-                table.axis
-            );
-            let _ = writeln!(s, "# values: {INTERPOLATION}; {}", table.grid_note);
-            s.push_str("angle_deg,error_forward_arcsec,error_reverse_arcsec\n");
-            for i in 0..table.angles_deg.len() {
-                let _ = writeln!(
-                    s,
-                    "{},{},{}",
-                    table.angles_deg[i],
-                    fixed(table.forward_arcsec[i], 3),
-                    fixed(table.reverse_arcsec[i], 3)
-                );
-            }
-        }
-        TableFormat::Linuxcnc => {
-            if table.angles_deg.len() > LINUXCNC_MAX_ENTRIES {
-                return Err(Error::usage(
-                    format!(
-                        "{} entries, LinuxCNC reads at most {LINUXCNC_MAX_ENTRIES} per joint",
-                        table.angles_deg.len()
-                    ),
-                    "use a coarser --step-deg (e.g. 5)",
-                ));
-            }
-            // COMP_FILE_TYPE = 0: nominal, actual position moving +, actual moving − (degrees).
-            // actual β = α − err. No comment lines: the loader expects numbers only.
-            for i in 0..table.angles_deg.len() {
-                let a = table.angles_deg[i];
-                let _ = writeln!(
-                    s,
-                    "{} {} {}",
-                    fixed(a, 6),
-                    fixed(a - deg(table.forward_arcsec[i]), 7),
-                    fixed(a - deg(table.reverse_arcsec[i]), 7)
-                );
-            }
-        }
-        TableFormat::Sinumerik => {
-            let ax = machine_axis;
-            if ax.is_empty() || !ax.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-                return Err(Error::usage(
-                    format!("'{ax}' is not a machine axis name"),
-                    "give the machine axis name as configured, e.g. C1 or AX4",
-                ));
-            }
-            s.push_str("%_N_AX_EEC_INI\nCHANDATA(1)\n");
-            let _ = writeln!(
-                s,
-                "; errmap rotary table, axis {}: value = -(err) = beta - alpha in degrees (a positive value moves the axis negative)",
-                table.axis
-            );
-            let _ = writeln!(s, "; values: {INTERPOLATION}; {}", table.grid_note);
-            if table.bidirectional {
-                // Over one turn: the 360° entry repeats 0° and is left out.
-                let turn = table.angles_deg.len().saturating_sub(1).max(1);
-                let reversal: f64 = table
-                    .forward_arcsec
-                    .iter()
-                    .zip(&table.reverse_arcsec)
-                    .take(turn)
-                    .map(|(f, r)| r - f)
-                    .sum::<f64>()
-                    / turn as f64;
-                let _ = writeln!(
-                    s,
-                    "; LEC acts in both directions: values are the mean of + and -; mean reversal (err- minus err+) {reversal:.2} arcsec belongs in the backlash compensation"
-                );
-            }
-            for i in 0..table.angles_deg.len() {
-                let mean = 0.5 * (table.forward_arcsec[i] + table.reverse_arcsec[i]);
-                let _ = writeln!(s, "$AA_ENC_COMP[0,{i},{ax}]={}", fixed(-deg(mean), 7));
-            }
-            let _ = writeln!(s, "$AA_ENC_COMP_STEP[0,{ax}]={}", table.step_deg);
-            let _ = writeln!(s, "$AA_ENC_COMP_MIN[0,{ax}]=0.0");
-            let _ = writeln!(s, "$AA_ENC_COMP_MAX[0,{ax}]=360.0");
-            let _ = writeln!(s, "$AA_ENC_COMP_IS_MODULO[0,{ax}]=1");
-            s.push_str("M17\n");
+impl CompTable {
+    /// The table in the controller writers' model: e = actual - nominal = -err, reference 0 deg.
+    pub fn to_controller(&self) -> ControllerTable {
+        ControllerTable {
+            kind: AxisKind::Rotary,
+            axis: self.axis.clone(),
+            start: 0.0,
+            step: self.step_deg,
+            forward: self.forward_arcsec.iter().map(|e| -e).collect(),
+            reverse: self.reverse_arcsec.iter().map(|e| -e).collect(),
+            bidirectional: self.bidirectional,
+            reference: 0.0,
+            notes: vec![format!("values: {INTERPOLATION}; {}", self.grid_note)],
         }
     }
-    Ok(s)
+}
+
+/// Render the table in `format` as `(path, text)` pairs (Sinumerik and Heidenhain write two
+/// files). `opts.axis` names the controller's axis (Sinumerik machine axis, e.g. `C1`;
+/// Heidenhain column; Fanuc axis number).
+pub fn render(
+    table: &CompTable,
+    format: TableFormat,
+    opts: &TableOptions,
+    path: &Path,
+) -> Result<Vec<(PathBuf, String)>> {
+    crate::controller::render(&table.to_controller(), format, opts, path)
 }
 
 #[cfg(test)]
@@ -475,13 +386,5 @@ mod tests {
         let t = table_from_rows("C", &rows, None, Some(0.0)).unwrap();
         assert!(t.grid_note.contains("as given"), "{}", t.grid_note);
         assert_eq!(t.step_deg, 30.0);
-    }
-
-    #[test]
-    fn fixed_point_has_no_negative_zero() {
-        assert_eq!(fixed(-0.0000001, 3), "0.000");
-        assert_eq!(fixed(-0.0004, 3), "0.000");
-        assert_eq!(fixed(-0.0006, 3), "-0.001");
-        assert_eq!(fixed(12.5, 1), "12.5");
     }
 }
