@@ -210,7 +210,7 @@ fn is_default<T: Default + PartialEq>(value: &T) -> bool {
 /// Default of `check_every_epochs`.
 pub const CHECK_EVERY_EPOCHS: u32 = 10;
 /// Default of `patience_checks`.
-pub const PATIENCE_CHECKS: u32 = 3;
+pub const PATIENCE_CHECKS: u32 = 5;
 fn is_default_check_every(value: &u32) -> bool {
     *value == CHECK_EVERY_EPOCHS
 }
@@ -344,7 +344,7 @@ impl ModelConfig {
                     "model.patience_checks = {} is out of range 1..={MAX_EPOCHS}",
                     self.patience_checks
                 ),
-                "3 to 10 checks without improvement before stopping",
+                "5 checks without improvement are the default",
             ));
         }
         if self.stop != Stop::Holdout {
