@@ -383,3 +383,88 @@ fn a_batch_that_stops_on_the_holdout_writes_its_timing_apart() {
         );
     }
 }
+
+/// A trainer that only knows whole fits (as the GPU trainers do), so segments take the
+/// trait's default: moments restarted, learning-rate schedule continued.
+struct WholeFitsOnly(CpuTrainer);
+
+impl Trainer for WholeFitsOnly {
+    fn name(&self) -> String {
+        "whole fits only".into()
+    }
+    fn train_from(
+        &self,
+        initial: Vec<Mlp>,
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+    ) -> errmap::Result<Vec<Mlp>> {
+        self.0.train_from(initial, sets, config)
+    }
+    fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> errmap::Result<Vec<Vec<f32>>> {
+        self.0.evaluate_batch(nets, inputs)
+    }
+}
+
+#[test]
+fn trainers_without_adam_state_restart_the_moments_each_segment() {
+    let sets = errmap::synth::training::plate_family(2, 203);
+    let config = ModelConfig {
+        lr_decay: 1.0, // a constant rate, so a restarted segment is a fresh fit of its length
+        ..small_config(40)
+    };
+    let trainer = WholeFitsOnly(CpuTrainer::reference());
+    let initial = initial_networks(sets.len(), &config);
+    let mut runs: Vec<AdamRun> = initial.iter().cloned().map(AdamRun::new).collect();
+    trainer
+        .train_segment(&mut runs, &sets, &config, 15)
+        .unwrap();
+    trainer
+        .train_segment(&mut runs, &sets, &config, 40)
+        .unwrap();
+    let steps = |n| ModelConfig {
+        epochs: n,
+        loss_every: n,
+        ..config.clone()
+    };
+    let first = CpuTrainer::reference()
+        .train_from(initial.clone(), &sets, &steps(15))
+        .unwrap();
+    let chained = CpuTrainer::reference()
+        .train_from(first, &sets, &steps(25))
+        .unwrap();
+    let whole = CpuTrainer::reference()
+        .train_from(initial, &sets, &config)
+        .unwrap();
+    for k in 0..2 {
+        assert_eq!(runs[k].epoch, 40);
+        assert_eq!(bits(&runs[k].net), bits(&chained[k]), "network {k}");
+        assert_ne!(bits(&runs[k].net), bits(&whole[k]), "network {k}");
+    }
+    // Hold-out stopping on such a trainer is still repeatable.
+    let groups = [StopGroup {
+        judge: 0,
+        members: vec![0],
+        holdout: own_samples(&sets[1]),
+    }];
+    let config = ModelConfig {
+        stop: Stop::Holdout,
+        check_every_epochs: 5,
+        patience_checks: 2,
+        ..config
+    };
+    let run = || {
+        train_until_holdout_stops(
+            &trainer,
+            initial_networks(2, &config),
+            &sets,
+            &groups,
+            &config,
+        )
+        .unwrap()
+    };
+    let (a, oa) = run();
+    let (b, ob) = run();
+    assert_eq!(oa[0].best_epochs, ob[0].best_epochs);
+    assert_eq!(bits(&a[0]), bits(&b[0]));
+    assert_eq!(bits(&a[1]), bits(&b[1]));
+}
