@@ -140,6 +140,9 @@ pub fn run_job(
         }
     }
     crate::io::write_json(&dir.join("summary.json"), &summary)?;
+    if let Some(timing) = &summary.timing {
+        timing.write(&dir)?;
+    }
     let kind = if opts.shard.is_some() {
         "shard"
     } else {

@@ -9,6 +9,7 @@ pub mod reduce;
 pub mod run;
 pub mod slurm;
 pub mod summary;
+pub mod timing;
 pub mod train_step;
 
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};

@@ -6,11 +6,13 @@
 //! trainer in one call, so on a GPU a whole family trains in the same dispatches.
 
 use super::summary::{BatchSummary, FamilySummary, PartSummary, ToolpathSummary};
+use super::timing::{PartTiming, Stopping, Timing};
 use super::train_step::{train_all, Role};
 use crate::error::{Error, Result};
 use crate::geom::{Axis, Domain};
 use crate::interp::{self, Grid, Method, Surface};
 use crate::map::{family_stats, ErrorMap, FittedModel};
+use crate::nn::stop::Holdout;
 use crate::nn::{ModelConfig, Normalisation, Trainer, TrainingSet};
 use crate::probe::{self, ProbePoint, ProbeSpec, Rejected};
 use crate::report::heatmap::{self, Heatmap, Scale};
@@ -423,10 +425,12 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
         let mut norms = Vec::new();
         let mut roles = Vec::new();
         let mut slots = Vec::new(); // (holdout slot, delivered slot) per part
+        let mut holdouts = Vec::new(); // held-out points of each hold-out slot
         for p in &interpolated {
             let name = &p.prep.input.name;
             let h = p.holdout_nodes.as_ref().map(|nodes| {
                 let (set, norm) = training_set(&train_grid, nodes, &domain);
+                holdouts.push(Some(held_out(p, &norm)));
                 sets.push(set);
                 norms.push(norm);
                 roles.push(Role::Holdout(name.clone()));
@@ -435,6 +439,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             let (set, norm) = training_set(&train_grid, &p.full_nodes, &domain);
             sets.push(set);
             norms.push(norm);
+            holdouts.push(None);
             roles.push(Role::Delivered(name.clone()));
             slots.push((h, sets.len() - 1));
         }
@@ -470,6 +475,14 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 } else {
                     format!("{} epochs", s.model.epochs)
                 };
+                let epochs = if s.model.stop == crate::nn::Stop::Holdout {
+                    format!(
+                        "{epochs} at most, stopping on the hold-out RMS: a check every {} epochs, patience {} checks",
+                        s.model.check_every_epochs, s.model.patience_checks
+                    )
+                } else {
+                    epochs
+                };
                 crate::progress::detail(&format!(
                     "training {} networks ({} points each at most; {epochs}) on {}",
                     sets.len(),
@@ -480,9 +493,18 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             // One call trains every network; the bar ticks so a terminal shows it is alive.
             let bar = crate::progress::bar(1, "train", quiet);
             bar.enable_steady_tick(std::time::Duration::from_millis(200));
-            let nets = train_all(trainer, &sets, &norms, &roles, &s.model);
+            let trained = train_all(trainer, &sets, &norms, &roles, &s.model, &holdouts);
             bar.finish_and_clear();
-            let nets = nets?;
+            let trained = trained?;
+            let nets = trained.nets;
+            let timings: Vec<Option<PartTiming>> = interpolated
+                .iter()
+                .zip(&slots)
+                .map(|(p, &(h, _))| {
+                    let outcome = trained.stops.get(h?)?.as_ref()?;
+                    Some(PartTiming::new(&p.prep.input.name, outcome))
+                })
+                .collect();
             if nets.len() != sets.len() {
                 return Err(Error::Internal(format!(
                     "trainer returned {} networks for {} training sets",
@@ -515,7 +537,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                 .par_iter()
                 .zip(slots.par_iter())
                 .zip(outputs.par_iter())
-                .map(|((p, &(h, d)), out)| {
+                .zip(timings.par_iter())
+                .map(|(((p, &(h, d)), out), timing)| {
                     let map = to_map(d, out);
                     let model = FittedModel::new(
                         &p.prep.input.name,
@@ -567,7 +590,8 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         }
                         _ => (map, model),
                     };
-                    let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
+                    let stopping = timing.as_ref().map(PartTiming::stopping);
+                    let r = write_part(p, &map, &model, holdout_rmse_um, stopping, s, (ua, va));
                     bar.inc(1);
                     match r {
                         Ok(summary) => (summary, Some((map, model))),
@@ -626,14 +650,19 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                     }
                 }
             }
-            return Ok(finish(
+            let mut summary = finish(
                 plan,
                 trainer,
                 Some(domain),
                 failed,
                 family_summary,
                 toolpaths,
-            ));
+            );
+            let timings: Vec<PartTiming> = timings.into_iter().flatten().collect();
+            if !timings.is_empty() {
+                summary.timing = Some(Timing::new(trainer.name(), timings));
+            }
+            return Ok(summary);
         }
     }
     // Nothing could be fitted: every part failed before training.
@@ -668,6 +697,20 @@ fn finish(
         parts,
         family_map,
         toolpaths,
+        timing: None,
+    }
+}
+
+/// A part's held-out probe points in the units of its hold-out network (`norm`).
+fn held_out(p: &Interpolated, norm: &Normalisation) -> Holdout {
+    let points = p.prep.holdout.iter().map(|&i| &p.prep.clean[i]);
+    Holdout {
+        inputs: points
+            .clone()
+            .map(|q| norm.scale_input(q.u_mm, q.v_mm))
+            .collect(),
+        e_um: points.map(|q| q.e_um).collect(),
+        norm: norm.clone(),
     }
 }
 
@@ -864,6 +907,7 @@ fn write_part(
     map: &ErrorMap,
     model: &FittedModel,
     holdout_rmse_um: Option<f64>,
+    stopping: Option<Stopping>,
     s: &Settings,
     axes: (Axis, Axis),
 ) -> Result<PartSummary> {
@@ -935,6 +979,7 @@ fn write_part(
         ),
         rms_extrapolated_um: outside.map(|o| o.1),
         pv_extrapolated_um: outside.map(|o| o.0),
+        stopping,
         output_dir: Some(dir.clone()),
         error: None,
     };

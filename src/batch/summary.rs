@@ -41,6 +41,10 @@ pub struct PartSummary {
     pub rms_extrapolated_um: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pv_extrapolated_um: Option<f64>,
+    /// Hold-out stopping (`stop = "holdout"`): the steps kept and trained, and the
+    /// epochs to within 5 % of the converged hold-out RMS. Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopping: Option<super::timing::Stopping>,
     /// Folder of the part's files.
     pub output_dir: Option<PathBuf>,
     /// Why the part failed: `{kind, message, file, line, column, hint}` (kind `input`, `io`,
@@ -67,6 +71,7 @@ impl PartSummary {
             extrapolated_fraction: None,
             rms_extrapolated_um: None,
             pv_extrapolated_um: None,
+            stopping: None,
             output_dir: None,
             error: Some(error.report()),
         }
@@ -114,6 +119,10 @@ pub struct BatchSummary {
     pub failed_parts: usize,
     pub family_map: Option<FamilySummary>,
     pub toolpaths: Vec<ToolpathSummary>,
+    /// Hold-out curves and time-to-accuracy (`stop = "holdout"`): written to `timing.json`,
+    /// never to `summary.json` (seconds differ from run to run).
+    #[serde(skip)]
+    pub timing: Option<super::timing::Timing>,
 }
 
 impl BatchSummary {
@@ -164,6 +173,10 @@ impl BatchSummary {
                         .map_or("unknown error".to_string(), |e| e.to_string())
                 ));
             }
+        }
+        if let Some(t) = &self.timing {
+            s.push_str(&t.line());
+            s.push('\n');
         }
         if let Some(f) = &self.family_map {
             s.push_str(&format!(

@@ -1,6 +1,9 @@
-//! The batch's training step: every network's starting weights (seeded from the job seed and the network's name, never its position), and the optional warm start of each part from the family network.
+//! The batch's training step: every network's starting weights (seeded from the job seed and the network's name, never its position), the optional warm start of each part from the family network, and the hold-out stopping groups (a part's hold-out and delivered networks).
 
-use crate::nn::{network_seed, Mlp, ModelConfig, Normalisation, Trainer, TrainingSet, WarmStart};
+use crate::nn::stop::{train_until_holdout_stops, GroupOutcome, Holdout, StopGroup};
+use crate::nn::{
+    network_seed, Mlp, ModelConfig, Normalisation, Stop, Trainer, TrainingSet, WarmStart,
+};
 use crate::{Error, Result};
 
 /// Stable 64-bit FNV-1a of a name.
@@ -46,20 +49,33 @@ pub fn initial_network(config: &ModelConfig, role: &Role) -> Mlp {
     )
 }
 
-/// Trains every network of the batch. Without a warm start, all in one trainer call. With
-/// `warm_start = "family"`, the family network first (`epochs` steps), then every part's
-/// networks from it, rescaled to each part's targets, for `warm_epochs` steps.
+/// The batch's networks, and per network the hold-out stopping outcome of the groups it
+/// judged (`stop = "holdout"`; `None` otherwise).
+#[derive(Debug, Clone)]
+pub struct Trained {
+    pub nets: Vec<Mlp>,
+    pub stops: Vec<Option<GroupOutcome>>,
+}
+
+/// Trains every network of the batch. Without a warm start, all in one trainer call (one per
+/// segment with `stop = "holdout"`). With `warm_start = "family"`, the family network first
+/// (`epochs` steps), then every part's networks from it, rescaled to each part's targets, for
+/// `warm_epochs` steps. With `stop = "holdout"`, a part's hold-out network (`holdouts[k]`: its
+/// held-out points) and its delivered network stop together at the hold-out network's best
+/// check; the family network, which has no held-out points, trains its full steps.
 pub fn train_all(
     trainer: &dyn Trainer,
     sets: &[TrainingSet],
     norms: &[Normalisation],
     roles: &[Role],
     config: &ModelConfig,
-) -> Result<Vec<Mlp>> {
+    holdouts: &[Option<Holdout>],
+) -> Result<Trained> {
     let initial: Vec<Mlp> = roles.iter().map(|r| initial_network(config, r)).collect();
     let family = roles.iter().position(|r| *r == Role::Family);
+    let all: Vec<usize> = (0..sets.len()).collect();
     let (WarmStart::Family, Some(f)) = (config.warm_start, family) else {
-        return trainer.train_from(initial, sets, config);
+        return fit(trainer, initial, sets, roles, config, holdouts, &all);
     };
     let family_net = trainer
         .train_from(vec![initial[f].clone()], &sets[f..=f], config)?
@@ -76,13 +92,65 @@ pub fn train_all(
         .map(|&k| rescaled(&family_net, &norms[f], &norms[k]))
         .collect();
     let part_sets: Vec<TrainingSet> = others.iter().map(|&k| sets[k].clone()).collect();
-    let trained = trainer.train_from(starts, &part_sets, &warm)?;
-    let mut out = initial;
-    out[f] = family_net;
-    for (k, net) in others.into_iter().zip(trained) {
-        out[k] = net;
+    let trained = fit(trainer, starts, &part_sets, roles, &warm, holdouts, &others)?;
+    let mut out = Trained {
+        nets: initial,
+        stops: vec![None; sets.len()],
+    };
+    out.nets[f] = family_net;
+    for (i, k) in others.into_iter().enumerate() {
+        out.nets[k] = trained.nets[i].clone();
+        out.stops[k] = trained.stops[i].clone();
     }
     Ok(out)
+}
+
+/// The networks `batch` (indices into `roles` and `holdouts`) trained from `initial` on
+/// `sets` (one per index), by `config.stop`; results indexed like `batch`.
+fn fit(
+    trainer: &dyn Trainer,
+    initial: Vec<Mlp>,
+    sets: &[TrainingSet],
+    roles: &[Role],
+    config: &ModelConfig,
+    holdouts: &[Option<Holdout>],
+    batch: &[usize],
+) -> Result<Trained> {
+    if config.stop != Stop::Holdout {
+        let nets = trainer.train_from(initial, sets, config)?;
+        let stops = vec![None; nets.len()];
+        return Ok(Trained { nets, stops });
+    }
+    let groups = stop_groups(roles, holdouts, batch);
+    let (nets, outcomes) = train_until_holdout_stops(trainer, initial, sets, &groups, config)?;
+    let mut stops = vec![None; nets.len()];
+    for (group, outcome) in groups.iter().zip(outcomes) {
+        stops[group.judge] = Some(outcome);
+    }
+    Ok(Trained { nets, stops })
+}
+
+/// One group per part with held-out points: its hold-out network judges, its delivered
+/// network stops with it. Indices are positions in `batch`.
+fn stop_groups(roles: &[Role], holdouts: &[Option<Holdout>], batch: &[usize]) -> Vec<StopGroup> {
+    let at = |role: &Role| batch.iter().position(|&k| roles[k] == *role);
+    batch
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &k)| {
+            let Role::Holdout(part) = &roles[k] else {
+                return None;
+            };
+            let holdout = holdouts.get(k)?.clone()?;
+            let mut members = vec![i];
+            members.extend(at(&Role::Delivered(part.clone())));
+            Some(StopGroup {
+                judge: i,
+                members,
+                holdout,
+            })
+        })
+        .collect()
 }
 
 /// The same function as `net` (trained for targets standardised by `from`), for targets
@@ -172,8 +240,12 @@ mod tests {
             warm_epochs: 40,
             ..scratch.clone()
         };
-        let cold = train_all(&FastCpuTrainer, &sets, &norms, &roles, &scratch).unwrap();
-        let hot = train_all(&FastCpuTrainer, &sets, &norms, &roles, &warm).unwrap();
+        let cold = train_all(&FastCpuTrainer, &sets, &norms, &roles, &scratch, &[])
+            .unwrap()
+            .nets;
+        let hot = train_all(&FastCpuTrainer, &sets, &norms, &roles, &warm, &[])
+            .unwrap()
+            .nets;
         for k in 1..3 {
             let (c, h) = (mse(&cold[k], &sets[k]), mse(&hot[k], &sets[k]));
             assert!(h < 0.25 * c, "part {k}: warm {h:e}, scratch {c:e}");

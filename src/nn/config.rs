@@ -151,6 +151,19 @@ pub enum WarmStart {
     Family,
 }
 
+/// When a fit ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Stop {
+    /// After `epochs` steps (`warm_epochs` for a warm-started part).
+    #[default]
+    Epochs,
+    /// When the hold-out RMS has not improved for `patience_checks` checks, one check every
+    /// `check_every_epochs` steps, or after `epochs` (`warm_epochs`) steps; the fit keeps
+    /// the parameters of its best check ([`crate::nn::stop`]).
+    Holdout,
+}
+
 /// How networks are fitted. Every key has a default, so `[model]` may be empty.
 ///
 /// Training is full-batch Adam (β₁ 0.9, β₂ 0.999, ε 1e-8) on the mean squared error of the
@@ -179,6 +192,30 @@ pub struct ModelConfig {
     pub warm_start: WarmStart,
     /// Steps of a part's fit when it starts from the family network.
     pub warm_epochs: u32,
+    /// When a fit ends; the keys below only matter for `stop = "holdout"` and are left out
+    /// of the serialised settings at their defaults (so a job's hash is as before).
+    #[serde(skip_serializing_if = "is_default")]
+    pub stop: Stop,
+    /// Steps between two hold-out checks.
+    #[serde(skip_serializing_if = "is_default_check_every")]
+    pub check_every_epochs: u32,
+    /// Checks without a lower hold-out RMS after which a fit stops.
+    #[serde(skip_serializing_if = "is_default_patience")]
+    pub patience_checks: u32,
+}
+
+fn is_default<T: Default + PartialEq>(value: &T) -> bool {
+    *value == T::default()
+}
+/// Default of `check_every_epochs`.
+pub const CHECK_EVERY_EPOCHS: u32 = 10;
+/// Default of `patience_checks`.
+pub const PATIENCE_CHECKS: u32 = 5;
+fn is_default_check_every(value: &u32) -> bool {
+    *value == CHECK_EVERY_EPOCHS
+}
+fn is_default_patience(value: &u32) -> bool {
+    *value == PATIENCE_CHECKS
 }
 
 impl Default for ModelConfig {
@@ -196,6 +233,9 @@ impl Default for ModelConfig {
             optimizer: Optimizer::Adam,
             warm_start: WarmStart::None,
             warm_epochs: 150,
+            stop: Stop::Epochs,
+            check_every_epochs: CHECK_EVERY_EPOCHS,
+            patience_checks: PATIENCE_CHECKS,
         }
     }
 }
@@ -282,6 +322,44 @@ impl ModelConfig {
             return Err(Error::usage(
                 "model.loss_every must be at least 1",
                 "the default reads the loss every 250 epochs",
+            ));
+        }
+        self.validate_stop()
+    }
+
+    /// The hold-out stopping keys: checked whatever `stop` is, so a typo shows at once.
+    fn validate_stop(&self) -> Result<()> {
+        if self.check_every_epochs == 0 || self.check_every_epochs > MAX_EPOCHS {
+            return Err(Error::usage(
+                format!(
+                    "model.check_every_epochs = {} is out of range 1..={MAX_EPOCHS}",
+                    self.check_every_epochs
+                ),
+                "check the hold-out RMS every 10 to 50 steps",
+            ));
+        }
+        if self.patience_checks == 0 || self.patience_checks > MAX_EPOCHS {
+            return Err(Error::usage(
+                format!(
+                    "model.patience_checks = {} is out of range 1..={MAX_EPOCHS}",
+                    self.patience_checks
+                ),
+                "5 checks without improvement are the default",
+            ));
+        }
+        if self.stop != Stop::Holdout {
+            return Ok(());
+        }
+        if self.optimizer != Optimizer::Adam {
+            return Err(Error::usage(
+                "model.stop = \"holdout\" needs optimizer = \"adam\"",
+                "L-BFGS stops on its own evaluation budget (epochs); use stop = \"epochs\" with it",
+            ));
+        }
+        if self.holdout_fraction == 0.0 {
+            return Err(Error::usage(
+                "model.stop = \"holdout\" needs held-out points, and holdout_fraction is 0",
+                "set holdout_fraction = 0.1, or stop = \"epochs\"",
             ));
         }
         Ok(())

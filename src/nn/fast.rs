@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use super::config::{Activation, ModelConfig};
 use super::mlp::{layer_spans, unit_offsets, LayerSpan, Mlp};
-use super::train::{fit_one, train_each, REFERENCE_LANES};
+use super::train::{adam_steps, continue_each, fit_one, train_each, AdamRun, REFERENCE_LANES};
 use super::{CpuTrainer, Trainer, TrainingSet};
 use crate::Result;
 
@@ -58,6 +58,23 @@ impl Trainer for FastCpuTrainer {
         train_each(initial, sets, config, |net, set, k| {
             let mut fast = FastGradient::new(net, set);
             fit_one(net, config, k, |params, grad| {
+                let loss = fast.compute(params, set);
+                grad.copy_from_slice(&fast.sum);
+                loss
+            })
+        })
+    }
+
+    fn train_segment(
+        &self,
+        runs: &mut [AdamRun],
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+        to_epoch: u32,
+    ) -> Result<()> {
+        continue_each(runs, sets, config, to_epoch, |run, set, k| {
+            let mut fast = FastGradient::new(&run.net, set);
+            adam_steps(run, config, to_epoch, k, |params, grad| {
                 let loss = fast.compute(params, set);
                 grad.copy_from_slice(&fast.sum);
                 loss

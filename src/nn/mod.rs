@@ -9,11 +9,12 @@ mod fast;
 pub mod lbfgs;
 mod mlp;
 mod norm;
+pub mod stop;
 mod train;
 
 pub use config::{
-    network_seed, tanh_f32, Activation, Backend, ModelConfig, Optimizer, WarmStart, MAX_EPOCHS,
-    MAX_HIDDEN_LAYERS, MAX_WIDTH,
+    network_seed, tanh_f32, Activation, Backend, ModelConfig, Optimizer, Stop, WarmStart,
+    MAX_EPOCHS, MAX_HIDDEN_LAYERS, MAX_WIDTH,
 };
 pub use fast::{FastCpuTrainer, FastGradient, CHUNK_BLOCKS};
 pub use mlp::{layer_spans, param_count, unit_offsets, LayerSpan, Mlp};
@@ -21,6 +22,6 @@ pub use norm::Normalisation;
 pub(crate) use train::diverged;
 pub use train::{
     adam_update, check_batch, check_nets, initial_networks, loss_gradient, mse, train_network,
-    AdamScalars, CpuTrainer, Trainer, TrainingSet, ADAM_BETA1, ADAM_BETA2, ADAM_EPSILON,
+    AdamRun, AdamScalars, CpuTrainer, Trainer, TrainingSet, ADAM_BETA1, ADAM_BETA2, ADAM_EPSILON,
     ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2, GRAD_LANES, REFERENCE_LANES,
 };

@@ -45,6 +45,107 @@ pub trait Trainer: Send + Sync {
 
     /// Every network on the same inputs: result `[k][i]` = `nets[k].forward(inputs[i])`.
     fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>>;
+
+    /// Continues the Adam fit of every run on its set from its `epoch` to `to_epoch` of
+    /// `config`'s schedule (learning rate and bias corrections of the full `config.epochs`).
+    /// The CPU trainers carry the moments, so segments give the bits of one
+    /// [`Trainer::train_from`] call. This default, for trainers that take no moments in (the
+    /// GPU kernels), restarts the moments each segment and continues the learning-rate
+    /// schedule; it needs every run at the same epoch.
+    fn train_segment(
+        &self,
+        runs: &mut [AdamRun],
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+        to_epoch: u32,
+    ) -> Result<()> {
+        let Some(from) = runs.first().map(|r| r.epoch) else {
+            return Ok(());
+        };
+        check_segment(runs, sets, config, to_epoch)?;
+        if runs.iter().any(|r| r.epoch != from) {
+            return Err(Error::Internal(
+                "a restarted segment needs every network at the same epoch".into(),
+            ));
+        }
+        let steps = to_epoch - from;
+        if steps == 0 {
+            return Ok(());
+        }
+        let first = config.learning_rate_at(from);
+        let last = config.learning_rate_at(to_epoch - 1);
+        let segment = ModelConfig {
+            epochs: steps,
+            learning_rate: first,
+            lr_decay: if steps > 1 {
+                (last / first).min(1.0)
+            } else {
+                1.0
+            },
+            loss_every: config.loss_every.min(steps),
+            stop: super::Stop::Epochs,
+            ..config.clone()
+        };
+        let nets = runs.iter().map(|r| r.net.clone()).collect();
+        for (run, net) in runs.iter_mut().zip(self.train_from(nets, sets, &segment)?) {
+            run.net = net;
+            run.m.fill(0.0);
+            run.v.fill(0.0);
+            run.epoch = to_epoch;
+        }
+        Ok(())
+    }
+}
+
+/// A network in the middle of a full-batch Adam fit: its parameters, Adam's first and
+/// second moments, and the steps done.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdamRun {
+    pub net: Mlp,
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+    pub epoch: u32,
+}
+
+impl AdamRun {
+    /// A fit about to take its first step from `net`.
+    pub fn new(net: Mlp) -> AdamRun {
+        let n = net.params.len();
+        AdamRun {
+            net,
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            epoch: 0,
+        }
+    }
+}
+
+/// Checks a segment: one set per run, Adam, consistent moments, `epoch ≤ to_epoch ≤
+/// config.epochs`, and the batch checks of [`check_batch`].
+pub fn check_segment(
+    runs: &[AdamRun],
+    sets: &[TrainingSet],
+    config: &ModelConfig,
+    to_epoch: u32,
+) -> Result<()> {
+    if config.optimizer != Optimizer::Adam {
+        return Err(Error::usage(
+            "training in segments is for optimizer = \"adam\"",
+            "use stop = \"epochs\" with L-BFGS",
+        ));
+    }
+    if to_epoch > config.epochs
+        || runs.iter().any(|r| {
+            r.epoch > to_epoch || r.m.len() != r.net.params.len() || r.v.len() != r.m.len()
+        })
+    {
+        return Err(Error::Internal(format!(
+            "a training segment to epoch {to_epoch} of {} does not fit its runs",
+            config.epochs
+        )));
+    }
+    let nets: Vec<Mlp> = runs.iter().map(|r| r.net.clone()).collect();
+    check_batch(&nets, sets, config)
 }
 
 /// The starting networks of a batch of `count`: Glorot-uniform, network k seeded with
@@ -225,6 +326,25 @@ impl Trainer for CpuTrainer {
         let lanes = self.lanes;
         train_each(initial, sets, config, |net, set, k| {
             fit_reference(net, set, config, k, lanes)
+        })
+    }
+
+    fn train_segment(
+        &self,
+        runs: &mut [AdamRun],
+        sets: &[TrainingSet],
+        config: &ModelConfig,
+        to_epoch: u32,
+    ) -> Result<()> {
+        let lanes = self.lanes;
+        continue_each(runs, sets, config, to_epoch, |run, set, k| {
+            let mut ws = GradientWorkspace::new(&run.net, lanes);
+            let activation = run.net.activation;
+            adam_steps(run, config, to_epoch, k, |params, grad| {
+                let loss = ws.gradient(params, activation, set);
+                grad.copy_from_slice(&ws.lanes[..params.len()]);
+                loss
+            })
         })
     }
 
@@ -643,32 +763,69 @@ pub(crate) fn fit_one(
     k: usize,
     mut loss_gradient: impl FnMut(&[f32], &mut [f32]) -> f64,
 ) -> Result<()> {
-    let n_params = net.params.len();
     if config.optimizer == Optimizer::Lbfgs {
+        let n_params = net.params.len();
         return super::lbfgs::fit_network_checked(net, config, k, |params| {
             let mut grad = vec![0.0f32; n_params];
             let loss = loss_gradient(params, &mut grad);
             (loss, grad)
         });
     }
-    let mut grad = vec![0.0f32; n_params];
-    let mut m = vec![0.0f32; n_params];
-    let mut v = vec![0.0f32; n_params];
-    for epoch in 0..config.epochs {
+    let mut run = AdamRun::new(net.clone());
+    let result = adam_steps(&mut run, config, config.epochs, k, loss_gradient);
+    *net = run.net;
+    result
+}
+
+/// Adam steps of `run` from its epoch to `to_epoch` of `config`'s schedule. The loss is
+/// checked every `loss_every` steps and at the segment's and the schedule's last step.
+pub(crate) fn adam_steps(
+    run: &mut AdamRun,
+    config: &ModelConfig,
+    to_epoch: u32,
+    k: usize,
+    mut loss_gradient: impl FnMut(&[f32], &mut [f32]) -> f64,
+) -> Result<()> {
+    let mut grad = vec![0.0f32; run.net.params.len()];
+    let AdamRun { net, m, v, epoch } = run;
+    while *epoch < to_epoch {
+        let e = *epoch;
         let loss = loss_gradient(&net.params, &mut grad);
-        if ((epoch + 1) % config.loss_every == 0 || epoch + 1 == config.epochs) && !loss.is_finite()
-        {
-            return Err(diverged(k, epoch));
+        let read = (e + 1) % config.loss_every == 0 || e + 1 == config.epochs || e + 1 == to_epoch;
+        if read && !loss.is_finite() {
+            return Err(diverged(k, e));
         }
-        let scalars = AdamScalars::at(config, epoch);
-        for (((p, mi), vi), &g) in net.params.iter_mut().zip(&mut m).zip(&mut v).zip(&grad) {
+        let scalars = AdamScalars::at(config, e);
+        for (((p, mi), vi), &g) in net
+            .params
+            .iter_mut()
+            .zip(m.iter_mut())
+            .zip(v.iter_mut())
+            .zip(&grad)
+        {
             adam_update(p, mi, vi, g, &scalars);
         }
+        *epoch += 1;
     }
     if net.params.iter().any(|p| !p.is_finite()) {
-        return Err(diverged(k, config.epochs));
+        return Err(diverged(k, *epoch));
     }
     Ok(())
+}
+
+/// Every run of a segment continued to `to_epoch` by `fit(run, set, k)`, in parallel.
+pub(crate) fn continue_each(
+    runs: &mut [AdamRun],
+    sets: &[TrainingSet],
+    config: &ModelConfig,
+    to_epoch: u32,
+    fit: impl Fn(&mut AdamRun, &TrainingSet, usize) -> Result<()> + Sync + Send,
+) -> Result<()> {
+    check_segment(runs, sets, config, to_epoch)?;
+    runs.par_iter_mut()
+        .zip(sets.par_iter())
+        .enumerate()
+        .try_for_each(|(k, (run, set))| fit(run, set, k))
 }
 
 /// Mean squared error of a network on a set (f64 sum), for reports and tests.
