@@ -71,7 +71,7 @@ pub struct AnalyzeArgs {
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Write a chart (PNG).
+    /// Write a chart (PNG) and, beside it, the result as NAME.json (read by `errmap report`).
     #[arg(long, value_name = "PNG")]
     pub chart: Option<PathBuf>,
     #[command(flatten)]
@@ -256,6 +256,7 @@ struct AfterJson<'a> {
     table: String,
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
+    figures: Vec<Figure>,
 }
 
 /// The analyze document: `standard`, `unit`, `targets`, `axis`, then the optional parts.
@@ -266,6 +267,9 @@ struct AnalyzeJson<'a> {
     /// Present only for a unidirectional test: the one direction measured.
     #[serde(skip_serializing_if = "Option::is_none")]
     unidirectional: Option<errmap::linear::Direction>,
+    /// Headings of the `targets` keys mean_up … repeatability in the standard's own symbols
+    /// (empty: the standard defines no such figure).
+    target_symbols: [&'static str; 8],
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
     /// The axis figures in the standard's own symbols, with their definitions.
@@ -403,22 +407,41 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
             },
         )?;
     }
+    let doc = AnalyzeJson {
+        standard: ev.standard.name(),
+        unit: "um",
+        unidirectional: ev.unidirectional,
+        target_symbols: target_symbols(ev.standard),
+        targets: targets_json(&ev),
+        axis: &ev.axis,
+        figures: ev.figures(),
+        pitch_fit: fit.as_ref(),
+        after: after.as_ref().map(|(path, a)| AfterJson {
+            table: path.display().to_string(),
+            targets: targets_json(a),
+            axis: &a.axis,
+            figures: a.figures(),
+        }),
+        corrections: notes.clone(),
+    };
+    if let Some(png) = &args.chart {
+        // The result beside the chart, for `errmap report`.
+        let mut inputs: Vec<&Path> = vec![args.runs.as_path()];
+        inputs.extend(args.apply_table.as_deref());
+        errmap::report::result::write_result(
+            &errmap::report::result::beside(png),
+            &errmap::report::result::ResultSpec {
+                kind: "linear-analysis",
+                title: format!("Linear axis {} ({})", args.runs.display(), ev.standard),
+                inputs: &inputs,
+                charts: &[png.as_path()],
+                table: args.apply_table.as_deref(),
+            },
+            &doc,
+        )?;
+    }
     if args.json {
-        print_json(&AnalyzeJson {
-            standard: ev.standard.name(),
-            unit: "um",
-            unidirectional: ev.unidirectional,
-            targets: targets_json(&ev),
-            axis: &ev.axis,
-            figures: ev.figures(),
-            pitch_fit: fit.as_ref(),
-            after: after.as_ref().map(|(path, a)| AfterJson {
-                table: path.display().to_string(),
-                targets: targets_json(a),
-                axis: &a.axis,
-            }),
-            corrections: notes.clone(),
-        })?;
+        print_json(&doc)?;
     } else {
         for n in &notes {
             outln!("{n}");
@@ -435,7 +458,11 @@ fn analyze(args: AnalyzeArgs, globals: Globals) -> Result<i32> {
         }
     }
     if let (Some(png), false) = (&args.chart, globals.quiet || args.json) {
-        eprintln!("chart written to {}", png.display());
+        eprintln!(
+            "chart written to {} (result: {})",
+            png.display(),
+            errmap::report::result::beside(png).display()
+        );
     }
     Ok(0)
 }

@@ -63,7 +63,7 @@ pub struct CalibrateArgs {
 pub struct DifferenceArgs {
     /// Campaign folder (or its campaign.toml).
     pub campaign: PathBuf,
-    /// Output folder for difference.csv, lines.csv and fan.png (default: <campaign>/difference).
+    /// Output folder for difference.csv, lines.csv, fan.png and difference.json (default: <campaign>/difference).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Print one JSON document instead of the table.
@@ -179,7 +179,7 @@ pub struct EvaluateArgs {
     /// Evaluation standard.
     #[arg(long, value_enum, default_value = "iso230-2:2014")]
     pub standard: Standard,
-    /// Output folder for evaluate.csv and evaluate.png (default: beside the model).
+    /// Output folder for evaluate.csv, evaluate.png and evaluate.json (default: beside the model).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Print one JSON document instead of the table.
@@ -328,6 +328,17 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
         Ok(())
     })?;
     fan_chart(&out.join("fan.png"), &d)?;
+    errmap::report::result::write_result(
+        &out.join("difference.json"),
+        &errmap::report::result::ResultSpec {
+            kind: "thermal-difference",
+            title: format!("Thermal difference, campaign {}", d.campaign),
+            inputs: &[campaign_file_path(&a.campaign).as_path()],
+            charts: &[&out.join("fan.png")],
+            table: None,
+        },
+        &d,
+    )?;
     if a.json {
         print_json(&d)?;
     } else {
@@ -349,7 +360,7 @@ fn run_difference(a: DifferenceArgs, g: Globals) -> Result<i32> {
         }
         if !g.quiet {
             eprintln!(
-                "wrote difference.csv, lines.csv, fan.png in {}",
+                "wrote difference.csv, lines.csv, fan.png, difference.json in {}",
                 out.display()
             );
         }
@@ -669,6 +680,17 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
         Ok(())
     })?;
     evaluate_chart(&out.join("evaluate.png"), &report)?;
+    errmap::report::result::write_result(
+        &out.join("evaluate.json"),
+        &errmap::report::result::ResultSpec {
+            kind: "thermal-evaluate",
+            title: format!("Thermal model {} evaluated", a.model.display()),
+            inputs: &[a.model.as_path()],
+            charts: &[&out.join("evaluate.png")],
+            table: None,
+        },
+        &report,
+    )?;
     if a.json {
         print_json(&report)?;
         return Ok(0);
@@ -692,7 +714,10 @@ fn run_evaluate(a: EvaluateArgs, g: Globals) -> Result<i32> {
         );
     }
     if !g.quiet {
-        eprintln!("wrote evaluate.csv, evaluate.png in {}", out.display());
+        eprintln!(
+            "wrote evaluate.csv, evaluate.png, evaluate.json in {}",
+            out.display()
+        );
     }
     Ok(0)
 }
