@@ -148,7 +148,8 @@ pub fn run_job(
     let files = manifest::hash_tree(&dir)?;
     let mut m = RunManifest::build(files, kind, job_hash, &summary, input_hashes, &reused)?;
     m.metadata = file.job.metadata_json();
-    write_report(&dir, &mut m, Some(file.job.clean.k_sigma))?;
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(&dir, &mut m)?;
     m.write(&dir)?;
     staging.commit()?;
     Ok(JobRun {
@@ -159,7 +160,7 @@ pub fn run_job(
 }
 
 /// Write `report.html` into the run's folder and list it in the manifest (before `run.json`).
-fn write_report(dir: &Path, m: &mut RunManifest, k_sigma: Option<f64>) -> Result<()> {
+fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
     // The summary as `errmap report` will read it back (JSON parsing may round the last
     // digit), so that both give the same bytes.
     let summary = BatchSummary::read(&dir.join("summary.json"))?;
@@ -167,7 +168,6 @@ fn write_report(dir: &Path, m: &mut RunManifest, k_sigma: Option<f64>) -> Result
         dir,
         manifest: m,
         summary: &summary,
-        k_sigma,
     })?;
     let name = crate::report::run::REPORT_FILE;
     crate::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
@@ -548,7 +548,8 @@ fn reduce_into(
     let mut m = reduce_manifest(batch_dir, folders, manifests, &merged)?;
     m.job = Some(file.path.clone());
     m.metadata = file.job.metadata_json();
-    write_report(batch_dir, &mut m, Some(file.job.clean.k_sigma))?;
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(batch_dir, &mut m)?;
     m.write(batch_dir)?;
     Ok(JobRun {
         summary: merged,
@@ -625,5 +626,6 @@ fn reduce_manifest(
         shards,
         created_utc: Some(manifest::utc_now()),
         metadata: manifests[0].metadata.clone(),
+        k_sigma: manifests[0].k_sigma,
     })
 }

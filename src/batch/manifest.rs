@@ -46,6 +46,9 @@ pub struct RunManifest {
     /// The job's free-form `[metadata]` (machine, serial, operator, temperatures …).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub metadata: BTreeMap<String, serde_json::Value>,
+    /// `[clean] k_sigma`: a point was rejected when its leave-one-out residual exceeded k·σ.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_sigma: Option<f64>,
 }
 
 /// Now (or `SOURCE_DATE_EPOCH`, for reproducible runs) as UTC RFC 3339, to the second.
@@ -220,6 +223,7 @@ impl RunManifest {
             shards: BTreeMap::new(),
             created_utc: Some(utc_now()),
             metadata: BTreeMap::new(),
+            k_sigma: None,
         })
     }
 

@@ -2,7 +2,7 @@
 
 use super::result::{read_result, render_results, results_in};
 use super::run::{render_run, RunInput};
-use crate::batch::manifest::{sha256_file, RunManifest, RUN_MANIFEST};
+use crate::batch::manifest::{RunManifest, RUN_MANIFEST};
 use crate::batch::summary::BatchSummary;
 use crate::error::{Error, Result};
 use std::path::Path;
@@ -31,7 +31,6 @@ pub fn render_path(source: &Path) -> Result<String> {
             dir: source,
             manifest: &manifest,
             summary: &summary,
-            k_sigma: job_k_sigma(&manifest),
         };
         return render_run(&input);
     }
@@ -50,16 +49,4 @@ fn not_a_source(source: &Path) -> Error {
         ),
         "pass a batch's output folder, or the folder where linear analyze --chart, thermal difference/evaluate, rotary analyze --chart or circular -o wrote",
     )
-}
-
-/// `[clean] k_sigma` of the run's job, when its file is still the one the run read.
-fn job_k_sigma(m: &RunManifest) -> Option<f64> {
-    let job = m.job.as_ref()?;
-    let want = m.inputs.get(job)?;
-    if sha256_file(job).ok().as_ref() != Some(want) {
-        return None;
-    }
-    crate::batch::Job::read(job)
-        .ok()
-        .map(|f| f.job.clean.k_sigma)
 }

@@ -12,7 +12,7 @@ pub const CSP: &str = "default-src 'none'; img-src data:; style-src 'unsafe-inli
 const CSS: &str = "
 body{font-family:'DejaVu Sans',Arial,Helvetica,sans-serif;color:#111;margin:2em auto;max-width:60em;padding:0 1em;line-height:1.4}
 h1{font-size:1.6em;margin-bottom:.2em}h2{font-size:1.3em;border-bottom:2px solid #333;padding-bottom:.2em;margin-top:2em}
-h3{font-size:1.05em;margin-top:1.4em}
+h3,h4,h5{font-size:1.05em;margin-top:1.4em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
 th,td{border:1px solid #999;padding:.2em .5em;text-align:left;vertical-align:top}
 td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
@@ -80,11 +80,15 @@ pub fn table(headers: &[&str], rows: &[Vec<Cell>]) -> String {
     if rows.is_empty() {
         return "<p class=\"note\">none</p>\n".to_string();
     }
-    let mut s = String::from("<table>\n<thead><tr>");
-    for h in headers {
-        s.push_str(&format!("<th>{}</th>", escape(h)));
+    let mut s = String::from("<table>\n");
+    if headers.iter().any(|h| !h.is_empty()) {
+        s.push_str("<thead><tr>");
+        for h in headers {
+            s.push_str(&format!("<th>{}</th>", escape(h)));
+        }
+        s.push_str("</tr></thead>\n");
     }
-    s.push_str("</tr></thead>\n<tbody>\n");
+    s.push_str("<tbody>\n");
     for row in rows {
         s.push_str("<tr>");
         for c in row {

@@ -303,42 +303,40 @@ fn targets_table(standard: &str, symbols: &[String], targets: Option<&Value>) ->
     table(&headers, &rows)
 }
 
-/// Any other analysis: its scalar figures, then each list of records as a table and each
-/// nested object as a table of its scalars.
+/// Any other analysis: its scalar figures, then each nested object as its own table (two
+/// levels deep) and each list of records as a table.
 fn generic_block(key: &str, doc: &Value) -> String {
-    let Value::Object(map) = doc else {
-        return pre(&doc.to_string());
-    };
+    match doc {
+        Value::Object(map) => object_block(key, map, 3),
+        other => pre(&other.to_string()),
+    }
+}
+
+fn object_block(key: &str, map: &serde_json::Map<String, Value>, level: usize) -> String {
     let mut s = String::new();
     let scalars: Vec<Vec<Cell>> = map
         .iter()
         .filter(|(_, v)| !v.is_object() && !v.is_array())
         .map(|(k, v)| scalar_row(&format!("{key}.{k}"), k, v))
         .collect();
-    s.push_str(&table(&["figure", "value"], &scalars));
+    if !scalars.is_empty() {
+        s.push_str(&table(&["figure", "value"], &scalars));
+    }
+    let heading = |k: &str| format!("<h{level}>{}</h{level}>\n", html::escape(k));
     for (k, v) in map {
         match v {
-            Value::Object(inner) => {
-                s.push_str(&format!("<h3>{}</h3>\n", html::escape(k)));
-                let rows: Vec<Vec<Cell>> = inner
-                    .iter()
-                    .map(|(ik, iv)| match iv {
-                        Value::Object(_) | Value::Array(_) => {
-                            vec![Cell::text(ik), Cell::text(iv.to_string())]
-                        }
-                        _ => scalar_row(&format!("{key}.{k}.{ik}"), ik, iv),
-                    })
-                    .collect();
-                s.push_str(&table(&["", "value"], &rows));
+            Value::Object(inner) if level < 5 => {
+                s.push_str(&heading(k));
+                s.push_str(&object_block(&format!("{key}.{k}"), inner, level + 1));
             }
+            Value::Object(_) => s.push_str(&para("", &format!("{k}: {v}"))),
             Value::Array(items) if items.iter().all(Value::is_object) && !items.is_empty() => {
-                s.push_str(&format!("<h3>{}</h3>\n", html::escape(k)));
+                s.push_str(&heading(k));
                 s.push_str(&records_table(items));
             }
             Value::Array(items) if !items.is_empty() => {
-                s.push_str(&format!("<h3>{}</h3>\n", html::escape(k)));
                 let text: Vec<String> = items.iter().map(json_text).collect();
-                s.push_str(&para("", &text.join(", ")));
+                s.push_str(&para("", &format!("{k}: {}", text.join(", "))));
             }
             _ => {}
         }

@@ -18,8 +18,6 @@ pub struct RunInput<'a> {
     pub dir: &'a Path,
     pub manifest: &'a RunManifest,
     pub summary: &'a BatchSummary,
-    /// `[clean] k_sigma` of the job, when known (names the rejection rule).
-    pub k_sigma: Option<f64>,
 }
 
 /// Render the report of a run.
@@ -359,7 +357,7 @@ fn rejected_block(input: &RunInput, p: &PartSummary, folder: &str) -> Result<Str
         .map(|c| t.require(c))
         .into_iter()
         .collect::<Result<Vec<usize>>>()?;
-    let limit = match (input.k_sigma, p.sigma_um) {
+    let limit = match (input.manifest.k_sigma, p.sigma_um) {
         (Some(k), Some(s)) => Some((k, s)),
         _ => None,
     };
@@ -385,4 +383,102 @@ fn rejected_block(input: &RunInput, p: &PartSummary, folder: &str) -> Result<Str
         &["x, mm", "y, mm", "z, mm", "residual, µm", "reason"],
         &rows,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// A run folder with one mapped part whose name needs escaping, one failed part, the
+    /// family and a toolpath.
+    fn fake_run(dir: &Path) -> (RunManifest, BatchSummary) {
+        let part = "p<1>&";
+        std::fs::create_dir_all(dir.join(part)).unwrap();
+        std::fs::create_dir_all(dir.join("family")).unwrap();
+        for f in [
+            format!("{part}/map.png"),
+            "family/mean.png".into(),
+            "family/std.png".into(),
+        ] {
+            std::fs::write(dir.join(f), b"\x89PNG fake").unwrap();
+        }
+        std::fs::write(
+            dir.join(part).join("rejected.csv"),
+            "x_mm,y_mm,z_mm,residual_um\n125,70.5,5.05,39.5\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("family/model.json"),
+            r#"{"hull_mm": [[25.0, 25.0], [575.0, 25.0], [575.0, 275.0]]}"#,
+        )
+        .unwrap();
+        let summary: BatchSummary = serde_json::from_value(json!({
+            "family": "web<plate>", "job": "job.toml", "backend": "cpu", "normal": "z",
+            "shard": null, "domain_mm": [10.0, 10.0, 590.0, 290.0], "grid_step_mm": 5.0,
+            "parts": [
+                {"part": part, "probe_file": "probes/p<1>&.csv", "ok": true, "points": 144,
+                 "repeats_averaged": 2, "rejected": 1, "sigma_um": 1.25, "holdout_points": 14,
+                 "holdout_rmse_um": 1.19, "kriging_holdout_rmse_um": 1.2, "better_fit": "network",
+                 "rms_um": 16.6, "pv_um": 30.7, "output_dir": null, "error": null},
+                {"part": "bad", "probe_file": "probes/bad.csv", "ok": false, "points": 0,
+                 "repeats_averaged": 0, "rejected": 0, "sigma_um": null, "holdout_points": 0,
+                 "holdout_rmse_um": null, "rms_um": null, "pv_um": null, "output_dir": null,
+                 "error": {"kind": "input", "message": "no <points>", "file": null, "line": null,
+                           "column": null, "hint": null}}
+            ],
+            "failed_parts": 1,
+            "family_map": {"parts": 1, "output_dir": "family", "mean_rms_um": 17.5,
+                           "mean_pv_um": 31.0, "std_max_um": 2.5},
+            "toolpaths": [{"input": "finish.ngc", "output": "/x/family/finish-compensated.ngc",
+                           "map": "family", "report": {"moves_changed": 34}, "error": null}]
+        }))
+        .unwrap();
+        let manifest: RunManifest = serde_json::from_value(json!({
+            "format": "errmap-run/1", "errmap_version": "0.1.0", "kind": "batch",
+            "job": "job.toml", "job_hash": "abc", "shard": null, "backend": "cpu",
+            "inputs": {"probes/p<1>&.csv": "1234"},
+            "parts": [{"part": part, "probe_file": "probes/p<1>&.csv", "input_sha256": "1234",
+                       "ok": true, "reused": false,
+                       "outputs": {"p<1>&/summary.json": "00", "p<1>&/map.png": "01"}}],
+            "files": {}, "shards": {}, "created_utc": "2026-11-23T16:11:05Z",
+            "metadata": {"machine": "DMU <50>", "spindle_temp_c": 21.5}, "k_sigma": 3.0
+        }))
+        .unwrap();
+        (manifest, summary)
+    }
+
+    #[test]
+    fn every_section_is_present_and_every_text_escaped() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (manifest, summary) = fake_run(tmp.path());
+        let html = render_run(&RunInput {
+            dir: tmp.path(),
+            manifest: &manifest,
+            summary: &summary,
+        })
+        .unwrap();
+        for id in ["job", "family", "toolpaths", "part-p-1--", "part-bad"] {
+            assert!(html.contains(&format!("<section id=\"{id}\">")), "{id}");
+        }
+        // Job metadata: date from run.json, metadata, inputs, escaped.
+        assert!(html.contains("2026-11-23T16:11:05Z"));
+        assert!(html.contains("DMU &lt;50&gt;") && html.contains("21.5"));
+        assert!(html.contains("probes/p&lt;1&gt;&amp;.csv"));
+        assert!(!html.contains("<1>") && !html.contains("<plate>") && !html.contains("<points>"));
+        // Three pictures (the fake PNG bytes, base64) and the hull drawn.
+        assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3);
+        assert!(html.contains("<polygon points=\""));
+        // Figures with exact values; the rejected point with its reason (k·σ = 3·1.25).
+        assert!(
+            html.contains("data-figure=\"p&lt;1&gt;&amp;.holdout_rmse_um\" data-value=\"1.19\"")
+        );
+        assert!(html.contains("data-figure=\"family.std_max_um\" data-value=\"2.5\""));
+        assert!(html.contains("|r| &gt; k·σ = 3·1.250 = 3.750 µm"), "{html}");
+        assert!(html.contains("moves_changed") && html.contains("family/finish-compensated.ngc"));
+        assert!(html.contains("FAILED: no &lt;points&gt;"));
+        // No network: nothing but data: URIs and in-page anchors.
+        assert!(!html.contains("http://") || html.matches("http://").count() == 1);
+        assert!(!html.contains("https://") && !html.contains("<script"));
+    }
 }
