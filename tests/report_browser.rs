@@ -459,3 +459,63 @@ fn report_refuses_an_input_as_output_and_a_missing_browser() {
     let r = common::errmap(tmp.path(), &["report", empty.to_str().unwrap()]);
     r.expect_code(2);
 }
+
+#[test]
+fn analyses_write_results_that_report_renders_in_each_standards_symbols() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("axes");
+    std::fs::create_dir(&dir).unwrap();
+    let chart = dir.join("x.png");
+    let runs = root.join("data/linear/runs.csv");
+    let r = common::ok(
+        tmp.path(),
+        &[
+            "linear",
+            "analyze",
+            runs.to_str().unwrap(),
+            "--standard",
+            "vdi3441",
+            "--chart",
+            chart.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    let printed = common::json(&r);
+    let result: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("x.json")).unwrap()).unwrap();
+    assert_eq!(result["format"], "errmap-result/1");
+    assert_eq!(result["charts"], json!(["x.png"]));
+    assert_eq!(
+        result["result"], printed,
+        "the result is what --json prints"
+    );
+    assert_eq!(printed["target_symbols"][4], "U_j");
+    let centres = root.join("data/rotary/centres.csv");
+    common::ok(
+        tmp.path(),
+        &[
+            "rotary",
+            "analyze",
+            centres.to_str().unwrap(),
+            "--chart",
+            dir.join("c.png").to_str().unwrap(),
+        ],
+    );
+    common::ok(tmp.path(), &["report", dir.to_str().unwrap(), "-q"]);
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_eq!(html.matches("<section id=").count(), 2);
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    // VDI/DGQ 3441's own symbols, not ISO's, with each value as --json gave it.
+    for f in printed["figures"].as_array().unwrap() {
+        let sym = f["symbol"].as_str().unwrap();
+        let v = f["value"].as_f64().unwrap();
+        let attr = format!("data-figure=\"x.{sym}\" data-value=\"");
+        let at = html.find(&attr).unwrap_or_else(|| panic!("{sym} missing"));
+        let rest = &html[at + attr.len()..];
+        let shown: f64 = rest[..rest.find('"').unwrap()].parse().unwrap();
+        assert_eq!(shown, v, "{sym}");
+    }
+    assert!(html.contains("<th>Ps_j</th>") && html.contains("<th>U_j</th>"));
+    assert!(!html.contains("<th>R_i</th>") && !html.contains(">B̄<"));
+}
