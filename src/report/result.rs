@@ -72,7 +72,7 @@ pub struct ResultSpec<'a> {
 
 /// Write a result file (atomically; never over an input).
 pub fn write_result(path: &Path, spec: &ResultSpec, result: &impl Serialize) -> Result<()> {
-    if spec.charts.iter().any(|c| *c == path) {
+    if spec.charts.contains(&path) {
         return Err(Error::usage(
             format!("the result {} would replace the chart", path.display()),
             "name the chart NAME.png; its result is NAME.json",
