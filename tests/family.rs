@@ -440,13 +440,21 @@ fn the_same_job_gives_the_same_bytes_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     synth_family(d, "2", &["--epochs", "40"]);
-    batch(d, "cpu", "out", 0);
+    // The run's date (run.json, report.html) is the one thing that differs between runs:
+    // fixed here as reproducible builds fix it.
+    let fixed_date = |c: &mut std::process::Command| {
+        c.env("SOURCE_DATE_EPOCH", "1795450265");
+    };
+    common::errmap_with(d, &batch_args("cpu", "out", &[]), fixed_date).expect_code(0);
     let first: Vec<(PathBuf, Vec<u8>)> = common::files(&d.join("out"))
         .into_iter()
         .map(|p| (p.clone(), std::fs::read(&p).unwrap()))
         .collect();
     assert!(first.len() > 10);
-    batch(d, "cpu", "out", 0);
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("out/run.json")).unwrap()).unwrap();
+    assert_eq!(run["created_utc"], "2026-11-23T16:11:05Z");
+    common::errmap_with(d, &batch_args("cpu", "out", &[]), fixed_date).expect_code(0);
     for (path, bytes) in &first {
         assert!(
             std::fs::read(path).unwrap() == *bytes,

@@ -57,9 +57,11 @@ fn analyze_json_has_the_issue_shape_and_hand_values() {
         .keys()
         .map(String::as_str)
         .collect();
-    // The four keys of the shape, plus `figures`: the axis figures in the standard's symbols.
-    assert_eq!(keys.len(), 5, "{keys:?}");
+    // The four keys of the shape, plus `figures` (the axis figures in the standard's symbols)
+    // and `target_symbols` (the per-target headings in them).
+    assert_eq!(keys.len(), 6, "{keys:?}");
     assert_eq!(doc["figures"][0]["symbol"], "A");
+    assert_eq!(doc["target_symbols"][4], "B_i");
     let t = &doc["targets"][1];
     for key in [
         "target_mm",

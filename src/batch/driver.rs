@@ -149,7 +149,10 @@ pub fn run_job(
         "batch"
     };
     let files = manifest::hash_tree(&dir)?;
-    let m = RunManifest::build(files, kind, job_hash, &summary, input_hashes, &reused)?;
+    let mut m = RunManifest::build(files, kind, job_hash, &summary, input_hashes, &reused)?;
+    m.metadata = file.job.metadata_json();
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(&dir, &mut m)?;
     m.write(&dir)?;
     staging.commit()?;
     Ok(JobRun {
@@ -157,6 +160,23 @@ pub fn run_job(
         folder: target,
         reused,
     })
+}
+
+/// Write `report.html` into the run's folder and list it in the manifest (before `run.json`).
+fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
+    // The summary as `errmap report` will read it back (JSON parsing may round the last
+    // digit), so that both give the same bytes.
+    let summary = BatchSummary::read(&dir.join("summary.json"))?;
+    let html = crate::report::run::render_run(&crate::report::run::RunInput {
+        dir,
+        manifest: m,
+        summary: &summary,
+    })?;
+    let name = crate::report::run::REPORT_FILE;
+    crate::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
+    m.files
+        .insert(name.to_string(), manifest::sha256_bytes(html.as_bytes()));
+    Ok(())
 }
 
 fn domain_of(file: &JobFile) -> Result<crate::geom::Domain> {
@@ -530,6 +550,9 @@ fn reduce_into(
     crate::io::write_json(&batch_dir.join("summary.json"), &merged)?;
     let mut m = reduce_manifest(batch_dir, folders, manifests, &merged)?;
     m.job = Some(file.path.clone());
+    m.metadata = file.job.metadata_json();
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(batch_dir, &mut m)?;
     m.write(batch_dir)?;
     Ok(JobRun {
         summary: merged,
@@ -604,5 +627,8 @@ fn reduce_manifest(
         parts,
         files,
         shards,
+        created_utc: Some(manifest::utc_now()),
+        metadata: manifests[0].metadata.clone(),
+        k_sigma: manifests[0].k_sigma,
     })
 }

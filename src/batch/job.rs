@@ -36,6 +36,10 @@ pub struct Job {
     pub interp: InterpConfig,
     pub model: ModelConfig,
     pub toolpaths: ToolpathConfig,
+    /// `[metadata]`: free-form facts for the report (machine, serial, operator, temperatures …),
+    /// each a string or a number; they decide no result and are left out of the job hash.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub metadata: std::collections::BTreeMap<String, toml::Value>,
 }
 
 impl Default for Job {
@@ -53,6 +57,7 @@ impl Default for Job {
             interp: InterpConfig::default(),
             model: ModelConfig::default(),
             toolpaths: ToolpathConfig::default(),
+            metadata: std::collections::BTreeMap::new(),
         }
     }
 }
@@ -278,6 +283,7 @@ impl Job {
                 "use letters, digits, '-', '_' or '.', e.g. family = \"web-plate\"",
             ));
         }
+        self.validate_metadata(&bad)?;
         if let Some(z) = self.nominal_plane_mm {
             if !z.is_finite() {
                 return Err(bad(
@@ -357,6 +363,50 @@ impl Job {
                 hint,
             )
         })
+    }
+}
+
+impl Job {
+    /// `[metadata]` values are strings or finite numbers under non-empty keys.
+    fn validate_metadata(&self, bad: &dyn Fn(&str, String, &str) -> Error) -> Result<()> {
+        let hint = "write key = \"text\" or key = number, e.g. machine = \"DMU 50\", spindle_temp_c = 21.4";
+        for (key, value) in &self.metadata {
+            let at = format!("metadata.{key}");
+            if key.trim().is_empty() {
+                return Err(bad("metadata", "a key is empty".into(), hint));
+            }
+            match value {
+                toml::Value::String(_) | toml::Value::Integer(_) => {}
+                toml::Value::Float(f) if f.is_finite() => {}
+                toml::Value::Float(f) => {
+                    return Err(bad(&at, format!("{f} is not a finite number"), hint))
+                }
+                other => {
+                    return Err(bad(
+                        &at,
+                        format!("a {} is neither text nor a number", other.type_str()),
+                        hint,
+                    ))
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// `[metadata]` as JSON values, for the run manifest and the report.
+    pub fn metadata_json(&self) -> std::collections::BTreeMap<String, serde_json::Value> {
+        self.metadata
+            .iter()
+            .map(|(k, v)| {
+                let j = match v {
+                    toml::Value::String(t) => serde_json::Value::from(t.clone()),
+                    toml::Value::Integer(i) => serde_json::Value::from(*i),
+                    toml::Value::Float(f) => serde_json::Value::from(*f),
+                    other => serde_json::Value::from(other.to_string()),
+                };
+                (k.clone(), j)
+            })
+            .collect()
     }
 }
 
@@ -491,6 +541,24 @@ map = "part"
             err.contains("grid_step_mm") && err.contains("positive"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn metadata_takes_text_and_numbers_and_names_a_bad_value() {
+        let text = "family = \"a\"\n[metadata]\nmachine = \"DMU <50>\"\nserial = 1234\ncoolant_temp_c = 21.5\n";
+        let job = Job::parse(Path::new("j.toml"), text).unwrap();
+        let m = job.metadata_json();
+        assert_eq!(m["machine"], "DMU <50>");
+        assert_eq!(m["serial"], 1234);
+        assert_eq!(m["coolant_temp_c"], 21.5);
+        let text = "family = \"a\"\n[metadata]\nmachine = \"m\"\naxes = [1, 2]\n";
+        let err = Job::parse(Path::new("j.toml"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("j.toml:4, column 8:"), "{err}");
+        assert!(err.contains("metadata.axes"), "{err}");
+        let text = "[metadata]\nwhen = 2026-01-01\n";
+        assert!(Job::parse(Path::new("j.toml"), text).is_err());
     }
 
     #[test]

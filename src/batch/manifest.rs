@@ -40,6 +40,50 @@ pub struct RunManifest {
     pub files: BTreeMap<String, String>,
     /// For a reduce: each shard folder (relative) and the SHA-256 of its `run.json`.
     pub shards: BTreeMap<String, String>,
+    /// When the run was committed, UTC, RFC 3339 (`SOURCE_DATE_EPOCH` when set); the report's date.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub created_utc: Option<String>,
+    /// The job's free-form `[metadata]` (machine, serial, operator, temperatures …).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub metadata: BTreeMap<String, serde_json::Value>,
+    /// `[clean] k_sigma`: a point was rejected when its leave-one-out residual exceeded k·σ.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_sigma: Option<f64>,
+}
+
+/// Now (or `SOURCE_DATE_EPOCH`, for reproducible runs) as UTC RFC 3339, to the second.
+pub fn utc_now() -> String {
+    let secs = std::env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|v| v.trim().parse::<i64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs() as i64)
+        });
+    utc_rfc3339(secs)
+}
+
+/// Seconds since 1970-01-01T00:00:00Z as `YYYY-MM-DDThh:mm:ssZ` (proleptic Gregorian calendar;
+/// days to date by Hinnant's `civil_from_days`).
+pub fn utc_rfc3339(secs: i64) -> String {
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
 }
 
 /// One part of a run.
@@ -86,6 +130,8 @@ fn hex(bytes: &[u8]) -> String {
 pub fn job_hash(job: &super::Job, probe_files: &[PathBuf], base: &Path) -> Result<String> {
     let mut job = job.clone();
     job.output = None;
+    // Free-form metadata names the machine and set-up; it decides no result.
+    job.metadata.clear();
     let names: Vec<String> = probe_files
         .iter()
         .map(|f| {
@@ -175,6 +221,9 @@ impl RunManifest {
             parts,
             files,
             shards: BTreeMap::new(),
+            created_utc: Some(utc_now()),
+            metadata: BTreeMap::new(),
+            k_sigma: None,
         })
     }
 
@@ -242,6 +291,15 @@ mod tests {
             sha256_bytes(b""),
             "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
         );
+    }
+
+    #[test]
+    fn dates_are_utc_rfc3339() {
+        // Values checked with `date -u -d @SECS`.
+        assert_eq!(utc_rfc3339(0), "1970-01-01T00:00:00Z");
+        assert_eq!(utc_rfc3339(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(utc_rfc3339(1_795_450_265), "2026-11-23T16:11:05Z");
+        assert_eq!(utc_rfc3339(-1), "1969-12-31T23:59:59Z");
     }
 
     #[test]

@@ -28,7 +28,7 @@ pub struct CircularArgs {
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Write the polar chart (PNG).
+    /// Write the polar chart (PNG) and, beside it, the result as NAME.json (read by `errmap report`).
     #[arg(long, short = 'o', value_name = "PNG")]
     pub output: Option<PathBuf>,
 }
@@ -120,6 +120,18 @@ pub fn run(args: CircularArgs, _globals: Globals) -> Result<i32> {
     let (eval, centred, _) = analyze(&run, args.plane, args.feed)?;
     if let Some(png) = &args.output {
         save_polar_chart(png, &eval, &centred)?;
+        // The result beside the chart, for `errmap report`.
+        errmap::report::result::write_result(
+            &errmap::report::result::beside(png),
+            &errmap::report::result::ResultSpec {
+                kind: "circular",
+                title: format!("Circular test {}", args.run.display()),
+                inputs: &[args.run.as_path()],
+                charts: &[png.as_path()],
+                table: None,
+            },
+            &eval,
+        )?;
     }
     let text = if args.json {
         let mut t = serde_json::to_string_pretty(&eval)

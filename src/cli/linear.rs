@@ -92,7 +92,7 @@ pub struct AnalyzeArgs {
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Also draw the deviations as a chart (PNG file).
+    /// Write a chart (PNG) and, beside it, the result as NAME.json (read by `errmap report`).
     #[arg(long, value_name = "PNG")]
     pub chart: Option<PathBuf>,
     #[command(flatten)]
@@ -307,6 +307,7 @@ struct AfterJson<'a> {
     table: String,
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
+    figures: Vec<Figure>,
 }
 
 /// The analyze document: `standard`, `unit`, `targets`, `axis`, then the optional parts.
@@ -317,6 +318,9 @@ struct AnalyzeJson<'a> {
     /// Present only for a unidirectional test: the one direction measured.
     #[serde(skip_serializing_if = "Option::is_none")]
     unidirectional: Option<errmap::linear::Direction>,
+    /// Headings of the `targets` keys mean_up … repeatability in the standard's own symbols
+    /// (empty: the standard defines no such figure).
+    target_symbols: [&'static str; 8],
     targets: Vec<TargetJson>,
     axis: &'a AxisFigures,
     /// The axis figures in the standard's own symbols, with their definitions.
@@ -459,22 +463,41 @@ fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
             },
         )?;
     }
+    let doc = AnalyzeJson {
+        standard: ev.standard.name(),
+        unit: "um",
+        unidirectional: ev.unidirectional,
+        target_symbols: target_symbols(ev.standard),
+        targets: targets_json(&ev),
+        axis: &ev.axis,
+        figures: ev.figures(),
+        pitch_fit: fit.as_ref(),
+        after: after.as_ref().map(|(path, a)| AfterJson {
+            table: path.display().to_string(),
+            targets: targets_json(a),
+            axis: &a.axis,
+            figures: a.figures(),
+        }),
+        corrections: notes.clone(),
+    };
+    if let Some(png) = &args.chart {
+        // The result beside the chart, for `errmap report`.
+        let mut inputs: Vec<&Path> = vec![args.runs.as_path()];
+        inputs.extend(args.apply_table.as_deref());
+        errmap::report::result::write_result(
+            &errmap::report::result::beside(png),
+            &errmap::report::result::ResultSpec {
+                kind: "linear-analysis",
+                title: format!("Linear axis {} ({})", args.runs.display(), ev.standard),
+                inputs: &inputs,
+                charts: &[png.as_path()],
+                table: args.apply_table.as_deref(),
+            },
+            &doc,
+        )?;
+    }
     if args.json {
-        print_json(&AnalyzeJson {
-            standard: ev.standard.name(),
-            unit: "um",
-            unidirectional: ev.unidirectional,
-            targets: targets_json(&ev),
-            axis: &ev.axis,
-            figures: ev.figures(),
-            pitch_fit: fit.as_ref(),
-            after: after.as_ref().map(|(path, a)| AfterJson {
-                table: path.display().to_string(),
-                targets: targets_json(a),
-                axis: &a.axis,
-            }),
-            corrections: notes.clone(),
-        })?;
+        print_json(&doc)?;
     } else {
         for n in &notes {
             outln!("{n}");
@@ -491,7 +514,11 @@ fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
         }
     }
     if let (Some(png), false) = (&args.chart, args.json) {
-        info!("chart written to {}", png.display());
+        info!(
+            "chart written to {} (result: {})",
+            png.display(),
+            errmap::report::result::beside(png).display()
+        );
     }
     Ok(0)
 }

@@ -34,6 +34,7 @@ mod gpu;
 mod grid;
 mod linear;
 mod part;
+mod report;
 mod rotary;
 mod scale;
 mod synth_web_plate;
@@ -98,6 +99,8 @@ pub enum Command {
     Rotary(rotary::RotaryCommand),
     /// Dynamic circular test (ISO 230-4, ballbar or grid encoder): G, F, H and a diagnosis of axis errors.
     Circular(circular::CircularArgs),
+    /// Write the self-contained report.html of a batch run or an analysis's outputs (and --pdf).
+    Report(report::ReportArgs),
     /// Generate sample data with known ground truth.
     #[command(subcommand)]
     Synth(SynthCommand),
@@ -180,6 +183,7 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Synth(SynthCommand::Thermal(args)) => thermal::run_synth(args, globals),
         Command::Synth(SynthCommand::Rotary(args)) => rotary::run_synth(args, globals),
         Command::Circular(args) => circular::run(args, globals),
+        Command::Report(args) => report::run(args, globals),
         Command::Synth(SynthCommand::Circular(args)) => circular::run_synth(args, globals),
     }
 }

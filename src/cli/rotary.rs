@@ -66,7 +66,8 @@ pub struct AnalyzeArgs {
     /// Print one JSON document on stdout instead of text.
     #[arg(long)]
     pub json: bool,
-    /// Write a chart of error vs angle per direction with the repeat spread.
+    /// Write a chart of error vs angle per direction with the repeat spread, and beside it the
+    /// result as NAME.json (read by `errmap report`).
     #[arg(long, value_name = "PNG")]
     pub chart: Option<PathBuf>,
 }
@@ -149,6 +150,18 @@ pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
             let analysis = args.measurement.analyze()?;
             if let Some(png) = &args.chart {
                 save_error_chart(png, &analysis)?;
+                // The result beside the chart, for `errmap report`.
+                errmap::report::result::write_result(
+                    &errmap::report::result::beside(png),
+                    &errmap::report::result::ResultSpec {
+                        kind: "rotary-analysis",
+                        title: format!("Rotary axis {}", analysis.axis),
+                        inputs: &[args.measurement.file.as_path()],
+                        charts: &[png.as_path()],
+                        table: None,
+                    },
+                    &analysis,
+                )?;
             }
             if args.json {
                 let text = serde_json::to_string_pretty(&analysis)

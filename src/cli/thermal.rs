@@ -64,7 +64,7 @@ pub struct CalibrateArgs {
 pub struct DifferenceArgs {
     /// Campaign folder (or its campaign.toml).
     pub campaign: PathBuf,
-    /// Output folder for difference.csv, lines.csv and fan.png (default: <campaign>/difference).
+    /// Output folder for difference.csv, lines.csv, fan.png and difference.json (default: <campaign>/difference).
     #[arg(long, value_name = "DIR")]
     pub out_dir: Option<PathBuf>,
     /// Old spelling of --out-dir.
@@ -189,7 +189,7 @@ pub struct EvaluateArgs {
     /// Evaluation standard.
     #[arg(long, value_enum, default_value = "iso230-2:2014")]
     pub standard: Standard,
-    /// Output folder for evaluate.csv and evaluate.png (default: the model's folder).
+    /// Output folder for evaluate.csv, evaluate.png and evaluate.json (default: the model's folder).
     #[arg(long, value_name = "DIR")]
     pub out_dir: Option<PathBuf>,
     /// Old spelling of --out-dir.
@@ -359,6 +359,17 @@ fn run_difference(a: DifferenceArgs, _g: Globals) -> Result<i32> {
         Ok(())
     })?;
     fan_chart(&out.join("fan.png"), &d)?;
+    errmap::report::result::write_result(
+        &out.join("difference.json"),
+        &errmap::report::result::ResultSpec {
+            kind: "thermal-difference",
+            title: format!("Thermal difference, campaign {}", d.campaign),
+            inputs: &[campaign_file_path(&a.campaign).as_path()],
+            charts: &[&out.join("fan.png")],
+            table: None,
+        },
+        &d,
+    )?;
     if a.json {
         print_json(&d)?;
     } else {
@@ -379,7 +390,7 @@ fn run_difference(a: DifferenceArgs, _g: Globals) -> Result<i32> {
             );
         }
         info!(
-            "wrote difference.csv, lines.csv, fan.png in {}",
+            "wrote difference.csv, lines.csv, fan.png, difference.json in {}",
             out.display()
         );
     }
@@ -700,6 +711,17 @@ fn run_evaluate(a: EvaluateArgs, _g: Globals) -> Result<i32> {
         Ok(())
     })?;
     evaluate_chart(&out.join("evaluate.png"), &report)?;
+    errmap::report::result::write_result(
+        &out.join("evaluate.json"),
+        &errmap::report::result::ResultSpec {
+            kind: "thermal-evaluate",
+            title: format!("Thermal model {} evaluated", a.model.display()),
+            inputs: &[a.model.as_path()],
+            charts: &[&out.join("evaluate.png")],
+            table: None,
+        },
+        &report,
+    )?;
     if a.json {
         print_json(&report)?;
         return Ok(0);
@@ -722,7 +744,7 @@ fn run_evaluate(a: EvaluateArgs, _g: Globals) -> Result<i32> {
             opt(t.after.B)
         );
     }
-    info!("wrote evaluate.csv, evaluate.png in {}", out.display());
+    info!("wrote evaluate.csv, evaluate.png, evaluate.json in {}", out.display());
     Ok(0)
 }
 

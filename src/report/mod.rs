@@ -1,4 +1,9 @@
-//! Pictures and reports: the shared chart plumbing (fonts, PNG output) and the heatmaps and charts built on it.
+//! Pictures and reports: the shared chart plumbing (fonts, PNG output), the heatmaps and charts built on it, and the self-contained `report.html`.
 
+pub mod build;
 pub mod chart;
 pub mod heatmap;
+pub mod html;
+pub mod pdf;
+pub mod result;
+pub mod run;

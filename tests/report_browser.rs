@@ -1,0 +1,521 @@
+//! report.html in a real browser: the sample job's report opened by headless Chromium over the DevTools protocol (every image decoded, no console error, no request outside the file, the figures equal summary.json, printed to PDF), and `errmap report`'s refusals.
+//!
+//! Chromium is driven through `--remote-debugging-pipe`: it reads DevTools commands on file
+//! descriptor 3 and writes replies and events on 4, each a JSON message ended by a NUL byte.
+//! `sh` maps the test's pipes onto those descriptors, so no WebSocket client and no unsafe
+//! code are needed. Without a browser the browser test is skipped (and says so), unless
+//! `ERRMAP_REQUIRE_BROWSER=1`, as in CI, which makes it fail.
+
+mod common;
+
+use base64::Engine as _;
+use serde_json::{json, Value};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+const BROWSER_NAMES: [&str; 4] = [
+    "chromium",
+    "chromium-browser",
+    "google-chrome",
+    "google-chrome-stable",
+];
+
+/// The browser errmap would use: `$ERRMAP_CHROMIUM`, else the first name on the PATH.
+fn browser() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("ERRMAP_CHROMIUM").filter(|p| !p.is_empty()) {
+        return Some(PathBuf::from(p)).filter(|p| p.is_file());
+    }
+    let path = std::env::var_os("PATH")?;
+    BROWSER_NAMES.iter().find_map(|name| {
+        std::env::split_paths(&path)
+            .map(|d| d.join(name))
+            .find(|c| c.is_file())
+    })
+}
+
+/// The browser, or `None` after a visible skip note; a panic under ERRMAP_REQUIRE_BROWSER=1.
+fn browser_or_skip(test: &str) -> Option<PathBuf> {
+    let found = browser();
+    if found.is_none() {
+        if std::env::var("ERRMAP_REQUIRE_BROWSER").as_deref() == Ok("1") {
+            panic!("ERRMAP_REQUIRE_BROWSER=1 but no Chromium was found (install the Debian package `chromium` or set ERRMAP_CHROMIUM)");
+        }
+        eprintln!("SKIPPED {test}: no Chromium (install `chromium` or set ERRMAP_CHROMIUM)");
+    }
+    found
+}
+
+/// The sample job run once for the whole file: (its folder, the repository root).
+fn sample_run() -> &'static Path {
+    static RUN: OnceLock<PathBuf> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let tmp = tempfile::tempdir().unwrap().keep();
+        let out = tmp.join("run");
+        common::ok(
+            root,
+            &[
+                "batch",
+                "data/web-plate/job.toml",
+                "--out",
+                out.to_str().unwrap(),
+                "-q",
+            ],
+        );
+        out
+    })
+}
+
+/// A DevTools session over Chromium's pipe.
+struct DevTools {
+    child: Child,
+    to_browser: ChildStdin,
+    from_browser: Receiver<Value>,
+    next_id: u64,
+    /// Every event received so far, in order.
+    events: Vec<Value>,
+    _profile: tempfile::TempDir,
+}
+
+const TIMEOUT: Duration = Duration::from_secs(90);
+
+impl DevTools {
+    fn start(browser: &Path) -> DevTools {
+        let profile = tempfile::tempdir().unwrap();
+        let mut child = Command::new("sh")
+            .arg("-c")
+            .arg(r#"exec "$0" "$@" 3<&0 4>&1 0</dev/null 1>/dev/null"#)
+            .arg(browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--no-first-run",
+                "--remote-debugging-pipe",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start the browser");
+        let to_browser = child.stdin.take().unwrap();
+        let mut out = child.stdout.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let mut chunk = [0u8; 1 << 16];
+            while let Ok(n) = out.read(&mut chunk) {
+                if n == 0 {
+                    break;
+                }
+                buf.extend_from_slice(&chunk[..n]);
+                while let Some(end) = buf.iter().position(|&b| b == 0) {
+                    let msg: Vec<u8> = buf.drain(..=end).collect();
+                    if let Ok(v) = serde_json::from_slice(&msg[..end]) {
+                        if tx.send(v).is_err() {
+                            return;
+                        }
+                    }
+                }
+            }
+        });
+        DevTools {
+            child,
+            to_browser,
+            from_browser: rx,
+            next_id: 1,
+            events: Vec::new(),
+            _profile: profile,
+        }
+    }
+
+    fn recv(&mut self, deadline: Instant) -> Value {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match self.from_browser.recv_timeout(left) {
+            Ok(v) => v,
+            Err(RecvTimeoutError::Timeout) => panic!("the browser did not answer in time"),
+            Err(RecvTimeoutError::Disconnected) => panic!("the browser closed its pipe"),
+        }
+    }
+
+    /// Send a command (to a page session when given) and wait for its result.
+    fn call(&mut self, session: Option<&str>, method: &str, params: Value) -> Value {
+        let id = self.next_id;
+        self.next_id += 1;
+        let mut msg = json!({"id": id, "method": method, "params": params});
+        if let Some(s) = session {
+            msg["sessionId"] = json!(s);
+        }
+        let mut bytes = serde_json::to_vec(&msg).unwrap();
+        bytes.push(0);
+        self.to_browser.write_all(&bytes).unwrap();
+        self.to_browser.flush().unwrap();
+        let deadline = Instant::now() + TIMEOUT;
+        loop {
+            let v = self.recv(deadline);
+            if v.get("id").and_then(Value::as_u64) == Some(id) {
+                if let Some(e) = v.get("error") {
+                    panic!("{method} failed: {e}");
+                }
+                return v["result"].clone();
+            }
+            self.events.push(v);
+        }
+    }
+
+    /// Wait until an event `method` has arrived.
+    fn wait_for(&mut self, method: &str) {
+        let deadline = Instant::now() + TIMEOUT;
+        while !self.events.iter().any(|e| e["method"] == method) {
+            let v = self.recv(deadline);
+            self.events.push(v);
+        }
+    }
+
+    /// Collect what arrives for a short while (late console messages, requests).
+    fn drain(&mut self, wait: Duration) {
+        let deadline = Instant::now() + wait;
+        while let Ok(v) = self
+            .from_browser
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            self.events.push(v);
+        }
+    }
+}
+
+impl Drop for DevTools {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn file_url(path: &Path) -> String {
+    let abs = path.canonicalize().unwrap();
+    let mut url = String::from("file://");
+    for b in abs.to_string_lossy().bytes() {
+        if b.is_ascii_alphanumeric() || b"/-._~".contains(&b) {
+            url.push(b as char);
+        } else {
+            url.push_str(&format!("%{b:02X}"));
+        }
+    }
+    url
+}
+
+/// What the page says about itself, read in the page by DevTools (the page has no script).
+const PROBE: &str = r#"JSON.stringify({
+  images: Array.from(document.images).map(i => ({alt: i.alt, complete: i.complete, width: i.naturalWidth})),
+  svgs: document.querySelectorAll('svg polygon').length,
+  sections: Array.from(document.querySelectorAll('section')).map(s => ({id: s.id, text: s.innerText.length})),
+  figures: Array.from(document.querySelectorAll('[data-figure]')).map(e => [e.dataset.figure, e.dataset.value === undefined ? null : Number(e.dataset.value)]),
+  scripts: document.scripts.length
+})"#;
+
+#[test]
+fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
+    let Some(chrome) = browser_or_skip("report_browser") else {
+        return;
+    };
+    let run = sample_run();
+    let report = run.join("report.html");
+    let url = file_url(&report);
+    let mut dt = DevTools::start(&chrome);
+    let target = dt.call(None, "Target.createTarget", json!({"url": "about:blank"}));
+    let attached = dt.call(
+        None,
+        "Target.attachToTarget",
+        json!({"targetId": target["targetId"], "flatten": true}),
+    );
+    let session = attached["sessionId"].as_str().unwrap().to_string();
+    let s = Some(session.as_str());
+    for domain in [
+        "Page.enable",
+        "Runtime.enable",
+        "Log.enable",
+        "Network.enable",
+    ] {
+        dt.call(s, domain, json!({}));
+    }
+    dt.call(s, "Page.navigate", json!({"url": url}));
+    dt.wait_for("Page.loadEventFired");
+    let probe = dt.call(
+        s,
+        "Runtime.evaluate",
+        json!({"expression": PROBE, "returnByValue": true}),
+    );
+    let page: Value = serde_json::from_str(probe["result"]["value"].as_str().unwrap()).unwrap();
+    let pdf = dt.call(s, "Page.printToPDF", json!({"printBackground": true}));
+    dt.drain(Duration::from_millis(500));
+
+    // Every image decoded: 2 family maps and one heatmap per part.
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    let parts = summary["parts"].as_array().unwrap();
+    let images = page["images"].as_array().unwrap();
+    assert_eq!(images.len(), 2 + parts.len(), "{page}");
+    for img in images {
+        assert!(
+            img["complete"] == true && img["width"].as_u64().unwrap() > 0,
+            "image not decoded: {img}"
+        );
+    }
+    assert_eq!(page["svgs"], 1, "the family hull is drawn");
+    assert_eq!(page["scripts"], 0);
+    // Every section present and filled.
+    let ids: Vec<&str> = page["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["id"].as_str().unwrap())
+        .collect();
+    let mut want = vec!["job".to_string(), "family".into(), "toolpaths".into()];
+    want.extend(
+        parts
+            .iter()
+            .map(|p| format!("part-{}", p["part"].as_str().unwrap())),
+    );
+    assert_eq!(ids, want);
+    for sec in page["sections"].as_array().unwrap() {
+        assert!(sec["text"].as_u64().unwrap() > 100, "empty section {sec}");
+    }
+    // No console error, no exception, no failed or blocked load.
+    for e in &dt.events {
+        let m = e["method"].as_str().unwrap_or("");
+        let p = &e["params"];
+        let bad = match m {
+            "Runtime.consoleAPICalled" => matches!(p["type"].as_str(), Some("error" | "assert")),
+            "Runtime.exceptionThrown" => true,
+            "Log.entryAdded" => p["entry"]["level"] == "error",
+            "Network.loadingFailed" => true,
+            _ => false,
+        };
+        assert!(!bad, "browser reported: {e}");
+    }
+    // No request but the file itself and its data: images.
+    let requests: Vec<&str> = dt
+        .events
+        .iter()
+        .filter(|e| e["method"] == "Network.requestWillBeSent")
+        .filter_map(|e| e["params"]["request"]["url"].as_str())
+        .collect();
+    assert!(requests.contains(&url.as_str()), "{requests:?}");
+    for r in &requests {
+        assert!(
+            *r == url || r.starts_with("data:"),
+            "request outside the file: {r}"
+        );
+    }
+    // The figures in the page equal summary.json's, exactly.
+    let figures: std::collections::BTreeMap<String, Value> = page["figures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| (f[0].as_str().unwrap().to_string(), f[1].clone()))
+        .collect();
+    let mut checked = 0;
+    for p in parts {
+        let name = p["part"].as_str().unwrap();
+        for key in [
+            "points",
+            "rejected",
+            "sigma_um",
+            "holdout_points",
+            "holdout_rmse_um",
+            "kriging_holdout_rmse_um",
+            "rms_um",
+            "pv_um",
+        ] {
+            let shown = &figures[&format!("{name}.{key}")];
+            assert_eq!(shown.as_f64(), p[key].as_f64(), "{name}.{key}");
+            checked += 1;
+        }
+    }
+    let fam = &summary["family_map"];
+    for key in ["mean_rms_um", "mean_pv_um", "std_max_um", "parts"] {
+        assert_eq!(
+            figures[&format!("family.{key}")].as_f64(),
+            fam[key].as_f64(),
+            "family.{key}"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, parts.len() * 8 + 4);
+    // Printed to PDF.
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(pdf["data"].as_str().unwrap())
+        .unwrap();
+    assert!(
+        bytes.len() > 10_000 && bytes.starts_with(b"%PDF"),
+        "{} bytes",
+        bytes.len()
+    );
+}
+
+#[test]
+fn report_rewrites_the_same_bytes_and_prints_a_pdf() {
+    let run = sample_run();
+    let tmp = tempfile::tempdir().unwrap();
+    let again = tmp.path().join("again.html");
+    let r = common::errmap(
+        tmp.path(),
+        &[
+            "report",
+            run.to_str().unwrap(),
+            "-o",
+            again.to_str().unwrap(),
+        ],
+    );
+    r.expect_code(0);
+    // The same run gives the same bytes (the date is the run's, from run.json).
+    assert!(
+        std::fs::read(&again).unwrap() == std::fs::read(run.join("report.html")).unwrap(),
+        "errmap report differs from the batch's report.html"
+    );
+    let Some(chrome) = browser_or_skip("report --pdf") else {
+        return;
+    };
+    let pdf = tmp.path().join("r.pdf");
+    let r = common::errmap_with(
+        tmp.path(),
+        &[
+            "report",
+            run.to_str().unwrap(),
+            "-o",
+            again.to_str().unwrap(),
+            "--pdf",
+            pdf.to_str().unwrap(),
+        ],
+        |c| {
+            c.env("ERRMAP_CHROMIUM", &chrome);
+        },
+    );
+    r.expect_code(0);
+    let bytes = std::fs::read(&pdf).unwrap();
+    assert!(
+        bytes.len() > 10_000 && bytes.starts_with(b"%PDF"),
+        "{}",
+        r.report()
+    );
+}
+
+#[test]
+fn report_refuses_an_input_as_output_and_a_missing_browser() {
+    let run = sample_run();
+    let summary = run.join("summary.json");
+    let before = std::fs::read(&summary).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let r = common::errmap(
+        tmp.path(),
+        &[
+            "report",
+            run.to_str().unwrap(),
+            "-o",
+            summary.to_str().unwrap(),
+        ],
+    );
+    r.expect_code(2);
+    assert!(r.stderr.contains("input"), "{}", r.report());
+    assert_eq!(std::fs::read(&summary).unwrap(), before);
+    // A PNG the report embeds is an input too.
+    let png = run.join("p01").join("map.png");
+    let r = common::errmap(
+        tmp.path(),
+        &["report", run.to_str().unwrap(), "-o", png.to_str().unwrap()],
+    );
+    r.expect_code(2);
+    // --pdf with no browser anywhere: exit 2 naming what to install.
+    let empty = tmp.path().join("empty-path");
+    std::fs::create_dir(&empty).unwrap();
+    let out = tmp.path().join("r.html");
+    let r = common::errmap_with(
+        tmp.path(),
+        &[
+            "report",
+            run.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--pdf",
+            tmp.path().join("r.pdf").to_str().unwrap(),
+        ],
+        |c| {
+            c.env("PATH", &empty).env_remove("ERRMAP_CHROMIUM");
+        },
+    );
+    r.expect_code(2);
+    assert!(
+        r.stderr.contains("apt-get install chromium"),
+        "{}",
+        r.report()
+    );
+    assert!(!tmp.path().join("r.pdf").exists());
+    // A folder that holds neither a run nor a result.
+    let r = common::errmap(tmp.path(), &["report", empty.to_str().unwrap()]);
+    r.expect_code(2);
+}
+
+#[test]
+fn analyses_write_results_that_report_renders_in_each_standards_symbols() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("axes");
+    std::fs::create_dir(&dir).unwrap();
+    let chart = dir.join("x.png");
+    let runs = root.join("data/linear/runs.csv");
+    let r = common::ok(
+        tmp.path(),
+        &[
+            "linear",
+            "analyze",
+            runs.to_str().unwrap(),
+            "--standard",
+            "vdi3441",
+            "--chart",
+            chart.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    let printed = common::json(&r);
+    let result: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("x.json")).unwrap()).unwrap();
+    assert_eq!(result["format"], "errmap-result/1");
+    assert_eq!(result["charts"], json!(["x.png"]));
+    assert_eq!(
+        result["result"], printed,
+        "the result is what --json prints"
+    );
+    assert_eq!(printed["target_symbols"][4], "U_j");
+    let centres = root.join("data/rotary/centres.csv");
+    common::ok(
+        tmp.path(),
+        &[
+            "rotary",
+            "analyze",
+            centres.to_str().unwrap(),
+            "--chart",
+            dir.join("c.png").to_str().unwrap(),
+        ],
+    );
+    common::ok(tmp.path(), &["report", dir.to_str().unwrap(), "-q"]);
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_eq!(html.matches("<section id=").count(), 2);
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    // VDI/DGQ 3441's own symbols, not ISO's, with each value as --json gave it.
+    for f in printed["figures"].as_array().unwrap() {
+        let sym = f["symbol"].as_str().unwrap();
+        let v = f["value"].as_f64().unwrap();
+        let attr = format!("data-figure=\"x.{sym}\" data-value=\"");
+        let at = html.find(&attr).unwrap_or_else(|| panic!("{sym} missing"));
+        let rest = &html[at + attr.len()..];
+        let shown: f64 = rest[..rest.find('"').unwrap()].parse().unwrap();
+        assert_eq!(shown, v, "{sym}");
+    }
+    assert!(html.contains("<th>Ps_j</th>") && html.contains("<th>U_j</th>"));
+    assert!(!html.contains("<th>R_i</th>") && !html.contains(">B̄<"));
+}
