@@ -511,76 +511,81 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             // 5. Outputs per part (rayon).
             let bar = crate::progress::bar(interpolated.len() as u64, "write", quiet);
             let (ua, va) = s.normal.plane_axes();
-            let part_results: Vec<(PartSummary, Option<(ErrorMap, FittedModel)>)> = interpolated
-                .par_iter()
-                .zip(slots.par_iter())
-                .zip(outputs.par_iter())
-                .map(|((p, &(h, d)), out)| {
-                    let map = to_map(d, out);
-                    let model = FittedModel::new(
-                        &p.prep.input.name,
-                        s.normal,
-                        domain,
-                        norms[d].clone(),
-                        nets[d].clone(),
-                    )
-                    .with_probes(&p.prep.clean);
-                    let holdout_rmse_um = h.map(|h| {
-                        let hm = FittedModel::new(
-                            "holdout",
+            let part_results: Vec<(PartSummary, Option<(ErrorMap, FittedModel, Marks)>)> =
+                interpolated
+                    .par_iter()
+                    .zip(slots.par_iter())
+                    .zip(outputs.par_iter())
+                    .map(|((p, &(h, d)), out)| {
+                        let map = to_map(d, out);
+                        let model = FittedModel::new(
+                            &p.prep.input.name,
                             s.normal,
                             domain,
-                            norms[h].clone(),
-                            nets[h].clone(),
-                        );
-                        let sq: f64 = p
-                            .prep
-                            .holdout
-                            .iter()
-                            .map(|&i| {
-                                let q = &p.prep.clean[i];
-                                (q.e_um - hm.e_um(q.u_mm, q.v_mm)).powi(2)
-                            })
-                            .sum();
-                        (sq / p.prep.holdout.len() as f64).sqrt()
-                    });
-                    // The delivered map: the kriging when it fits the held-out points better
-                    // (fitted to every clean point only then: it costs a likelihood search).
-                    let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
-                        .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
-                        .flatten();
-                    let (map, model) = match &kriging_full {
-                        Some(k) => {
-                            let values = (0..grid.nv)
-                                .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
-                                .map(|(i, j)| {
-                                    let (u, v) = grid.node(i, j);
-                                    k.predict(u, v)
+                            norms[d].clone(),
+                            nets[d].clone(),
+                        )
+                        .with_probes(&p.prep.clean);
+                        let holdout_rmse_um = h.map(|h| {
+                            let hm = FittedModel::new(
+                                "holdout",
+                                s.normal,
+                                domain,
+                                norms[h].clone(),
+                                nets[h].clone(),
+                            );
+                            let sq: f64 = p
+                                .prep
+                                .holdout
+                                .iter()
+                                .map(|&i| {
+                                    let q = &p.prep.clean[i];
+                                    (q.e_um - hm.e_um(q.u_mm, q.v_mm)).powi(2)
                                 })
-                                .collect();
-                            let map = ErrorMap {
-                                grid,
-                                normal: s.normal,
-                                values,
-                            };
-                            (map, model.with_kriging(k.clone()))
+                                .sum();
+                            (sq / p.prep.holdout.len() as f64).sqrt()
+                        });
+                        // The delivered map: the kriging when it fits the held-out points better
+                        // (fitted to every clean point only then: it costs a likelihood search).
+                        let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
+                            .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
+                            .flatten();
+                        let (map, model) = match &kriging_full {
+                            Some(k) => {
+                                let values = (0..grid.nv)
+                                    .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+                                    .map(|(i, j)| {
+                                        let (u, v) = grid.node(i, j);
+                                        k.predict(u, v)
+                                    })
+                                    .collect();
+                                let map = ErrorMap {
+                                    grid,
+                                    normal: s.normal,
+                                    values,
+                                };
+                                (map, model.with_kriging(k.clone()))
+                            }
+                            _ => (map, model),
+                        };
+                        let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
+                        bar.inc(1);
+                        match r {
+                            Ok(summary) => (summary, Some((map, model, part_marks(p)))),
+                            Err(e) => (fail(&p.prep.input, &e), None),
                         }
-                        _ => (map, model),
-                    };
-                    let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
-                    bar.inc(1);
-                    match r {
-                        Ok(summary) => (summary, Some((map, model))),
-                        Err(e) => (fail(&p.prep.input, &e), None),
-                    }
-                })
-                .collect();
+                    })
+                    .collect();
             bar.finish_and_clear();
             let mut summaries = Vec::new();
             let mut part_maps = Vec::new();
+            // Every part's probe and rejected points, in batch order, for the family maps.
+            let mut marks = Marks::default();
             for (summary, fitted) in part_results {
-                if let Some((map, model)) = fitted {
+                if let Some((map, model, part)) = fitted {
                     part_maps.push((summary.part.clone(), summary.output_dir.clone(), map, model));
+                    marks.probes.extend(part.probes);
+                    marks.rejected.extend(part.rejected);
                 }
                 summaries.push(summary);
             }
@@ -604,7 +609,15 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         nets[fslot].clone(),
                     )
                     .with_parts(&parts);
-                    family_summary = Some(write_family(dir, &mean, &std, &model, maps.len(), s)?);
+                    family_summary = Some(write_family(
+                        dir,
+                        &mean,
+                        &std,
+                        &model,
+                        maps.len(),
+                        &marks,
+                        s,
+                    )?);
                     family_model = Some(model);
                 }
             }
@@ -671,16 +684,37 @@ fn finish(
     }
 }
 
-/// The family folder: mean and std maps (CSV, heatmaps) and the family network's `model.json`.
+/// Probe and rejected points (plane axes, mm) drawn on a map.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Marks {
+    pub probes: Vec<(f64, f64)>,
+    pub rejected: Vec<(f64, f64)>,
+}
+
+/// A part's kept and rejected probe points in the map plane.
+fn part_marks(p: &Interpolated) -> Marks {
+    Marks {
+        probes: p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect(),
+        rejected: p
+            .prep
+            .rejected
+            .iter()
+            .map(|r| (r.point.u_mm, r.point.v_mm))
+            .collect(),
+    }
+}
+
+/// The family folder: mean and std maps (CSV, heatmaps with every part's probe and rejected
+/// points and the family's measured hull) and the family network's `model.json`.
 pub(crate) fn write_family(
     dir: &Path,
     mean: &ErrorMap,
     std: &ErrorMap,
     model: &FittedModel,
     parts: usize,
+    marks: &Marks,
     s: &Settings,
 ) -> Result<FamilySummary> {
-    let probes: Vec<(f64, f64)> = Vec::new();
     let axes = s.normal.plane_axes();
     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
     std.write_csv(&dir.join("std.csv"), "std_um")?;
@@ -693,30 +727,32 @@ pub(crate) fn write_family(
         "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)",
         s.family
     );
+    let hull = model.hull_mm.as_deref().unwrap_or(&[]);
     draw_shaded(
         &dir.join("mean.png"),
         &title_mean,
         mean,
-        &probes,
-        &probes,
+        marks,
+        hull,
         Scale::Diverging,
         axes,
-        "E (µm)",
+        "mean E (µm)",
         &extrapolated,
     )?;
     let title_std = format!(
         "{} part-to-part standard deviation — max {std_max:.2} µm",
         s.family
     );
-    draw(
+    draw_shaded(
         &dir.join("std.png"),
         &title_std,
         std,
-        &probes,
-        &probes,
+        marks,
+        hull,
         Scale::Sequential,
         axes,
-        "σ (µm)",
+        "σ of E (µm)",
+        &extrapolated,
     )?;
     crate::io::write_json(&dir.join("model.json"), model)?;
     Ok(FamilySummary {
@@ -765,38 +801,15 @@ pub(crate) fn compensate_one(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn draw(
-    path: &Path,
-    title: &str,
-    map: &ErrorMap,
-    probes: &[(f64, f64)],
-    rejected: &[(f64, f64)],
-    scale: Scale,
-    (ua, va): (Axis, Axis),
-    label: &str,
-) -> Result<()> {
-    draw_shaded(
-        path,
-        title,
-        map,
-        probes,
-        rejected,
-        scale,
-        (ua, va),
-        label,
-        &[],
-    )
-}
-
-/// [`draw`] with the nodes outside the measured domain lightened.
+/// Draw a map's heatmap with its probe and rejected points, the measured hull and the nodes
+/// outside it (`extrapolated`) lightened.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn draw_shaded(
     path: &Path,
     title: &str,
     map: &ErrorMap,
-    probes: &[(f64, f64)],
-    rejected: &[(f64, f64)],
+    marks: &Marks,
+    hull: &[[f64; 2]],
     scale: Scale,
     (ua, va): (Axis, Axis),
     label: &str,
@@ -816,12 +829,14 @@ pub(crate) fn draw_shaded(
             nu: map.grid.nu,
             nv: map.grid.nv,
             values: &values,
-            probes,
-            rejected,
+            probes: &marks.probes,
+            rejected: &marks.rejected,
+            hull,
             scale,
             extrapolated,
         },
-    )
+    )?;
+    Ok(())
 }
 
 /// `kriging` when its hold-out RMSE is below the network's (a tie keeps the network).
@@ -874,6 +889,7 @@ fn write_part(
     crate::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
+    let marks = part_marks(p);
     if s.reduce_inputs {
         super::reduce::PartReduce {
             part: name.clone(),
@@ -882,6 +898,7 @@ fn write_part(
             map_e_um: map.values.clone(),
             hull_mm: model.hull_mm.clone(),
             surface_mm: model.surface_mm,
+            marks: marks.clone(),
         }
         .write(dir)?;
     }
@@ -891,13 +908,6 @@ fn write_part(
         .pv_rms_where_um(&extrapolated, false)
         .unwrap_or((0.0, 0.0));
     let outside = map.pv_rms_where_um(&extrapolated, true);
-    let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
-    let rejected: Vec<(f64, f64)> = p
-        .prep
-        .rejected
-        .iter()
-        .map(|r| (r.point.u_mm, r.point.v_mm))
-        .collect();
     // `errmap map` names the family after the part: say it once.
     let label = if s.family == *name {
         name.clone()
@@ -909,8 +919,8 @@ fn write_part(
         &dir.join("map.png"),
         &title,
         map,
-        &probes,
-        &rejected,
+        &marks,
+        model.hull_mm.as_deref().unwrap_or(&[]),
         Scale::Diverging,
         axes,
         "E (µm)",
