@@ -90,6 +90,23 @@ impl Frame {
         }
     }
 
+    /// The pixel (column, row) plotters draws the data point (x, y) at: it rounds toward the
+    /// range's start (floor on x, ceil on the upward y axis).
+    pub fn pixel(&self, x: f64, y: f64) -> (i32, i32) {
+        let snap = |v: f64, (p, q): (i32, i32)| {
+            if q >= p {
+                (v + 1e-3).floor() as i32
+            } else {
+                (v - 1e-3).ceil() as i32
+            }
+        };
+        let (px, py) = self.to_px(x, y);
+        (
+            snap(px, (self.lo_px.0, self.hi_px.0)),
+            snap(py, (self.lo_px.1, self.hi_px.1)),
+        )
+    }
+
     /// Pixel (column, row) of the data point (x, y), unrounded.
     pub fn to_px(&self, x: f64, y: f64) -> (f64, f64) {
         let f = |v: f64, (a, b): (f64, f64), (p, q): (i32, i32)| {
