@@ -296,7 +296,7 @@ where
     if !map.rejected.is_empty() || !map.probes.is_empty() {
         draw_rejected_mark(header, (x, y1))?;
         let text = format!("rejected gross error ({})", map.rejected.len());
-        header.draw(&Text::new(text, (x + 12, y1 - 9), small.clone()))?;
+        header.draw(&Text::new(text, (x + 16, y1 - 9), small.clone()))?;
     }
     let mut x = x0;
     if map.hull.len() >= 2 {
