@@ -511,71 +511,70 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             // 5. Outputs per part (rayon).
             let bar = crate::progress::bar(interpolated.len() as u64, "write", quiet);
             let (ua, va) = s.normal.plane_axes();
-            let part_results: Vec<(PartSummary, Option<(ErrorMap, FittedModel, Marks)>)> =
-                interpolated
-                    .par_iter()
-                    .zip(slots.par_iter())
-                    .zip(outputs.par_iter())
-                    .map(|((p, &(h, d)), out)| {
-                        let map = to_map(d, out);
-                        let model = FittedModel::new(
-                            &p.prep.input.name,
+            let part_results: Vec<(PartSummary, Option<Fitted>)> = interpolated
+                .par_iter()
+                .zip(slots.par_iter())
+                .zip(outputs.par_iter())
+                .map(|((p, &(h, d)), out)| {
+                    let map = to_map(d, out);
+                    let model = FittedModel::new(
+                        &p.prep.input.name,
+                        s.normal,
+                        domain,
+                        norms[d].clone(),
+                        nets[d].clone(),
+                    )
+                    .with_probes(&p.prep.clean);
+                    let holdout_rmse_um = h.map(|h| {
+                        let hm = FittedModel::new(
+                            "holdout",
                             s.normal,
                             domain,
-                            norms[d].clone(),
-                            nets[d].clone(),
-                        )
-                        .with_probes(&p.prep.clean);
-                        let holdout_rmse_um = h.map(|h| {
-                            let hm = FittedModel::new(
-                                "holdout",
-                                s.normal,
-                                domain,
-                                norms[h].clone(),
-                                nets[h].clone(),
-                            );
-                            let sq: f64 = p
-                                .prep
-                                .holdout
-                                .iter()
-                                .map(|&i| {
-                                    let q = &p.prep.clean[i];
-                                    (q.e_um - hm.e_um(q.u_mm, q.v_mm)).powi(2)
+                            norms[h].clone(),
+                            nets[h].clone(),
+                        );
+                        let sq: f64 = p
+                            .prep
+                            .holdout
+                            .iter()
+                            .map(|&i| {
+                                let q = &p.prep.clean[i];
+                                (q.e_um - hm.e_um(q.u_mm, q.v_mm)).powi(2)
+                            })
+                            .sum();
+                        (sq / p.prep.holdout.len() as f64).sqrt()
+                    });
+                    // The delivered map: the kriging when it fits the held-out points better
+                    // (fitted to every clean point only then: it costs a likelihood search).
+                    let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
+                        .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
+                        .flatten();
+                    let (map, model) = match &kriging_full {
+                        Some(k) => {
+                            let values = (0..grid.nv)
+                                .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+                                .map(|(i, j)| {
+                                    let (u, v) = grid.node(i, j);
+                                    k.predict(u, v)
                                 })
-                                .sum();
-                            (sq / p.prep.holdout.len() as f64).sqrt()
-                        });
-                        // The delivered map: the kriging when it fits the held-out points better
-                        // (fitted to every clean point only then: it costs a likelihood search).
-                        let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
-                            .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
-                            .flatten();
-                        let (map, model) = match &kriging_full {
-                            Some(k) => {
-                                let values = (0..grid.nv)
-                                    .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
-                                    .map(|(i, j)| {
-                                        let (u, v) = grid.node(i, j);
-                                        k.predict(u, v)
-                                    })
-                                    .collect();
-                                let map = ErrorMap {
-                                    grid,
-                                    normal: s.normal,
-                                    values,
-                                };
-                                (map, model.with_kriging(k.clone()))
-                            }
-                            _ => (map, model),
-                        };
-                        let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
-                        bar.inc(1);
-                        match r {
-                            Ok(summary) => (summary, Some((map, model, part_marks(p)))),
-                            Err(e) => (fail(&p.prep.input, &e), None),
+                                .collect();
+                            let map = ErrorMap {
+                                grid,
+                                normal: s.normal,
+                                values,
+                            };
+                            (map, model.with_kriging(k.clone()))
                         }
-                    })
-                    .collect();
+                        _ => (map, model),
+                    };
+                    let r = write_part(p, &map, &model, holdout_rmse_um, s, (ua, va));
+                    bar.inc(1);
+                    match r {
+                        Ok(summary) => (summary, Some((map, model, part_marks(p)))),
+                        Err(e) => (fail(&p.prep.input, &e), None),
+                    }
+                })
+                .collect();
             bar.finish_and_clear();
             let mut summaries = Vec::new();
             let mut part_maps = Vec::new();
@@ -683,6 +682,9 @@ fn finish(
         toolpaths,
     }
 }
+
+/// A part's delivered map, its model and its marks.
+type Fitted = (ErrorMap, FittedModel, Marks);
 
 /// Probe and rejected points (plane axes, mm) drawn on a map.
 #[derive(Debug, Clone, Default, PartialEq)]
