@@ -36,11 +36,11 @@ struct ReduceFile {
     hull_mm: Option<Vec<[f64; 2]>>,
     #[serde(default)]
     surface_mm: Option<[f64; 2]>,
-    /// Kept and rejected probe points in the map plane (mm), drawn on the family maps.
+    /// Kept and rejected probe points in the map plane (mm, as bits), drawn on the family maps.
     #[serde(default)]
-    probes_mm: Vec<[f64; 2]>,
+    probes_mm_bits: Vec<[String; 2]>,
     #[serde(default)]
-    rejected_mm: Vec<[f64; 2]>,
+    rejected_mm_bits: Vec<[String; 2]>,
 }
 
 /// One part's contribution to the family.
@@ -70,8 +70,18 @@ impl PartReduce {
             map_e_um_bits: self.map_e_um.iter().map(|&v| bits(v)).collect(),
             hull_mm: self.hull_mm.clone(),
             surface_mm: self.surface_mm,
-            probes_mm: self.marks.probes.iter().map(|&(u, v)| [u, v]).collect(),
-            rejected_mm: self.marks.rejected.iter().map(|&(u, v)| [u, v]).collect(),
+            probes_mm_bits: self
+                .marks
+                .probes
+                .iter()
+                .map(|&(u, v)| [bits(u), bits(v)])
+                .collect(),
+            rejected_mm_bits: self
+                .marks
+                .rejected
+                .iter()
+                .map(|&(u, v)| [bits(u), bits(v)])
+                .collect(),
         };
         crate::io::write_json(&dir.join(REDUCE_FILE), &file)
     }
@@ -98,6 +108,11 @@ impl PartReduce {
                 .map(f64::from_bits)
                 .map_err(|_| bad(format!("'{s}' is not the hex of an f64")))
         };
+        let points = |list: &[[String; 2]]| -> Result<Vec<(f64, f64)>> {
+            list.iter()
+                .map(|[u, v]| Ok((parse(u)?, parse(v)?)))
+                .collect()
+        };
         Ok(PartReduce {
             part: file.part,
             holdout_fit: file.holdout_fit,
@@ -114,8 +129,8 @@ impl PartReduce {
             hull_mm: file.hull_mm,
             surface_mm: file.surface_mm,
             marks: Marks {
-                probes: file.probes_mm.iter().map(|p| (p[0], p[1])).collect(),
-                rejected: file.rejected_mm.iter().map(|p| (p[0], p[1])).collect(),
+                probes: points(&file.probes_mm_bits)?,
+                rejected: points(&file.rejected_mm_bits)?,
             },
         })
     }
