@@ -41,6 +41,7 @@ pub fn family_benches(c: &mut Criterion) {
                     values: &values,
                     probes: &probes,
                     rejected: &probes[..3],
+                    hull: &[[25.0, 25.0], [575.0, 25.0], [575.0, 275.0], [25.0, 275.0]],
                     scale: Scale::Diverging,
                     extrapolated: &[],
                 },

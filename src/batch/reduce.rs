@@ -4,7 +4,7 @@
 //! batch order, and starts from the same initial weights as in the unsharded batch, so on the
 //! CPU trainer the reduce writes the same bytes.
 
-use super::run::{compensate_one, training_set, write_family, Settings, ToolpathPlan};
+use super::run::{compensate_one, training_set, write_family, Marks, Settings, ToolpathPlan};
 use super::summary::{FamilySummary, ToolpathSummary};
 use super::train_step::{initial_network, Role};
 use crate::error::{Error, Location, Result};
@@ -36,6 +36,11 @@ struct ReduceFile {
     hull_mm: Option<Vec<[f64; 2]>>,
     #[serde(default)]
     surface_mm: Option<[f64; 2]>,
+    /// Kept and rejected probe points in the map plane (mm, as bits), drawn on the family maps.
+    #[serde(default)]
+    probes_mm_bits: Vec<[String; 2]>,
+    #[serde(default)]
+    rejected_mm_bits: Vec<[String; 2]>,
 }
 
 /// One part's contribution to the family.
@@ -47,6 +52,8 @@ pub struct PartReduce {
     pub map_e_um: Vec<f64>,
     pub hull_mm: Option<Vec<[f64; 2]>>,
     pub surface_mm: Option<[f64; 2]>,
+    /// The part's probe and rejected points, for the family maps.
+    pub(crate) marks: Marks,
 }
 
 fn bits(v: f64) -> String {
@@ -63,6 +70,18 @@ impl PartReduce {
             map_e_um_bits: self.map_e_um.iter().map(|&v| bits(v)).collect(),
             hull_mm: self.hull_mm.clone(),
             surface_mm: self.surface_mm,
+            probes_mm_bits: self
+                .marks
+                .probes
+                .iter()
+                .map(|&(u, v)| [bits(u), bits(v)])
+                .collect(),
+            rejected_mm_bits: self
+                .marks
+                .rejected
+                .iter()
+                .map(|&(u, v)| [bits(u), bits(v)])
+                .collect(),
         };
         crate::io::write_json(&dir.join(REDUCE_FILE), &file)
     }
@@ -89,6 +108,11 @@ impl PartReduce {
                 .map(f64::from_bits)
                 .map_err(|_| bad(format!("'{s}' is not the hex of an f64")))
         };
+        let points = |list: &[[String; 2]]| -> Result<Vec<(f64, f64)>> {
+            list.iter()
+                .map(|[u, v]| Ok((parse(u)?, parse(v)?)))
+                .collect()
+        };
         Ok(PartReduce {
             part: file.part,
             holdout_fit: file.holdout_fit,
@@ -104,6 +128,10 @@ impl PartReduce {
                 .collect::<Result<_>>()?,
             hull_mm: file.hull_mm,
             surface_mm: file.surface_mm,
+            marks: Marks {
+                probes: points(&file.probes_mm_bits)?,
+                rejected: points(&file.rejected_mm_bits)?,
+            },
         })
     }
 }
@@ -178,7 +206,12 @@ pub fn reduce_family(
     let Some((mean, std)) = family_stats(&refs) else {
         return Ok(FamilyOutcome::default());
     };
-    let family = write_family(dir, &mean, &std, &model, maps.len(), s)?;
+    let mut marks = Marks::default();
+    for p in parts {
+        marks.probes.extend_from_slice(&p.marks.probes);
+        marks.rejected.extend_from_slice(&p.marks.rejected);
+    }
+    let family = write_family(dir, &mean, &std, &model, maps.len(), &marks, s)?;
     let mut out = FamilyOutcome {
         family: Some(family),
         toolpaths: Vec::new(),
@@ -211,6 +244,10 @@ mod tests {
             map_e_um: vec![1.0 / 3.0, -0.0, 12_345.678_901_234_567],
             hull_mm: Some(vec![[0.1, 0.2], [600.0 / 7.0, 1.0 / 3.0], [5.5, 290.0]]),
             surface_mm: Some([4.999_999_999_999_999, 5.0]),
+            marks: Marks {
+                probes: vec![(0.1, 1.0 / 3.0), (2.5, -7.25)],
+                rejected: vec![(600.0 / 7.0, 0.2)],
+            },
         };
         p.write(dir.path()).unwrap();
         let back = PartReduce::read(&dir.path().join(REDUCE_FILE)).unwrap();

@@ -533,7 +533,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             // 5. Outputs per part (rayon).
             let bar = crate::progress::bar(interpolated.len() as u64, "write", quiet);
             let (ua, va) = s.normal.plane_axes();
-            let part_results: Vec<(PartSummary, Option<(ErrorMap, FittedModel)>)> = interpolated
+            let part_results: Vec<(PartSummary, Option<Fitted>)> = interpolated
                 .par_iter()
                 .zip(slots.par_iter())
                 .zip(outputs.par_iter())
@@ -594,7 +594,7 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                     let r = write_part(p, &map, &model, holdout_rmse_um, stopping, s, (ua, va));
                     bar.inc(1);
                     match r {
-                        Ok(summary) => (summary, Some((map, model))),
+                        Ok(summary) => (summary, Some((map, model, part_marks(p)))),
                         Err(e) => (fail(&p.prep.input, &e), None),
                     }
                 })
@@ -602,9 +602,13 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
             bar.finish_and_clear();
             let mut summaries = Vec::new();
             let mut part_maps = Vec::new();
+            // Every part's probe and rejected points, in batch order, for the family maps.
+            let mut marks = Marks::default();
             for (summary, fitted) in part_results {
-                if let Some((map, model)) = fitted {
+                if let Some((map, model, part)) = fitted {
                     part_maps.push((summary.part.clone(), summary.output_dir.clone(), map, model));
+                    marks.probes.extend(part.probes);
+                    marks.rejected.extend(part.rejected);
                 }
                 summaries.push(summary);
             }
@@ -628,7 +632,15 @@ pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchS
                         nets[fslot].clone(),
                     )
                     .with_parts(&parts);
-                    family_summary = Some(write_family(dir, &mean, &std, &model, maps.len(), s)?);
+                    family_summary = Some(write_family(
+                        dir,
+                        &mean,
+                        &std,
+                        &model,
+                        maps.len(),
+                        &marks,
+                        s,
+                    )?);
                     family_model = Some(model);
                 }
             }
@@ -714,16 +726,40 @@ fn held_out(p: &Interpolated, norm: &Normalisation) -> Holdout {
     }
 }
 
-/// The family folder: mean and std maps (CSV, heatmaps) and the family network's `model.json`.
+/// A part's delivered map, its model and its marks.
+type Fitted = (ErrorMap, FittedModel, Marks);
+
+/// Probe and rejected points (plane axes, mm) drawn on a map.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Marks {
+    pub probes: Vec<(f64, f64)>,
+    pub rejected: Vec<(f64, f64)>,
+}
+
+/// A part's kept and rejected probe points in the map plane.
+fn part_marks(p: &Interpolated) -> Marks {
+    Marks {
+        probes: p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect(),
+        rejected: p
+            .prep
+            .rejected
+            .iter()
+            .map(|r| (r.point.u_mm, r.point.v_mm))
+            .collect(),
+    }
+}
+
+/// The family folder: mean and std maps (CSV, heatmaps with every part's probe and rejected
+/// points and the family's measured hull) and the family network's `model.json`.
 pub(crate) fn write_family(
     dir: &Path,
     mean: &ErrorMap,
     std: &ErrorMap,
     model: &FittedModel,
     parts: usize,
+    marks: &Marks,
     s: &Settings,
 ) -> Result<FamilySummary> {
-    let probes: Vec<(f64, f64)> = Vec::new();
     let axes = s.normal.plane_axes();
     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
     std.write_csv(&dir.join("std.csv"), "std_um")?;
@@ -736,30 +772,32 @@ pub(crate) fn write_family(
         "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)",
         s.family
     );
+    let hull = model.hull_mm.as_deref().unwrap_or(&[]);
     draw_shaded(
         &dir.join("mean.png"),
         &title_mean,
         mean,
-        &probes,
-        &probes,
+        marks,
+        hull,
         Scale::Diverging,
         axes,
-        "E (µm)",
+        "mean E (µm)",
         &extrapolated,
     )?;
     let title_std = format!(
         "{} part-to-part standard deviation — max {std_max:.2} µm",
         s.family
     );
-    draw(
+    draw_shaded(
         &dir.join("std.png"),
         &title_std,
         std,
-        &probes,
-        &probes,
+        marks,
+        hull,
         Scale::Sequential,
         axes,
-        "σ (µm)",
+        "σ of E (µm)",
+        &extrapolated,
     )?;
     crate::io::write_json(&dir.join("model.json"), model)?;
     Ok(FamilySummary {
@@ -808,38 +846,15 @@ pub(crate) fn compensate_one(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn draw(
-    path: &Path,
-    title: &str,
-    map: &ErrorMap,
-    probes: &[(f64, f64)],
-    rejected: &[(f64, f64)],
-    scale: Scale,
-    (ua, va): (Axis, Axis),
-    label: &str,
-) -> Result<()> {
-    draw_shaded(
-        path,
-        title,
-        map,
-        probes,
-        rejected,
-        scale,
-        (ua, va),
-        label,
-        &[],
-    )
-}
-
-/// [`draw`] with the nodes outside the measured domain lightened.
+/// Draw a map's heatmap with its probe and rejected points, the measured hull and the nodes
+/// outside it (`extrapolated`) lightened.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn draw_shaded(
     path: &Path,
     title: &str,
     map: &ErrorMap,
-    probes: &[(f64, f64)],
-    rejected: &[(f64, f64)],
+    marks: &Marks,
+    hull: &[[f64; 2]],
     scale: Scale,
     (ua, va): (Axis, Axis),
     label: &str,
@@ -859,12 +874,14 @@ pub(crate) fn draw_shaded(
             nu: map.grid.nu,
             nv: map.grid.nv,
             values: &values,
-            probes,
-            rejected,
+            probes: &marks.probes,
+            rejected: &marks.rejected,
+            hull,
             scale,
             extrapolated,
         },
-    )
+    )?;
+    Ok(())
 }
 
 /// `kriging` when its hold-out RMSE is below the network's (a tie keeps the network).
@@ -918,6 +935,7 @@ fn write_part(
     crate::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
+    let marks = part_marks(p);
     if s.reduce_inputs {
         super::reduce::PartReduce {
             part: name.clone(),
@@ -926,6 +944,7 @@ fn write_part(
             map_e_um: map.values.clone(),
             hull_mm: model.hull_mm.clone(),
             surface_mm: model.surface_mm,
+            marks: marks.clone(),
         }
         .write(dir)?;
     }
@@ -935,13 +954,6 @@ fn write_part(
         .pv_rms_where_um(&extrapolated, false)
         .unwrap_or((0.0, 0.0));
     let outside = map.pv_rms_where_um(&extrapolated, true);
-    let probes: Vec<(f64, f64)> = p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect();
-    let rejected: Vec<(f64, f64)> = p
-        .prep
-        .rejected
-        .iter()
-        .map(|r| (r.point.u_mm, r.point.v_mm))
-        .collect();
     // `errmap map` names the family after the part: say it once.
     let label = if s.family == *name {
         name.clone()
@@ -953,8 +965,8 @@ fn write_part(
         &dir.join("map.png"),
         &title,
         map,
-        &probes,
-        &rejected,
+        &marks,
+        model.hull_mm.as_deref().unwrap_or(&[]),
         Scale::Diverging,
         axes,
         "E (µm)",

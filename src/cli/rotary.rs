@@ -4,7 +4,7 @@ use super::Globals;
 use errmap::error::Error;
 use errmap::rotary::{
     analyze, build_table, chart::save_error_chart, read_measurement, render, table::fixed,
-    Analysis, AnalyzeOptions, RotaryAxis, TableFormat, TableOptions,
+    Analysis, AnalyzeOptions, RotaryAxis, Sign, TableFormat, TableOptions,
 };
 use errmap::synth::rotary::{write_set, RotarySynthConfig};
 use errmap::Result;
@@ -70,6 +70,10 @@ pub struct AnalyzeArgs {
     /// result as NAME.json (read by `errmap report`).
     #[arg(long, value_name = "PNG")]
     pub chart: Option<PathBuf>,
+    /// Sign of the errors in the text, JSON and chart: errmap = commanded − measured (α − β),
+    /// calibrator = measured − commanded (β − α, as ISO 230-2 and rotary calibrators report).
+    #[arg(long, value_enum, default_value = "errmap")]
+    pub sign: Sign,
 }
 
 #[derive(Debug, clap::Args)]
@@ -147,7 +151,7 @@ fn parse_axis(s: &str) -> std::result::Result<RotaryAxis, String> {
 pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
     match cmd {
         RotaryCommand::Analyze(args) => {
-            let analysis = args.measurement.analyze()?;
+            let analysis = args.measurement.analyze()?.with_sign(args.sign);
             if let Some(png) = &args.chart {
                 save_error_chart(png, &analysis)?;
                 // The result beside the chart, for `errmap report`.
@@ -271,7 +275,18 @@ fn human_report(a: &Analysis) -> String {
             );
         }
     }
-    let _ = writeln!(s, "\nerr = α − β (arcsec), mean over repeats");
+    match a.sign {
+        Sign::Errmap => {
+            let _ = writeln!(s, "\nerr = α − β (arcsec), mean over repeats");
+        }
+        Sign::Calibrator => {
+            let _ = writeln!(
+                s,
+                "\nerror = β − α = measured − commanded (arcsec, --sign calibrator: ISO 230-2's x), mean over repeats\n{}",
+                a.sign.positive(a.axis)
+            );
+        }
+    }
     let _ = writeln!(
         s,
         "{:>10}  dir  {:>12}  {:>8}  {:>3}",
@@ -293,7 +308,11 @@ fn human_report(a: &Analysis) -> String {
             let f = &e.axis;
             let _ = writeln!(
                 s,
-                "\nISO 230-2:2014 (arcsec, x = actual − target = −err): A {}  A↑ {}  A↓ {}  R {}  R↑ {}  R↓ {}  E {}  M {}  B {}  B̄ {}",
+                "\nISO 230-2:2014 (arcsec, x = actual − target = {}): A {}  A↑ {}  A↓ {}  R {}  R↑ {}  R↓ {}  E {}  M {}  B {}  B̄ {}",
+                match a.sign {
+                    Sign::Errmap => "−err",
+                    Sign::Calibrator => "the error above",
+                },
                 opt(f.A, 2),
                 opt(f.A_up, 2),
                 opt(f.A_down, 2),

@@ -1,9 +1,9 @@
-//! Vendor-style positioning chart: mean deviation per direction with the ±k·s band at each target, reversal marked, pitch fit, before/after a table, and the axis figures beside it.
+//! Vendor-style positioning chart: mean deviation per direction (markers at the targets) with the ±k·s band at each target, reversal marked, the pitch fit as a curve on a dense grid, before/after a table, and the axis figures beside it.
 
 use super::eval::Evaluation;
 use super::pitch::PitchFit;
 use crate::error::Result;
-use crate::report::chart::{save_png, FONT};
+use crate::report::chart::{save_png, Frame, FONT};
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -56,8 +56,30 @@ fn figure_rows(before: &Evaluation, after: Option<&Evaluation>) -> Vec<(String, 
         .collect()
 }
 
-/// Draw the chart to `path` (PNG, 1280 × 720).
-pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
+/// Width of the chart's plotting area, pixels (about: the left panel less its label areas).
+const PLOT_PX: f64 = 800.0;
+
+/// The pitch fit evaluated on a grid fine enough for both the screen and the screw: at least
+/// 2 points per pixel of the plot and 64 per lead, so the periodic term is drawn as the curve it
+/// is between the targets, never as chords through them (capped at 200 000 points).
+pub fn fit_curve(fit: &PitchFit, x_min: f64, x_max: f64, plot_px: f64) -> Vec<(f64, f64)> {
+    let span = (x_max - x_min).max(0.0);
+    let per_lead = if fit.lead_mm > 0.0 {
+        64.0 * span / fit.lead_mm
+    } else {
+        0.0
+    };
+    let steps = (2.0 * plot_px).max(per_lead).clamp(1.0, 200_000.0).ceil() as usize;
+    (0..=steps)
+        .map(|i| {
+            let x = x_min + span * i as f64 / steps as f64;
+            (x, fit.eval(x))
+        })
+        .collect()
+}
+
+/// Draw the chart to `path` (PNG, 1280 × 720); returns where the plot lies.
+pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<Frame> {
     let ev = input.before;
     let k = ev.k;
     let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
@@ -92,7 +114,8 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
     let rows = figure_rows(ev, input.after);
     let standard = ev.standard.name().to_string();
     let band = format!("±{k}s");
-    save_png(path, 1280, 720, move |root| {
+    let mut frame = None;
+    save_png(path, 1280, 720, |root| {
         let (left, right) = root.split_horizontally(900);
         let mut chart = ChartBuilder::on(&left)
             .caption(&title, (FONT, 22))
@@ -142,22 +165,27 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
             }
         }
         // Only the measured directions are drawn (a unidirectional test has one line).
-        let up_pts = series(ev, true);
-        if !up_pts.is_empty() {
+        // Measured means as dots, joined by thin straight lines (vendor style); a unidirectional
+        // test has one direction.
+        for (up, colour, name) in [
+            (true, blue, "mean ↑ (forward)"),
+            (false, red, "mean ↓ (reverse)"),
+        ] {
+            let pts = series(ev, up);
+            if pts.is_empty() {
+                continue;
+            }
+            chart.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(1)))?;
             chart
-                .draw_series(LineSeries::new(up_pts, blue.stroke_width(2)))?
-                .label(format!("mean ↑ (forward), {band}"))
+                .draw_series(
+                    pts.iter()
+                        .map(|&(x, e)| Circle::new((x, e), 4, colour.filled())),
+                )?
+                .label(format!("{name} at each target (dot), bar {band}"))
                 .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2))
-                });
-        }
-        let down_pts = series(ev, false);
-        if !down_pts.is_empty() {
-            chart
-                .draw_series(LineSeries::new(down_pts, red.stroke_width(2)))?
-                .label(format!("mean ↓ (reverse), {band}"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], red.stroke_width(2))
+                    EmptyElement::at((x + 10, y))
+                        + PathElement::new(vec![(-10, 0), (10, 0)], colour.stroke_width(1))
+                        + Circle::new((0, 0), 4, colour.filled())
                 });
         }
         // Reversal: mark the target with the largest |B_i| (none in a unidirectional test).
@@ -179,22 +207,29 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
             )))?;
         }
         if let Some(fit) = input.fit {
-            let green = RGBColor(20, 140, 60);
-            let steps = 600;
-            let pts: Vec<(f64, f64)> = (0..=steps)
-                .map(|i| {
-                    let x = x_min + (x_max - x_min) * i as f64 / steps as f64;
-                    (x, fit.eval(x))
-                })
-                .collect();
             chart
-                .draw_series(LineSeries::new(pts, green.stroke_width(1)))?
+                .draw_series(LineSeries::new(
+                    fit_curve(fit, x_min, x_max, PLOT_PX),
+                    FIT.stroke_width(1),
+                ))?
                 .label(format!(
-                    "pitch fit: k = {:.2} {unit}/m, d = {:.2} {unit}, P = {} mm",
+                    "pitch fit a + k·x + d·sin(2πx/P + φ): k = {:.2} {unit}/m, d = {:.2} {unit}, P = {} mm",
                     fit.k_um_per_m, fit.d_um, fit.lead_mm
                 ))
                 .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(1))
+                    PathElement::new(vec![(x, y), (x + 20, y)], FIT.stroke_width(1))
+                });
+            let trend = |x: f64| fit.a_um + fit.k_um_per_m * x * 1e-3;
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x_min, trend(x_min)), (x_max, trend(x_max))],
+                    6,
+                    4,
+                    FIT.stroke_width(2),
+                ))?
+                .label("pitch fit without its periodic term: a + k·x")
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 8, y)], FIT.stroke_width(2))
                 });
         }
         if let Some(after) = input.after {
@@ -226,6 +261,11 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
             .border_style(BLACK)
             .position(SeriesLabelPosition::UpperLeft)
             .draw()?;
+        frame = Some(Frame::new(
+            (x_min - x_pad, x_max + x_pad),
+            (y0, y1),
+            |x, y| chart.backend_coord(&(x, y)),
+        ));
 
         // The figures table.
         let font = (FONT, 15).into_font();
@@ -266,5 +306,104 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<()> {
             }
         }
         Ok(())
-    })
+    })?;
+    frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+}
+
+/// Colour of the pitch fit.
+pub const FIT: RGBColor = RGBColor(20, 140, 60);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linear::{evaluate, fit_pitch, Direction, Sample, Standard};
+
+    /// e(x) = 2 µm + 10 µm/m · x + 8 µm · sin(2πx/50 + 0.3): a screw of lead 50 mm over 200 mm.
+    fn planted(x_mm: f64) -> f64 {
+        2.0 + 10.0 * x_mm * 1e-3 + 8.0 * (2.0 * std::f64::consts::PI * x_mm / 50.0 + 0.3).sin()
+    }
+
+    const TARGETS: [f64; 11] = [
+        0.0, 17.0, 41.0, 58.0, 83.0, 100.0, 124.0, 141.0, 166.0, 183.0, 200.0,
+    ];
+
+    #[test]
+    fn the_fit_is_a_curve_between_the_targets_not_chords() {
+        let samples: Vec<Sample> = (0..5)
+            .flat_map(|run| {
+                [Direction::Forward, Direction::Reverse]
+                    .into_iter()
+                    .flat_map(move |direction| {
+                        TARGETS.iter().map(move |&target| Sample {
+                            run,
+                            direction,
+                            target,
+                            deviation: planted(target),
+                        })
+                    })
+            })
+            .collect();
+        let ev = evaluate(&samples, Standard::Iso230_2_2014).unwrap();
+        let means: Vec<f64> = TARGETS.iter().map(|&x| planted(x)).collect();
+        let fit = fit_pitch(&TARGETS, &means, 50.0).unwrap();
+        // The noise-free fit is the planted curve (checked against the formula, not the fit).
+        assert!((fit.d_um - 8.0).abs() < 1e-9 && (fit.k_um_per_m - 10.0).abs() < 1e-9);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.png");
+        let input = ChartInput {
+            title: "synthetic".into(),
+            unit: "µm",
+            before: &ev,
+            after: None,
+            fit: Some(&fit),
+        };
+        let f = save_chart(&path, &input).unwrap();
+        let img = image::open(&path).unwrap().to_rgb8();
+        let fit_at = |x: f64, y: f64| -> bool {
+            let (px, py) = f.pixel(x, y);
+            (-2..=2).any(|d| img.get_pixel(px as u32, (py + d) as u32).0 == [FIT.0, FIT.1, FIT.2])
+        };
+        let mut checked = 0;
+        for w in TARGETS.windows(2) {
+            let x = (w[0] + w[1]) / 2.0;
+            let (truth, chord) = (planted(x), (planted(w[0]) + planted(w[1])) / 2.0);
+            let trend = 2.0 + 10.0 * x * 1e-3;
+            let px = |y: f64| f.to_px(x, y).1;
+            // Below the legend box, and the chord well apart from the curve and the dashed trend.
+            if px(truth) < 140.0 || (px(truth) - px(chord)).abs() < 10.0 {
+                continue;
+            }
+            if (px(chord) - px(trend)).abs() < 6.0 {
+                continue;
+            }
+            assert!(
+                fit_at(x, truth),
+                "no fit curve at x = {x} mm, e = {truth:.2} µm"
+            );
+            assert!(!fit_at(x, chord), "fit drawn as a chord at x = {x} mm");
+            checked += 1;
+        }
+        assert!(checked >= 3, "only {checked} midpoints checked");
+    }
+
+    #[test]
+    fn the_fit_grid_resolves_the_screw_and_the_pixels() {
+        // The sample axis: 1000 mm with a 10 mm lead is 100 periods over ~800 px.
+        let fit = PitchFit {
+            lead_mm: 10.0,
+            a_um: 0.0,
+            k_um_per_m: 0.0,
+            d_um: 1.0,
+            phi_rad: 0.0,
+            residual_rms_um: 0.0,
+            points: 21,
+        };
+        let pts = fit_curve(&fit, 0.0, 1000.0, PLOT_PX);
+        let step = pts[1].0 - pts[0].0;
+        assert!(step <= 10.0 / 64.0 + 1e-12, "step {step} mm");
+        assert!(pts.len() as f64 >= 2.0 * PLOT_PX);
+        // Every crest of the sine is reached to within 0.2 % of d.
+        let top = pts.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+        assert!(top > 0.998, "{top}");
+    }
 }

@@ -63,6 +63,62 @@ pub fn encode_png(
     Ok(out.into_inner())
 }
 
+/// Where a chart's plotting area lies in its PNG: data coordinates to pixels, so that a test or
+/// a report can find what was drawn at a value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// Data ranges of the axes (x, y).
+    pub x_range: (f64, f64),
+    pub y_range: (f64, f64),
+    /// Pixels of the corners (x_range.0, y_range.0) and (x_range.1, y_range.1).
+    lo_px: (i32, i32),
+    hi_px: (i32, i32),
+}
+
+impl Frame {
+    /// The frame of a chart whose mapping is `to_px` (e.g. `|x, y| chart.backend_coord(&(x, y))`).
+    pub fn new(
+        x_range: (f64, f64),
+        y_range: (f64, f64),
+        to_px: impl Fn(f64, f64) -> (i32, i32),
+    ) -> Frame {
+        Frame {
+            x_range,
+            y_range,
+            lo_px: to_px(x_range.0, y_range.0),
+            hi_px: to_px(x_range.1, y_range.1),
+        }
+    }
+
+    /// The pixel (column, row) plotters draws the data point (x, y) at: it rounds toward the
+    /// range's start (floor on x, ceil on the upward y axis).
+    pub fn pixel(&self, x: f64, y: f64) -> (i32, i32) {
+        let snap = |v: f64, (p, q): (i32, i32)| {
+            if q >= p {
+                (v + 1e-3).floor() as i32
+            } else {
+                (v - 1e-3).ceil() as i32
+            }
+        };
+        let (px, py) = self.to_px(x, y);
+        (
+            snap(px, (self.lo_px.0, self.hi_px.0)),
+            snap(py, (self.lo_px.1, self.hi_px.1)),
+        )
+    }
+
+    /// Pixel (column, row) of the data point (x, y), unrounded.
+    pub fn to_px(&self, x: f64, y: f64) -> (f64, f64) {
+        let f = |v: f64, (a, b): (f64, f64), (p, q): (i32, i32)| {
+            f64::from(p) + (v - a) / (b - a) * f64::from(q - p)
+        };
+        (
+            f(x, self.x_range, (self.lo_px.0, self.hi_px.0)),
+            f(y, self.y_range, (self.lo_px.1, self.hi_px.1)),
+        )
+    }
+}
+
 fn chart_error(path: &Path, e: &dyn std::fmt::Display) -> Error {
     Error::Internal(format!("drawing {}: {e}", path.display()))
 }

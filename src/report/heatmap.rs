@@ -1,21 +1,34 @@
-//! Heatmap pictures of error maps: diverging colour map centred on 0 µm, colour bar, axes in mm, probe points.
+//! Heatmap pictures of error maps: diverging colours centred on 0 µm (or viridis for magnitudes), colour bar, axes in mm, probes, rejects and the measured hull.
 //!
 //! A map is drawn cell by cell (one cell per grid node, centred on it) with equal scales on both
-//! axes, probe points as black dots, rejected points as crossed circles, a colour bar with µm
-//! ticks on the right, and a legend line under the title saying what the colours and marks mean.
+//! axes; probe points as black dots in a white rim, rejected points as crossed circles, the
+//! measured hull as a black outline on a white rim, nodes outside it lightened; a colour bar
+//! with its quantity and unit on the right, and legend lines under the title saying what every
+//! mark, line and colour means. Colour maps: [`crate::report::colormap`].
 
 use crate::error::Result;
-use crate::report::chart::{self, FONT};
+use crate::report::chart::{self, Frame, FONT};
+use crate::report::colormap::{draw_colour_bar, ColourBar, ColourMap};
 use plotters::prelude::*;
 use std::path::Path;
 
 /// How values map to colours.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Scale {
-    /// Blue (below nominal) – white (0 µm) – red (above nominal), limits ±max|E|.
+    /// Signed errors: RdBu, blue (below nominal) – white (0 µm) – red (above nominal), limits ±max|E|.
     Diverging,
-    /// White (0) to dark purple (max), for magnitudes such as a standard deviation.
+    /// Magnitudes such as a standard deviation: viridis from 0 (dark) to the largest (light).
     Sequential,
+}
+
+impl Scale {
+    /// The colour map of the scale.
+    pub fn colour_map(self) -> ColourMap {
+        match self {
+            Scale::Diverging => ColourMap::Diverging,
+            Scale::Sequential => ColourMap::Viridis,
+        }
+    }
 }
 
 /// One picture of a map over a regular grid in the map plane.
@@ -26,7 +39,7 @@ pub struct Heatmap<'a> {
     /// Axis names of the plane, e.g. ("x", "y").
     pub u_name: &'a str,
     pub v_name: &'a str,
-    /// What the colour shows, e.g. "E (µm)".
+    /// What the colour shows, quantity and unit, e.g. "E (µm)"; written above the colour bar.
     pub value_label: &'a str,
     /// First node and step of the grid, mm; node (i, j) sits at (u0 + i·step, v0 + j·step).
     pub u0_mm: f64,
@@ -40,6 +53,8 @@ pub struct Heatmap<'a> {
     pub probes: &'a [(f64, f64)],
     /// Rejected probe points (u, v) mm.
     pub rejected: &'a [(f64, f64)],
+    /// The measured hull (u, v) mm, in order around it; empty = not drawn.
+    pub hull: &'a [[f64; 2]],
     pub scale: Scale,
     /// Nodes outside the measured domain (index j·nu + i), drawn lightened; empty = none.
     pub extrapolated: &'a [bool],
@@ -71,49 +86,6 @@ pub fn nice_limit(v: f64) -> f64 {
     10.0 * p
 }
 
-// ColorBrewer RdBu (11 classes), reversed so negative is blue and positive red.
-const DIVERGING: [(u8, u8, u8); 11] = [
-    (5, 48, 97),
-    (33, 102, 172),
-    (67, 147, 195),
-    (146, 197, 222),
-    (209, 229, 240),
-    (247, 247, 247),
-    (253, 219, 199),
-    (244, 165, 130),
-    (214, 96, 77),
-    (178, 24, 43),
-    (103, 0, 31),
-];
-
-// ColorBrewer Purples (9 classes), white to dark purple.
-const SEQUENTIAL: [(u8, u8, u8); 9] = [
-    (252, 251, 253),
-    (239, 237, 245),
-    (218, 218, 235),
-    (188, 189, 220),
-    (158, 154, 200),
-    (128, 125, 186),
-    (106, 81, 163),
-    (84, 39, 143),
-    (63, 0, 125),
-];
-
-/// Colour of `t` in [0, 1] along a piecewise-linear palette.
-fn palette(colours: &[(u8, u8, u8)], t: f64) -> RGBColor {
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.5
-    };
-    let x = t * (colours.len() - 1) as f64;
-    let i = (x.floor() as usize).min(colours.len() - 2);
-    let f = x - i as f64;
-    let (a, b) = (colours[i], colours[i + 1]);
-    let mix = |p: u8, q: u8| (p as f64 + (q as f64 - p as f64) * f).round() as u8;
-    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
-}
-
 /// The colour limits (lo, hi) a map is drawn with: symmetric about 0 for [`Scale::Diverging`].
 pub fn limits(values: &[Option<f64>], scale: Scale) -> (f64, f64) {
     let max_abs = values.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -125,41 +97,92 @@ pub fn limits(values: &[Option<f64>], scale: Scale) -> (f64, f64) {
 }
 
 fn colour_of(v: f64, lo: f64, hi: f64, scale: Scale) -> RGBColor {
-    let t = (v - lo) / (hi - lo);
-    match scale {
-        Scale::Diverging => palette(&DIVERGING, t),
-        Scale::Sequential => palette(&SEQUENTIAL, t),
+    scale.colour_map().of(v, lo, hi)
+}
+
+/// Height of the header: the title and three legend lines.
+const HEADER: u32 = 104;
+const MARGIN: u32 = 12;
+const Y_LABELS: u32 = 70;
+const X_LABELS: u32 = 50;
+const BAR: u32 = 130;
+
+/// The picture's geometry: cell size, data extent (mm) and plotting-area size (px).
+struct Layout {
+    step: f64,
+    u: (f64, f64),
+    v: (f64, f64),
+    plot_w: u32,
+    plot_h: u32,
+}
+
+impl Layout {
+    fn of(map: &Heatmap<'_>) -> Layout {
+        let step = if map.step_mm > 0.0 { map.step_mm } else { 1.0 };
+        let half = step / 2.0;
+        let u = (
+            map.u0_mm - half,
+            map.u0_mm + step * map.nu.saturating_sub(1) as f64 + half,
+        );
+        let v = (
+            map.v0_mm - half,
+            map.v0_mm + step * map.nv.saturating_sub(1) as f64 + half,
+        );
+        // Equal scales: the plotting area's pixel aspect equals the domain's.
+        let aspect = ((v.1 - v.0) / (u.1 - u.0)).clamp(0.05, 20.0);
+        let (mut plot_w, mut plot_h) = (800.0, 800.0 * aspect);
+        if plot_h > 700.0 {
+            plot_h = 700.0;
+            plot_w = plot_h / aspect;
+        }
+        Layout {
+            step,
+            u,
+            v,
+            plot_w: plot_w.round().max(120.0) as u32,
+            plot_h: plot_h.round().max(120.0) as u32,
+        }
     }
 }
 
-/// Draw the heatmap and write it to `path` as PNG (atomically).
-pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
-    let step = if map.step_mm > 0.0 { map.step_mm } else { 1.0 };
+/// Where [`save_heatmap`] puts the plot of `map` in its PNG (from the grid alone, without drawing).
+pub fn frame(map: &Heatmap<'_>) -> Frame {
+    let l = Layout::of(map);
+    let left = (MARGIN + Y_LABELS) as i32;
+    let top = (HEADER + MARGIN) as i32;
+    // Plotters maps the range's ends onto the first and the last pixel of the area.
+    Frame::new(l.u, l.v, |u, v| {
+        let x = if u == l.u.0 {
+            left
+        } else {
+            left + l.plot_w as i32 - 1
+        };
+        let y = if v == l.v.0 {
+            top + l.plot_h as i32 - 1
+        } else {
+            top
+        };
+        (x, y)
+    })
+}
+
+/// Draw the heatmap and write it to `path` as PNG (atomically); returns where the plot lies.
+pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
+    let Layout {
+        step,
+        u: (u_lo, u_hi),
+        v: (v_lo, v_hi),
+        plot_w,
+        plot_h,
+    } = Layout::of(map);
     let half = step / 2.0;
-    let u_lo = map.u0_mm - half;
-    let v_lo = map.v0_mm - half;
-    let u_hi = map.u0_mm + step * map.nu.saturating_sub(1) as f64 + half;
-    let v_hi = map.v0_mm + step * map.nv.saturating_sub(1) as f64 + half;
-    // Equal scales: the plotting area's pixel aspect equals the domain's.
-    const MARGIN: u32 = 12;
-    const Y_LABELS: u32 = 70;
-    const X_LABELS: u32 = 50;
-    const HEADER: u32 = 64;
-    const BAR: u32 = 130;
-    let aspect = ((v_hi - v_lo) / (u_hi - u_lo)).clamp(0.05, 20.0);
-    let (mut plot_w, mut plot_h) = (800.0, 800.0 * aspect);
-    if plot_h > 700.0 {
-        plot_h = 700.0;
-        plot_w = plot_h / aspect;
-    }
-    let plot_w = plot_w.round().max(120.0) as u32;
-    let plot_h = plot_h.round().max(120.0) as u32;
     let main_w = plot_w + Y_LABELS + 2 * MARGIN;
     let width = main_w + BAR;
     let height = HEADER + plot_h + X_LABELS + 2 * MARGIN;
     let (lo, hi) = limits(map.values, map.scale);
     let values = map.values;
     let (nu, nv) = (map.nu, map.nv);
+    let mut frame = None;
     chart::save_png(path, width, height, |root| {
         let (header, body) = root.split_vertically(HEADER);
         header.draw(&Text::new(
@@ -167,32 +190,7 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
             (MARGIN as i32, 6),
             (FONT, 22).into_font().color(&BLACK),
         ))?;
-        // Legend line: what the marks and colours mean.
-        let small = (FONT, 15).into_font().color(&BLACK);
-        let y = 44;
-        let mut x = MARGIN as i32 + 6;
-        // Marks appear in the legend only when the picture has them.
-        if !map.probes.is_empty() {
-            header.draw(&Circle::new((x, y), 3, BLACK.filled()))?;
-            let probe_text = format!("probe point ({})", map.probes.len());
-            header.draw(&Text::new(
-                probe_text.clone(),
-                (x + 10, y - 9),
-                small.clone(),
-            ))?;
-            x += 24 + 8 * probe_text.chars().count() as i32;
-        }
-        if !map.rejected.is_empty() || !map.probes.is_empty() {
-            draw_rejected_mark(&header, (x, y))?;
-            let rej_text = format!("rejected gross error ({})", map.rejected.len());
-            header.draw(&Text::new(rej_text.clone(), (x + 12, y - 9), small.clone()))?;
-            x += 28 + 8 * rej_text.chars().count() as i32;
-        }
-        let sense = match map.scale {
-            Scale::Diverging => "red: above nominal (E > 0), blue: below",
-            Scale::Sequential => "darker: larger",
-        };
-        header.draw(&Text::new(sense, (x, y - 9), small.clone()))?;
+        draw_legend(&header, map, lo, hi)?;
 
         let (main, _bar) = body.split_horizontally(main_w);
         let mut chart = ChartBuilder::on(&main)
@@ -220,9 +218,7 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
                         None => grey,
                     };
                     if map.extrapolated.get(j * nu + i) == Some(&true) {
-                        // Extrapolated: halfway to white, so the measured domain stands out.
-                        let w = |c: u8| ((u16::from(c) + 255) / 2) as u8;
-                        colour = RGBColor(w(colour.0), w(colour.1), w(colour.2));
+                        colour = lighten(colour);
                     }
                     Rectangle::new(
                         [(u - half, v - half), (u + half, v + half)],
@@ -230,66 +226,125 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<()> {
                     )
                 }),
         )?;
-        chart.draw_series(
-            map.probes
-                .iter()
-                .map(|&(u, v)| Circle::new((u, v), 3, BLACK.filled())),
-        )?;
+        if map.hull.len() >= 2 {
+            let mut ring: Vec<(f64, f64)> = map.hull.iter().map(|p| (p[0], p[1])).collect();
+            ring.push(ring[0]);
+            chart.draw_series(std::iter::once(PathElement::new(
+                ring.clone(),
+                WHITE.stroke_width(4),
+            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                ring,
+                BLACK.stroke_width(2),
+            )))?;
+        }
+        for &(u, v) in map.probes {
+            draw_probe_mark(root, chart.backend_coord(&(u, v)))?;
+        }
         for &(u, v) in map.rejected {
-            let (px, py) = chart.backend_coord(&(u, v));
-            draw_rejected_mark(root, (px, py))?;
+            draw_rejected_mark(root, chart.backend_coord(&(u, v)))?;
         }
+        frame = Some(Frame::new((u_lo, u_hi), (v_lo, v_hi), |u, v| {
+            chart.backend_coord(&(u, v))
+        }));
 
-        // Colour bar beside the plot, same height, ticks and labels in the map's unit on its right.
+        // Colour bar beside the plot, same height, ticks in the map's unit, its label above.
         let (_, y_px) = chart.plotting_area().get_pixel_range();
-        let (top, bottom) = (y_px.start, y_px.end);
-        let x0 = main_w as i32 + 6;
-        let x1 = x0 + 24;
-        let span = (bottom - top).max(1);
-        for k in 0..span {
-            // Row k from the top shows the value at its centre.
-            let value = hi - (hi - lo) * (k as f64 + 0.5) / span as f64;
-            let c = colour_of(value, lo, hi, map.scale);
-            root.draw(&Rectangle::new(
-                [(x0, top + k), (x1, top + k + 1)],
-                c.filled(),
-            ))?;
-        }
-        root.draw(&Rectangle::new(
-            [(x0, top), (x1, bottom)],
-            BLACK.stroke_width(1),
-        ))?;
-        let tick = nice_limit((hi - lo) / 10.0);
-        let decimals = if tick >= 1.0 {
-            0
-        } else if tick >= 0.1 {
-            1
-        } else {
-            2
-        };
-        let first = (lo / tick).ceil() as i64;
-        let last = (hi / tick).floor() as i64;
-        let label_font = (FONT, 14).into_font().color(&BLACK);
-        for n in first..=last {
-            let value = n as f64 * tick;
-            let y = bottom - ((value - lo) / (hi - lo) * span as f64).round() as i32;
-            root.draw(&PathElement::new(
-                vec![(x1, y), (x1 + 5, y)],
-                BLACK.stroke_width(1),
-            ))?;
-            root.draw(&Text::new(
-                format!("{value:.decimals$}"),
-                (x1 + 8, y - 7),
-                label_font.clone(),
-            ))?;
-        }
-        root.draw(&Text::new(
-            map.value_label.to_string(),
-            (x0 - 4, top - 22),
-            (FONT, 15).into_font().color(&BLACK),
-        ))?;
+        draw_colour_bar(
+            root,
+            &ColourBar {
+                map: map.scale.colour_map(),
+                lo,
+                hi,
+                label: map.value_label,
+                x_px: main_w as i32 + 6,
+                top_px: y_px.start,
+                bottom_px: y_px.end,
+            },
+        )?;
         Ok(())
-    })
+    })?;
+    frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+}
+
+/// Halfway to white: nodes outside the measured hull (extrapolated), so the measured domain stands out.
+fn lighten(c: RGBColor) -> RGBColor {
+    let w = |c: u8| ((u16::from(c) + 255) / 2) as u8;
+    RGBColor(w(c.0), w(c.1), w(c.2))
+}
+
+/// The legend lines under the title: marks and lines (only those the picture has), then colours.
+fn draw_legend<DB: DrawingBackend>(
+    header: &DrawingArea<DB, plotters::coord::Shift>,
+    map: &Heatmap<'_>,
+    lo: f64,
+    hi: f64,
+) -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>
+where
+    DB::ErrorType: 'static,
+{
+    let small = (FONT, 15).into_font().color(&BLACK);
+    let x0 = 12 + 6;
+    let (y1, y2, y3) = (44, 66, 88);
+    let mut x = x0;
+    if !map.probes.is_empty() {
+        draw_probe_mark(header, (x, y1))?;
+        let text = format!("probe point kept ({})", map.probes.len());
+        header.draw(&Text::new(text.clone(), (x + 10, y1 - 9), small.clone()))?;
+        x += 24 + 8 * text.chars().count() as i32;
+    }
+    if !map.rejected.is_empty() || !map.probes.is_empty() {
+        draw_rejected_mark(header, (x, y1))?;
+        let text = format!("rejected gross error ({})", map.rejected.len());
+        header.draw(&Text::new(text, (x + 16, y1 - 9), small.clone()))?;
+    }
+    let mut x = x0;
+    if map.hull.len() >= 2 {
+        header.draw(&PathElement::new(
+            vec![(x - 6, y2), (x + 14, y2)],
+            BLACK.stroke_width(2),
+        ))?;
+        let text = "measured hull (convex hull of the probe points)";
+        header.draw(&Text::new(text, (x + 20, y2 - 9), small.clone()))?;
+        x += 40 + 8 * text.chars().count() as i32;
+    }
+    if map.extrapolated.iter().any(|&e| e) {
+        let sample = lighten(colour_of(hi, lo, hi, map.scale));
+        header.draw(&Rectangle::new(
+            [(x - 6, y2 - 7), (x + 14, y2 + 7)],
+            sample.filled(),
+        ))?;
+        header.draw(&Text::new(
+            "lighter: outside the hull (extrapolated)",
+            (x + 20, y2 - 9),
+            small.clone(),
+        ))?;
+    }
+    let colours = match map.scale {
+        Scale::Diverging => format!(
+            "colour: {} — red above nominal (E > 0), white 0, blue below; limits ±{hi}",
+            map.value_label
+        ),
+        Scale::Sequential => format!(
+            "colour: {} — viridis, dark {lo} to light {hi}",
+            map.value_label
+        ),
+    };
+    header.draw(&Text::new(colours, (x0 - 6, y3 - 9), small))?;
+    Ok(())
+}
+
+/// The probe mark: a black dot in a white rim, visible on any colour.
+fn draw_probe_mark<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    (x, y): (i32, i32),
+) -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>
+where
+    DB::ErrorType: 'static,
+{
+    area.draw(&Circle::new((x, y), 5, WHITE.filled()))?;
+    area.draw(&Circle::new((x, y), 3, BLACK.filled()))?;
+    Ok(())
 }
 
 /// The rejected-point mark: a black cross inside a white-rimmed circle, visible on any colour.
@@ -368,6 +423,7 @@ mod tests {
             values: &values,
             probes: &[(0.0, 0.0)],
             rejected: &[(20.0, 10.0)],
+            hull: &[],
             scale: Scale::Diverging,
             extrapolated: &[],
         };
@@ -378,7 +434,7 @@ mod tests {
         let img = image::open(&path).unwrap().to_rgb8();
         // The 30 × 20 mm extent gives a 3:2 plotting area: 800 × 533 px.
         assert_eq!(img.width(), 800 + 70 + 24 + 130);
-        assert_eq!(img.height(), 64 + 533 + 50 + 24);
+        assert_eq!(img.height(), HEADER + 533 + 50 + 24);
         let reddish = img
             .pixels()
             .filter(|p| p.0[0] > 150 && p.0[2] < 120)
@@ -389,5 +445,147 @@ mod tests {
             .count();
         // A third of the plot is each colour (the colour bar adds a little of both).
         assert!(reddish > 100_000 && bluish > 100_000, "{reddish} {bluish}");
+    }
+
+    /// A 4 × 3 map over 30 × 20 mm with two probes, one reject and a triangular hull.
+    fn small_map<'a>(
+        values: &'a [Option<f64>],
+        scale: Scale,
+        probes: &'a [(f64, f64)],
+        hull: &'a [[f64; 2]],
+    ) -> Heatmap<'a> {
+        Heatmap {
+            title: "test".into(),
+            u_name: "x",
+            v_name: "y",
+            value_label: "σ of E (µm)",
+            u0_mm: 0.0,
+            v0_mm: 0.0,
+            step_mm: 10.0,
+            nu: 4,
+            nv: 3,
+            values,
+            probes,
+            rejected: &[(25.0, 15.0)],
+            hull,
+            scale,
+            extrapolated: &[],
+        }
+    }
+
+    fn rgb(img: &image::RgbImage, (x, y): (f64, f64)) -> [u8; 3] {
+        img.get_pixel(x.round() as u32, y.round() as u32).0
+    }
+
+    #[test]
+    fn probes_and_the_hull_are_drawn_where_they_are() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("std.png");
+        // A uniform mid-scale σ: every cell the same viridis colour, so any black is a mark.
+        let values = vec![Some(1.0); 12];
+        let probes = [(7.0, 4.0), (18.0, 12.0)];
+        let hull = [[0.0, 0.0], [30.0, 0.0], [0.0, 20.0]];
+        let map = small_map(&values, Scale::Sequential, &probes, &hull);
+        let drawn = save_heatmap(&path, &map).unwrap();
+        let planned = frame(&map);
+        for (u, v) in [(0.0, 0.0), (30.0, 20.0), (12.5, 7.5)] {
+            let (a, b) = (drawn.to_px(u, v), planned.to_px(u, v));
+            assert!(
+                (a.0 - b.0).abs() <= 1.0 && (a.1 - b.1).abs() <= 1.0,
+                "{a:?} {b:?}"
+            );
+        }
+        let img = image::open(&path).unwrap().to_rgb8();
+        let cell = rgb(&img, drawn.to_px(33.0, 23.0));
+        assert!(cell.iter().any(|&c| c > 60), "cell colour {cell:?}");
+        for &(u, v) in &probes {
+            let (x, y) = drawn.to_px(u, v);
+            assert!(
+                rgb(&img, (x, y)).iter().all(|&c| c < 60),
+                "probe at ({u}, {v})"
+            );
+            // The white rim around the dot.
+            assert!(rgb(&img, (x + 4.0, y)).iter().all(|&c| c > 200));
+        }
+        // The hull's edge from (30, 0) to (0, 20) passes through (15, 10): black there, the
+        // cell colour 12 px off it on both sides (its normal is (2, −3) in pixels).
+        let (x, y) = drawn.to_px(15.0, 10.0);
+        assert!(rgb(&img, (x, y)).iter().all(|&c| c < 60));
+        let (dx, dy) = (12.0 * 2.0 / 13f64.sqrt(), 12.0 * 3.0 / 13f64.sqrt());
+        assert_eq!(rgb(&img, (x + dx, y - dy)), cell);
+        assert_eq!(rgb(&img, (x - dx, y + dy)), cell);
+    }
+
+    #[test]
+    fn the_diverging_map_is_neutral_at_zero_and_symmetric() {
+        let white = ColourMap::Diverging.at(0.5);
+        assert!(white.0 == white.1 && white.1 == white.2 && white.0 > 240);
+        // ±t from the middle: blue one side, red the other, of (nearly) equal lightness.
+        for t in [0.1, 0.25, 0.4, 0.5] {
+            let hot = ColourMap::Diverging.at(0.5 + t);
+            let cold = ColourMap::Diverging.at(0.5 - t);
+            assert!(hot.0 > hot.2 && cold.2 > cold.0, "{t}: {hot:?} {cold:?}");
+            let (lh, lc) = (
+                crate::report::colormap::luminance(hot),
+                crate::report::colormap::luminance(cold),
+            );
+            assert!((lh - lc).abs() < 0.06, "{t}: Y {lh} vs {lc}");
+        }
+        // Limits are ±L about zero, whatever the sign of the larger error.
+        assert_eq!(
+            limits(&[Some(-7.0), Some(2.0)], Scale::Diverging),
+            (-10.0, 10.0)
+        );
+        // In the picture, the colour bar's middle row is the neutral colour.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("e.png");
+        let values: Vec<Option<f64>> = (0..12).map(|k| Some(k as f64 - 3.0)).collect();
+        let mut map = small_map(&values, Scale::Diverging, &[], &[]);
+        map.value_label = "E (µm)";
+        let f = save_heatmap(&path, &map).unwrap();
+        let img = image::open(&path).unwrap().to_rgb8();
+        let (_, top) = f.to_px(0.0, f.y_range.1);
+        let (_, bottom) = f.to_px(0.0, f.y_range.0);
+        let x_bar = (img.width() - BAR + 6 + 12) as f64;
+        let mid = rgb(&img, (x_bar, (top + bottom) / 2.0));
+        assert!(
+            mid[0] == mid[1] && mid[1] == mid[2] && mid[0] > 240,
+            "{mid:?}"
+        );
+        let (hi, lo) = (
+            rgb(&img, (x_bar, top + 3.0)),
+            rgb(&img, (x_bar, bottom - 3.0)),
+        );
+        assert!(hi[0] > hi[2] && lo[2] > lo[0], "{hi:?} {lo:?}");
+    }
+
+    #[test]
+    fn the_magnitude_map_grows_lighter_monotonically() {
+        let y: Vec<f64> = (0..=64)
+            .map(|k| crate::report::colormap::luminance(ColourMap::Viridis.at(k as f64 / 64.0)))
+            .collect();
+        assert!(y.windows(2).all(|w| w[1] > w[0]), "{y:?}");
+        // Published end points of viridis.
+        assert_eq!(ColourMap::Viridis.at(0.0), RGBColor(68, 1, 84));
+        assert_eq!(ColourMap::Viridis.at(1.0), RGBColor(253, 231, 37));
+        // And in the picture: the colour bar darkens from top to bottom.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.png");
+        let values: Vec<Option<f64>> = (0..12).map(|k| Some(k as f64)).collect();
+        let f = save_heatmap(&path, &small_map(&values, Scale::Sequential, &[], &[])).unwrap();
+        let img = image::open(&path).unwrap().to_rgb8();
+        let (_, top) = f.to_px(0.0, f.y_range.1);
+        let (_, bottom) = f.to_px(0.0, f.y_range.0);
+        let x_bar = (img.width() - BAR + 6 + 12) as f64;
+        let bar: Vec<f64> = (0..=20)
+            .map(|k| {
+                let [r, g, b] = rgb(
+                    &img,
+                    (x_bar, top + 2.0 + (bottom - top - 4.0) * k as f64 / 20.0),
+                );
+                crate::report::colormap::luminance(RGBColor(r, g, b))
+            })
+            .collect();
+        assert!(bar.windows(2).all(|w| w[1] < w[0]), "{bar:?}");
     }
 }

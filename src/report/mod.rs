@@ -2,6 +2,7 @@
 
 pub mod build;
 pub mod chart;
+pub mod colormap;
 pub mod heatmap;
 pub mod html;
 pub mod pdf;

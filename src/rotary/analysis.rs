@@ -144,11 +144,48 @@ pub struct SphereSummary {
     pub max_abs_radius_deviation_mm: Option<f64>,
 }
 
+/// Sign convention of the angular errors of an analysis (`rotary analyze --sign`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Sign {
+    /// err = α − β = commanded − measured (seed 003; what `rotary table` compensates).
+    #[default]
+    Errmap,
+    /// error = β − α = measured − commanded: ISO 230-2's deviation x (actual − target), the
+    /// sign of laser and rotary-calibrator reports.
+    Calibrator,
+}
+
+impl Sign {
+    /// The error's definition, e.g. "α − β (commanded − measured)".
+    pub fn formula(self) -> &'static str {
+        match self {
+            Sign::Errmap => "α − β (commanded − measured)",
+            Sign::Calibrator => "β − α (measured − commanded)",
+        }
+    }
+
+    /// What a positive error means for `axis`, in words.
+    pub fn positive(self, axis: RotaryAxis) -> String {
+        let about = ["X", "Y", "Z"][axis.index()];
+        let side = match self {
+            Sign::Errmap => "clockwise",
+            Sign::Calibrator => "counter-clockwise",
+        };
+        format!(
+            "positive: the axis stopped {side} of the commanded angle, seen from +{about} (angles right-handed about +{about})"
+        )
+    }
+}
+
 /// Result of `rotary analyze`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Analysis {
     pub axis: RotaryAxis,
     pub unit: &'static str,
+    /// Sign of `table` (and of the observations): `errmap` (α − β) or `calibrator` (β − α).
+    /// `iso230_2` keeps ISO's x = β − α whatever the sign.
+    pub sign: Sign,
     /// Mean error per direction and target angle, direction `+` first, angles ascending.
     pub table: Vec<TableRow>,
     pub axis_fit: AxisReport,
@@ -445,6 +482,7 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
     Ok(Analysis {
         axis: m.axis,
         unit: "arcsec",
+        sign: Sign::Errmap,
         reference,
         table,
         axis_fit: axis_report,
@@ -454,6 +492,26 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
         observations,
         sphere_fits,
     })
+}
+
+impl Analysis {
+    /// The analysis with its errors in `sign`: the table's means, minima and maxima and the
+    /// observations change sign (minimum and maximum swap); the ISO figures stay as they are.
+    pub fn with_sign(mut self, sign: Sign) -> Analysis {
+        // 0 stays 0, not −0 (which JSON and text would print as "-0").
+        let neg = |v: f64| if v == 0.0 { 0.0 } else { -v };
+        if sign != self.sign {
+            for r in &mut self.table {
+                r.error_arcsec = neg(r.error_arcsec);
+                (r.min_arcsec, r.max_arcsec) = (neg(r.max_arcsec), neg(r.min_arcsec));
+            }
+            for o in &mut self.observations {
+                o.error_arcsec = neg(o.error_arcsec);
+            }
+            self.sign = sign;
+        }
+        self
+    }
 }
 
 /// ISO 230-2:2014 figures of the observations (targets = commanded angles, runs = repeats).

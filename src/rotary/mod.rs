@@ -13,7 +13,7 @@ pub mod input;
 pub mod sphere;
 pub mod table;
 
-pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, TableRow};
+pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, Sign, TableRow};
 pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
 pub use axis_fit::{fit_axis, AxisFit, CircleFit};
 pub use input::{read_measurement, Direction, Measurement, Position, RotaryAxis};

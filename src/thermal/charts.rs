@@ -1,25 +1,24 @@
-//! Charts of the thermal commands: the fan of thermal error lines (seed 000) and the positioning
-//! figures before/after compensation over time.
+//! Charts of the thermal commands: the fan of thermal error lines (seed 000), coloured by time with a colour bar, and the positioning figures before/after compensation over time.
 
 use super::campaign::{direction_name, DIRECTIONS};
 use super::difference::Difference;
 use super::evaluate::EvaluationReport;
 use crate::error::Result;
 use crate::report::chart::{save_png, FONT};
+use crate::report::colormap::{draw_colour_bar, ColourBar, ColourMap};
 use plotters::prelude::*;
 use std::path::Path;
 
 /// Picks one figure of a time, if the standard defines it there.
 type Figure = fn(&super::evaluate::TimeFigures) -> Option<f64>;
 
-/// Colour of time `t` on a blue (cold) → red (warm) scale over `[t0, t1]`.
-fn time_colour(t: f64, t0: f64, t1: f64) -> RGBColor {
-    let w = if t1 > t0 {
-        ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)
+/// The time scale of the fan's colours: minutes, or hours past three hours.
+fn time_unit(span_s: f64) -> (&'static str, f64) {
+    if span_s > 3.0 * 3600.0 {
+        ("h", 3600.0)
     } else {
-        0.0
-    };
-    RGBColor((40.0 + 200.0 * w) as u8, 60, (230.0 - 200.0 * w) as u8)
+        ("min", 60.0)
+    }
 }
 
 fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -35,18 +34,29 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-/// Et points and the fitted line of every time, one panel per direction.
+/// Et points and the fitted line of every time, one panel per direction, coloured (viridis) by
+/// the time since the cold measurement, with a colour bar saying so.
 pub fn fan_chart(path: &Path, d: &Difference) -> Result<()> {
     let (x0, x1) = span(d.rows.iter().map(|r| r.target_mm));
     let (y0, y1) = span(d.rows.iter().map(|r| r.et_um));
-    let (t0, t1) = span(d.lines.iter().map(|l| l.time_s));
-    save_png(path, 1200, 560, |root| {
-        let panels = root.split_evenly((1, 2));
+    let last_s = d
+        .lines
+        .iter()
+        .map(|l| l.time_s - d.cold_time_s)
+        .fold(0.0, f64::max);
+    let (unit, per) = time_unit(last_s);
+    let t_max = if last_s > 0.0 { last_s / per } else { 1.0 };
+    let colour =
+        move |time_s: f64| ColourMap::Viridis.of((time_s - d.cold_time_s) / per, 0.0, t_max);
+    let bar_label = format!("time ({unit})");
+    save_png(path, 1300, 560, |root| {
+        let (plots, bar) = root.split_horizontally(1160);
+        let panels = plots.split_evenly((1, 2));
         for (area, dir) in panels.iter().zip(DIRECTIONS) {
             let mut chart = ChartBuilder::on(area)
                 .caption(
                     format!(
-                        "{} {}: Et = E − Es (blue cold → red warm)",
+                        "{} {}: Et = E − Es, one line per measurement",
                         d.campaign,
                         direction_name(dir)
                     ),
@@ -64,20 +74,46 @@ pub fn fan_chart(path: &Path, d: &Difference) -> Result<()> {
                 .axis_desc_style((FONT, 14))
                 .draw()?;
             for line in d.lines.iter().filter(|l| l.direction == dir) {
-                let colour = time_colour(line.time_s, t0, t1);
+                let c = colour(line.time_s);
                 let at = |x: f64| line.offset_um + line.slope_um_per_m * x / 1000.0;
                 chart.draw_series(LineSeries::new(
                     [(x0, at(x0)), (x1, at(x1))],
-                    colour.stroke_width(2),
+                    c.stroke_width(2),
                 ))?;
                 chart.draw_series(
                     d.rows
                         .iter()
                         .filter(|r| r.direction == dir && r.time_s == line.time_s)
-                        .map(|r| Circle::new((r.target_mm, r.et_um), 3, colour.filled())),
+                        .map(|r| Circle::new((r.target_mm, r.et_um), 3, c.filled())),
                 )?;
             }
         }
+        let small = (FONT, 13).into_font().color(&BLACK);
+        for (k, line) in [
+            "dots: measured Et",
+            "lines: fitted Et",
+            "",
+            "colour: time since",
+            "the cold (first)",
+            "measurement",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            bar.draw(&Text::new(line, (4, 14 + 17 * k as i32), small.clone()))?;
+        }
+        draw_colour_bar(
+            &bar,
+            &ColourBar {
+                map: ColourMap::Viridis,
+                lo: 0.0,
+                hi: t_max,
+                label: &bar_label,
+                x_px: 20,
+                top_px: 150,
+                bottom_px: 500,
+            },
+        )?;
         Ok(())
     })
 }
