@@ -446,6 +446,16 @@ fn strip_comments(line: &str) -> String {
 fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     let t = l.trim_start();
     let mut out = Vec::new();
+    heidenhain_markers(t, &mut out);
+    linuxcnc_markers(t, &mut out);
+    let compact: String = t.chars().filter(|c| !c.is_whitespace()).collect();
+    fanuc_markers(&compact, &mut out);
+    sinumerik_markers(t, &compact, &mut out);
+    out
+}
+
+/// Heidenhain Klartext and ISO headers.
+fn heidenhain_markers(t: &str, out: &mut Vec<(Dialect, &'static str)>) {
     let words: Vec<&str> = t.split_whitespace().collect();
     // Heidenhain Klartext: `0 BEGIN PGM`, `5 L X+10 R0 FMAX`, `7 CC X…`, `TOOL CALL`, `CYCL DEF`.
     if t.contains("BEGIN PGM") || t.contains("END PGM") {
@@ -479,6 +489,10 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     if t.starts_with('%') && (t.contains("G70") || t.contains("G71")) && t.ends_with('*') {
         out.push((Dialect::Heidenhain, "%… G71 *"));
     }
+}
+
+/// LinuxCNC O-words with keywords and named parameters.
+fn linuxcnc_markers(t: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // LinuxCNC: O-words with keywords, named parameters, G64 P, G38.x, G5.x.
     if t.starts_with('O') || t.contains(" O") {
         for k in [
@@ -505,8 +519,11 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     if t.contains("#<") {
         out.push((Dialect::Linuxcnc, "#<name>"));
     }
+}
+
+/// Fanuc subprograms, macro calls, macro B flow and transformations.
+fn fanuc_markers(compact: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // Fanuc: M98/M99 subprograms, G65/G66 macro calls, macro B flow, G68/G51/G52.
-    let compact: String = t.chars().filter(|c| !c.is_whitespace()).collect();
     for (pat, what) in [
         ("M98", "M98"),
         ("M99", "M99"),
@@ -528,6 +545,10 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     {
         out.push((Dialect::Fanuc, "O program number"));
     }
+}
+
+/// Sinumerik assignments, frames, instructions and R parameters.
+fn sinumerik_markers(t: &str, compact: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // Sinumerik: `X=…`, `CR=`, AC()/IC(), frames, DEF, R-parameter assignment, MSG, G500/G710.
     let siemens = [
         "CR=", "X=", "Y=", "Z=", "=AC(", "=IC(", "TRANS", "ROT ", "SCALE", "MIRROR", "DEF ",
@@ -547,7 +568,6 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     if is_r_assignment(&compact) {
         out.push((Dialect::Sinumerik, "R parameter"));
     }
-    out
 }
 
 fn is_r_assignment(compact: &str) -> bool {
@@ -604,6 +624,48 @@ mod tests {
 
     fn detect(text: &str) -> Result<Dialect> {
         resolve(text, Path::new("t.nc"), None)
+    }
+
+    #[test]
+    fn g_codes_are_read_as_written_and_meant_per_dialect() {
+        let g = |v: f64| GCode::from_value(v).unwrap();
+        assert_eq!(
+            g(38.2),
+            GCode {
+                number: 38,
+                decimal: 2
+            }
+        );
+        assert_eq!(g(1.0).to_string(), "G1");
+        assert_eq!(g(38.2).to_string(), "G38.2");
+        assert_eq!(g(710.0).to_string(), "G710");
+        assert_eq!(GCode::from_value(-1.0), None);
+        assert_eq!(GCode::from_value(f64::NAN), None);
+        // The same code means different things in different controllers.
+        assert_eq!(g_code(Dialect::Linuxcnc, g(70.0)), None);
+        assert_eq!(g_code(Dialect::Sinumerik, g(70.0)), Some(G::Units(true)));
+        assert_eq!(
+            g_code(Dialect::Fanuc, g(51.0)),
+            Some(G::Frame(Frame::Scaling))
+        );
+        assert_eq!(
+            g_code(Dialect::Heidenhain, g(2.0)),
+            Some(G::Motion(Motion::Special))
+        );
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(2.0)),
+            Some(G::Motion(Motion::ArcCw))
+        );
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(38.3)),
+            Some(G::Motion(Motion::Probe))
+        );
+        assert_eq!(g_code(Dialect::Linuxcnc, g(59.3)), Some(G::WorkOffset));
+        assert_eq!(g_code(Dialect::Fanuc, g(59.3)), None);
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(90.1)),
+            Some(G::ArcDistance(true))
+        );
     }
 
     #[test]

@@ -89,3 +89,27 @@ pub(super) fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
     }
     most.min(9)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_are_written_as_fixed_point() {
+        let t = |u: i64, d: usize| {
+            let mut s = String::new();
+            push_units(&mut s, u, d);
+            s
+        };
+        assert_eq!(t(12345, 4), "1.2345");
+        assert_eq!(t(5, 4), "0.0005");
+        assert_eq!(t(-5, 4), "-0.0005");
+        assert_eq!(t(0, 4), "0.0000");
+        assert_eq!(t(0, 0), "0");
+        assert_eq!(t(-120, 0), "-120");
+        assert_eq!(t(-1_000_000_000, 9), "-1.000000000");
+        assert_eq!(format_decimals(-0.00001, 4), "0.0000");
+        assert_eq!(format_decimals(2.5e-5, 4), "0.0000");
+        assert_eq!(format_decimals(-12.34565, 5), "-12.34565");
+    }
+}
