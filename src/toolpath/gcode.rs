@@ -18,7 +18,7 @@ use super::arc::Plane;
 use super::dialect::{self, Dialect, Frame, GCode, Motion, G};
 use super::expr::{eval, Params};
 use super::lexer::{lex_dialect, Line, TokenKind, WordValue};
-use super::{CompensationReport, CompensationSettings};
+use super::{CompensationReport, CompensationSettings, TracedMove};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
 use std::cell::Cell;
@@ -142,6 +142,8 @@ struct Rewriter<'a> {
     words: Vec<W>,
     emitted: Vec<([f64; 3], Option<f64>)>,
     segments: rewrite::Segments,
+    /// The moves read, when tracing.
+    trace: Option<Vec<TracedMove>>,
 }
 
 /// Compensate a G-code program. See the module documentation of [`crate::toolpath`].
@@ -151,75 +153,130 @@ pub fn compensate(
     field: &dyn ErrorField,
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
-    settings.validate()?;
-    let dialect = dialect::resolve(text, source, settings.dialect)?;
-    refuse_klartext(text, source, dialect)?;
-    let zone_mm = super::default_zone_mm(source, field, settings)?;
-    let normal_axis = field.normal();
-    let (u, v) = normal_axis.plane_axes();
-    let units = settings.units;
-    let mut rw = Rewriter {
-        text,
-        source,
-        field,
-        settings,
-        normal: normal_axis.index(),
-        plane_uv: (u.index(), v.index()),
-        pos: [None; 3],
-        inches: units == Some(super::Units::Inch),
-        absolute: true,
-        arc_absolute: false,
-        plane: Plane::G17,
-        motion: None,
-        cutter_comp: None,
-        params: Params::new(),
-        offset: 0.0,
-        out_motion: None,
-        blocks: Vec::new(),
-        sub: None,
-        subs: HashMap::new(),
-        unknown_since: None,
-        program_decimals: 0,
-        report: CompensationReport::default(),
-        out: String::with_capacity(text.len() + text.len() / 4),
-        dialect,
-        units_known: false,
-        zone_first_units: settings.zone,
-        zone_mm,
-        shift: [0.0; 3],
-        local: [0.0; 3],
-        frames: Vec::new(),
-        first_offset: None,
-        flow: None,
-        programs: 0,
-        m99: None,
-        extrapolated: Cell::new(false),
-        words: Vec::new(),
-        emitted: Vec::new(),
-        segments: rewrite::Segments::default(),
+    let mut rw = Rewriter::start(text, source, field, settings)?;
+    rw.run()?;
+    rw.finish()
+}
+
+/// A map that compensates nothing: reading a program through it traces its moves.
+struct Nothing;
+
+impl ErrorField for Nothing {
+    fn normal(&self) -> crate::geom::Axis {
+        crate::geom::Axis::Z
+    }
+    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
+        None
+    }
+}
+
+/// The moves of a G-code program as errmap's interpreter reads them (see
+/// [`crate::toolpath::trace_gcode`]).
+pub fn trace(
+    text: &str,
+    source: &Path,
+    settings: &CompensationSettings,
+) -> Result<Vec<TracedMove>> {
+    let settings = CompensationSettings {
+        zone: None,
+        everywhere: true,
+        ..*settings
     };
-    if units.is_some() {
-        rw.set_units_known();
+    let mut rw = Rewriter::start(text, source, &Nothing, &settings)?;
+    rw.trace = Some(Vec::new());
+    rw.run()?;
+    Ok(rw.trace.take().unwrap_or_default())
+}
+
+impl<'a> Rewriter<'a> {
+    /// The state at the program start, after the checks that need the whole text.
+    fn start(
+        text: &'a str,
+        source: &'a Path,
+        field: &'a dyn ErrorField,
+        settings: &'a CompensationSettings,
+    ) -> Result<Rewriter<'a>> {
+        settings.validate()?;
+        let dialect = dialect::resolve(text, source, settings.dialect)?;
+        refuse_klartext(text, source, dialect)?;
+        let zone_mm = super::default_zone_mm(source, field, settings)?;
+        let normal_axis = field.normal();
+        let (u, v) = normal_axis.plane_axes();
+        let units = settings.units;
+        let mut rw = Rewriter {
+            text,
+            source,
+            field,
+            settings,
+            normal: normal_axis.index(),
+            plane_uv: (u.index(), v.index()),
+            pos: [None; 3],
+            inches: units == Some(super::Units::Inch),
+            absolute: true,
+            arc_absolute: false,
+            plane: Plane::G17,
+            motion: None,
+            cutter_comp: None,
+            params: Params::new(),
+            offset: 0.0,
+            out_motion: None,
+            blocks: Vec::new(),
+            sub: None,
+            subs: HashMap::new(),
+            unknown_since: None,
+            program_decimals: 0,
+            report: CompensationReport::default(),
+            out: String::with_capacity(text.len() + text.len() / 4),
+            dialect,
+            units_known: false,
+            zone_first_units: settings.zone,
+            zone_mm,
+            shift: [0.0; 3],
+            local: [0.0; 3],
+            frames: Vec::new(),
+            first_offset: None,
+            flow: None,
+            programs: 0,
+            m99: None,
+            extrapolated: Cell::new(false),
+            words: Vec::new(),
+            emitted: Vec::new(),
+            segments: rewrite::Segments::default(),
+            trace: None,
+        };
+        if units.is_some() {
+            rw.set_units_known();
+        }
+        Ok(rw)
     }
-    let lines = lex_dialect(text, dialect);
-    rw.flow = first_jump(text, &lines, dialect);
-    rw.program_decimals = coordinate_decimals(text, &lines);
-    rw.report.lines_in = lines.len() as u64;
-    for line in &lines {
-        rw.line(line)?;
+
+    /// Read every line, rewriting the moves to compensate.
+    fn run(&mut self) -> Result<()> {
+        let lines = lex_dialect(self.text, self.dialect);
+        self.flow = first_jump(self.text, &lines, self.dialect);
+        self.program_decimals = coordinate_decimals(self.text, &lines);
+        self.report.lines_in = lines.len() as u64;
+        for line in &lines {
+            self.line(line)?;
+        }
+        Ok(())
     }
-    if let (Some(l), true) = (rw.m99, rw.report.moves_changed > 0) {
-        return Err(Error::input(
-            Location::cell(source, l, "M99"),
-            "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
-            "compensate the main program with the subprogram expanded into it",
-        ));
+
+    /// The output and its report; a subprogram whose moves changed is refused.
+    fn finish(mut self) -> Result<(String, CompensationReport)> {
+        if let (Some(l), true) = (self.m99, self.report.moves_changed > 0) {
+            return Err(Error::input(
+                Location::cell(self.source, l, "M99"),
+                "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
+                "compensate the main program with the subprogram expanded into it",
+            ));
+        }
+        self.report.dialect = Some(self.dialect);
+        self.report.zone_mm = self.zone_mm;
+        self.report.lines_out = self.out.matches('\n').count() as u64
+            + u64::from(!self.out.is_empty() && !self.out.ends_with('\n'));
+        Ok((self.out, self.report))
     }
-    rw.report.dialect = Some(dialect);
-    rw.report.zone_mm = rw.zone_mm;
-    rw.report.lines_out = rw.out.matches('\n').count() as u64
-        + u64::from(!rw.out.is_empty() && !rw.out.ends_with('\n'));
-    Ok((rw.out, rw.report))
 }
 
 impl<'a> Rewriter<'a> {

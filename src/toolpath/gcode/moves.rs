@@ -3,6 +3,7 @@
 use super::super::arc::Arc;
 use super::super::dialect::{Dialect, Motion, G};
 use super::super::lexer::{Line, TokenKind};
+use super::super::TracedMove;
 use super::emit::{emit_curve, Breaks};
 use super::{dist, lerp, MotionMode, Rewriter, AXES, W};
 use crate::error::{Error, Result};
@@ -87,6 +88,9 @@ impl<'a> Rewriter<'a> {
         let mv = self.classify(line, words, motion, g53);
         if let Some((col, msg, hint)) = self.refusal(words, &mv) {
             return Err(self.err(line, &col, msg, hint));
+        }
+        if self.trace.is_some() {
+            self.trace_move(line, words, &mv)?;
         }
         if !self.plain(&mv) {
             // Not compensable, but shown above not to touch the zone: copy as is.
@@ -320,6 +324,42 @@ impl<'a> Rewriter<'a> {
             ));
         }
         None
+    }
+
+    /// Record a move whose start and end are known, in mm and work coordinates.
+    fn trace_move(&mut self, line: &Line, words: &[W], mv: &Move) -> Result<()> {
+        let known = |p: Point| -> Option<[f64; 3]> { Some([p[0]?, p[1]?, p[2]?]) };
+        let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
+            return Ok(());
+        };
+        let k = self.scale_mm();
+        let shift = self.shift;
+        let mm = |p: [f64; 3]| [0, 1, 2].map(|i| (p[i] + shift[i]) * k);
+        let arc_mm = match mv.motion.kind {
+            Motion::ArcCw | Motion::ArcCcw => {
+                let a = self.arc(line, words, s, e, mv.motion.kind == Motion::ArcCw)?;
+                let (a1, a2, _) = a.plane.axes();
+                Some(Arc {
+                    start: mm(a.start),
+                    end: mm(a.end),
+                    centre: ((a.centre.0 + shift[a1]) * k, (a.centre.1 + shift[a2]) * k),
+                    r_start: a.r_start * k,
+                    r_end: a.r_end * k,
+                    ..a
+                })
+            }
+            _ => None,
+        };
+        if let Some(t) = self.trace.as_mut() {
+            t.push(TracedMove {
+                line: line.number,
+                kind: mv.motion.kind,
+                start_mm: mm(s),
+                end_mm: mm(e),
+                arc_mm,
+            });
+        }
+        Ok(())
     }
 
     /// A cut errmap compensates: nothing in the block or the state stands in the way.
