@@ -93,13 +93,8 @@ impl<'a> Rewriter<'a> {
         dialect::g_code(self.dialect, code)
     }
 
-    /// The G words of a block with their meaning in the dialect; an unknown code is refused.
-    pub(super) fn g_words<'w>(
-        &self,
-        line: &Line,
-        words: &'w [W],
-    ) -> Result<Vec<(&'w W, GCode, G)>> {
-        let mut gs = Vec::new();
+    /// Every G word of a block has a meaning in the dialect; an unknown code is refused.
+    pub(super) fn check_g_words(&self, line: &Line, words: &[W]) -> Result<()> {
         for w in words.iter().filter(|w| w.letter == b'G') {
             if w.value.is_none() || w.is_expr {
                 return Err(self.err(
@@ -109,7 +104,7 @@ impl<'a> Rewriter<'a> {
                     "write the G code as a number",
                 ));
             }
-            let Some((code, g)) = w.g else {
+            if w.g.is_none() {
                 return Err(self.err(
                     line,
                     self.wtext(w),
@@ -120,10 +115,9 @@ impl<'a> Rewriter<'a> {
                     ),
                     "expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect), or pass the program's --dialect",
                 ));
-            };
-            gs.push((w, code, g));
+            }
         }
-        Ok(gs)
+        Ok(())
     }
 
     /// Fanuc numbers without a decimal point are least input increments unless the machine
@@ -164,10 +158,10 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Apply the modal G codes of a block (plane, units, distance modes, cutter compensation).
-    pub(super) fn modal(&mut self, line: &Line, gs: &[(&W, GCode, G)]) {
+    pub(super) fn modal(&mut self, line: &Line, words: &[W]) {
         let orig_inches = self.inches;
         let mut units_word = false;
-        for &(_, code, g) in gs {
+        for (code, g) in words.iter().filter_map(|w| w.g) {
             match g {
                 G::Plane(p) => self.plane = p,
                 G::Units(inches) => {

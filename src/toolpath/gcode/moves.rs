@@ -40,18 +40,19 @@ impl<'a> Rewriter<'a> {
     /// A block of words (no keyword, O-word or subroutine body): modal codes, then either a
     /// group-0 code, no motion, a move errmap copies, or a move it compensates.
     pub(super) fn block(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
-        let gs = self.g_words(line, words_in)?;
-        self.modal(line, &gs);
+        self.check_g_words(line, words_in)?;
+        self.modal(line, words_in);
+        let gs = || words_in.iter().filter_map(|w| w.g.map(|(c, g)| (w, c, g)));
         let scaled = self.fanuc_numbers(line, words_in)?;
         let words: &[W] = scaled.as_deref().unwrap_or(words_in);
-        let motion_word = gs.iter().find(|(_, _, g)| g.is_motion());
-        if let Some(&(_, code, g)) = motion_word {
+        let motion_word = gs().find(|(_, _, g)| g.is_motion());
+        if let Some((_, code, g)) = motion_word {
             self.motion = match g {
                 G::Motion(kind) => Some(MotionMode { kind, code }),
                 _ => None,
             };
         }
-        let group0 = gs.iter().find(|(_, _, g)| {
+        let group0 = gs().find(|(_, _, g)| {
             matches!(
                 g,
                 G::SetPosition
@@ -63,14 +64,14 @@ impl<'a> Rewriter<'a> {
             )
         });
         // Group 0 codes that take axis words (G10, G28, G30, G92…): no cutting move on the line.
-        if let Some(&(gw, _, g)) = group0 {
+        if let Some((gw, _, g)) = group0 {
             self.return_if_needed(line, words, true)?;
             self.group0(line, words, gw, g)?;
             self.sync_out_motion(words);
             self.copy_line(line);
             return Ok(());
         }
-        let g53 = gs.iter().any(|(_, _, g)| *g == G::Machine);
+        let g53 = gs().any(|(_, _, g)| g == G::Machine);
         let arc_words = words
             .iter()
             .any(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
