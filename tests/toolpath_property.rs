@@ -311,8 +311,10 @@ fn require_rs274() -> bool {
     std::env::var("ERRMAP_REQUIRE_RS274").is_ok_and(|v| v == "1")
 }
 
-/// The motions of rs274's canonical output: (cutting, end mm, arc centre mm).
-fn canon_motions(canon: &str) -> Vec<(bool, [f64; 3], Option<(f64, f64)>)> {
+/// A motion of rs274's canonical output: cutting (not a traverse), end mm, arc centre mm.
+type CanonMotion = (bool, [f64; 3], Option<(f64, f64)>);
+
+fn canon_motions(canon: &str) -> Vec<CanonMotion> {
     let mut k = 1.0;
     let mut out = Vec::new();
     for line in canon.lines() {

@@ -323,7 +323,7 @@ fn fanuc(c: (u16, u8)) -> Option<G> {
         (16, 0) => G::Frame(Frame::Polar),
         (15, 0) => G::FrameCancel(Frame::Polar),
         (10, 0) => G::DataSetting,
-        (28 | 29 | 30, 0) => G::Home,
+        (28..=30, 0) => G::Home,
         (54..=58, _) | (59, 0) => G::WorkOffset,
         (80, 0) => G::MotionCancel,
         (73 | 74 | 76 | 81..=89, 0) => G::Motion(Canned),
@@ -565,7 +565,7 @@ fn sinumerik_markers(t: &str, compact: &str, out: &mut Vec<(Dialect, &'static st
             out.push((Dialect::Sinumerik, s.trim()));
         }
     }
-    if is_r_assignment(&compact) {
+    if is_r_assignment(compact) {
         out.push((Dialect::Sinumerik, "R parameter"));
     }
 }

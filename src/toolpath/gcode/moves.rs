@@ -384,9 +384,9 @@ impl<'a> Rewriter<'a> {
         let mut end = mv.end;
         // A block-deleted line may or may not run; a probing move stops where it touches.
         if mv.block_delete || mv.motion.kind == Motion::Probe {
-            for i in 0..3 {
-                if end[i] != mv.start[i] {
-                    end[i] = None;
+            for (e, s) in end.iter_mut().zip(mv.start) {
+                if *e != s {
+                    *e = None;
                 }
             }
         }
