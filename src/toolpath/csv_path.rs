@@ -11,7 +11,7 @@ use super::gcode::{emit_points, format_coord};
 use super::{CompensationReport, CompensationSettings};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
-use crate::io::CsvTable;
+use crate::io::{CsvRow, CsvTable};
 use std::path::Path;
 
 const COLUMNS: [&str; 3] = ["x_mm", "y_mm", "z_mm"];
@@ -35,6 +35,19 @@ fn raw_fields(line: &str) -> Vec<&str> {
     out
 }
 
+/// The rewrite's state from row to row.
+struct Rows<'t> {
+    source: &'t Path,
+    cols: [usize; 3],
+    normal: usize,
+    /// The previous row's point, and the last point written (compensated or not), to drop
+    /// repeated boundary points.
+    prev: Option<[f64; 3]>,
+    prev_out: Option<[f64; 3]>,
+    report: CompensationReport,
+}
+
+/// Compensate a CSV toolpath. See the module documentation.
 pub fn compensate(
     text: &str,
     source: &Path,
@@ -67,114 +80,154 @@ pub fn compensate(
         }
         Some(e)
     };
-
     // Lines with their terminators, so unchanged ones are copied exactly.
     let lines: Vec<&str> = text.split_inclusive('\n').collect();
-    let mut report = CompensationReport {
-        lines_in: lines.len() as u64,
-        ..CompensationReport::default()
+    let mut rows = Rows {
+        source,
+        cols,
+        normal,
+        prev: None,
+        prev_out: None,
+        report: CompensationReport {
+            lines_in: lines.len() as u64,
+            ..CompensationReport::default()
+        },
     };
     // Rewritten text per line index (0-based); `None` = copy.
     let mut replaced: Vec<Option<String>> = vec![None; lines.len()];
-    let mut prev: Option<[f64; 3]> = None;
-    // Last point written (compensated or not), to drop repeated boundary points.
-    let mut prev_out: Option<[f64; 3]> = None;
     for row in &table.rows {
-        let p = [
-            table.f64(row, cols[0])?,
-            table.f64(row, cols[1])?,
-            table.f64(row, cols[2])?,
-        ];
+        let p = row_point(&table, row, cols)?;
         let li = (row.line as usize).saturating_sub(1);
-        let raw_line = lines.get(li).copied().unwrap_or("");
-        let (content, term) = split_terminator(raw_line);
+        let (content, term) = split_terminator(lines.get(li).copied().unwrap_or(""));
         let fields = raw_fields(content);
-        if fields.len() != table.headers.len() {
+        rows.check_row(
+            row.line,
+            &fields,
+            table.headers.len(),
+            &p,
+            settings.max_segment,
+        )?;
+        let path: Vec<[f64; 3]> = rows.prev.into_iter().chain([p]).collect();
+        let mut emitted = emit_points(&path, settings.max_segment, zone, normal, &error_at);
+        if extrapolated.replace(false) {
+            rows.report.moves_outside_domain += 1;
+        }
+        if rows.prev.is_some() {
+            emitted.remove(0); // the previous row, already written
+        }
+        rows.prev = Some(p);
+        if emitted.len() == 1 && emitted[0].1.is_none() {
+            rows.prev_out = Some(p);
+            continue;
+        }
+        if let Some(slot) = replaced.get_mut(li) {
+            *slot = Some(rows.rewrite(&emitted, &p, &fields, term));
+        }
+    }
+    let out = assemble(&lines, &replaced, text.len());
+    let mut report = rows.report;
+    report.lines_out = out.split_inclusive('\n').count() as u64;
+    Ok((out, report))
+}
+
+impl Rows<'_> {
+    /// A row must be one line, and its move from the previous row of a sane length.
+    fn check_row(
+        &self,
+        line: u64,
+        fields: &[&str],
+        columns: usize,
+        p: &[f64; 3],
+        max_segment: f64,
+    ) -> Result<()> {
+        if fields.len() != columns {
             return Err(Error::input(
-                Location::line(source, row.line),
+                Location::line(self.source, line),
                 "a row that spans several lines (a quoted field with a line break) cannot be rewritten",
                 "keep each toolpath point on one line",
             ));
         }
-        if let Some(q) = prev {
-            let len = super::gcode::dist(&q, &p);
-            if len / settings.max_segment > 1e6 {
+        if let Some(q) = self.prev {
+            let len = super::gcode::dist(&q, p);
+            if len / max_segment > 1e6 {
                 return Err(Error::input(
-                    Location::line(source, row.line),
+                    Location::line(self.source, line),
                     format!("the move to this row ({len:.6e} mm) would need more than a million segments"),
                     "check the coordinates and units, or raise --max-segment",
                 ));
             }
         }
-        let path: Vec<[f64; 3]> = match prev {
-            Some(q) => vec![q, p],
-            None => vec![p],
-        };
-        let mut emitted = emit_points(&path, settings.max_segment, zone, normal, &error_at);
-        if extrapolated.replace(false) {
-            report.moves_outside_domain += 1;
-        }
-        if prev.is_some() {
-            emitted.remove(0); // the previous row, already written
-        }
-        prev = Some(p);
-        let untouched = emitted.len() == 1 && emitted[0].1.is_none();
-        if untouched {
-            prev_out = Some(p);
-            continue;
-        }
+        Ok(())
+    }
+
+    /// The rows replacing row `p`: one per emitted point (with E subtracted where
+    /// compensated); the row's own point keeps the text of coordinates that did not change.
+    fn rewrite(
+        &mut self,
+        emitted: &[([f64; 3], Option<f64>)],
+        p: &[f64; 3],
+        fields: &[&str],
+        term: &str,
+    ) -> String {
         let mut new_text = String::new();
         let total = emitted.len();
         let mut n = 0;
         for (k, (q, e)) in emitted.iter().enumerate() {
             let mut q = *q;
             if let Some(e) = e {
-                q[normal] -= e;
+                q[self.normal] -= e;
             }
             let last = k + 1 == total;
-            if !last && prev_out.is_some_and(|po| super::gcode::dist(&po, &q) < 1e-12) {
+            if !last
+                && self
+                    .prev_out
+                    .is_some_and(|po| super::gcode::dist(&po, &q) < 1e-12)
+            {
                 continue;
             }
             if let Some(e) = e {
-                report.points_compensated += 1;
-                report.max_abs_error_mm = report.max_abs_error_mm.max(e.abs());
+                self.report.points_compensated += 1;
+                self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e.abs());
             }
-            prev_out = Some(q);
+            self.prev_out = Some(q);
             n += 1;
             let mut out_fields: Vec<String> = fields.iter().map(|f| f.to_string()).collect();
             for axis in 0..3 {
-                // The row's own point keeps the text of coordinates that did not change.
                 if !last || q[axis] != p[axis] {
-                    out_fields[cols[axis]] = format_coord(q[axis], false);
+                    out_fields[self.cols[axis]] = format_coord(q[axis], false);
                 }
             }
             new_text.push_str(&out_fields.join(","));
-            new_text.push_str(if last {
-                term
-            } else if term.is_empty() {
-                "\n"
-            } else {
-                term
+            new_text.push_str(match (last, term) {
+                (false, "") => "\n",
+                _ => term,
             });
         }
-        report.moves_changed += 1;
-        report.segments_emitted += n as u64;
+        self.report.moves_changed += 1;
+        self.report.segments_emitted += n as u64;
         if n > 1 {
-            report.moves_split += 1;
+            self.report.moves_split += 1;
         }
-        if let Some(slot) = replaced.get_mut(li) {
-            *slot = Some(new_text);
-        }
+        new_text
     }
-    let mut out = String::with_capacity(text.len());
-    for (i, l) in lines.iter().enumerate() {
-        match &replaced[i] {
-            Some(t) => out.push_str(t),
-            None => out.push_str(l),
-        }
+}
+
+/// The x, y, z of a row, mm.
+fn row_point(table: &CsvTable, row: &CsvRow, cols: [usize; 3]) -> Result<[f64; 3]> {
+    Ok([
+        table.f64(row, cols[0])?,
+        table.f64(row, cols[1])?,
+        table.f64(row, cols[2])?,
+    ])
+}
+
+/// The output: each line as rewritten, or copied.
+fn assemble(lines: &[&str], replaced: &[Option<String>], capacity: usize) -> String {
+    let mut out = String::with_capacity(capacity);
+    for (l, r) in lines.iter().zip(replaced) {
+        out.push_str(r.as_deref().unwrap_or(l));
     }
-    report.lines_out = out.split_inclusive('\n').count() as u64;
-    Ok((out, report))
+    out
 }
 
 fn split_terminator(line: &str) -> (&str, &str) {

@@ -113,8 +113,10 @@ pub enum Motion {
     ArcCcw,
     /// Drilling/boring canned cycle (G73, G74, G76, G81–G89 …).
     Canned,
-    /// Splines, NURBS, threading, rigid tapping, probing: never compensated.
+    /// Splines, NURBS, threading, rigid tapping: never compensated.
     Special,
+    /// Probing (LinuxCNC G38.x): stops where it touches, so its end point is unknown.
+    Probe,
 }
 
 /// A coordinate transformation errmap does not follow: cuts in the zone are refused while one
@@ -139,7 +141,46 @@ pub enum Frame {
     Data,
 }
 
-/// What a G code means to the rewrite. Codes are `G × 10` rounded (G38.2 → 382).
+/// A G code as written: `G38.2` is `GCode { number: 38, decimal: 2 }`. Only the table
+/// ([`g_code`]) gives it a meaning.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GCode {
+    pub number: u16,
+    /// The digit after the decimal point (G38.2 → 2; G1 → 0).
+    pub decimal: u8,
+}
+
+impl GCode {
+    /// The code of a G word's value (`38.2`), rounded to one decimal; `None` for a value no
+    /// controller has (negative, not finite, or beyond G9999).
+    pub fn from_value(v: f64) -> Option<GCode> {
+        let tenths = (v * 10.0).round();
+        if !(0.0..100_000.0).contains(&tenths) {
+            return None;
+        }
+        let tenths = tenths as u32;
+        Some(GCode {
+            number: (tenths / 10) as u16,
+            decimal: (tenths % 10) as u8,
+        })
+    }
+
+    /// A whole code (`G1`).
+    pub const fn whole(number: u16) -> GCode {
+        GCode { number, decimal: 0 }
+    }
+}
+
+impl std::fmt::Display for GCode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.decimal {
+            0 => write!(f, "G{}", self.number),
+            d => write!(f, "G{}.{d}", self.number),
+        }
+    }
+}
+
+/// What a G code means to the rewrite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum G {
     Motion(Motion),
@@ -174,118 +215,139 @@ pub enum G {
     Neutral,
 }
 
-/// The meaning of `G<code/10>` in `dialect`, or `None` if errmap does not know it there (such a
-/// code is refused: a G code errmap does not know may move the machine).
-pub fn g_code(dialect: Dialect, code: i32) -> Option<G> {
-    use super::arc::Plane;
-    use Motion::*;
+impl G {
+    /// Group 1: a motion mode or its cancel.
+    pub fn is_motion(self) -> bool {
+        matches!(self, G::Motion(_) | G::MotionCancel)
+    }
+}
+
+/// The meaning of `code` in `dialect`, or `None` if errmap does not know it there (such a code
+/// is refused: a G code errmap does not know may move the machine).
+pub fn g_code(dialect: Dialect, code: GCode) -> Option<G> {
+    let c = (code.number, code.decimal);
     if dialect == Dialect::Heidenhain {
-        // TNC ISO: G02/G03 take the centre from I/J (absolute) or G29; errmap follows G00/G01 only.
-        match code {
-            20 | 30 | 50 | 60 | 100 | 110 | 120 | 130 | 150 | 160 | 240 | 250 | 260 | 270 | 790 => {
-                return Some(G::Motion(Special))
-            }
-            700 => return Some(G::Units(true)),
-            710 => return Some(G::Units(false)),
-            280 => return Some(G::Frame(Frame::Mirror)),
-            730 => return Some(G::Frame(Frame::Rotation)),
-            720 => return Some(G::Frame(Frame::Scaling)),
-            540 => return Some(G::Frame(Frame::Local)),
-            290 | 980 | 990 => return Some(G::Neutral),
-            _ => {}
+        if let Some(g) = heidenhain_iso(c) {
+            return Some(g);
         }
     }
-    let common = match code {
-        0 => Some(G::Motion(Rapid)),
-        10 => Some(G::Motion(Linear)),
-        20 => Some(G::Motion(ArcCw)),
-        30 => Some(G::Motion(ArcCcw)),
-        40 | 90 | 940 | 950 | 640 | 490 | 430 | 440 => Some(G::Neutral),
-        170 => Some(G::Plane(Plane::G17)),
-        180 => Some(G::Plane(Plane::G18)),
-        190 => Some(G::Plane(Plane::G19)),
-        900 => Some(G::Distance(true)),
-        910 => Some(G::Distance(false)),
-        400 => Some(G::CutterComp(false)),
-        410 | 420 => Some(G::CutterComp(true)),
-        530 => Some(G::Machine),
-        _ => None,
-    };
-    if common.is_some() {
-        return common;
-    }
-    match dialect {
-        // LinuxCNC G-code reference (milling).
-        Dialect::Linuxcnc => match code {
-            200 => Some(G::Units(true)),
-            210 => Some(G::Units(false)),
-            901 => Some(G::ArcDistance(true)),
-            911 => Some(G::ArcDistance(false)),
-            411 | 421 => Some(G::CutterComp(true)),
-            920 => Some(G::SetPosition),
-            921 | 922 => Some(G::FrameCancel(Frame::Shift)),
-            923 => Some(G::Frame(Frame::Shift)),
-            520 => Some(G::Frame(Frame::Local)),
-            100 => Some(G::DataSetting),
-            280 | 281 | 300 | 301 => Some(G::Home),
-            540..=593 => Some(G::WorkOffset),
-            800 => Some(G::MotionCancel),
-            730 | 740 | 810..=890 => Some(G::Motion(Canned)),
-            50..=53 | 330 | 331 | 380..=385 | 760 => Some(G::Motion(Special)),
-            70 | 80 | 610 | 930 | 931 | 960 | 970 | 980 | 990 | 641 | 431 | 432 | 433 | 600
-            | 650 | 951 => Some(G::Neutral),
-            _ => None,
-        },
-        // Fanuc Series 0i-MF / 30i-B (milling), G-code system A.
-        Dialect::Fanuc => match code {
-            200 => Some(G::Units(true)),
-            210 => Some(G::Units(false)),
-            920 => Some(G::SetPosition),
-            921 => Some(G::FrameCancel(Frame::Shift)),
-            520 => Some(G::Frame(Frame::Local)),
-            680 => Some(G::Frame(Frame::Rotation)),
-            690 => Some(G::FrameCancel(Frame::Rotation)),
-            510 => Some(G::Frame(Frame::Scaling)),
-            500 => Some(G::FrameCancel(Frame::Scaling)),
-            511 => Some(G::Frame(Frame::Mirror)),
-            501 => Some(G::FrameCancel(Frame::Mirror)),
-            160 => Some(G::Frame(Frame::Polar)),
-            150 => Some(G::FrameCancel(Frame::Polar)),
-            100 => Some(G::DataSetting),
-            280 | 290 | 300 => Some(G::Home),
-            540..=590 => Some(G::WorkOffset),
-            800 => Some(G::MotionCancel),
-            730 | 740 | 760 | 810..=890 => Some(G::Motion(Canned)),
-            330 | 62 | 310 | 121 => Some(G::Motion(Special)),
-            650 | 660 | 661 => Some(G::Call),
-            670 | 50 | 51 | 80 | 131 | 610 | 620 | 630 | 980 | 990 | 110 => Some(G::Neutral),
-            _ => None,
-        },
-        // Sinumerik 840D sl, Siemens mode: G70/G71 (G700/G710) are units.
-        Dialect::Sinumerik => match code {
-            700 | 7000 => Some(G::Units(true)),
-            710 | 7100 => Some(G::Units(false)),
-            5000 | 540..=570 | 5050..=5990 => Some(G::WorkOffset),
-            740 | 750 => Some(G::Home),
-            1530 => Some(G::Machine),
-            250
-            | 260
-            | 1100
-            | 1110
-            | 1120
-            | 641..=645
-            | 600
-            | 6010
-            | 6020
-            | 6030
-            | 930
-            | 960
-            | 970 => Some(G::Neutral),
-            330 | 331 | 332 | 340 | 350 | 630 => Some(G::Motion(Special)),
-            _ => None,
-        },
+    common(c).or_else(|| match dialect {
+        Dialect::Linuxcnc => linuxcnc(c),
+        Dialect::Fanuc => fanuc(c),
+        Dialect::Sinumerik => sinumerik(c),
         Dialect::Heidenhain => None,
-    }
+    })
+}
+
+/// Codes every dialect reads alike.
+fn common(c: (u16, u8)) -> Option<G> {
+    use super::arc::Plane;
+    use Motion::*;
+    Some(match c {
+        (0, 0) => G::Motion(Rapid),
+        (1, 0) => G::Motion(Linear),
+        (2, 0) => G::Motion(ArcCw),
+        (3, 0) => G::Motion(ArcCcw),
+        (4 | 9 | 94 | 95 | 64 | 49 | 43 | 44, 0) => G::Neutral,
+        (17, 0) => G::Plane(Plane::G17),
+        (18, 0) => G::Plane(Plane::G18),
+        (19, 0) => G::Plane(Plane::G19),
+        (90, 0) => G::Distance(true),
+        (91, 0) => G::Distance(false),
+        (40, 0) => G::CutterComp(false),
+        (41 | 42, 0) => G::CutterComp(true),
+        (53, 0) => G::Machine,
+        _ => return None,
+    })
+}
+
+/// TNC ISO: G02/G03 take the centre from I/J (absolute) or G29; errmap follows G00/G01 only.
+fn heidenhain_iso(c: (u16, u8)) -> Option<G> {
+    Some(match c {
+        (2 | 3 | 5 | 6 | 10 | 11 | 12 | 13 | 15 | 16 | 24 | 25 | 26 | 27 | 79, 0) => {
+            G::Motion(Motion::Special)
+        }
+        (70, 0) => G::Units(true),
+        (71, 0) => G::Units(false),
+        (28, 0) => G::Frame(Frame::Mirror),
+        (73, 0) => G::Frame(Frame::Rotation),
+        (72, 0) => G::Frame(Frame::Scaling),
+        (54, 0) => G::Frame(Frame::Local),
+        (29 | 98 | 99, 0) => G::Neutral,
+        _ => return None,
+    })
+}
+
+/// LinuxCNC G-code reference (milling).
+fn linuxcnc(c: (u16, u8)) -> Option<G> {
+    use Motion::*;
+    Some(match c {
+        (20, 0) => G::Units(true),
+        (21, 0) => G::Units(false),
+        (90, 1) => G::ArcDistance(true),
+        (91, 1) => G::ArcDistance(false),
+        (41 | 42, 1) => G::CutterComp(true),
+        (92, 0) => G::SetPosition,
+        (92, 1 | 2) => G::FrameCancel(Frame::Shift),
+        (92, 3) => G::Frame(Frame::Shift),
+        (52, 0) => G::Frame(Frame::Local),
+        (10, 0) => G::DataSetting,
+        (28 | 30, 0 | 1) => G::Home,
+        (54..=58, _) | (59, 0..=3) => G::WorkOffset,
+        (80, 0) => G::MotionCancel,
+        (73 | 74, 0) | (81..=89, 0) => G::Motion(Canned),
+        (5, 0..=3) | (33, 0 | 1) | (76, 0) => G::Motion(Special),
+        (38, 0..=5) => G::Motion(Probe),
+        (7 | 8 | 61 | 93 | 96 | 97 | 98 | 99 | 60 | 65, 0) | (93 | 64 | 95, 1) | (43, 1..=3) => {
+            G::Neutral
+        }
+        _ => return None,
+    })
+}
+
+/// Fanuc Series 0i-MF / 30i-B (milling), G-code system A.
+fn fanuc(c: (u16, u8)) -> Option<G> {
+    use Motion::*;
+    Some(match c {
+        (20, 0) => G::Units(true),
+        (21, 0) => G::Units(false),
+        (92, 0) => G::SetPosition,
+        (92, 1) => G::FrameCancel(Frame::Shift),
+        (52, 0) => G::Frame(Frame::Local),
+        (68, 0) => G::Frame(Frame::Rotation),
+        (69, 0) => G::FrameCancel(Frame::Rotation),
+        (51, 0) => G::Frame(Frame::Scaling),
+        (50, 0) => G::FrameCancel(Frame::Scaling),
+        (51, 1) => G::Frame(Frame::Mirror),
+        (50, 1) => G::FrameCancel(Frame::Mirror),
+        (16, 0) => G::Frame(Frame::Polar),
+        (15, 0) => G::FrameCancel(Frame::Polar),
+        (10, 0) => G::DataSetting,
+        (28..=30, 0) => G::Home,
+        (54..=58, _) | (59, 0) => G::WorkOffset,
+        (80, 0) => G::MotionCancel,
+        (73 | 74 | 76 | 81..=89, 0) => G::Motion(Canned),
+        (33 | 31, 0) | (6, 2) | (12, 1) => G::Motion(Special),
+        (65 | 66, 0) | (66, 1) => G::Call,
+        (67 | 5 | 8 | 61 | 62 | 63 | 98 | 99 | 11, 0) | (5 | 13, 1) => G::Neutral,
+        _ => return None,
+    })
+}
+
+/// Sinumerik 840D sl, Siemens mode: G70/G71 (G700/G710) are units.
+fn sinumerik(c: (u16, u8)) -> Option<G> {
+    Some(match c {
+        (70 | 700, 0) => G::Units(true),
+        (71 | 710, 0) => G::Units(false),
+        (500, 0) | (54..=56, _) | (57, 0) | (505..=598, _) | (599, 0) => G::WorkOffset,
+        (74 | 75, 0) => G::Home,
+        (153, 0) => G::Machine,
+        (25 | 26 | 110 | 111 | 112 | 60 | 601 | 602 | 603 | 93 | 96 | 97, 0) | (64, 1..=5) => {
+            G::Neutral
+        }
+        (33, 0..=2) | (34 | 35 | 63, 0) => G::Motion(Motion::Special),
+        _ => return None,
+    })
 }
 
 /// A construct that only one dialect has, found at `line`.
@@ -384,6 +446,16 @@ fn strip_comments(line: &str) -> String {
 fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     let t = l.trim_start();
     let mut out = Vec::new();
+    heidenhain_markers(t, &mut out);
+    linuxcnc_markers(t, &mut out);
+    let compact: String = t.chars().filter(|c| !c.is_whitespace()).collect();
+    fanuc_markers(&compact, &mut out);
+    sinumerik_markers(t, &compact, &mut out);
+    out
+}
+
+/// Heidenhain Klartext and ISO headers.
+fn heidenhain_markers(t: &str, out: &mut Vec<(Dialect, &'static str)>) {
     let words: Vec<&str> = t.split_whitespace().collect();
     // Heidenhain Klartext: `0 BEGIN PGM`, `5 L X+10 R0 FMAX`, `7 CC X…`, `TOOL CALL`, `CYCL DEF`.
     if t.contains("BEGIN PGM") || t.contains("END PGM") {
@@ -417,6 +489,10 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     if t.starts_with('%') && (t.contains("G70") || t.contains("G71")) && t.ends_with('*') {
         out.push((Dialect::Heidenhain, "%… G71 *"));
     }
+}
+
+/// LinuxCNC O-words with keywords and named parameters.
+fn linuxcnc_markers(t: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // LinuxCNC: O-words with keywords, named parameters, G64 P, G38.x, G5.x.
     if t.starts_with('O') || t.contains(" O") {
         for k in [
@@ -443,8 +519,11 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     if t.contains("#<") {
         out.push((Dialect::Linuxcnc, "#<name>"));
     }
+}
+
+/// Fanuc subprograms, macro calls, macro B flow and transformations.
+fn fanuc_markers(compact: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // Fanuc: M98/M99 subprograms, G65/G66 macro calls, macro B flow, G68/G51/G52.
-    let compact: String = t.chars().filter(|c| !c.is_whitespace()).collect();
     for (pat, what) in [
         ("M98", "M98"),
         ("M99", "M99"),
@@ -466,6 +545,10 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
     {
         out.push((Dialect::Fanuc, "O program number"));
     }
+}
+
+/// Sinumerik assignments, frames, instructions and R parameters.
+fn sinumerik_markers(t: &str, compact: &str, out: &mut Vec<(Dialect, &'static str)>) {
     // Sinumerik: `X=…`, `CR=`, AC()/IC(), frames, DEF, R-parameter assignment, MSG, G500/G710.
     let siemens = [
         "CR=", "X=", "Y=", "Z=", "=AC(", "=IC(", "TRANS", "ROT ", "SCALE", "MIRROR", "DEF ",
@@ -482,10 +565,9 @@ fn markers(l: &str) -> Vec<(Dialect, &'static str)> {
             out.push((Dialect::Sinumerik, s.trim()));
         }
     }
-    if is_r_assignment(&compact) {
+    if is_r_assignment(compact) {
         out.push((Dialect::Sinumerik, "R parameter"));
     }
-    out
 }
 
 fn is_r_assignment(compact: &str) -> bool {
@@ -542,6 +624,48 @@ mod tests {
 
     fn detect(text: &str) -> Result<Dialect> {
         resolve(text, Path::new("t.nc"), None)
+    }
+
+    #[test]
+    fn g_codes_are_read_as_written_and_meant_per_dialect() {
+        let g = |v: f64| GCode::from_value(v).unwrap();
+        assert_eq!(
+            g(38.2),
+            GCode {
+                number: 38,
+                decimal: 2
+            }
+        );
+        assert_eq!(g(1.0).to_string(), "G1");
+        assert_eq!(g(38.2).to_string(), "G38.2");
+        assert_eq!(g(710.0).to_string(), "G710");
+        assert_eq!(GCode::from_value(-1.0), None);
+        assert_eq!(GCode::from_value(f64::NAN), None);
+        // The same code means different things in different controllers.
+        assert_eq!(g_code(Dialect::Linuxcnc, g(70.0)), None);
+        assert_eq!(g_code(Dialect::Sinumerik, g(70.0)), Some(G::Units(true)));
+        assert_eq!(
+            g_code(Dialect::Fanuc, g(51.0)),
+            Some(G::Frame(Frame::Scaling))
+        );
+        assert_eq!(
+            g_code(Dialect::Heidenhain, g(2.0)),
+            Some(G::Motion(Motion::Special))
+        );
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(2.0)),
+            Some(G::Motion(Motion::ArcCw))
+        );
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(38.3)),
+            Some(G::Motion(Motion::Probe))
+        );
+        assert_eq!(g_code(Dialect::Linuxcnc, g(59.3)), Some(G::WorkOffset));
+        assert_eq!(g_code(Dialect::Fanuc, g(59.3)), None);
+        assert_eq!(
+            g_code(Dialect::Linuxcnc, g(90.1)),
+            Some(G::ArcDistance(true))
+        );
     }
 
     #[test]

@@ -6,18 +6,19 @@
 mod emit;
 mod format;
 mod modal;
+mod moves;
+mod rewrite;
 
-use emit::emit_curve;
 pub(crate) use emit::{dist, emit_points, lerp};
-use format::{coordinate_decimals, decimal_units, format_decimals_slow, units_text};
+use format::{coordinate_decimals, decimal_units, push_units};
 pub use format::{format_coord, format_decimals};
 use modal::{first_jump, refuse_klartext};
 
-use super::arc::{Arc, Plane};
-use super::dialect::{self, Dialect, Frame, Motion, G};
+use super::arc::Plane;
+use super::dialect::{self, Dialect, Frame, GCode, Motion, G};
 use super::expr::{eval, Params};
 use super::lexer::{lex_dialect, Line, TokenKind, WordValue};
-use super::{CompensationReport, CompensationSettings};
+use super::{CompensationReport, CompensationSettings, TracedMove};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
 use std::cell::Cell;
@@ -39,6 +40,33 @@ struct W {
     abs: Option<bool>,
     /// The number was written without a decimal point.
     no_dot: bool,
+    /// A G word's code and its meaning in the dialect (`None`: not a G word, or unknown).
+    g: Option<(GCode, G)>,
+}
+
+impl W {
+    /// The meaning of a G word in the dialect.
+    fn g(&self) -> Option<G> {
+        self.g.map(|(_, g)| g)
+    }
+}
+
+/// The motion mode (group 1) in effect: what it does and the code that selected it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct MotionMode {
+    kind: Motion,
+    code: GCode,
+}
+
+impl MotionMode {
+    const RAPID: MotionMode = MotionMode {
+        kind: Motion::Rapid,
+        code: GCode::whole(0),
+    };
+    const LINEAR: MotionMode = MotionMode {
+        kind: Motion::Linear,
+        code: GCode::whole(1),
+    };
 }
 
 /// What a subroutine body does, collected while reading its definition.
@@ -72,12 +100,12 @@ struct Rewriter<'a> {
     absolute: bool,
     arc_absolute: bool,
     plane: Plane,
-    motion: Option<i32>,
+    motion: Option<MotionMode>,
     cutter_comp: Option<(u64, String)>,
     params: Params,
     // Output state: the output position differs from `pos` only along the normal, by `offset`.
     offset: f64,
-    out_motion: Option<i32>,
+    out_motion: Option<MotionMode>,
     // Flow control.
     blocks: Vec<Block>,
     sub: Option<(String, SubInfo)>,
@@ -101,7 +129,7 @@ struct Rewriter<'a> {
     /// Transformations errmap does not follow, with the line and word that started them.
     frames: Vec<(Frame, u64, String)>,
     /// The first work offset selected (the map's coordinates); another one is a frame.
-    first_offset: Option<i32>,
+    first_offset: Option<GCode>,
     /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
     flow: Option<(u64, String)>,
     /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
@@ -109,6 +137,13 @@ struct Rewriter<'a> {
     m99: Option<u64>,
     /// Set by `error_at` when a point in the zone lies outside the measured domain.
     extrapolated: Cell<bool>,
+    /// Buffers kept from line to line: the words of a line, the points of a move and the
+    /// segments written for it.
+    words: Vec<W>,
+    emitted: Vec<([f64; 3], Option<f64>)>,
+    segments: rewrite::Segments,
+    /// The moves read, when tracing.
+    trace: Option<Vec<TracedMove>>,
 }
 
 /// Compensate a G-code program. See the module documentation of [`crate::toolpath`].
@@ -118,77 +153,130 @@ pub fn compensate(
     field: &dyn ErrorField,
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
-    settings.validate()?;
-    let dialect = dialect::resolve(text, source, settings.dialect)?;
-    refuse_klartext(text, source, dialect)?;
-    let zone_mm = super::default_zone_mm(source, field, settings)?;
-    let normal_axis = field.normal();
-    let (u, v) = normal_axis.plane_axes();
-    let units = settings.units;
-    let mut rw = Rewriter {
-        text,
-        source,
-        field,
-        settings,
-        normal: normal_axis.index(),
-        plane_uv: (u.index(), v.index()),
-        pos: [None; 3],
-        inches: units == Some(super::Units::Inch),
-        absolute: true,
-        arc_absolute: false,
-        plane: Plane::G17,
-        motion: None,
-        cutter_comp: None,
-        params: Params::new(),
-        offset: 0.0,
-        out_motion: None,
-        blocks: Vec::new(),
-        sub: None,
-        subs: HashMap::new(),
-        unknown_since: None,
-        program_decimals: 0,
-        report: CompensationReport::default(),
-        out: String::with_capacity(text.len() + text.len() / 4),
-        dialect,
-        units_known: false,
-        zone_first_units: settings.zone,
-        zone_mm,
-        shift: [0.0; 3],
-        local: [0.0; 3],
-        frames: Vec::new(),
-        first_offset: None,
-        flow: None,
-        programs: 0,
-        m99: None,
-        extrapolated: Cell::new(false),
-    };
-    if units.is_some() {
-        rw.set_units_known();
-    }
-    let lines = lex_dialect(text, dialect);
-    rw.flow = first_jump(text, &lines, dialect);
-    rw.program_decimals = coordinate_decimals(text, &lines);
-    rw.report.lines_in = lines.len() as u64;
-    for line in &lines {
-        rw.line(line)?;
-    }
-    if let (Some(l), true) = (rw.m99, rw.report.moves_changed > 0) {
-        return Err(Error::input(
-            Location::cell(source, l, "M99"),
-            "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
-            "compensate the main program with the subprogram expanded into it",
-        ));
-    }
-    rw.report.dialect = Some(dialect);
-    rw.report.zone_mm = rw.zone_mm;
-    rw.report.lines_out = rw.out.matches('\n').count() as u64
-        + u64::from(!rw.out.is_empty() && !rw.out.ends_with('\n'));
-    Ok((rw.out, rw.report))
+    let mut rw = Rewriter::start(text, source, field, settings)?;
+    rw.run()?;
+    rw.finish()
 }
 
-/// `G` value × 10, rounded (G38.2 → 382).
-fn g_code(v: f64) -> i32 {
-    (v * 10.0).round() as i32
+/// A map that compensates nothing: reading a program through it traces its moves.
+struct Nothing;
+
+impl ErrorField for Nothing {
+    fn normal(&self) -> crate::geom::Axis {
+        crate::geom::Axis::Z
+    }
+    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
+        None
+    }
+}
+
+/// The moves of a G-code program as errmap's interpreter reads them (see
+/// [`crate::toolpath::trace_gcode`]).
+pub fn trace(
+    text: &str,
+    source: &Path,
+    settings: &CompensationSettings,
+) -> Result<Vec<TracedMove>> {
+    let settings = CompensationSettings {
+        zone: None,
+        everywhere: true,
+        ..*settings
+    };
+    let mut rw = Rewriter::start(text, source, &Nothing, &settings)?;
+    rw.trace = Some(Vec::new());
+    rw.run()?;
+    Ok(rw.trace.take().unwrap_or_default())
+}
+
+impl<'a> Rewriter<'a> {
+    /// The state at the program start, after the checks that need the whole text.
+    fn start(
+        text: &'a str,
+        source: &'a Path,
+        field: &'a dyn ErrorField,
+        settings: &'a CompensationSettings,
+    ) -> Result<Rewriter<'a>> {
+        settings.validate()?;
+        let dialect = dialect::resolve(text, source, settings.dialect)?;
+        refuse_klartext(text, source, dialect)?;
+        let zone_mm = super::default_zone_mm(source, field, settings)?;
+        let normal_axis = field.normal();
+        let (u, v) = normal_axis.plane_axes();
+        let units = settings.units;
+        let mut rw = Rewriter {
+            text,
+            source,
+            field,
+            settings,
+            normal: normal_axis.index(),
+            plane_uv: (u.index(), v.index()),
+            pos: [None; 3],
+            inches: units == Some(super::Units::Inch),
+            absolute: true,
+            arc_absolute: false,
+            plane: Plane::G17,
+            motion: None,
+            cutter_comp: None,
+            params: Params::new(),
+            offset: 0.0,
+            out_motion: None,
+            blocks: Vec::new(),
+            sub: None,
+            subs: HashMap::new(),
+            unknown_since: None,
+            program_decimals: 0,
+            report: CompensationReport::default(),
+            out: String::with_capacity(text.len() + text.len() / 4),
+            dialect,
+            units_known: false,
+            zone_first_units: settings.zone,
+            zone_mm,
+            shift: [0.0; 3],
+            local: [0.0; 3],
+            frames: Vec::new(),
+            first_offset: None,
+            flow: None,
+            programs: 0,
+            m99: None,
+            extrapolated: Cell::new(false),
+            words: Vec::new(),
+            emitted: Vec::new(),
+            segments: rewrite::Segments::default(),
+            trace: None,
+        };
+        if units.is_some() {
+            rw.set_units_known();
+        }
+        Ok(rw)
+    }
+
+    /// Read every line, rewriting the moves to compensate.
+    fn run(&mut self) -> Result<()> {
+        let lines = lex_dialect(self.text, self.dialect);
+        self.flow = first_jump(self.text, &lines, self.dialect);
+        self.program_decimals = coordinate_decimals(self.text, &lines);
+        self.report.lines_in = lines.len() as u64;
+        for line in &lines {
+            self.line(line)?;
+        }
+        Ok(())
+    }
+
+    /// The output and its report; a subprogram whose moves changed is refused.
+    fn finish(mut self) -> Result<(String, CompensationReport)> {
+        if let (Some(l), true) = (self.m99, self.report.moves_changed > 0) {
+            return Err(Error::input(
+                Location::cell(self.source, l, "M99"),
+                "the program ends in M99: it is a subprogram, whose moves run in its caller's position, modes and frames, which errmap cannot see",
+                "compensate the main program with the subprogram expanded into it",
+            ));
+        }
+        self.report.dialect = Some(self.dialect);
+        self.report.zone_mm = self.zone_mm;
+        self.report.lines_out = self.out.matches('\n').count() as u64
+            + u64::from(!self.out.is_empty() && !self.out.ends_with('\n'));
+        Ok((self.out, self.report))
+    }
 }
 
 impl<'a> Rewriter<'a> {
@@ -208,28 +296,19 @@ impl<'a> Rewriter<'a> {
                 || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
     }
 
-    /// Coordinates get at least 4 decimals in mm and 5 in inches, and as many as the program
-    /// itself uses (so unchanged end points are written back exactly).
-    fn fmt(&self, v: f64) -> String {
-        format_decimals(v, self.decimals())
+    /// Append a coordinate: at least 4 decimals in mm and 5 in inches, and as many as the
+    /// program itself uses (so unchanged end points are written back exactly).
+    fn push_coord(&self, buf: &mut String, v: f64) {
+        let d = self.decimals();
+        match decimal_units(v, d) {
+            Some(u) => push_units(buf, u, d),
+            None => buf.push_str(&format_decimals(v, d)),
+        }
     }
 
     fn decimals(&self) -> usize {
         let d = if self.inches { 5 } else { 4 };
         d.max(self.program_decimals)
-    }
-
-    /// The text of a coordinate and the value the controller reads from it.
-    fn written(&self, v: f64) -> (String, f64) {
-        let d = self.decimals();
-        match decimal_units(v, d) {
-            Some(u) => (units_text(u, d), u as f64 / 10f64.powi(d as i32)),
-            None => {
-                let t = format_decimals_slow(v, d);
-                let r = t.parse().unwrap_or(v);
-                (t, r)
-            }
-        }
     }
 
     fn scale_mm(&self) -> f64 {
@@ -341,65 +420,127 @@ impl<'a> Rewriter<'a> {
         false
     }
 
+    /// One line: strict checks, then a dialect statement, an O-word, a subroutine body line
+    /// or a block of words.
     fn line(&mut self, line: &Line) -> Result<()> {
-        let text = self.text;
         self.check_block(line)?;
         let keyword = line.tokens.iter().find_map(|t| match &t.kind {
-            TokenKind::Keyword { name } => Some((name.clone(), t.span.clone())),
+            TokenKind::Keyword { name } => Some((name.as_str(), t.span.clone())),
             _ => None,
         });
         if let Some((name, span)) = keyword {
-            if !self.keyword(line, &name, span)? {
+            if !self.keyword(line, name, span)? {
                 self.copy_line(line);
                 return Ok(());
             }
         }
-        // Words, assignments and O-words of the line.
-        let mut words: Vec<W> = Vec::new();
-        let mut oword: Option<(String, String, String)> = None;
-        let mut assignments: Vec<(String, Option<f64>)> = Vec::new();
+        let mut words = std::mem::take(&mut self.words);
+        words.clear();
+        let result = self.line_words(line, &mut words);
+        self.words = words;
+        result
+    }
+
+    /// The line's words read into `words`, its assignments stored, and the line handled.
+    fn line_words(&mut self, line: &Line, words: &mut Vec<W>) -> Result<()> {
+        let oword = self.read_words(line, words).map(|ti| &line.tokens[ti]);
+        if let Some(t) = oword {
+            let TokenKind::OWord { name, keyword } = &t.kind else {
+                return Err(Error::Internal("an O-word token expected".into()));
+            };
+            let otext = self.text.get(t.span.clone()).unwrap_or("");
+            if self.dialect == Dialect::Fanuc {
+                // `O1234`: a program number; a second one starts a subprogram.
+                self.programs += 1;
+                if self.programs > 1 && self.sub.is_none() {
+                    self.sub = Some((name.to_string(), SubInfo::default()));
+                }
+            } else {
+                self.oword(line, name, keyword, otext)?;
+            }
+            self.copy_line(line);
+            return Ok(());
+        }
+        self.fanuc_m_codes(line, words)?;
+        if self.sub.is_some() {
+            self.sub_body_line(line, words);
+            self.copy_line(line);
+            return Ok(());
+        }
+        self.block(line, words)
+    }
+
+    /// Read the words of a line (values evaluated where plain) and store its assignments;
+    /// returns the index of its O-word token if it has one.
+    fn read_words(&mut self, line: &Line, words: &mut Vec<W>) -> Option<usize> {
+        let mut oword = None;
+        let mut assigned = false;
         for (ti, tok) in line.tokens.iter().enumerate() {
             match &tok.kind {
                 TokenKind::Word { letter, value } => {
-                    let (value, is_expr, abs) = match value {
-                        WordValue::Number(v) => (Some(*v), false, None),
-                        WordValue::Abs(v) => (Some(*v), false, Some(true)),
-                        WordValue::Inc(v) => (Some(*v), false, Some(false)),
-                        WordValue::Expr(r) => (
-                            text.get(r.clone()).and_then(|t| eval(t, &self.params)),
-                            true,
-                            None,
-                        ),
-                    };
-                    let no_dot = value.is_some()
-                        && !is_expr
-                        && !text.get(tok.span.clone()).unwrap_or("").contains('.');
-                    words.push(W {
-                        letter: *letter,
-                        value,
-                        is_expr,
-                        token: ti,
-                        span: tok.span.clone(),
-                        abs,
-                        no_dot,
-                    });
+                    words.push(self.word(*letter, value, ti, tok.span.clone()));
                 }
-                TokenKind::OWord { name, keyword } => {
-                    let t = text.get(tok.span.clone()).unwrap_or("").to_string();
-                    oword = Some((name.clone(), keyword.clone(), t));
+                TokenKind::OWord { .. } => {
+                    oword = Some(ti);
                 }
-                TokenKind::Assignment { target, value_span } => {
-                    let v = text
-                        .get(value_span.clone())
-                        .and_then(|t| eval(t, &self.params));
-                    assignments.push((target.clone(), v));
-                }
+                TokenKind::Assignment { .. } => assigned = true,
                 _ => {}
             }
         }
-        // LinuxCNC evaluates all assignments of a line after its words: store them now, but
-        // only outside blocks and subroutines (inside, the value depends on the flow).
+        if assigned {
+            self.assign(line);
+        }
+        oword
+    }
+
+    /// A word with its value evaluated when it is a number or a plain expression.
+    fn word(&self, letter: u8, value: &WordValue, token: usize, span: Range<usize>) -> W {
+        let text = self.text;
+        let (value, is_expr, abs) = match value {
+            WordValue::Number(v) => (Some(*v), false, None),
+            WordValue::Abs(v) => (Some(*v), false, Some(true)),
+            WordValue::Inc(v) => (Some(*v), false, Some(false)),
+            WordValue::Expr(r) => (
+                text.get(r.clone()).and_then(|t| eval(t, &self.params)),
+                true,
+                None,
+            ),
+        };
+        let no_dot =
+            value.is_some() && !is_expr && !text.get(span.clone()).unwrap_or("").contains('.');
+        let g = if letter == b'G' && !is_expr {
+            value
+                .and_then(GCode::from_value)
+                .and_then(|c| Some((c, self.g(c)?)))
+        } else {
+            None
+        };
+        W {
+            letter,
+            value,
+            is_expr,
+            token,
+            span,
+            abs,
+            no_dot,
+            g,
+        }
+    }
+
+    /// LinuxCNC evaluates all assignments of a line after its words: store them now, but only
+    /// outside blocks and subroutines (inside, the value depends on the flow).
+    fn assign(&mut self, line: &Line) {
         let top = self.blocks.is_empty() && self.sub.is_none();
+        let mut assignments: Vec<(String, Option<f64>)> = Vec::new();
+        for tok in &line.tokens {
+            if let TokenKind::Assignment { target, value_span } = &tok.kind {
+                let v = self
+                    .text
+                    .get(value_span.clone())
+                    .and_then(|t| eval(t, &self.params));
+                assignments.push((target.clone(), v));
+            }
+        }
         for (name, v) in assignments {
             match (top, v) {
                 (true, Some(v)) => {
@@ -410,800 +551,39 @@ impl<'a> Rewriter<'a> {
                 }
             }
         }
-        if let Some((name, keyword, otext)) = oword {
-            if self.dialect == Dialect::Fanuc {
-                // `O1234`: a program number; a second one starts a subprogram.
-                self.programs += 1;
-                if self.programs > 1 && self.sub.is_none() {
-                    self.sub = Some((name.clone(), SubInfo::default()));
-                }
-                self.copy_line(line);
-                return Ok(());
-            }
-            self.oword(line, &name, &keyword, &otext)?;
-            self.copy_line(line);
-            return Ok(());
-        }
-        self.fanuc_m_codes(line, &words)?;
-        if self.sub.is_some() {
-            // Subroutine bodies are classified where they are called.
-            let n = AXES[self.normal];
-            let writes = words.iter().filter(|w| w.letter == b'G').any(|w| {
-                !matches!(
-                    w.value.and_then(|v| self.g(g_code(v))),
-                    Some(
-                        G::Motion(Motion::Rapid | Motion::Linear | Motion::ArcCw | Motion::ArcCcw)
-                            | G::Plane(_)
-                            | G::Units(_)
-                            | G::Distance(_)
-                            | G::ArcDistance(_)
-                            | G::CutterComp(_)
-                            | G::Neutral
-                            | G::MotionCancel
-                    )
-                )
-            });
-            let axis_words = words
-                .iter()
-                .any(|w| matches!(w.letter, b'X' | b'Y' | b'Z' | b'@' | b'^'));
-            let Some((_, info)) = self.sub.as_mut() else {
-                return Ok(());
-            };
-            if words.iter().any(|w| w.letter == n) || writes {
-                info.writes_normal = true;
-            }
-            if axis_words && info.first_move.is_none() {
-                info.first_move = Some(line.number);
-            }
-            self.copy_line(line);
-            return Ok(());
-        }
-        self.words(line, &words)
     }
 
-    fn words(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
-        let gs = self.g_words(line, words_in)?;
-        self.modal(line, &gs);
-        let scaled = self.fanuc_numbers(line, words_in)?;
-        let words: &[W] = scaled.as_deref().unwrap_or(words_in);
-        let find = |l: u8| words.iter().find(|w| w.letter == l);
-        let motion_word = gs
-            .iter()
-            .find(|(_, _, g)| matches!(g, G::Motion(_) | G::MotionCancel));
-        let group0 = gs.iter().find(|(_, _, g)| {
-            matches!(
-                g,
-                G::SetPosition
-                    | G::Frame(_)
-                    | G::FrameCancel(_)
-                    | G::Home
-                    | G::DataSetting
-                    | G::Call
-            )
-        });
-        let g53 = gs.iter().any(|(_, _, g)| *g == G::Machine);
-        let axis_present = words.iter().any(|w| {
-            matches!(
-                w.letter,
-                b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' | b'@' | b'^'
-            )
-        });
-        let arc_words = words
-            .iter()
-            .any(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
-        if let Some((_, c, g)) = motion_word {
-            self.motion = (*g != G::MotionCancel).then_some(*c);
-        }
-        let motion = self.motion;
-
-        // Group 0 codes that take axis words (G10, G28, G30, G92…): no cutting move on the line.
-        if let Some(&(gw, _, g)) = group0 {
-            self.return_if_needed(line, words, true)?;
-            self.group0(line, words, gw, g)?;
-            self.sync_out_motion(words);
-            self.copy_line(line);
-            return Ok(());
-        }
-
-        let moves =
-            axis_present || (motion_word.is_some() && arc_words && matches!(motion, Some(20 | 30)));
-        let Some(motion) = motion.filter(|_| moves) else {
-            // No motion on this line.
-            self.sync_out_motion(words);
-            self.copy_line(line);
-            return Ok(());
-        };
-
-        self.fix_zone();
-        // Start and end of the move in the original program.
-        let start = self.pos;
-        let mut end = self.pos;
-        let polar = words.iter().find(|w| w.letter == b'@' || w.letter == b'^');
-        for (i, l) in AXES.iter().enumerate() {
-            if let Some(w) = find(*l) {
-                end[i] = if g53 {
-                    None
-                } else if w.abs.unwrap_or(self.absolute) {
-                    w.value
-                } else {
-                    match (start[i], w.value) {
-                        (Some(s), Some(d)) => Some(s + d),
-                        _ => None,
-                    }
-                };
-            }
-        }
-        if polar.is_some() {
-            let (a1, a2, _) = self.plane.axes();
-            end[a1] = None;
-            end[a2] = None;
-        }
-        let other_axis = words
-            .iter()
-            .find(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'));
-        let expr_word = words.iter().find(|w| w.is_expr);
-        let cutting = matches!(
-            self.g(motion),
-            Some(G::Motion(Motion::Linear | Motion::ArcCw | Motion::ArcCcw))
-        );
-        // `/` at the start of a line: block delete, the controller may skip the line.
-        let block_delete = line
-            .tokens
-            .iter()
-            .find(|t| t.kind != TokenKind::Space)
-            .is_some_and(|t| {
-                t.kind == TokenKind::Other && self.text.get(t.span.clone()) == Some("/")
-            });
-
-        // Refusals: things errmap cannot compensate safely, if the move may touch the zone.
-        let refusal: Option<(String, String, &str)> = if !cutting {
-            let special = self.g(motion) == Some(G::Motion(Motion::Special))
-                && !(self.dialect == Dialect::Linuxcnc && (380..=385).contains(&motion));
-            if self.is_canned(motion) || special {
-                let mut pts = vec![start, end];
-                if self.is_canned(motion) {
-                    // The drill axis runs from the start through the R level to the bottom Z;
-                    // under G91, R is relative to the start and Z to the R level.
-                    let (_, _, ax) = self.plane.axes();
-                    let r = find(b'R').and_then(|w| w.value);
-                    let z = find(AXES[ax]).and_then(|w| w.value);
-                    let (r_abs, z_abs) = if self.absolute {
-                        (r, z)
-                    } else {
-                        let ra = start[ax].zip(r).map(|(s, r)| s + r);
-                        (ra, ra.zip(z).map(|(ra, z)| ra + z))
-                    };
-                    pts[1][ax] = start[ax];
-                    for level in [r_abs, z_abs] {
-                        let mut p = pts[1];
-                        p[ax] = level;
-                        pts.push(p);
-                    }
-                }
-                let name = format!("G{}", motion as f64 / 10.0);
-                let what = if self.is_canned(motion) {
-                    format!("canned cycle {name}")
-                } else {
-                    format!(
-                        "{name} (in the {} dialect a spline, thread, tap or other move errmap does not follow)",
-                        self.dialect.name()
-                    )
-                };
-                self.may_touch(&pts).then(|| {
-                    (
-                        name,
-                        format!("{what} in the compensation zone cannot be compensated"),
-                        "expand the cycle into G0/G1 moves with your CAM post (or move the zone away)",
-                    )
-                })
-            } else {
-                None
-            }
-        } else if !self.units_known {
-            let at = words
-                .iter()
-                .find(|w| matches!(w.letter, b'G' | b'X' | b'Y' | b'Z'))
-                .map(|w| self.wtext(w).to_string())
-                .unwrap_or_default();
-            let (codes, hint) = match self.dialect {
-                Dialect::Linuxcnc | Dialect::Fanuc => ("G20/G21", "add G21 (mm) or G20 (inch) before the first cut, or pass --units mm|inch"),
-                Dialect::Sinumerik => ("G70/G71/G700/G710", "add G71 (mm) or G70 (inch) before the first cut, or pass --units mm|inch"),
-                Dialect::Heidenhain => ("G70/G71 in the % header", "begin the program with %NAME G71 * (mm) or G70 * (inch), or pass --units mm|inch"),
-            };
-            Some((
-                at,
-                format!("cut with no unit code ({codes}) before it: errmap cannot tell millimetres from inches (a 25.4× error)"),
-                hint,
-            ))
-        } else if let Some((kind, fl, fw)) = self.frames.last().cloned() {
-            let pts = self.frame_points(kind, &[start, end]);
-            self.may_touch(&pts).then(|| {
-                (
-                    fw.clone(),
-                    format!("`{fw}` (line {fl}) transforms the coordinates ({kind:?}), which errmap does not follow, and this cut may lie in the compensation zone"),
-                    "cancel the transformation before the cuts in the zone (G69, G50, G50.1, G54 …), or post the program without it",
-                )
-            })
-        } else if let Some((fl, fw)) = self.flow.clone() {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    fw.clone(),
-                    format!("the program jumps (`{fw}` on line {fl}), so a cut may run any number of times from any position, and this cut may lie in the compensation zone"),
-                    "expand loops and jumps into plain blocks",
-                )
-            })
-        } else if !self.blocks.is_empty() {
-            let b = &self.blocks[self.blocks.len() - 1];
-            let head = format!("o{} {}", b.name, b.keyword);
-            let bl = b.line;
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    head.clone(),
-                    format!("move inside the O-word block `{head}` (line {bl}) may lie in the compensation zone"),
-                    "expand O-word loops, conditions and subroutines into plain G-code (or move the zone away)",
-                )
-            })
-        } else if let Some((cl, code)) = self.cutter_comp.clone() {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    code.clone(),
-                    format!("cutter radius compensation {code} (from line {cl}) is active on a move in the compensation zone"),
-                    "post the program as the tool-centre path (G40) for the zone, or move the zone away",
-                )
-            })
-        } else if block_delete {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    "/".into(),
-                    "block delete `/` on a move in the compensation zone (the controller may skip the line)".into(),
-                    "remove the `/` or move the zone away",
-                )
-            })
-        } else if let Some(w) = polar {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    self.wtext(w).to_string(),
-                    "polar coordinates (@ ^) on a move in the compensation zone".into(),
-                    "post the program with X/Y coordinates (or move the zone away)",
-                )
-            })
-        } else if let Some(w) = expr_word {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    self.wtext(w).to_string(),
-                    "# parameters or [expressions] on a move in the compensation zone".into(),
-                    "expand the program to plain numbers (or move the zone away)",
-                )
-            })
-        } else if let Some(w) = other_axis {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    self.wtext(w).to_string(),
-                    format!(
-                        "axis {} moves together with a cut in the compensation zone",
-                        w.letter as char
-                    ),
-                    "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move",
-                )
-            })
-        } else if g53 {
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    "G53".into(),
-                    "G53 machine-coordinate cutting move in the compensation zone".into(),
-                    "program the cut in work coordinates",
-                )
-            })
-        } else if start.iter().any(|c| c.is_none()) {
-            let since = self
-                .unknown_since
-                .map(|l| format!(" since line {l}"))
-                .unwrap_or_else(|| " (no absolute X, Y and Z since the program start)".into());
-            self.may_touch(&[start, end]).then(|| {
-                (
-                    "start".into(),
-                    format!("the start point of this move is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"),
-                    "give absolute X, Y and Z (G90) before the first cut",
-                )
-            })
-        } else {
-            None
-        };
-        if let Some((col, msg, hint)) = refusal {
-            return Err(self.err(line, &col, msg, hint));
-        }
-
-        let plain = cutting
-            && self.units_known
-            && self.frames.is_empty()
-            && self.flow.is_none()
-            && !block_delete
-            && self.blocks.is_empty()
-            && self.cutter_comp.is_none()
-            && polar.is_none()
-            && expr_word.is_none()
-            && other_axis.is_none()
-            && !g53
-            && start.iter().all(|c| c.is_some());
-        if !plain {
-            // Not compensable, but shown above not to touch the zone: copy as is.
-            let mut end = end;
-            if block_delete {
-                // Executed or not: the axes it writes are unknown afterwards.
-                for i in 0..3 {
-                    if end[i] != start[i] {
-                        end[i] = None;
-                    }
-                }
-            }
-            if (380..=385).contains(&motion) {
-                // A probing move stops where it touches.
-                for i in 0..3 {
-                    if end[i] != start[i] {
-                        end[i] = None;
-                    }
-                }
-            }
-            if self.is_canned(motion) {
-                // The cycle retracts to the R level or the start (G98/G99): not tracked.
-                end[self.plane.axes().2] = None;
-            }
-            return self.finish_unchanged(line, words, end);
-        }
-        let s = [
-            start[0].unwrap_or(0.0),
-            start[1].unwrap_or(0.0),
-            start[2].unwrap_or(0.0),
-        ];
-        let e = [
-            end[0].unwrap_or(s[0]),
-            end[1].unwrap_or(s[1]),
-            end[2].unwrap_or(s[2]),
-        ];
-        // The original path as a polyline of points on it.
-        let arc = if motion == 10 {
-            None
-        } else {
-            Some(self.arc(line, words, s, e, motion == 20)?)
-        };
-        // Keep the output finite: a move needing over a million segments is a typo or a unit
-        // mistake, not a toolpath.
-        let step = self.settings.max_segment_in(self.inches);
-        let (length, chords) = match &arc {
-            None => (dist(&s, &e), 1),
-            Some(a) => {
-                let (_, _, ax) = a.plane.axes();
-                let len = (a.sweep.abs() * a.r_start.max(a.r_end)).hypot(a.end[ax] - a.start[ax]);
-                (len, a.chords(self.settings.chord_tol_in(self.inches), step))
-            }
-        };
-        if !length.is_finite() || length / step > 1e6 || chords >= 1_000_000 {
-            return Err(self.err(
-                line,
-                "X",
-                format!("this move ({length:.6e} program units) would need more than a million segments"),
-                "check the coordinates and units, or raise --max-segment / --chord-tol",
-            ));
-        }
-        // The move as a curve over [0, 1] with its chord ends as break points: splits at the
-        // zone and domain edges fall on the curve itself (on the arc, not on a chord).
-        let breaks: Vec<f64> = (0..=chords).map(|i| i as f64 / chords as f64).collect();
-        let line_at = |t: f64| lerp(&s, &e, t);
-        let arc_at = |t: f64| arc.as_ref().map_or(e, |a| a.point(t));
-        let curve: &dyn Fn(f64) -> [f64; 3] = if arc.is_some() { &arc_at } else { &line_at };
-        let emitted = emit_curve(
-            &breaks,
-            curve,
-            self.settings.max_segment_in(self.inches),
-            self.zone_now(),
-            self.normal,
-            &|p| self.error_at(p),
-        );
-        if self.extrapolated.replace(false) {
-            self.report.moves_outside_domain += 1;
-        }
-        if !emitted.iter().any(|(_, e)| e.is_some()) {
-            return self.finish_unchanged(line, words, end);
-        }
-        self.rewrite(line, words, &emitted, arc.as_ref(), motion)?;
-        self.pos = [Some(e[0]), Some(e[1]), Some(e[2])];
-        Ok(())
-    }
-
-    fn arc(&self, line: &Line, words: &[W], s: [f64; 3], e: [f64; 3], cw: bool) -> Result<Arc> {
-        let find = |l: u8| words.iter().find(|w| w.letter == l).and_then(|w| w.value);
-        let turns = match find(b'P') {
-            Some(p) if p >= 1.0 && p.fract() == 0.0 => p as u32,
-            Some(_) => {
-                return Err(self.err(
-                    line,
-                    "P",
-                    "arc turn count P must be a positive whole number".into(),
-                    "use P1, P2, …",
-                ))
-            }
-            None => 1,
-        };
-        let (a1, a2, _) = self.plane.axes();
-        let result = if let Some(r) = find(b'R') {
-            Arc::from_radius(self.plane, s, e, r, cw, turns)
-        } else {
-            // Offsets I, J, K go with X, Y, Z; Sinumerik `I=AC(…)` is an absolute centre.
-            let word = |axis: usize| words.iter().find(|w| w.letter == [b'I', b'J', b'K'][axis]);
-            let off = |axis: usize| word(axis).and_then(|w| w.value);
-            let abs = |axis: usize| word(axis).and_then(|w| w.abs).unwrap_or(self.arc_absolute);
-            let (o1, o2) = (off(a1), off(a2));
-            if o1.is_none() && o2.is_none() {
-                return Err(self.err(
-                    line,
-                    if cw { "G2" } else { "G3" },
-                    "arc without R and without centre words for the selected plane".into(),
-                    "give R or the I/J/K words of the plane (G17: I J, G18: I K, G19: J K)",
-                ));
-            }
-            let centre = |o: Option<f64>, axis: usize, start: f64| {
-                if abs(axis) {
-                    o.unwrap_or(start)
-                } else {
-                    start + o.unwrap_or(0.0)
-                }
-            };
-            let c = (centre(o1, a1, s[a1]), centre(o2, a2, s[a2]));
-            Arc::from_centre(self.plane, s, e, c, cw, turns)
-        };
-        result.map_err(|m| {
-            self.err(
-                line,
-                if cw { "G2" } else { "G3" },
-                m,
-                "fix the arc's end point or centre",
-            )
-        })
-    }
-
-    /// Emit a return along the normal to the original position before an unchanged line that
-    /// depends on the current position, when the last cut ended compensated.
-    fn return_if_needed(&mut self, line: &Line, words: &[W], group0: bool) -> Result<()> {
-        if self.offset == 0.0 {
-            return Ok(());
-        }
+    /// A subroutine body line: classified where the subroutine is called, so only note whether
+    /// it writes the normal axis (or a mode that changes it) and where it first moves.
+    fn sub_body_line(&mut self, line: &Line, words: &[W]) {
         let n = AXES[self.normal];
-        // A canned cycle's Z word is the hole bottom, and it retracts to its start: not a move
-        // to an absolute normal coordinate.
-        let absolute_normal = !group0
-            && self.absolute
-            && !self.motion.is_some_and(|m| self.is_canned(m))
-            && words.iter().any(|w| w.letter == n && w.value.is_some())
-            && !words
-                .iter()
-                .any(|w| w.letter == b'G' && w.value.map(g_code) == Some(530));
-        if absolute_normal {
-            self.offset = 0.0;
-            return Ok(());
-        }
-        let Some(orig) = self.pos[self.normal] else {
-            return Err(Error::Internal(format!(
-                "{}:{}: compensated position with unknown normal coordinate",
-                self.source.display(),
-                line.number
-            )));
-        };
-        let value = if self.absolute { orig } else { -self.offset };
-        let code = if self.out_motion == Some(0) {
-            "G0"
-        } else {
-            "G1"
-        };
-        self.out.push_str(&format!(
-            "{code} {}{}{}",
-            n as char,
-            self.fmt(value),
-            self.eob()
-        ));
-        self.out.push_str(line_terminator(self.text, line));
-        self.out_motion = Some(if code == "G0" { 0 } else { 10 });
-        self.offset = 0.0;
-        self.report.returns_inserted += 1;
-        Ok(())
-    }
-
-    /// Keep the output's modal motion in step with the original's on an unchanged line.
-    fn sync_out_motion(&mut self, words: &[W]) {
-        if words
-            .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)))
-        {
-            self.out_motion = self.motion;
-        }
-    }
-
-    fn finish_unchanged(&mut self, line: &Line, words: &[W], end: [Option<f64>; 3]) -> Result<()> {
-        self.return_if_needed(line, words, false)?;
-        let has_motion_g = words
-            .iter()
-            .any(|w| w.letter == b'G' && w.value.map(g_code).is_some_and(|c| self.is_group1(c)));
-        let moves = words.iter().any(|w| {
-            matches!(
-                w.letter,
-                b'X' | b'Y'
-                    | b'Z'
-                    | b'A'
-                    | b'B'
-                    | b'C'
-                    | b'U'
-                    | b'V'
-                    | b'W'
-                    | b'I'
-                    | b'J'
-                    | b'K'
-                    | b'R'
-                    | b'@'
-                    | b'^'
+        let writes = words.iter().filter(|w| w.letter == b'G').any(|w| {
+            !matches!(
+                w.g(),
+                Some(
+                    G::Motion(Motion::Rapid | Motion::Linear | Motion::ArcCw | Motion::ArcCcw)
+                        | G::Plane(_)
+                        | G::Units(_)
+                        | G::Distance(_)
+                        | G::ArcDistance(_)
+                        | G::CutterComp(_)
+                        | G::Neutral
+                        | G::MotionCancel
+                )
             )
         });
-        match self.motion {
-            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => {
-                // The output's modal motion differs (after a return step): say it on this
-                // line, after its block delete and N-word, which must come first.
-                let mut at = line.span.start;
-                for t in &line.tokens {
-                    let lead = match &t.kind {
-                        TokenKind::Space => true,
-                        TokenKind::Word { letter: b'N', .. } => true,
-                        TokenKind::Other => self.text.get(t.span.clone()) == Some("/"),
-                        _ => false,
-                    };
-                    if !lead {
-                        break;
-                    }
-                    at = t.span.end;
-                }
-                let text = self.text;
-                self.out.push_str(&text[line.span.start..at]);
-                if at > line.span.start && !text[..at].ends_with([' ', '\t']) {
-                    self.out.push(' ');
-                }
-                self.out.push_str(&format!("G{} ", m as f64 / 10.0));
-                self.out.push_str(&text[at..line.end]);
-                self.report.lines_prefixed += 1;
-            }
-            _ => self.copy_line(line),
-        }
-        if has_motion_g || moves {
-            self.out_motion = self.motion;
-        }
-        // Position bookkeeping.
-        let mut end = end;
-        if !self.blocks.is_empty() && !self.absolute {
-            // Incremental moves inside a loop land somewhere else on each pass.
-            for (i, l) in AXES.iter().enumerate() {
-                if words.iter().any(|w| w.letter == *l) {
-                    end[i] = None;
-                }
-            }
-        }
-        for (i, e) in end.iter().enumerate() {
-            if *e != self.pos[i] {
-                if let Some(b) = self.blocks.last_mut() {
-                    b.written[i] = true;
-                }
-                if e.is_none() {
-                    self.unknown_since = Some(line.number);
-                }
-            }
-        }
-        self.pos = end;
-        Ok(())
-    }
-
-    fn rewrite(
-        &mut self,
-        line: &Line,
-        words: &[W],
-        emitted: &[([f64; 3], Option<f64>)],
-        arc: Option<&Arc>,
-        motion: i32,
-    ) -> Result<()> {
-        let text = self.text;
-        let term = line_terminator(text, line);
-        let term_last = line.terminator(text);
-        // Current output position.
-        let mut out_pos = [
-            self.pos[0].unwrap_or(0.0),
-            self.pos[1].unwrap_or(0.0),
-            self.pos[2].unwrap_or(0.0),
-        ];
-        out_pos[self.normal] += self.offset;
-        // Targets: compensated points P' = P − E along the normal.
-        let mut targets: Vec<[f64; 3]> = Vec::with_capacity(emitted.len());
-        let mut last_e = None;
-        for (p, e) in emitted {
-            let mut q = *p;
-            if let Some(e) = e {
-                q[self.normal] -= e;
-                let e_mm = e.abs() * self.scale_mm();
-                if e_mm > self.report.max_abs_error_mm {
-                    self.report.max_abs_error_mm = e_mm;
-                }
-                self.report.points_compensated += 1;
-            }
-            last_e = *e;
-            targets.push(q);
-        }
-        // Drop points that repeat the current output position.
-        let mut segs: Vec<[f64; 3]> = Vec::with_capacity(targets.len());
-        let mut prev = out_pos;
-        for q in targets {
-            if dist(&q, &prev) > 1e-12 {
-                segs.push(q);
-                prev = q;
-            }
-        }
-        if segs.is_empty() {
-            segs.push(prev);
-        }
-        let removed = |w: &W| {
-            matches!(w.letter, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R')
-                || (w.letter == b'G'
-                    && w.value
-                        .map(g_code)
-                        .is_some_and(|c| matches!(c, 0 | 10 | 20 | 30)))
-                || (w.letter == b'P' && arc.is_some())
-        };
-        let mut removed_tokens = vec![false; line.tokens.len()];
-        for w in words.iter().filter(|w| removed(w)) {
-            removed_tokens[w.token] = true;
-        }
-        let nseg = segs.len();
-        let mut lines_text: Vec<String> = Vec::with_capacity(nseg);
-        for (k, q) in segs.iter().enumerate() {
-            let final_arc = k + 1 == nseg && arc.is_some();
-            let mut words_text = String::new();
-            let mut code = "G1".to_string();
-            let mut r_word = None;
-            if final_arc {
-                if let Some(a) = arc {
-                    let (a1, a2, _) = a.plane.axes();
-                    let chord = (q[a1] - out_pos[a1]).hypot(q[a2] - out_pos[a2]);
-                    if chord > 1e-6 && 2.0 * a.r_end > chord {
-                        code = if motion == 20 {
-                            "G2".into()
-                        } else {
-                            "G3".into()
-                        };
-                        r_word = Some(a.r_end);
-                    }
-                }
-            }
-            // The words as written, and the values the controller reads from them.
-            let written: Vec<(String, f64)> = (0..3)
-                .map(|i| {
-                    let v = if self.absolute {
-                        q[i]
-                    } else {
-                        q[i] - out_pos[i]
-                    };
-                    self.written(v)
-                })
-                .collect();
-            // No zero-length moves: a point that rounds to where the tool already is goes.
-            let d = self.decimals();
-            let zero = (0..3).all(|i| {
-                if self.absolute {
-                    decimal_units(written[i].1, d) == decimal_units(out_pos[i], d)
-                } else {
-                    decimal_units(written[i].1, d) == Some(0)
-                }
-            });
-            if zero {
-                continue;
-            }
-            words_text.push_str(&code);
-            for (i, l) in AXES.iter().enumerate() {
-                // Track the position the controller will reach after rounding.
-                out_pos[i] = if self.absolute {
-                    written[i].1
-                } else {
-                    out_pos[i] + written[i].1
-                };
-                words_text.push_str(&format!(" {}{}", *l as char, written[i].0));
-            }
-            if let Some(r) = r_word {
-                let r_letter = if self.dialect == Dialect::Sinumerik {
-                    "CR="
-                } else {
-                    "R"
-                };
-                words_text.push_str(&format!(" {r_letter}{}", self.fmt(r)));
-            }
-            self.out_motion = Some(if code == "G1" { 10 } else { motion });
-            lines_text.push(words_text);
-        }
-        if lines_text.is_empty() {
-            // Every point rounds to the current position: the line keeps its other words only.
-            lines_text.push(String::new());
-        }
-        let nseg = lines_text.len();
-        // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
-        // segment, so the program does not stop after the first one.
-        let stops: Vec<&W> = if nseg > 1 {
-            words
-                .iter()
-                .filter(|w| {
-                    w.letter == b'M'
-                        && w.value
-                            .is_some_and(|v| [0.0, 1.0, 2.0, 30.0, 60.0].contains(&v))
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        if let Some(last) = lines_text.last_mut() {
-            for w in &stops {
-                last.push(' ');
-                last.push_str(self.wtext(w));
-            }
-        }
-        let mut stop_tokens = vec![false; line.tokens.len()];
-        for w in &stops {
-            stop_tokens[w.token] = true;
-        }
-        // First line: the original line with its motion words replaced by the first segment.
-        let mut first = String::new();
-        let mut inserted = false;
-        let mut skip_space = false;
-        for (ti, tok) in line.tokens.iter().enumerate() {
-            if stop_tokens[ti] {
-                skip_space = true;
-                continue;
-            }
-            if removed_tokens[ti] {
-                if !inserted {
-                    first.push_str(&lines_text[0]);
-                    inserted = true;
-                }
-                skip_space = true;
-                continue;
-            }
-            if skip_space && tok.kind == TokenKind::Space {
-                skip_space = false;
-                if ti + 1 < line.tokens.len() && !removed_tokens[ti + 1] {
-                    first.push(' ');
-                }
-                continue;
-            }
-            skip_space = false;
-            first.push_str(text.get(tok.span.clone()).unwrap_or(""));
-        }
-        if !inserted {
-            first.push_str(&lines_text[0]);
-        }
-        // Inserted lines use the file's terminator; the last one keeps the line's own
-        // (none on a last line without a newline).
-        let eob = self.eob();
-        let extra: Vec<String> = lines_text[1..]
+        let axis_words = words
             .iter()
-            .map(|t| format!("{t}{eob}"))
-            .collect();
-        let mut pieces: Vec<&str> = vec![first.trim_end_matches([' ', '\t'])];
-        pieces.extend(extra.iter().map(|t| t.as_str()));
-        let count = pieces.len();
-        for (k, piece) in pieces.into_iter().enumerate() {
-            self.out.push_str(piece);
-            self.out
-                .push_str(if k + 1 == count { term_last } else { term });
-        }
-        self.report.moves_changed += 1;
-        if nseg > 1 {
-            self.report.moves_split += 1;
-        }
-        self.report.segments_emitted += nseg as u64;
-        // Offset of the output along the normal at the end of the move.
-        self.offset = match last_e {
-            Some(e) => -e,
-            None => 0.0,
+            .any(|w| matches!(w.letter, b'X' | b'Y' | b'Z' | b'@' | b'^'));
+        let Some((_, info)) = self.sub.as_mut() else {
+            return;
         };
-        Ok(())
+        if words.iter().any(|w| w.letter == n) || writes {
+            info.writes_normal = true;
+        }
+        if axis_words && info.first_move.is_none() {
+            info.first_move = Some(line.number);
+        }
     }
 }
 

@@ -238,7 +238,10 @@ fn lex_number(b: &[u8], i: usize, end: usize) -> Option<(usize, f64)> {
         digits += usize::from(b[j] != b'.');
         j += 1;
     }
-    if digits > 0 && (j >= end || !is_space(b[j])) {
+    // Spaces after the number end it unless more digits follow them.
+    let k = skip_spaces(b, j, end);
+    let more = k > j && k < end && (b[k].is_ascii_digit() || (b[k] == b'.' && !dot));
+    if digits > 0 && !more {
         let v: f64 = std::str::from_utf8(&b[s..j]).ok()?.parse().ok()?;
         return Some((j, v));
     }

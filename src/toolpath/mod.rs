@@ -232,6 +232,31 @@ pub fn compensate_gcode(
     gcode::compensate(text, source, field, settings)
 }
 
+/// A move of a G-code program as errmap's interpreter reads it: mm, in work coordinates (the
+/// program's coordinates plus the shifts errmap follows: G92, G52, Sinumerik TRANS).
+#[derive(Debug, Clone)]
+pub struct TracedMove {
+    /// 1-based line of the block.
+    pub line: u64,
+    pub kind: dialect::Motion,
+    pub start_mm: [f64; 3],
+    pub end_mm: [f64; 3],
+    /// The arc of a G2/G3 block, mm.
+    pub arc_mm: Option<Arc>,
+}
+
+/// The moves of a G-code program whose start and end errmap knows, as its interpreter reads
+/// them (the same reading `compensate_gcode` rewrites by): what the program commands, for
+/// checking a rewrite against its original. Refuses what `compensate_gcode` refuses at every
+/// height (unknown codes, malformed blocks, a cut before the unit code …).
+pub fn trace_gcode(
+    text: &str,
+    source: &Path,
+    settings: &CompensationSettings,
+) -> Result<Vec<TracedMove>> {
+    gcode::trace(text, source, settings)
+}
+
 /// Compensate a CSV toolpath: header with `x_mm,y_mm,z_mm` (other columns passed through), one
 /// point per row, consecutive rows joined by straight moves.
 pub fn compensate_csv(

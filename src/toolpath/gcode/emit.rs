@@ -11,7 +11,6 @@ pub(crate) fn emit_points(
     normal: usize,
     error_at: &dyn Fn(&[f64; 3]) -> Option<f64>,
 ) -> Vec<([f64; 3], Option<f64>)> {
-    let breaks: Vec<f64> = (0..path.len()).map(|i| i as f64).collect();
     let curve = |s: f64| {
         let i = (s.floor() as usize).min(path.len().saturating_sub(2));
         match (path.get(i), path.get(i + 1)) {
@@ -20,96 +19,182 @@ pub(crate) fn emit_points(
             _ => [0.0; 3],
         }
     };
-    emit_curve(&breaks, &curve, step, zone, normal, error_at)
+    let mut out = Vec::new();
+    if !path.is_empty() {
+        let breaks = Breaks::Indices(path.len() - 1);
+        emit_curve(breaks, &curve, step, zone, normal, &error_at, &mut out);
+    }
+    out
+}
+
+/// The parameters of a polyline's corners along its curve.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Breaks {
+    /// `0, 1, …, n` (a polyline of n pieces parametrised by its corner index).
+    Indices(usize),
+    /// `0, 1/n, …, 1` (a curve over [0, 1] cut into n chords).
+    Fractions(usize),
+}
+
+impl Breaks {
+    fn pieces(self) -> usize {
+        match self {
+            Breaks::Indices(n) | Breaks::Fractions(n) => n,
+        }
+    }
+
+    fn at(self, i: usize) -> f64 {
+        match self {
+            Breaks::Indices(_) => i as f64,
+            Breaks::Fractions(n) => i as f64 / n as f64,
+        }
+    }
 }
 
 /// [`emit_points`] along a curve given by its parameter: `breaks` are the parameters of the
-/// polyline's corners; intermediate and boundary points are taken on the curve.
+/// polyline's corners; intermediate and boundary points are taken on the curve. The points
+/// are appended to `out`.
 pub(crate) fn emit_curve(
-    breaks: &[f64],
-    curve: &dyn Fn(f64) -> [f64; 3],
+    breaks: Breaks,
+    curve: &impl Fn(f64) -> [f64; 3],
     step: f64,
     zone: Option<(f64, f64)>,
     normal: usize,
-    error_at: &dyn Fn(&[f64; 3]) -> Option<f64>,
-) -> Vec<([f64; 3], Option<f64>)> {
-    let mut out: Vec<([f64; 3], Option<f64>)> = Vec::new();
-    let Some(&s0) = breaks.first() else {
-        return out;
-    };
-    let first = curve(s0);
+    error_at: &impl Fn(&[f64; 3]) -> Option<f64>,
+    out: &mut Vec<([f64; 3], Option<f64>)>,
+) {
+    let first = curve(breaks.at(0));
     out.push((first, error_at(&first)));
-    for w in breaks.windows(2) {
-        let (sa, sb) = (w[0], w[1]);
-        let (a, b) = (curve(sa), curve(sb));
-        let at = |t: f64| {
-            if t <= 0.0 {
-                a
-            } else if t >= 1.0 {
-                b
-            } else {
-                curve(sa + t * (sb - sa))
-            }
+    for i in 0..breaks.pieces() {
+        let (sa, sb) = (breaks.at(i), breaks.at(i + 1));
+        let piece = Piece {
+            a: curve(sa),
+            b: curve(sb),
+            sa,
+            sb,
         };
-        let len = dist(&a, &b);
-        let k = (len / step).ceil().clamp(1.0, 1e7) as usize;
-        let mut ts: Vec<f64> = (1..=k).map(|i| i as f64 / k as f64).collect();
-        // Exact zone crossings along the normal.
+        emit_piece(&piece, curve, step, zone, normal, error_at, out);
+    }
+}
+
+/// One piece of the polyline: its end points and their parameters on the curve.
+struct Piece {
+    a: [f64; 3],
+    b: [f64; 3],
+    sa: f64,
+    sb: f64,
+}
+
+impl Piece {
+    /// The curve's point at fraction `t` of the piece (its ends exactly at 0 and 1).
+    fn at(&self, curve: &impl Fn(f64) -> [f64; 3], t: f64) -> [f64; 3] {
+        if t <= 0.0 {
+            self.a
+        } else if t >= 1.0 {
+            self.b
+        } else {
+            curve(self.sa + t * (self.sb - self.sa))
+        }
+    }
+
+    /// Fractions where the piece crosses the zone's limits along the normal, ascending.
+    fn crossings(&self, zone: Option<(f64, f64)>, normal: usize) -> ([f64; 2], usize) {
+        let mut ts = [0.0; 2];
+        let mut n = 0;
         if let Some((lo, hi)) = zone {
-            let (na, nb) = (a[normal], b[normal]);
+            let (na, nb) = (self.a[normal], self.b[normal]);
             if (nb - na).abs() > 0.0 {
                 for z in [lo, hi] {
                     let t = (z - na) / (nb - na);
                     if t > 0.0 && t < 1.0 {
-                        ts.push(t);
+                        ts[n] = t;
+                        n += 1;
                     }
                 }
             }
         }
-        ts.sort_by(|x, y| x.total_cmp(y));
-        let mut t_prev = 0.0;
-        let mut e_prev = error_at(&a);
-        for t in ts {
-            // The last point is the piece end exactly (lerp can round past a domain edge).
-            let p = at(t);
-            let e_here = error_at(&p);
-            if e_prev.is_some() != e_here.is_some() {
-                // Bisect for the boundary: keep `lo_t` on the side of e_prev.
-                let (mut lo_t, mut hi_t) = (t_prev, t);
-                for _ in 0..60 {
-                    let mid = 0.5 * (lo_t + hi_t);
-                    if error_at(&at(mid)).is_some() == e_prev.is_some() {
-                        lo_t = mid;
-                    } else {
-                        hi_t = mid;
-                    }
-                }
-                let (t_in, t_out) = if e_prev.is_some() {
-                    (lo_t, hi_t)
-                } else {
-                    (hi_t, lo_t)
-                };
-                let p_in = at(t_in);
-                let p_out = at(t_out);
-                let e_in = error_at(&p_in);
-                if e_prev.is_some() {
-                    out.push((p_in, e_in));
-                    out.push((p_out, None));
-                } else {
-                    out.push((p_out, None));
-                    out.push((p_in, e_in));
-                }
-            }
-            // Outside stretches of a straight piece need no intermediate points.
-            let last = (t - 1.0).abs() < 1e-15;
-            if e_here.is_some() || last {
-                out.push((if last { b } else { p }, e_here));
-            }
-            t_prev = t;
-            e_prev = e_here;
+        if n == 2 && ts[1] < ts[0] {
+            ts.swap(0, 1);
+        }
+        (ts, n)
+    }
+}
+
+/// The points of one piece: every `step` in the zone, and both sides of each zone or domain
+/// edge it crosses.
+fn emit_piece(
+    piece: &Piece,
+    curve: &impl Fn(f64) -> [f64; 3],
+    step: f64,
+    zone: Option<(f64, f64)>,
+    normal: usize,
+    error_at: &impl Fn(&[f64; 3]) -> Option<f64>,
+    out: &mut Vec<([f64; 3], Option<f64>)>,
+) {
+    let len = dist(&piece.a, &piece.b);
+    let k = (len / step).ceil().clamp(1.0, 1e7) as usize;
+    let (cross, ncross) = piece.crossings(zone, normal);
+    let mut c = 0;
+    let mut i = 1;
+    let mut t_prev = 0.0;
+    let mut e_prev = error_at(&piece.a);
+    // The even steps i/k merged with the zone crossings, in ascending order.
+    while i <= k || c < ncross {
+        let even = i as f64 / k as f64;
+        let t = if c < ncross && (i > k || cross[c] < even) {
+            c += 1;
+            cross[c - 1]
+        } else {
+            i += 1;
+            even
+        };
+        let p = piece.at(curve, t);
+        let e_here = error_at(&p);
+        if e_prev.is_some() != e_here.is_some() {
+            boundary(piece, curve, (t_prev, t), e_prev.is_some(), error_at, out);
+        }
+        // Outside stretches of a straight piece need no intermediate points. The last point
+        // is the piece end exactly (lerp can round past a domain edge).
+        let last = (t - 1.0).abs() < 1e-15;
+        if e_here.is_some() || last {
+            out.push((if last { piece.b } else { p }, e_here));
+        }
+        t_prev = t;
+        e_prev = e_here;
+    }
+}
+
+/// Bisect for the zone/domain edge between fractions `span` and emit it twice: uncompensated
+/// on the outside, compensated on the inside, in the order the path meets them.
+fn boundary(
+    piece: &Piece,
+    curve: &impl Fn(f64) -> [f64; 3],
+    span: (f64, f64),
+    was_in: bool,
+    error_at: &impl Fn(&[f64; 3]) -> Option<f64>,
+    out: &mut Vec<([f64; 3], Option<f64>)>,
+) {
+    // Keep `lo_t` on the side of the previous point.
+    let (mut lo_t, mut hi_t) = span;
+    for _ in 0..60 {
+        let mid = 0.5 * (lo_t + hi_t);
+        if error_at(&piece.at(curve, mid)).is_some() == was_in {
+            lo_t = mid;
+        } else {
+            hi_t = mid;
         }
     }
-    out
+    let (t_in, t_out) = if was_in { (lo_t, hi_t) } else { (hi_t, lo_t) };
+    let p_in = piece.at(curve, t_in);
+    let p_out = piece.at(curve, t_out);
+    let e_in = error_at(&p_in);
+    if was_in {
+        out.push((p_in, e_in));
+        out.push((p_out, None));
+    } else {
+        out.push((p_out, None));
+        out.push((p_in, e_in));
+    }
 }
 
 pub(crate) fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {

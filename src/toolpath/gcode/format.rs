@@ -25,18 +25,33 @@ pub(super) fn decimal_units(v: f64, d: usize) -> Option<i64> {
 
 /// `units` × 10^-d as fixed-point text (`-0` written as `0`).
 pub(super) fn units_text(units: i64, d: usize) -> String {
-    use std::fmt::Write;
-    let p = 10u64.pow(d as u32);
-    let a = units.unsigned_abs();
     let mut t = String::with_capacity(24);
-    if units < 0 {
-        t.push('-');
-    }
-    let _ = write!(t, "{}", a / p);
-    if d > 0 {
-        let _ = write!(t, ".{:0d$}", a % p);
-    }
+    push_units(&mut t, units, d);
     t
+}
+
+/// Append `units` × 10^-d as fixed-point text (`-0` written as `0`), digit by digit.
+pub(super) fn push_units(buf: &mut String, units: i64, d: usize) {
+    // 20 digits hold any u64, a sign and a point make 22.
+    let mut digits = [0u8; 24];
+    let mut n = units.unsigned_abs();
+    let mut i = digits.len();
+    let mut written = 0;
+    while n > 0 || written <= d {
+        if written == d && d > 0 {
+            i -= 1;
+            digits[i] = b'.';
+        }
+        i -= 1;
+        digits[i] = b'0' + (n % 10) as u8;
+        n /= 10;
+        written += 1;
+    }
+    if units < 0 {
+        i -= 1;
+        digits[i] = b'-';
+    }
+    buf.push_str(std::str::from_utf8(&digits[i..]).unwrap_or("0"));
 }
 
 pub(super) fn format_decimals_slow(v: f64, d: usize) -> String {
@@ -73,4 +88,28 @@ pub(super) fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
         }
     }
     most.min(9)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_are_written_as_fixed_point() {
+        let t = |u: i64, d: usize| {
+            let mut s = String::new();
+            push_units(&mut s, u, d);
+            s
+        };
+        assert_eq!(t(12345, 4), "1.2345");
+        assert_eq!(t(5, 4), "0.0005");
+        assert_eq!(t(-5, 4), "-0.0005");
+        assert_eq!(t(0, 4), "0.0000");
+        assert_eq!(t(0, 0), "0");
+        assert_eq!(t(-120, 0), "-120");
+        assert_eq!(t(-1_000_000_000, 9), "-1.000000000");
+        assert_eq!(format_decimals(-0.00001, 4), "0.0000");
+        assert_eq!(format_decimals(2.5e-5, 4), "0.0000");
+        assert_eq!(format_decimals(-12.34565, 5), "-12.34565");
+    }
 }

@@ -1,8 +1,8 @@
 //! The modal-state machine of the rewrite: each dialect's G-code table applied to the state (units, distance modes, plane, frames, shifts, work offsets), dialect statements, flow control and subprograms, and strict block checks.
 
-use super::super::dialect::{self, Dialect, Frame, Motion, G};
+use super::super::dialect::{self, Dialect, Frame, GCode, G};
 use super::super::lexer::{Line, TokenKind, WordValue};
-use super::{g_code, Block, Rewriter, SubInfo, AXES, W};
+use super::{Block, Rewriter, SubInfo, AXES, W};
 use crate::error::{Error, Location, Result};
 use std::collections::HashSet;
 use std::ops::Range;
@@ -89,32 +89,22 @@ impl<'a> Rewriter<'a> {
         Some((lo - d, hi - d))
     }
 
-    pub(super) fn g(&self, code: i32) -> Option<G> {
+    pub(super) fn g(&self, code: GCode) -> Option<G> {
         dialect::g_code(self.dialect, code)
     }
 
-    pub(super) fn is_canned(&self, code: i32) -> bool {
-        self.g(code) == Some(G::Motion(Motion::Canned))
-    }
-
-    pub(super) fn is_group1(&self, code: i32) -> bool {
-        matches!(self.g(code), Some(G::Motion(_) | G::MotionCancel))
-    }
-
-    /// The G words of a block with their meaning in the dialect; an unknown code is refused.
-    pub(super) fn g_words<'w>(&self, line: &Line, words: &'w [W]) -> Result<Vec<(&'w W, i32, G)>> {
-        let mut gs = Vec::new();
+    /// Every G word of a block has a meaning in the dialect; an unknown code is refused.
+    pub(super) fn check_g_words(&self, line: &Line, words: &[W]) -> Result<()> {
         for w in words.iter().filter(|w| w.letter == b'G') {
-            let Some(v) = w.value.filter(|_| !w.is_expr) else {
+            if w.value.is_none() || w.is_expr {
                 return Err(self.err(
                     line,
                     self.wtext(w),
                     "a G word given by a parameter or expression".into(),
                     "write the G code as a number",
                 ));
-            };
-            let code = g_code(v);
-            let Some(g) = self.g(code) else {
+            }
+            if w.g.is_none() {
                 return Err(self.err(
                     line,
                     self.wtext(w),
@@ -125,10 +115,9 @@ impl<'a> Rewriter<'a> {
                     ),
                     "expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect), or pass the program's --dialect",
                 ));
-            };
-            gs.push((w, code, g));
+            }
         }
-        Ok(gs)
+        Ok(())
     }
 
     /// Fanuc numbers without a decimal point are least input increments unless the machine
@@ -169,10 +158,10 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Apply the modal G codes of a block (plane, units, distance modes, cutter compensation).
-    pub(super) fn modal(&mut self, line: &Line, gs: &[(&W, i32, G)]) {
+    pub(super) fn modal(&mut self, line: &Line, words: &[W]) {
         let orig_inches = self.inches;
         let mut units_word = false;
-        for &(_, code, g) in gs {
+        for (code, g) in words.iter().filter_map(|w| w.g) {
             match g {
                 G::Plane(p) => self.plane = p,
                 G::Units(inches) => {
@@ -183,16 +172,14 @@ impl<'a> Rewriter<'a> {
                 G::ArcDistance(a) => self.arc_absolute = a,
                 G::CutterComp(false) => self.cutter_comp = None,
                 G::CutterComp(true) => {
-                    self.cutter_comp = Some((line.number, format!("G{}", code as f64 / 10.0)));
+                    self.cutter_comp = Some((line.number, code.to_string()));
                 }
                 G::WorkOffset => match self.first_offset {
                     None => self.first_offset = Some(code),
                     Some(c) if c == code => self.frames.retain(|f| f.0 != Frame::WorkOffset),
-                    Some(_) => self.frames.push((
-                        Frame::WorkOffset,
-                        line.number,
-                        format!("G{}", code as f64 / 10.0),
-                    )),
+                    Some(_) => self
+                        .frames
+                        .push((Frame::WorkOffset, line.number, code.to_string())),
                 },
                 _ => {}
             }

@@ -1,0 +1,287 @@
+//! The rewriter: a compensated move's points written as blocks, the first in place of the original line's motion words (its other words kept), the others on lines of their own.
+
+use super::super::arc::Arc;
+use super::super::dialect::{Dialect, Motion, G};
+use super::super::lexer::{Line, TokenKind};
+use super::format::{decimal_units, format_decimals_slow, push_units};
+use super::{dist, MotionMode, Rewriter, AXES, W};
+use crate::error::Result;
+use std::ops::Range;
+
+/// The segments of a rewritten move: their words (`G1 X… Y… Z…`) one after another in `text`.
+#[derive(Debug, Default)]
+pub(super) struct Segments {
+    text: String,
+    spans: Vec<Range<usize>>,
+}
+
+impl<'a> Rewriter<'a> {
+    /// Write a move whose `emitted` points (with E where compensated) replace its motion words.
+    pub(super) fn rewrite(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        emitted: &[([f64; 3], Option<f64>)],
+        arc: Option<&Arc>,
+        motion: MotionMode,
+    ) -> Result<()> {
+        let mut segs = std::mem::take(&mut self.segments);
+        segs.text.clear();
+        segs.spans.clear();
+        let last_e = self.count_compensated(emitted);
+        self.segment_words(emitted, arc, motion, &mut segs);
+        if segs.spans.is_empty() {
+            // Every point rounds to the current position: the line keeps its other words only.
+            segs.spans.push(0..0);
+        }
+        let nseg = segs.spans.len();
+        self.write_lines(line, words, arc.is_some(), &segs);
+        self.report.moves_changed += 1;
+        if nseg > 1 {
+            self.report.moves_split += 1;
+        }
+        self.report.segments_emitted += nseg as u64;
+        // Offset of the output along the normal at the end of the move.
+        self.offset = last_e.map_or(0.0, |e| -e);
+        self.segments = segs;
+        Ok(())
+    }
+
+    /// Count the compensated points in the report; E of the last point.
+    fn count_compensated(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Option<f64> {
+        for e in emitted.iter().filter_map(|(_, e)| *e) {
+            let e_mm = e.abs() * self.scale_mm();
+            if e_mm > self.report.max_abs_error_mm {
+                self.report.max_abs_error_mm = e_mm;
+            }
+            self.report.points_compensated += 1;
+        }
+        emitted.last().and_then(|(_, e)| *e)
+    }
+
+    /// The words of each segment to the targets P' = P − E along the normal, leaving out
+    /// targets that repeat the output position or round onto it (no zero-length moves).
+    fn segment_words(
+        &mut self,
+        emitted: &[([f64; 3], Option<f64>)],
+        arc: Option<&Arc>,
+        motion: MotionMode,
+        segs: &mut Segments,
+    ) {
+        // Current output position: the original's, offset along the normal.
+        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
+        out_pos[self.normal] += self.offset;
+        // The targets that move the tool; the last one may be an arc piece.
+        let normal = self.normal;
+        let target = |(p, e): &([f64; 3], Option<f64>)| {
+            let mut q = *p;
+            if let Some(e) = e {
+                q[normal] -= e;
+            }
+            q
+        };
+        let moves = |q: &[f64; 3], prev: &[f64; 3]| dist(q, prev) > 1e-12;
+        let mut prev = out_pos;
+        let mut pending: Option<[f64; 3]> = None;
+        for q in emitted.iter().map(target) {
+            if moves(&q, &prev) {
+                if let Some(p) = pending.replace(q) {
+                    self.segment(p, None, motion, &mut out_pos, segs);
+                }
+                prev = q;
+            }
+        }
+        // No target moves: the move ends where the output already is.
+        let last = pending.unwrap_or(prev);
+        self.segment(last, arc, motion, &mut out_pos, segs);
+    }
+
+    /// One segment to `q` (an arc piece when `final_arc`), unless it rounds to no motion.
+    fn segment(
+        &mut self,
+        q: [f64; 3],
+        final_arc: Option<&Arc>,
+        motion: MotionMode,
+        out_pos: &mut [f64; 3],
+        segs: &mut Segments,
+    ) {
+        let d = self.decimals();
+        // The values the controller reads from the words as written.
+        let written = [0, 1, 2].map(|i| {
+            let v = if self.absolute {
+                q[i]
+            } else {
+                q[i] - out_pos[i]
+            };
+            rounded(v, d)
+        });
+        let zero = (0..3).all(|i| {
+            let now = decimal_units(written[i].1, d);
+            if self.absolute {
+                now == decimal_units(out_pos[i], d)
+            } else {
+                now == Some(0)
+            }
+        });
+        if zero {
+            return;
+        }
+        // The last piece of an arc is an arc, so the modal motion stays the original's.
+        let r_word = final_arc.and_then(|a| {
+            let (a1, a2, _) = a.plane.axes();
+            let chord = (q[a1] - out_pos[a1]).hypot(q[a2] - out_pos[a2]);
+            (chord > 1e-6 && 2.0 * a.r_end > chord).then_some(a.r_end)
+        });
+        let start = segs.text.len();
+        let mode = if r_word.is_some() {
+            motion
+        } else {
+            MotionMode::LINEAR
+        };
+        segs.text.push_str(match mode.kind {
+            Motion::ArcCw => "G2",
+            Motion::ArcCcw => "G3",
+            _ => "G1",
+        });
+        for (i, l) in AXES.iter().enumerate() {
+            // Track the position the controller will reach after rounding.
+            out_pos[i] = if self.absolute {
+                written[i].1
+            } else {
+                out_pos[i] + written[i].1
+            };
+            segs.text.push(' ');
+            segs.text.push(*l as char);
+            push_rounded(&mut segs.text, written[i], d);
+        }
+        if let Some(r) = r_word {
+            segs.text.push_str(if self.dialect == Dialect::Sinumerik {
+                " CR="
+            } else {
+                " R"
+            });
+            self.push_coord(&mut segs.text, r);
+        }
+        self.out_motion = Some(mode);
+        segs.spans.push(start..segs.text.len());
+    }
+
+    /// The original line with its motion words replaced by the first segment, then the other
+    /// segments on lines of their own; program stops move to the last one.
+    fn write_lines(&mut self, line: &Line, words: &[W], is_arc: bool, segs: &Segments) {
+        let text = self.text;
+        let nseg = segs.spans.len();
+        // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
+        // segment, so the program does not stop after the first one.
+        let is_stop = |w: &W| {
+            nseg > 1
+                && w.letter == b'M'
+                && w.value
+                    .is_some_and(|v| [0.0, 1.0, 2.0, 30.0, 60.0].contains(&v))
+        };
+        let removed = |w: &W| {
+            matches!(w.letter, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R')
+                || matches!(
+                    w.g(),
+                    Some(G::Motion(
+                        Motion::Rapid | Motion::Linear | Motion::ArcCw | Motion::ArcCcw
+                    ))
+                )
+                || (w.letter == b'P' && is_arc)
+        };
+        let first_text = &segs.text[segs.spans[0].clone()];
+        let line_start = self.out.len();
+        let mut inserted = false;
+        let mut skip_space = false;
+        // Words are in token order: walk both together.
+        let mut wi = 0;
+        for (ti, tok) in line.tokens.iter().enumerate() {
+            while wi < words.len() && words[wi].token < ti {
+                wi += 1;
+            }
+            let word = words.get(wi).filter(|w| w.token == ti);
+            if word.is_some_and(is_stop) {
+                skip_space = true;
+                continue;
+            }
+            if word.is_some_and(removed) {
+                if !inserted {
+                    self.out.push_str(first_text);
+                    inserted = true;
+                }
+                skip_space = true;
+                continue;
+            }
+            if skip_space && tok.kind == TokenKind::Space {
+                skip_space = false;
+                let next_removed = words
+                    .get(wi)
+                    .filter(|w| w.token == ti + 1)
+                    .is_some_and(removed);
+                if ti + 1 < line.tokens.len() && !next_removed {
+                    self.out.push(' ');
+                }
+                continue;
+            }
+            skip_space = false;
+            self.out.push_str(text.get(tok.span.clone()).unwrap_or(""));
+        }
+        if !inserted {
+            self.out.push_str(first_text);
+        }
+        while self.out.len() > line_start && self.out.ends_with([' ', '\t']) {
+            self.out.pop();
+        }
+        self.write_more_segments(line, words, segs, is_stop);
+    }
+
+    /// Segments after the first, each on its own line; the last keeps the line's terminator
+    /// and gets the program stops.
+    fn write_more_segments(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        segs: &Segments,
+        is_stop: impl Fn(&W) -> bool,
+    ) {
+        let text = self.text;
+        let term = super::line_terminator(text, line);
+        let term_last = line.terminator(text);
+        let nseg = segs.spans.len();
+        let eob = self.eob();
+        for (k, span) in segs.spans.iter().enumerate() {
+            if k > 0 {
+                self.out.push_str(term);
+                self.out.push_str(&segs.text[span.clone()]);
+                if k + 1 == nseg {
+                    for w in words.iter().filter(|w| is_stop(w)) {
+                        self.out.push(' ');
+                        self.out.push_str(self.wtext(w));
+                    }
+                }
+                self.out.push_str(eob);
+            }
+        }
+        self.out.push_str(term_last);
+    }
+}
+
+/// A coordinate rounded to `d` decimals: its units of the last decimal when exact in an f64,
+/// and the value the controller reads.
+fn rounded(v: f64, d: usize) -> (Option<i64>, f64) {
+    match decimal_units(v, d) {
+        Some(u) => (Some(u), u as f64 / 10f64.powi(d as i32)),
+        None => {
+            let r = format_decimals_slow(v, d).parse().unwrap_or(v);
+            (None, r)
+        }
+    }
+}
+
+/// Append the text of a rounded coordinate.
+fn push_rounded(buf: &mut String, r: (Option<i64>, f64), d: usize) {
+    match r.0 {
+        Some(u) => push_units(buf, u, d),
+        None => buf.push_str(&format_decimals_slow(r.1, d)),
+    }
+}
