@@ -380,10 +380,16 @@ impl JobFile {
                 "write a glob such as \"probes/*.csv\"",
             )
         })?;
-        let mut files: Vec<PathBuf> = paths
-            .filter_map(|p| p.ok())
-            .filter(|p| p.is_file())
-            .collect();
+        // Folders that match are skipped; a match that cannot be read (a broken link, no
+        // permission) stays, so that its part fails naming it instead of vanishing from the run.
+        let mut files = Vec::new();
+        for entry in paths {
+            let path =
+                entry.map_err(|e| Error::read(e.path().to_path_buf(), std::io::Error::from(e)))?;
+            if !path.is_dir() {
+                files.push(path);
+            }
+        }
         files.sort();
         if files.is_empty() {
             return Err(Error::input(
