@@ -212,6 +212,15 @@ fn iterations() -> u64 {
         .unwrap_or(2_000)
 }
 
+/// Optional wall-clock budget of a long run (`ERRMAP_FUZZ_SECONDS`): the run stops there and
+/// reports the executions it made.
+fn time_budget() -> Option<Duration> {
+    std::env::var("ERRMAP_FUZZ_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map(Duration::from_secs_f64)
+}
+
 fn base_seed() -> u64 {
     std::env::var("ERRMAP_FUZZ_SEED")
         .ok()
@@ -253,12 +262,24 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
         .num_threads(1)
         .build()
         .unwrap();
-    let iters = iterations();
+    let (iters, budget) = (iterations(), time_budget());
     let started = Instant::now();
-    let (slowest, findings) = pool.install(|| {
+    let (done, slowest, findings) = pool.install(|| {
         let mut rng = ChaCha8Rng::seed_from_u64(base_seed() ^ salt);
         let (mut slowest, mut findings) = (Duration::ZERO, Vec::new());
+        let mut done = 0;
         for n in 0..iters {
+            // Long runs say how far they are, so that a run cut short still has its figures.
+            if n > 0 && n % 1_000_000 == 0 {
+                println!(
+                    "fuzz {target}: {n} execs in {:.1?}, slowest {slowest:.1?}, {} findings so far",
+                    started.elapsed(),
+                    findings.len()
+                );
+                if budget.is_some_and(|b| started.elapsed() > b) {
+                    break;
+                }
+            }
             // The seeds themselves first, then mutants; the seed name picks the reader.
             let k = (n as usize) % bytes.len();
             let data = if (n as usize) < bytes.len() {
@@ -289,11 +310,12 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
                 std::fs::write(&file, &data).unwrap();
                 findings.push(format!("{}: {problem}", file.display()));
             }
+            done = n + 1;
         }
-        (slowest, findings)
+        (done, slowest, findings)
     });
     println!(
-        "fuzz {target}: {iters} execs in {:.1?}, slowest {slowest:.1?}, {} findings, seed {}",
+        "fuzz {target}: {done} execs in {:.1?}, slowest {slowest:.1?}, {} findings, seed {}",
         started.elapsed(),
         findings.len(),
         base_seed()
