@@ -276,9 +276,9 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
                     started.elapsed(),
                     findings.len()
                 );
-                if budget.is_some_and(|b| started.elapsed() > b) {
-                    break;
-                }
+            }
+            if n % 1_000 == 0 && budget.is_some_and(|b| started.elapsed() > b) {
+                break;
             }
             // The seeds themselves first, then mutants; the seed name picks the reader.
             let k = (n as usize) % bytes.len();
