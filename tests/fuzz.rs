@@ -475,9 +475,17 @@ fn toolpath_cases(
     ]
 }
 
+/// Compensated programs stop at 8 MB (`--max-output-mb 8`; inputs are at most 64 KB), so that a
+/// fuzzed program of many long arcs is refused at the line where it outgrows that, as a user's
+/// would be at the default 1000 MB. (No other target writes output.)
+fn limit_toolpath_output() {
+    errmap::io::safety::set_max_output_mb(8);
+}
+
 /// G-code of one dialect: the lexer, then compensation both ways of [`toolpath_cases`].
 fn fuzz_gcode(target: &str, corpus_name: &str, salt: u64, dialect: errmap::toolpath::Dialect) {
     let cases = toolpath_cases(Some(dialect));
+    limit_toolpath_output();
     fuzz(target, corpus_name, salt, |data, _| {
         let program = text(data);
         let _ = errmap::toolpath::lexer::lex(&program);
@@ -531,6 +539,7 @@ fn gcode_heidenhain() {
 #[test]
 fn toolpath_csv() {
     let cases = toolpath_cases(None);
+    limit_toolpath_output();
     fuzz("toolpath_csv", "toolpath-csv", 10, |data, _| {
         let path = text(data);
         for (field, settings) in &cases {

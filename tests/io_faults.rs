@@ -279,3 +279,57 @@ fn a_probe_file_the_glob_matches_but_cannot_read_is_named_not_dropped() {
     );
     assert!(!run.stderr.contains("old.csv"), "{}", run.report());
 }
+
+#[test]
+fn a_toolpath_that_outgrows_the_output_limit_is_refused_at_its_line_while_it_grows() {
+    // Found by `gcode_fanuc`: an arc of 2000 turns is 200 000 chords; a program of many such
+    // lines was built whole in memory before `--max-output-mb` was looked at, on writing.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("p.csv"), probe_text()).unwrap();
+    ok(
+        d,
+        &[
+            "-q",
+            "map",
+            "p.csv",
+            "--out",
+            "m",
+            "--epochs",
+            "2",
+            "--backend",
+            "cpu",
+            "--nominal-plane",
+            "5",
+        ],
+    );
+    // Full circles of radius 10 mm about (50, 30), inside the probed area: 200 turns are about
+    // 20 000 chords at the 0.005 mm chord tolerance, some 0.8 MB per line.
+    let mut program = String::from("G21 G90 G17\nG0 X60. Y30. Z5.\n");
+    for _ in 0..30 {
+        program.push_str("G3 X60. Y30. I-10. J0. P200 F100\n");
+    }
+    program.push_str("M2\n");
+    std::fs::write(d.join("arcs.ngc"), program).unwrap();
+    let compensate = [
+        "compensate",
+        "--model",
+        "m/model.json",
+        "arcs.ngc",
+        "-o",
+        "out.ngc",
+        "--zone",
+        "all",
+    ];
+    let run = errmap(d, &[&["--max-output-mb", "1"][..], &compensate].concat());
+    run.expect_code(2);
+    assert!(
+        run.stderr.contains("arcs.ngc:4") && run.stderr.contains("--max-output-mb"),
+        "{}",
+        run.report()
+    );
+    assert!(!d.join("out.ngc").exists(), "{}", run.report());
+    // Under the default limit the same program is written.
+    ok(d, &compensate);
+    assert!(std::fs::metadata(d.join("out.ngc")).unwrap().len() > 10_000_000);
+}

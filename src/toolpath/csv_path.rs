@@ -79,6 +79,7 @@ pub fn compensate(
     let mut prev: Option<[f64; 3]> = None;
     // Last point written (compensated or not), to drop repeated boundary points.
     let mut prev_out: Option<[f64; 3]> = None;
+    let mut grown_bytes = 0usize;
     for row in &table.rows {
         let p = [
             table.f64(row, cols[0])?,
@@ -162,6 +163,8 @@ pub fn compensate(
         if n > 1 {
             report.moves_split += 1;
         }
+        grown_bytes += new_text.len();
+        super::check_output_size(source, row.line, text.len() + grown_bytes)?;
         if let Some(slot) = replaced.get_mut(li) {
             *slot = Some(new_text);
         }

@@ -171,6 +171,7 @@ pub fn compensate(
     rw.report.lines_in = lines.len() as u64;
     for line in &lines {
         rw.line(line)?;
+        super::check_output_size(source, line.number, rw.out.len())?;
     }
     if let (Some(l), true) = (rw.m99, rw.report.moves_changed > 0) {
         return Err(Error::input(
