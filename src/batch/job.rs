@@ -381,11 +381,13 @@ impl JobFile {
             )
         })?;
         // Folders that match are skipped; a match that cannot be read (a broken link, no
-        // permission) stays, so that its part fails naming it instead of vanishing from the run.
+        // permission) stays, so that the run stops naming it instead of leaving its part out.
         let mut files = Vec::new();
         for entry in paths {
-            let path =
-                entry.map_err(|e| Error::read(e.path().to_path_buf(), std::io::Error::from(e)))?;
+            let path = entry.map_err(|e| {
+                let path = e.path().to_path_buf();
+                Error::read(path, std::io::Error::from(e))
+            })?;
             if !path.is_dir() {
                 files.push(path);
             }
