@@ -322,16 +322,20 @@ impl CsvTable {
 
 fn csv_error(path: &Path, e: csv::Error) -> Error {
     let line = e.position().map(|p| p.line());
-    let location = Location {
-        file: path.to_path_buf(),
-        line,
-        column: None,
-    };
-    Error::input(
-        location,
-        format!("unreadable CSV: {e}"),
-        "save the file as plain comma-separated UTF-8 text",
-    )
+    let message = format!("unreadable CSV: {e}");
+    match e.into_kind() {
+        // The file itself could not be read (a folder, a device error): an io error, not content.
+        csv::ErrorKind::Io(source) => Error::read(path, source),
+        _ => Error::input(
+            Location {
+                file: path.to_path_buf(),
+                line,
+                column: None,
+            },
+            message,
+            "save the file as plain comma-separated UTF-8 text",
+        ),
+    }
 }
 
 #[cfg(test)]

@@ -1,15 +1,19 @@
-//! Seeded mutation fuzzing of every input format under `cargo test`: probe CSV, linear run CSV, temperature log and sensor table, G-code, job TOML and controller tables. No input may panic or take more than a second.
+//! Seeded mutation fuzzing of every input format under `cargo test`: probe CSV, linear run CSV, temperature log and sensor table, G-code in each dialect, CSV toolpaths, job TOML and controller tables. No input may panic or take more than a second.
 //!
-//! Each target starts from its seed corpus in `tests/fuzz-corpus/<target>/` and applies a
+//! Each target starts from its seed corpus in `tests/fuzz-corpus/<corpus>/` and applies a
 //! seeded series of byte mutations (bit flips, inserts, deletes, duplicated ranges, spliced
 //! seeds, tokens the formats care about: separators, NaN, 1e308, G-code words …). A normal
 //! `cargo test` runs 2,000 cases per target; a long run sets the count and the seed:
 //!
 //! ```text
-//! ERRMAP_FUZZ_ITERS=1000000 ERRMAP_FUZZ_SEED=7 cargo test --release --test fuzz -- --nocapture
+//! ERRMAP_FUZZ_ITERS=10000000 ERRMAP_FUZZ_SEED=7 cargo test --release --test fuzz -- --exact job_toml --nocapture
 //! ```
 //!
-//! A panicking input is written to `target/fuzz-findings/<target>-<n>.bin` and fails the test.
+//! Each case costs what its input exercises: fixtures (fields, settings, the fixed half of a
+//! two-file format) are built once outside the loop, inputs are parsed from memory, and the
+//! loop runs on a one-thread rayon pool so the library's parallel loops run inline rather than
+//! handing every case to other threads. A panicking or slow input is written to
+//! `target/tmp/fuzz-findings/<target>-<n>.bin` and fails the test.
 
 use errmap::geom::{Axis, ErrorField};
 use errmap::interp::{resample, Grid, Method, Surface};
@@ -22,6 +26,30 @@ use std::time::{Duration, Instant};
 
 /// Tokens the formats give meaning to; inserting them reaches deeper than random bytes.
 const TOKENS: &[&[u8]] = &[
+    b"X=AC(",
+    b"X=IC(",
+    b"CR=",
+    b"TRANS",
+    b"ATRANS",
+    b"ROT",
+    b"G70",
+    b"G71",
+    b"G52",
+    b"G68",
+    b"G51",
+    b"M98",
+    b"M99",
+    b"#100=",
+    b"O1000",
+    b"WHILE[",
+    b"GOTO",
+    b"N10",
+    b" *",
+    b"%P1 G71 *",
+    b"X+",
+    b"L X+",
+    b"CC",
+    b"BEGIN PGM",
     b",",
     b"\n",
     b"\r\n",
@@ -184,6 +212,15 @@ fn iterations() -> u64 {
         .unwrap_or(2_000)
 }
 
+/// Optional wall-clock budget of a long run (`ERRMAP_FUZZ_SECONDS`): the run stops there and
+/// reports the executions it made.
+fn time_budget() -> Option<Duration> {
+    std::env::var("ERRMAP_FUZZ_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map(Duration::from_secs_f64)
+}
+
 fn base_seed() -> u64 {
     std::env::var("ERRMAP_FUZZ_SEED")
         .ok()
@@ -193,73 +230,110 @@ fn base_seed() -> u64 {
 
 thread_local! {
     static PANIC_MESSAGE: RefCell<Option<String>> = const { RefCell::new(None) };
+    static IN_CASE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Keep panics of fuzzed inputs quiet (their message is reported with the input) but still
-/// print any other panic.
+/// Keep panics of fuzzed inputs quiet (their message is reported with the input) but print
+/// every other panic, the test's own verdict included, as usual.
 fn quiet_panics() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
-        std::panic::set_hook(Box::new(|info| {
-            let message = format!("{info}");
-            PANIC_MESSAGE.with(|m| *m.borrow_mut() = Some(message));
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if IN_CASE.with(|c| c.get()) {
+                let message = format!("{info}");
+                PANIC_MESSAGE.with(|m| *m.borrow_mut() = Some(message));
+            } else {
+                default(info);
+            }
         }));
     });
 }
 
-/// Run `run` on `iterations()` mutated inputs of the target's corpus. `run` gets the input,
-/// the name of the seed it came from and a scratch folder.
-fn fuzz(target: &str, salt: u64, run: impl Fn(&[u8], &str, &Path)) {
+/// Run `run` on `iterations()` mutated inputs of the corpus `corpus`; `run` gets the input
+/// and the name of the seed it came from (which picks the reader where a format has several).
+fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + Sync) {
     quiet_panics();
-    let seeds = corpus(target);
+    let seeds = corpus(corpus_name);
     let names: Vec<String> = seeds.iter().map(|(n, _)| n.clone()).collect();
     let bytes: Vec<Vec<u8>> = seeds.into_iter().map(|(_, b)| b).collect();
-    let scratch = tempfile::tempdir().unwrap();
-    let mut rng = ChaCha8Rng::seed_from_u64(base_seed() ^ salt);
-    let iters = iterations();
-    let (mut slowest, mut findings) = (Duration::ZERO, Vec::new());
+    // One worker, and the loop on it: rayon's parallel loops inside the library then run inline.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let (iters, budget) = (iterations(), time_budget());
     let started = Instant::now();
-    for n in 0..iters {
-        // The seeds themselves first, then mutants; the seed name picks the reader.
-        let k = (n as usize) % bytes.len();
-        let data = if (n as usize) < bytes.len() {
-            bytes[k].clone()
-        } else {
-            mutate(&mut rng, &bytes)
-        };
-        let t0 = Instant::now();
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            run(&data, &names[k], scratch.path())
-        }));
-        let took = t0.elapsed();
-        slowest = slowest.max(took);
-        let problem = match result {
-            Err(_) => Some(
-                PANIC_MESSAGE
-                    .with(|m| m.borrow_mut().take())
-                    .unwrap_or_else(|| "panic".into()),
-            ),
-            Ok(()) if took > Duration::from_secs(1) => Some(format!("took {took:?}")),
-            Ok(()) => None,
-        };
-        if let Some(problem) = problem {
-            let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fuzz-findings");
-            std::fs::create_dir_all(&dir).unwrap();
-            let file = dir.join(format!("{target}-{n}.bin"));
-            std::fs::write(&file, &data).unwrap();
-            findings.push(format!("{}: {problem}", file.display()));
+    let (done, slowest, findings) = pool.install(|| {
+        let mut rng = ChaCha8Rng::seed_from_u64(base_seed() ^ salt);
+        let (mut slowest, mut findings) = (Duration::ZERO, Vec::new());
+        let mut done = 0;
+        for n in 0..iters {
+            // Long runs say how far they are, so that a run cut short still has its figures.
+            if n > 0 && n % 1_000_000 == 0 {
+                println!(
+                    "fuzz {target}: {n} execs in {:.1?}, slowest {slowest:.1?}, {} findings so far",
+                    started.elapsed(),
+                    findings.len()
+                );
+            }
+            if n % 1_000 == 0 && budget.is_some_and(|b| started.elapsed() > b) {
+                break;
+            }
+            // The seeds themselves first, then mutants; the seed name picks the reader.
+            let k = (n as usize) % bytes.len();
+            let data = if (n as usize) < bytes.len() {
+                bytes[k].clone()
+            } else {
+                mutate(&mut rng, &bytes)
+            };
+            let t0 = Instant::now();
+            IN_CASE.with(|c| c.set(true));
+            let result =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data, &names[k])));
+            IN_CASE.with(|c| c.set(false));
+            let took = t0.elapsed();
+            slowest = slowest.max(took);
+            let problem = match result {
+                Err(_) => Some(
+                    PANIC_MESSAGE
+                        .with(|m| m.borrow_mut().take())
+                        .unwrap_or_else(|| "panic".into()),
+                ),
+                Ok(()) if took > Duration::from_secs(1) => Some(format!("took {took:?}")),
+                Ok(()) => None,
+            };
+            if let Some(problem) = problem {
+                let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fuzz-findings");
+                std::fs::create_dir_all(&dir).unwrap();
+                let file = dir.join(format!("{target}-{n}.bin"));
+                std::fs::write(&file, &data).unwrap();
+                findings.push(format!("{}: {problem}", file.display()));
+            }
+            done = n + 1;
         }
-    }
+        (done, slowest, findings)
+    });
     println!(
-        "fuzz {target}: {iters} execs in {:.1?}, slowest {slowest:.1?}, {} findings",
+        "fuzz {target}: {done} execs in {:.1?}, slowest {slowest:.1?}, {} findings, seed {}",
         started.elapsed(),
-        findings.len()
+        findings.len(),
+        base_seed()
     );
     assert!(findings.is_empty(), "{}", findings.join("\n"));
 }
 
 fn text(data: &[u8]) -> String {
     String::from_utf8_lossy(data).into_owned()
+}
+
+/// The bytes of one seed of a corpus.
+fn seed_bytes(corpus_name: &str, name: &str) -> Vec<u8> {
+    corpus(corpus_name)
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .unwrap_or_else(|| panic!("no seed {name} in {corpus_name}"))
+        .1
 }
 
 #[test]
@@ -276,7 +350,7 @@ fn probe_csv() {
             ..Default::default()
         },
     ];
-    fuzz("probe", 1, |data, _, _| {
+    fuzz("probe_csv", "probe", 1, |data, _| {
         let Ok(table) = CsvTable::from_reader(Path::new("p.csv"), data) else {
             return;
         };
@@ -304,12 +378,13 @@ fn probe_csv() {
 #[test]
 fn linear_run_csv() {
     use clap::ValueEnum;
-    fuzz("runs", 2, |data, _, _| {
+    let standards = errmap::linear::Standard::value_variants();
+    fuzz("linear_run_csv", "runs", 2, |data, _| {
         let Ok(file) = errmap::linear::parse_runs(Path::new("runs.csv"), &text(data)) else {
             return;
         };
         let samples = file.samples();
-        for standard in errmap::linear::Standard::value_variants() {
+        for standard in standards {
             let _ = errmap::linear::evaluate(&samples, *standard);
         }
     });
@@ -317,29 +392,46 @@ fn linear_run_csv() {
 
 #[test]
 fn temperature_log_and_sensor_table() {
-    let seeds = corpus("templog");
-    let sensors_seed = &seeds.iter().find(|(n, _)| n == "sensors.csv").unwrap().1;
-    fuzz("templog", 3, |data, seed, dir| {
-        let (sensors, log) = (dir.join("sensors.csv"), dir.join("log.csv"));
-        let log_seed = &seeds.iter().find(|(n, _)| n == "log.csv").unwrap().1;
-        if seed == "sensors.csv" {
-            std::fs::write(&sensors, data).unwrap();
-            std::fs::write(&log, log_seed).unwrap();
-        } else {
-            std::fs::write(&sensors, sensors_seed).unwrap();
-            std::fs::write(&log, data).unwrap();
-        }
-        let Ok(table) = errmap::thermal::sensors::SensorTable::read(&sensors) else {
-            return;
-        };
-        if let Ok(log) = errmap::thermal::sensors::TemperatureLog::read(&log, &table) {
-            let _ = log.process(&table);
-        }
-    });
+    use errmap::thermal::sensors::{SensorTable, TemperatureLog};
+    // The fixed half of each pair, read once: a fuzzed sensor table reads the seed log, a
+    // fuzzed log is read with the seed sensor table.
+    let (sensors_path, log_path) = (Path::new("sensors.csv"), Path::new("log.csv"));
+    let seed_table =
+        CsvTable::from_reader(sensors_path, &seed_bytes("templog", "sensors.csv")[..]).unwrap();
+    let seed_sensors = SensorTable::from_csv(&seed_table).unwrap();
+    let seed_log = CsvTable::from_reader(log_path, &seed_bytes("templog", "log.csv")[..]).unwrap();
+    fuzz(
+        "temperature_log_and_sensor_table",
+        "templog",
+        3,
+        |data, seed| {
+            if seed == "sensors.csv" {
+                let Ok(table) = CsvTable::from_reader(sensors_path, data) else {
+                    return;
+                };
+                let Ok(sensors) = SensorTable::from_csv(&table) else {
+                    return;
+                };
+                if let Ok(log) = TemperatureLog::from_csv(&seed_log, &sensors) {
+                    let _ = log.process(&sensors);
+                }
+            } else {
+                let Ok(table) = CsvTable::from_reader(log_path, data) else {
+                    return;
+                };
+                if let Ok(log) = TemperatureLog::from_csv(&table, &seed_sensors) {
+                    let _ = log.process(&seed_sensors);
+                }
+            }
+        },
+    );
 }
 
-/// A small smooth map over ±1000 mm for compensating fuzzed programs.
-struct Tilt;
+/// A small smooth map over ±1000 mm for compensating fuzzed programs: measured within ±500 mm
+/// (so the domain edge splits moves), with its probed surface at z 0 … 5 mm when `surface`.
+struct Tilt {
+    surface: bool,
+}
 
 impl ErrorField for Tilt {
     fn normal(&self) -> Axis {
@@ -348,42 +440,178 @@ impl ErrorField for Tilt {
     fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
         (u_mm.abs() <= 1000.0 && v_mm.abs() <= 1000.0).then_some(0.01 + 1e-5 * u_mm - 2e-5 * v_mm)
     }
+    fn measured(&self, u_mm: f64, v_mm: f64, margin_mm: f64) -> Option<bool> {
+        Some(u_mm.abs() <= 500.0 + margin_mm && v_mm.abs() <= 500.0 + margin_mm)
+    }
+    fn surface_mm(&self) -> Option<(f64, f64)> {
+        self.surface.then_some((0.0, 5.0))
+    }
+}
+
+/// Two ways to compensate each program: (1) the dialect given, mm, everywhere, Fanuc
+/// decimal-less numbers as IS-B increments; (2) the dialect detected, units and Fanuc numbers
+/// unknown (refused where they matter), the zone around the map's probed surface. Segments up
+/// to 25 mm keep the output short; arcs still split at the chord tolerance.
+fn toolpath_cases(
+    dialect: Option<errmap::toolpath::Dialect>,
+) -> [(Tilt, errmap::toolpath::CompensationSettings); 2] {
+    use errmap::toolpath::{CompensationSettings, FanucNumbers, Units};
+    let base = CompensationSettings {
+        max_segment: 25.0,
+        ..CompensationSettings::default()
+    };
+    [
+        (
+            Tilt { surface: false },
+            CompensationSettings {
+                everywhere: true,
+                dialect,
+                units: Some(Units::Mm),
+                fanuc_numbers: Some(FanucNumbers::IsB),
+                ..base
+            },
+        ),
+        (Tilt { surface: true }, base),
+    ]
+}
+
+/// Compensated programs stop at 8 MB (`--max-output-mb 8`; inputs are at most 64 KB), so that a
+/// fuzzed program of many long arcs is refused at the line where it outgrows that, as a user's
+/// would be at the default 1000 MB. (No other target writes output.)
+fn limit_toolpath_output() {
+    errmap::io::safety::set_max_output_mb(8);
+}
+
+/// G-code of one dialect: the lexer, then compensation both ways of [`toolpath_cases`].
+fn fuzz_gcode(target: &str, corpus_name: &str, salt: u64, dialect: errmap::toolpath::Dialect) {
+    let cases = toolpath_cases(Some(dialect));
+    limit_toolpath_output();
+    fuzz(target, corpus_name, salt, |data, _| {
+        let program = text(data);
+        let _ = errmap::toolpath::lexer::lex(&program);
+        for (field, settings) in &cases {
+            let _ =
+                errmap::toolpath::compensate_gcode(&program, Path::new("p.nc"), field, settings);
+        }
+    });
 }
 
 #[test]
-fn gcode() {
-    let settings = errmap::toolpath::CompensationSettings::default();
-    fuzz("gcode", 4, |data, _, _| {
-        let program = text(data);
-        let _ = errmap::toolpath::lexer::lex(&program);
-        let _ = errmap::toolpath::compensate_gcode(&program, Path::new("p.ngc"), &Tilt, &settings);
-        let _ = errmap::toolpath::compensate_csv(&program, Path::new("p.csv"), &Tilt, &settings);
+fn gcode_linuxcnc() {
+    fuzz_gcode(
+        "gcode_linuxcnc",
+        "gcode-linuxcnc",
+        4,
+        errmap::toolpath::Dialect::Linuxcnc,
+    );
+}
+
+#[test]
+fn gcode_fanuc() {
+    fuzz_gcode(
+        "gcode_fanuc",
+        "gcode-fanuc",
+        7,
+        errmap::toolpath::Dialect::Fanuc,
+    );
+}
+
+#[test]
+fn gcode_sinumerik() {
+    fuzz_gcode(
+        "gcode_sinumerik",
+        "gcode-sinumerik",
+        8,
+        errmap::toolpath::Dialect::Sinumerik,
+    );
+}
+
+#[test]
+fn gcode_heidenhain() {
+    fuzz_gcode(
+        "gcode_heidenhain",
+        "gcode-heidenhain",
+        9,
+        errmap::toolpath::Dialect::Heidenhain,
+    );
+}
+
+#[test]
+fn toolpath_csv() {
+    let cases = toolpath_cases(None);
+    limit_toolpath_output();
+    fuzz("toolpath_csv", "toolpath-csv", 10, |data, _| {
+        let path = text(data);
+        for (field, settings) in &cases {
+            let _ = errmap::toolpath::compensate_csv(&path, Path::new("p.csv"), field, settings);
+        }
     });
 }
 
 #[test]
 fn job_toml() {
-    fuzz("job", 5, |data, _, _| {
+    fuzz("job_toml", "job", 5, |data, _| {
         let _ = errmap::batch::Job::parse(Path::new("job.toml"), &text(data));
     });
 }
 
 #[test]
 fn controller_tables() {
-    let seeds = corpus("tables");
-    let cec = seeds
-        .iter()
-        .find(|(n, _)| n == "x_lec_cec.ini")
-        .unwrap()
-        .1
-        .clone();
-    fuzz("tables", 6, |data, seed, dir| {
-        let path = dir.join(seed);
-        std::fs::write(&path, data).unwrap();
-        if seed == "x_lec.ini" {
-            std::fs::write(dir.join("x_lec_cec.ini"), &cec).unwrap();
-        }
-        let opts = errmap::linear::TableOptions::default();
-        let _ = errmap::linear::read_table(&path, None, &opts);
+    // The tables are read from files (a Sinumerik table is two), so each case writes one small
+    // file, in memory where the system has /dev/shm. Two folders hold the fixed Sinumerik
+    // half: a fuzzed LEC file reads the seed CEC file beside it, and a fuzzed CEC file is read
+    // through the seed LEC file.
+    let scratch = match tempfile::tempdir_in("/dev/shm") {
+        Ok(dir) => dir,
+        Err(_) => tempfile::tempdir().unwrap(),
+    };
+    let (main_dir, cec_dir) = (scratch.path().join("main"), scratch.path().join("cec"));
+    for dir in [&main_dir, &cec_dir] {
+        std::fs::create_dir(dir).unwrap();
+    }
+    std::fs::write(
+        main_dir.join("x_lec_cec.ini"),
+        seed_bytes("tables", "x_lec_cec.ini"),
+    )
+    .unwrap();
+    std::fs::write(cec_dir.join("x_lec.ini"), seed_bytes("tables", "x_lec.ini")).unwrap();
+    let names: Vec<String> = corpus("tables").into_iter().map(|(n, _)| n).collect();
+    let paths: std::collections::HashMap<String, (PathBuf, PathBuf)> = names
+        .into_iter()
+        .map(|name| {
+            let paths = if name == "x_lec_cec.ini" {
+                (cec_dir.join(&name), cec_dir.join("x_lec.ini"))
+            } else {
+                (main_dir.join(&name), main_dir.join(&name))
+            };
+            (name, paths)
+        })
+        .collect();
+    let opts = errmap::linear::TableOptions::default();
+    fuzz("controller_tables", "tables", 6, |data, seed| {
+        let (write_to, read_from) = &paths[seed];
+        std::fs::write(write_to, data).unwrap();
+        let _ = errmap::linear::read_table(read_from, None, &opts);
     });
+}
+
+// ---- Findings, kept as regressions (their inputs are in the seed corpus too) ----------------
+
+#[test]
+fn sinumerik_frame_word_starting_with_a_non_ascii_letter_is_refused_not_a_panic() {
+    // Found by `gcode_sinumerik`: `TRANS éX10` split the word inside its first character.
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fuzz-corpus/gcode-sinumerik/trans-non-ascii.mpf"),
+    )
+    .unwrap();
+    for (field, settings) in &toolpath_cases(Some(errmap::toolpath::Dialect::Sinumerik)) {
+        let err = errmap::toolpath::compensate_gcode(&text, Path::new("t.mpf"), field, settings)
+            .expect_err("a frame with a non-axis word must be refused");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("t.mpf:3") && msg.contains("X, Y and Z"),
+            "{msg}"
+        );
+    }
 }

@@ -30,12 +30,12 @@ impl Staging {
     pub fn begin_owned(target: &Path) -> Result<Staging> {
         remove_stale(target)?;
         let parent = parent_of(target);
-        std::fs::create_dir_all(&parent).map_err(|e| Error::write(&parent, e))?;
+        std::fs::create_dir_all(&parent).map_err(|e| Error::io("create folder", &parent, e))?;
         let dir = tempfile::Builder::new()
             .prefix(&staging_prefix(target))
             .suffix(".tmp")
             .tempdir_in(&parent)
-            .map_err(|e| Error::write(&parent, e))?;
+            .map_err(|e| Error::io("create a staging folder in", &parent, e))?;
         Ok(Staging {
             target: target.to_path_buf(),
             dir: Some(dir),
@@ -56,7 +56,7 @@ impl Staging {
         let staged = dir.keep();
         if !self.target.exists() {
             return std::fs::rename(&staged, &self.target)
-                .map_err(|e| Error::write(&self.target, e));
+                .map_err(|e| Error::io("rename the finished run to", &self.target, e));
         }
         if !exchange(&staged, &self.target)? {
             // No atomic exchange here: move the old run aside, then the new one in.
@@ -64,15 +64,19 @@ impl Staging {
                 .prefix(&staging_prefix(&self.target))
                 .suffix(".tmp")
                 .tempdir_in(parent_of(&self.target))
-                .map_err(|e| Error::write(&self.target, e))?
+                .map_err(|e| Error::io("create a folder beside", &self.target, e))?
                 .keep();
-            std::fs::rename(&self.target, &aside).map_err(|e| Error::write(&self.target, e))?;
-            std::fs::rename(&staged, &self.target).map_err(|e| Error::write(&self.target, e))?;
-            std::fs::remove_dir_all(&aside).map_err(|e| Error::write(&aside, e))?;
+            std::fs::rename(&self.target, &aside)
+                .map_err(|e| Error::io("move aside", &self.target, e))?;
+            std::fs::rename(&staged, &self.target)
+                .map_err(|e| Error::io("rename the finished run to", &self.target, e))?;
+            std::fs::remove_dir_all(&aside)
+                .map_err(|e| Error::io("remove the earlier run", &aside, e))?;
             return Ok(());
         }
         // `staged` now holds the old run.
-        std::fs::remove_dir_all(&staged).map_err(|e| Error::write(&staged, e))
+        std::fs::remove_dir_all(&staged)
+            .map_err(|e| Error::io("remove the earlier run", &staged, e))
     }
 }
 
@@ -82,7 +86,7 @@ fn exchange(a: &Path, b: &Path) -> Result<bool> {
     match renameat_with(CWD, a, CWD, b, RenameFlags::EXCHANGE) {
         Ok(()) => Ok(true),
         Err(e) if e == rustix::io::Errno::INVAL || e == rustix::io::Errno::NOSYS => Ok(false),
-        Err(e) => Err(Error::write(b, e.into())),
+        Err(e) => Err(Error::io("exchange the finished run with", b, e.into())),
     }
 }
 
@@ -154,7 +158,7 @@ fn remove_path(path: &Path) -> Result<()> {
     match r {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(Error::write(path, e)),
+        Err(e) => Err(Error::io("remove the stale temporary", path, e)),
     }
 }
 

@@ -213,10 +213,12 @@ fn reuse_parts(
             for rel in rec.outputs.keys() {
                 let (from, to) = (target.join(rel), staging.join(rel));
                 if let Some(parent) = to.parent() {
-                    std::fs::create_dir_all(parent).map_err(|e| Error::write(parent, e))?;
+                    std::fs::create_dir_all(parent)
+                        .map_err(|e| Error::io("create folder", parent, e))?;
                 }
                 if std::fs::hard_link(&from, &to).is_err() {
-                    std::fs::copy(&from, &to).map_err(|e| Error::write(&to, e))?;
+                    std::fs::copy(&from, &to)
+                        .map_err(|e| Error::io("copy the earlier output to", &to, e))?;
                 }
             }
             reused.push(part.name.clone());
@@ -531,7 +533,8 @@ fn reduce_into(
         }
     }
     if manifest_path.exists() {
-        std::fs::remove_file(&manifest_path).map_err(|e| Error::write(&manifest_path, e))?;
+        std::fs::remove_file(&manifest_path)
+            .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
     }
     let staging = Staging::begin_owned(&family_dir)?;
     let outcome = reduce::reduce_family(
@@ -568,7 +571,7 @@ fn remove_part_outputs(batch_dir: &Path, old: &RunManifest) -> Result<()> {
             let path = batch_dir.join(rel);
             match std::fs::remove_file(&path) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(Error::write(&path, e))
+                    return Err(Error::io("remove the earlier output", &path, e))
                 }
                 _ => {}
             }

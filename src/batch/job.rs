@@ -430,10 +430,18 @@ impl JobFile {
                 "write a glob such as \"probes/*.csv\"",
             )
         })?;
-        let mut files: Vec<PathBuf> = paths
-            .filter_map(|p| p.ok())
-            .filter(|p| p.is_file())
-            .collect();
+        // Folders that match are skipped; a match that cannot be read (a broken link, no
+        // permission) stays, so that the run stops naming it instead of leaving its part out.
+        let mut files = Vec::new();
+        for entry in paths {
+            let path = entry.map_err(|e| {
+                let path = e.path().to_path_buf();
+                Error::read(path, std::io::Error::from(e))
+            })?;
+            if !path.is_dir() {
+                files.push(path);
+            }
+        }
         files.sort();
         if files.is_empty() {
             return Err(Error::input(

@@ -119,7 +119,7 @@ fn backend_name(b: Option<Backend>) -> Option<String> {
 }
 
 fn absolute(p: &Path) -> Result<PathBuf> {
-    std::path::absolute(p).map_err(|e| Error::read(p, e))
+    std::path::absolute(p).map_err(|e| Error::io("resolve", p, e))
 }
 
 pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
@@ -147,7 +147,7 @@ pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
     }
     let errmap = match args.errmap {
         Some(p) => p,
-        None => std::env::current_exe().map_err(|e| Error::read("errmap", e))?,
+        None => std::env::current_exe().map_err(|e| Error::io("find the running", "errmap", e))?,
     };
     let plan = SlurmPlan {
         errmap,

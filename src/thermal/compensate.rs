@@ -199,9 +199,7 @@ pub fn compensate_stream<R: Read, W: Write>(
     let mut writer = csv::WriterBuilder::new()
         .buffer_capacity(1 << 16)
         .from_writer(output);
-    writer
-        .write_record(OUTPUT_HEADER)
-        .map_err(|e| Error::Internal(format!("writing the header: {e}")))?;
+    writer.write_record(OUTPUT_HEADER).map_err(write_failed)?;
     let mut record = csv::ByteRecord::new();
     let mut state = ThermalState {
         sensors_c: vec![0.0; cols.sensors.len()],
@@ -306,11 +304,9 @@ pub fn compensate_stream<R: Read, W: Write>(
                 &e_buf[..ne],
                 &c_buf[..nc],
             ])
-            .map_err(|e| Error::Internal(format!("writing row {line}: {e}")))?;
+            .map_err(write_failed)?;
     }
-    writer
-        .flush()
-        .map_err(|e| Error::Internal(format!("flushing the output: {e}")))?;
+    writer.flush().map_err(write_failed)?;
     Ok(summary)
 }
 
@@ -334,6 +330,13 @@ pub fn compensate_file(
                 summary = s;
                 Ok(())
             }
+            // A failed write goes back to `write_atomic`, which names the output (or the size
+            // limit it reached); anything else is the input's fault and keeps its own place.
+            Err(Error::Io {
+                action: "write",
+                source,
+                ..
+            }) => Err(source),
             Err(e) => {
                 failure = Some(e);
                 Err(std::io::Error::other("compensation stopped"))
@@ -347,17 +350,27 @@ pub fn compensate_file(
     Ok(summary)
 }
 
+/// A write to the output stream failed; [`compensate_file`] names the file.
+fn write_failed(e: impl Into<std::io::Error>) -> Error {
+    Error::write("the output", e.into())
+}
+
 fn csv_error(path: &Path, e: csv::Error) -> Error {
     let line = e.position().map(|p| p.line());
-    Error::input(
-        Location {
-            file: path.to_path_buf(),
-            line,
-            column: None,
-        },
-        format!("unreadable CSV: {e}"),
-        "save the log as plain comma-separated UTF-8 text",
-    )
+    let message = format!("unreadable CSV: {e}");
+    match e.into_kind() {
+        // The file itself could not be read (a folder, a device error): an io error, not content.
+        csv::ErrorKind::Io(source) => Error::read(path, source),
+        _ => Error::input(
+            Location {
+                file: path.to_path_buf(),
+                line,
+                column: None,
+            },
+            message,
+            "save the log as plain comma-separated UTF-8 text",
+        ),
+    }
 }
 
 #[cfg(test)]

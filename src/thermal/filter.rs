@@ -64,6 +64,12 @@ impl FilterSpec {
         if self.sg_window > 1001 || self.median_window > 1001 {
             return Err("filter windows above 1001 samples are not supported".into());
         }
+        if self.sg_window > 1 && self.sg_order > MAX_SG_ORDER {
+            return Err(format!(
+                "Savitzky–Golay order {} is above {MAX_SG_ORDER}: its normal equations are too ill-conditioned to mean anything",
+                self.sg_order
+            ));
+        }
         Ok(())
     }
 
@@ -93,30 +99,62 @@ pub fn running_median(samples: &[f64], window: usize) -> Vec<f64> {
     out
 }
 
+/// Highest Savitzky–Golay polynomial order accepted: beyond it the monomial normal equations
+/// lose every digit, and their cost grows with the cube of the order.
+pub const MAX_SG_ORDER: usize = 10;
+
+/// The least-squares projection of a `window`-sample polynomial fit of `order`:
+/// `(JᵀJ)⁻¹Jᵀ` with positions scaled to about [-1, 1] (which keeps the normal equations well
+/// conditioned), and the scaled position of each sample.
+struct SgProjection {
+    p: DMatrix<f64>,
+    centre: f64,
+    scale: f64,
+}
+
+impl SgProjection {
+    fn new(window: usize, order: usize) -> Result<SgProjection> {
+        if window == 0 || order >= window {
+            return Err(Error::usage(
+                format!("no Savitzky–Golay filter of order {order} over {window} samples"),
+                "use an odd window larger than the order",
+            ));
+        }
+        let centre = (window as f64 - 1.0) / 2.0;
+        let scale = centre.max(1.0);
+        let z = |i: usize| (i as f64 - centre) / scale;
+        let j = DMatrix::from_fn(window, order + 1, |r, c| z(r).powi(c as i32));
+        let inv = (j.transpose() * &j).try_inverse().ok_or_else(|| {
+            Error::numeric(
+                "Savitzky–Golay normal equations are singular",
+                "use a smaller order",
+            )
+        })?;
+        Ok(SgProjection {
+            p: inv * j.transpose(),
+            centre,
+            scale,
+        })
+    }
+
+    /// Weights of the fitted polynomial's value at sample `at` of the window.
+    fn weights(&self, at: usize) -> Vec<f64> {
+        let z = (at as f64 - self.centre) / self.scale;
+        let e = DVector::from_fn(self.p.nrows(), |c, _| z.powi(c as i32));
+        (e.transpose() * &self.p).iter().copied().collect()
+    }
+}
+
 /// Savitzky–Golay weights of a `window`-sample least-squares polynomial of `order`, evaluated at
 /// sample `at` (0-based within the window). `weights · samples` is the smoothed value.
 pub fn sg_weights(window: usize, order: usize, at: usize) -> Result<Vec<f64>> {
-    if window == 0 || order >= window || at >= window {
+    if at >= window {
         return Err(Error::usage(
-            format!("no Savitzky–Golay filter of order {order} over {window} samples"),
+            format!("no Savitzky–Golay weights at sample {at} of a {window}-sample window"),
             "use an odd window larger than the order",
         ));
     }
-    let centre = (window as f64 - 1.0) / 2.0;
-    // Positions scaled to about [-1, 1] keep the normal equations well conditioned.
-    let scale = centre.max(1.0);
-    let z = |i: usize| (i as f64 - centre) / scale;
-    let j = DMatrix::from_fn(window, order + 1, |r, c| z(r).powi(c as i32));
-    let jtj = j.transpose() * &j;
-    let inv = jtj.try_inverse().ok_or_else(|| {
-        Error::numeric(
-            "Savitzky–Golay normal equations are singular",
-            "use a smaller order",
-        )
-    })?;
-    let e = DVector::from_fn(order + 1, |c, _| z(at).powi(c as i32));
-    let w = (e.transpose() * inv * j.transpose()).transpose();
-    Ok(w.iter().copied().collect())
+    Ok(SgProjection::new(window, order)?.weights(at))
 }
 
 /// Savitzky–Golay smoothing over `window` samples (odd) with a polynomial of `order`.
@@ -132,17 +170,19 @@ pub fn savitzky_golay(samples: &[f64], window: usize, order: usize) -> Result<Ve
     }
     let order = order.min(w - 1);
     let half = w / 2;
-    let centre = sg_weights(w, order, half)?;
+    // One projection for the window; each edge sample only needs its own row of weights.
+    let projection = SgProjection::new(w, order)?;
+    let centre = projection.weights(half);
     let mut out = vec![0.0; n];
     for (i, slot) in out.iter_mut().enumerate() {
         let (start, weights);
         let edge;
         if i < half {
-            edge = sg_weights(w, order, i)?;
+            edge = projection.weights(i);
             start = 0;
             weights = &edge;
         } else if i + half >= n {
-            edge = sg_weights(w, order, w - (n - i))?;
+            edge = projection.weights(w - (n - i));
             start = n - w;
             weights = &edge;
         } else {
@@ -194,6 +234,28 @@ mod tests {
         for (a, b) in w.iter().zip(expect) {
             assert!((a - b).abs() < 1e-12, "{w:?}");
         }
+    }
+
+    #[test]
+    fn orders_above_the_limit_are_refused_before_any_fit() {
+        // A 1001-sample window of order 1000 once meant 1000 edge fits of a 1001 × 1001 system
+        // per channel: hours for one sensor table row.
+        let spec = FilterSpec {
+            median_window: 1,
+            sg_window: 1001,
+            sg_order: 1000,
+        };
+        let msg = spec.validate().unwrap_err();
+        assert!(
+            msg.contains("order 1000") && msg.contains("above 10"),
+            "{msg}"
+        );
+        let ok = FilterSpec {
+            sg_order: MAX_SG_ORDER,
+            ..spec
+        };
+        assert_eq!(ok.validate(), Ok(()));
+        assert!(ok.apply(&[1.0; 50]).is_ok());
     }
 
     #[test]

@@ -135,7 +135,12 @@ const TABLE_COLUMNS: [&str; 8] = [
 impl SensorTable {
     /// Read and validate a sensor table.
     pub fn read(path: &Path) -> Result<SensorTable> {
-        let t = CsvTable::read(path)?;
+        Self::from_csv(&CsvTable::read(path)?)
+    }
+
+    /// Validate a sensor table already read as CSV (errors name `t.path`).
+    pub fn from_csv(t: &CsvTable) -> Result<SensorTable> {
+        let path = t.path.as_path();
         t.reject_unknown(&TABLE_COLUMNS)?;
         let c_name = t.require("name")?;
         let c_role = t.require("role")?;
@@ -304,7 +309,12 @@ pub struct TemperatureLog {
 impl TemperatureLog {
     /// Read a log whose columns are `time_s` and sensors of `table`; Pt100 columns are converted.
     pub fn read(path: &Path, table: &SensorTable) -> Result<TemperatureLog> {
-        let t = CsvTable::read(path)?;
+        Self::from_csv(&CsvTable::read(path)?, table)
+    }
+
+    /// [`TemperatureLog::read`] for a log already read as CSV (errors name `t.path`).
+    pub fn from_csv(t: &CsvTable, table: &SensorTable) -> Result<TemperatureLog> {
+        let path = t.path.as_path();
         let c_time = t.require("time_s")?;
         let mut columns = Vec::new();
         for (c, h) in t.headers.iter().enumerate() {

@@ -140,7 +140,7 @@ impl Store {
     /// Open (creating if needed) a store, in WAL mode, with the schema in place.
     pub fn open(path: &Path) -> Result<Store> {
         if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
+            std::fs::create_dir_all(dir).map_err(|e| Error::io("create folder", dir, e))?;
         }
         let conn = Connection::open(path).map_err(|e| read_err(path, e))?;
         // The store is an input of the command: no output file may replace it.

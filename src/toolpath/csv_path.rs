@@ -95,6 +95,7 @@ pub fn compensate(
     };
     // Rewritten text per line index (0-based); `None` = copy.
     let mut replaced: Vec<Option<String>> = vec![None; lines.len()];
+    let mut grown_bytes = 0usize;
     for row in &table.rows {
         let p = row_point(&table, row, cols)?;
         let li = (row.line as usize).saturating_sub(1);
@@ -120,8 +121,11 @@ pub fn compensate(
             rows.prev_out = Some(p);
             continue;
         }
+        let new_text = rows.rewrite(&emitted, &p, &fields, term);
+        grown_bytes += new_text.len();
+        super::check_output_size(source, row.line, text.len() + grown_bytes)?;
         if let Some(slot) = replaced.get_mut(li) {
-            *slot = Some(rows.rewrite(&emitted, &p, &fields, term));
+            *slot = Some(new_text);
         }
     }
     let out = assemble(&lines, &replaced, text.len());

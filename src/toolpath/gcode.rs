@@ -258,6 +258,7 @@ impl<'a> Rewriter<'a> {
         self.report.lines_in = lines.len() as u64;
         for line in &lines {
             self.line(line)?;
+            super::check_output_size(self.source, line.number, self.out.len())?;
         }
         Ok(())
     }

@@ -173,6 +173,24 @@ pub(crate) fn default_zone_mm(
     }
 }
 
+/// Refuse a compensated toolpath that outgrows `--max-output-mb` while it is generated (checked
+/// after each line or row), so that memory and time stay bounded by the limit, not by how many
+/// long moves and many-turn arcs the input holds.
+pub(crate) fn check_output_size(source: &Path, line: u64, bytes: usize) -> Result<()> {
+    let limit = crate::io::safety::max_output_bytes();
+    if bytes as u64 > limit {
+        return Err(Error::input(
+            Location::line(source, line),
+            format!(
+                "the compensated toolpath would exceed the output limit of {} MB by this line",
+                limit / 1_000_000
+            ),
+            "check arc turn counts (P) and move lengths, raise --max-segment / --chord-tol, or raise --max-output-mb",
+        ));
+    }
+    Ok(())
+}
+
 /// What a compensation did.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct CompensationReport {

@@ -286,7 +286,9 @@ impl<'a> Rewriter<'a> {
         let args = &body[name.len().min(body.len())..];
         let mut values = [None; 3];
         for w in args.split_whitespace() {
-            let (l, v) = w.split_at(1);
+            // The axis letter may be any character in a mistyped frame: split after it, never
+            // inside it.
+            let (l, v) = w.split_at(w.chars().next().map_or(0, char::len_utf8));
             let i = match l.to_ascii_uppercase().as_str() {
                 "X" => 0,
                 "Y" => 1,
