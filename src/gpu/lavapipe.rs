@@ -30,6 +30,8 @@ use wgpu::util::DeviceExt;
 
 use super::context::GpuContext;
 use super::layout::{pack_samples, Step};
+use super::pipeline_cache::{self, CacheUse};
+use crate::backend::Notes;
 use crate::nn::{
     diverged, layer_spans, Activation, LayerSpan, Mlp, ModelConfig, TrainingSet, ADAM_BETA1,
     ADAM_BETA2, ADAM_EPSILON, ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2,
@@ -428,6 +430,8 @@ pub struct EpochPipeline {
     /// Seconds spent creating the pipeline and running its first (tiny) dispatch, which is
     /// when llvmpipe compiles it.
     pub build_s: f64,
+    /// What the on-disk pipeline cache did for this build.
+    pub cache: CacheUse,
 }
 
 impl EpochPipeline {
@@ -442,6 +446,10 @@ pub struct CpuKernels {
     step_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
     built: Mutex<HashMap<ArchitectureKey, Option<Arc<EpochPipeline>>>>,
+    /// errmap's cache folder, where pipeline caches are kept (`None`: none kept).
+    pub cache_dir: Option<std::path::PathBuf>,
+    /// Where a pipeline cache that could not be used or written is reported.
+    pub notes: Notes,
 }
 
 fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
@@ -458,8 +466,8 @@ fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::Bind
 }
 
 impl CpuKernels {
-    /// The layouts; no shader is compiled here.
-    pub fn new(ctx: &GpuContext) -> CpuKernels {
+    /// The layouts; no shader is compiled here. Pipeline caches are kept in `cache_dir`.
+    pub fn new(ctx: &GpuContext, cache_dir: Option<std::path::PathBuf>) -> CpuKernels {
         let device = &ctx.device;
         let uniform = wgpu::BufferBindingType::Uniform;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
@@ -495,6 +503,8 @@ impl CpuKernels {
             step_layout,
             layout,
             built: Mutex::new(HashMap::new()),
+            cache_dir,
+            notes: crate::backend::silent(),
         }
     }
 
@@ -528,6 +538,12 @@ impl CpuKernels {
         Ok(pipeline)
     }
 
+    /// The kernel of `net`'s architecture if it was built already.
+    pub fn built(&self, net: &Mlp) -> Option<Arc<EpochPipeline>> {
+        let key = (net.layer_sizes.clone(), net.activation.shader_code());
+        self.built.lock().ok()?.get(&key).cloned().flatten()
+    }
+
     fn build(
         &self,
         ctx: &GpuContext,
@@ -537,6 +553,15 @@ impl CpuKernels {
     ) -> Result<EpochPipeline> {
         let started = Instant::now();
         let device = &ctx.device;
+        // The cache key holds the kernel's text (by digest), so any change to it is a miss.
+        let architecture = format!(
+            "{:?} {} wgsl {}",
+            net.layer_sizes,
+            net.activation.name(),
+            source_digest(source)
+        );
+        let (cache, mut cache_use) =
+            pipeline_cache::open(ctx, self.cache_dir.as_deref(), &architecture);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cpu-adapter train_epoch"),
             source: wgpu::ShaderSource::Wgsl(source.to_string().into()),
@@ -547,13 +572,14 @@ impl CpuKernels {
             module: &module,
             entry_point: Some("train_epoch"),
             compilation_options: Default::default(),
-            cache: None,
+            cache: cache.as_ref(),
         });
         ctx.wait("compiling the cpu-adapter training kernel")?;
         let mut built = EpochPipeline {
             pipeline,
             plan,
             build_s: 0.0,
+            cache: CacheUse::default(),
         };
         // llvmpipe compiles at the first dispatch: one epoch on one sample, results dropped.
         let probe = TrainingSet {
@@ -576,9 +602,25 @@ impl CpuKernels {
             &config,
             0,
         )?;
+        if let Some(cache) = &cache {
+            pipeline_cache::save(ctx, cache, &architecture, &mut cache_use);
+        }
+        if let Some(note) = &cache_use.note {
+            (self.notes)(&format!("note: {note}"));
+        }
+        built.cache = cache_use;
         built.build_s = started.elapsed().as_secs_f64();
         Ok(built)
     }
+}
+
+/// First 16 hex digits of the SHA-256 of a kernel's text.
+fn source_digest(source: &str) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(source.as_bytes())[..8]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// Trains one group (its samples fit a storage binding; `initial` and `sets` are checked)
