@@ -28,7 +28,9 @@ fn build_in(dir: &std::path::Path) -> Option<(CacheUse, Vec<String>)> {
         Ok(t) => t
             .with_kernels(KernelFamily::CpuAdapter)
             .with_pipeline_cache_dir(Some(dir.to_path_buf()))
-            .with_notes(Arc::new(move |n: &str| sink.lock().unwrap().push(n.to_string()))),
+            .with_notes(Arc::new(move |n: &str| {
+                sink.lock().unwrap().push(n.to_string())
+            })),
         Err(e) => return skip(&e.to_string()),
     };
     if trainer.context().pipeline_cache_key.is_none() {
@@ -71,13 +73,19 @@ fn a_second_open_reuses_the_pipeline_cache_and_a_corrupt_one_is_rebuilt() {
     assert_eq!(first.loaded_bytes, 0);
     assert!(first.saved_bytes > 0, "nothing written: {first:?}");
     let file = first.file.clone().expect("a cache file");
-    assert!(file.starts_with(dir.path()), "{file:?} outside the private folder");
+    assert!(
+        file.starts_with(dir.path()),
+        "{file:?} outside the private folder"
+    );
     assert!(file.exists());
     assert!(notes.is_empty(), "{notes:?}");
 
     // Second open: the file is read and wgpu takes all of its bytes.
     let (second, notes) = build_in(dir.path()).unwrap();
-    assert!(second.hit, "the saved pipeline cache was not reused: {second:?}");
+    assert!(
+        second.hit,
+        "the saved pipeline cache was not reused: {second:?}"
+    );
     assert_eq!(second.loaded_bytes, first.saved_bytes);
     assert_eq!(second.file.as_ref(), Some(&file));
     assert!(notes.is_empty(), "{notes:?}");

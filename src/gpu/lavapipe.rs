@@ -7,7 +7,8 @@
 //!   constant offset from the binding costs a few ns. So each network's parameters are read
 //!   through a uniform binding, at offsets that are constants of the generated text; the
 //!   parameters ping-pong between two buffers so that the Adam step writes the one that is
-//!   not bound as uniform in this epoch.
+//!   not bound as uniform in this epoch. Each parameter is loaded once per epoch, before the
+//!   sample loop (LLVM does not hoist those loads out of the loop by itself).
 //! - Lane t handles samples t, t + 8, t + 16, … in ascending order and accumulates every
 //!   gradient in registers; at the end the 8 lanes are added in the fixed tree (lane l +=
 //!   lane l + 4, + 2, + 1) with subgroup shuffles (where the device has 8-wide subgroups) or
@@ -107,6 +108,12 @@ pub fn epoch_source(
     for c in 0..=params {
         line(&format!("    var g{c} = 0.0;"));
     }
+    // Every parameter read once, before the sample loop, into a value of its own: llvmpipe
+    // does not hoist the uniform loads out of the loop itself, and reloading ~2400 of them
+    // per iteration took half the loop's time (docs/gpu.md, Kernels).
+    for c in 0..params {
+        line(&format!("    let {} = {};", param(c), uniform_param(c)));
+    }
     // Two samples of this lane per iteration (s0, then s0 + 8 if there is one): the weights
     // loaded once serve both, and llvmpipe's masked loop bookkeeping is paid half as often.
     line("    for (var s0 = t; s0 < n; s0 += 16u) {");
@@ -188,9 +195,14 @@ fn acc(c: usize) -> String {
 }
 
 /// `w[…]` of parameter `c` of this network (a constant offset from `wb`).
-fn param(c: usize) -> String {
+fn uniform_param(c: usize) -> String {
     let comp = ["x", "y", "z", "w"][c % 4];
     format!("w[wb + {}u].{comp}", c / 4)
+}
+
+/// The value parameter `c` was loaded into before the sample loop.
+fn param(c: usize) -> String {
+    format!("p{c}")
 }
 
 fn apply(activation: Activation, z: &str) -> String {

@@ -102,7 +102,12 @@ fn rejected(file: &Path, why: &str) -> String {
 }
 
 /// Writes `cache`'s data to its file (atomically) unless the file was used as it is.
-pub fn save(ctx: &GpuContext, cache: &wgpu::PipelineCache, architecture: &str, found: &mut CacheUse) {
+pub fn save(
+    ctx: &GpuContext,
+    cache: &wgpu::PipelineCache,
+    architecture: &str,
+    found: &mut CacheUse,
+) {
     let (Some(file), Some(key)) = (found.file.clone(), cache_key(ctx, architecture)) else {
         return;
     };
@@ -122,4 +127,3 @@ pub fn save(ctx: &GpuContext, cache: &wgpu::PipelineCache, architecture: &str, f
         }
     }
 }
-
