@@ -36,7 +36,8 @@ fn trainer(
     ENV.get_or_init(errmap::gpu::quiet_headless_vulkan);
     match cell.get_or_init(|| {
         GpuTrainer::new()
-            .map(|t| t.with_kernels(family))
+            // No pipeline cache files from these tests (tests/gpu_pipeline_cache.rs has its own).
+            .map(|t| t.with_kernels(family).with_pipeline_cache_dir(None))
             .map_err(|e| e.to_string())
     }) {
         Ok(trainer) => Some(trainer),
@@ -571,7 +572,8 @@ fn cpu_adapter_kernels_are_repeatable_and_split_invariant() {
     let tiny = GpuTrainer::new()
         .unwrap()
         .with_kernels(KernelFamily::CpuAdapter)
-        .with_buffer_limit(2 * 1200 * 4);
+        .with_buffer_limit(2 * 1200 * 4)
+        .with_pipeline_cache_dir(None);
     let split = tiny.train_batch(&sets[..3], &config).unwrap();
     assert_eq!(bits(&split), bits(&a[..3]));
 }
@@ -639,7 +641,8 @@ fn cpu_adapter_workgroup_memory_reduction_matches_the_reference() {
     let gpu = GpuTrainer::new()
         .unwrap()
         .with_kernels(KernelFamily::CpuAdapter)
-        .without_subgroups();
+        .without_subgroups()
+        .with_pipeline_cache_dir(None);
     let (sets, _) = sets(&[(7, 5), (9, 6), (5, 5), (11, 4)]);
     let config = ModelConfig {
         hidden: vec![32, 16],

@@ -59,7 +59,7 @@ pub fn select_trainer_cached_in(
             reason: "--backend cpu-reference: the reference trainer".into(),
         }),
         Backend::Gpu => {
-            let gpu = GpuTrainer::new()?;
+            let gpu = GpuTrainer::new()?.with_notes(notes);
             let reason = format!("--backend gpu: {}", gpu.name());
             Ok(Selection {
                 trainer: Box::new(gpu),
@@ -84,7 +84,7 @@ fn select_auto(
         });
     }
     let gpu = match GpuTrainer::new() {
-        Ok(gpu) => gpu,
+        Ok(gpu) => gpu.with_notes(Arc::clone(&notes)),
         Err(e) => {
             return Ok(Selection {
                 trainer: Box::new(FastCpuTrainer),

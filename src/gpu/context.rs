@@ -96,6 +96,9 @@ pub struct GpuContext {
     /// The subgroup size when subgroup operations are enabled and the adapter has a single
     /// size (lavapipe: 8 with 256-bit SIMD); the CPU-adapter kernels use it.
     pub subgroup_size: Option<u32>,
+    /// wgpu's pipeline-cache key of the adapter when the device keeps pipeline caches
+    /// (`Features::PIPELINE_CACHE`, Vulkan).
+    pub pipeline_cache_key: Option<String>,
     errors: Arc<Mutex<Vec<String>>>,
     lost: Arc<Mutex<Option<String>>>,
 }
@@ -135,8 +138,10 @@ impl GpuContext {
             let info = adapter.get_info();
             let descriptor = wgpu::DeviceDescriptor {
                 label: Some("errmap"),
-                // Subgroup operations where offered (the CPU-adapter kernels' lane reduction).
-                required_features: adapter.features() & wgpu::Features::SUBGROUP,
+                // Subgroup operations where offered (the CPU-adapter kernels' lane reduction),
+                // and pipeline caches (kept between runs: src/gpu/pipeline_cache.rs).
+                required_features: adapter.features()
+                    & (wgpu::Features::SUBGROUP | wgpu::Features::PIPELINE_CACHE),
                 required_limits: adapter.limits(),
                 ..Default::default()
             };
@@ -171,12 +176,18 @@ impl GpuContext {
         let subgroup_size = (device.features().contains(wgpu::Features::SUBGROUP)
             && info.subgroup_min_size == info.subgroup_max_size)
             .then_some(info.subgroup_min_size);
+        let pipeline_cache_key = device
+            .features()
+            .contains(wgpu::Features::PIPELINE_CACHE)
+            .then(|| wgpu::util::pipeline_cache_key(info))
+            .flatten();
         GpuContext {
             device,
             queue,
             adapter: summarise(info),
             limits,
             subgroup_size,
+            pipeline_cache_key,
             errors,
             lost,
         }

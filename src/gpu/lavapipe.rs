@@ -7,7 +7,8 @@
 //!   constant offset from the binding costs a few ns. So each network's parameters are read
 //!   through a uniform binding, at offsets that are constants of the generated text; the
 //!   parameters ping-pong between two buffers so that the Adam step writes the one that is
-//!   not bound as uniform in this epoch.
+//!   not bound as uniform in this epoch. Each parameter is loaded once per epoch, before the
+//!   sample loop (LLVM does not hoist those loads out of the loop by itself).
 //! - Lane t handles samples t, t + 8, t + 16, … in ascending order and accumulates every
 //!   gradient in registers; at the end the 8 lanes are added in the fixed tree (lane l +=
 //!   lane l + 4, + 2, + 1) with subgroup shuffles (where the device has 8-wide subgroups) or
@@ -30,6 +31,8 @@ use wgpu::util::DeviceExt;
 
 use super::context::GpuContext;
 use super::layout::{pack_samples, Step};
+use super::pipeline_cache::{self, CacheUse};
+use crate::backend::Notes;
 use crate::nn::{
     diverged, layer_spans, Activation, LayerSpan, Mlp, ModelConfig, TrainingSet, ADAM_BETA1,
     ADAM_BETA2, ADAM_EPSILON, ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2,
@@ -104,6 +107,12 @@ pub fn epoch_source(
     // g0 … g{P-1}: this lane's gradient sums; g{P}: its squared errors.
     for c in 0..=params {
         line(&format!("    var g{c} = 0.0;"));
+    }
+    // Every parameter read once, before the sample loop, into a value of its own: llvmpipe
+    // does not hoist the uniform loads out of the loop itself, and reloading ~2400 of them
+    // per iteration took half the loop's time (docs/gpu.md, Kernels).
+    for c in 0..params {
+        line(&format!("    let {} = {};", param(c), uniform_param(c)));
     }
     // Two samples of this lane per iteration (s0, then s0 + 8 if there is one): the weights
     // loaded once serve both, and llvmpipe's masked loop bookkeeping is paid half as often.
@@ -186,9 +195,14 @@ fn acc(c: usize) -> String {
 }
 
 /// `w[…]` of parameter `c` of this network (a constant offset from `wb`).
-fn param(c: usize) -> String {
+fn uniform_param(c: usize) -> String {
     let comp = ["x", "y", "z", "w"][c % 4];
     format!("w[wb + {}u].{comp}", c / 4)
+}
+
+/// The value parameter `c` was loaded into before the sample loop.
+fn param(c: usize) -> String {
+    format!("p{c}")
 }
 
 fn apply(activation: Activation, z: &str) -> String {
@@ -428,6 +442,8 @@ pub struct EpochPipeline {
     /// Seconds spent creating the pipeline and running its first (tiny) dispatch, which is
     /// when llvmpipe compiles it.
     pub build_s: f64,
+    /// What the on-disk pipeline cache did for this build.
+    pub cache: CacheUse,
 }
 
 impl EpochPipeline {
@@ -442,6 +458,10 @@ pub struct CpuKernels {
     step_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
     built: Mutex<HashMap<ArchitectureKey, Option<Arc<EpochPipeline>>>>,
+    /// errmap's cache folder, where pipeline caches are kept (`None`: none kept).
+    pub cache_dir: Option<std::path::PathBuf>,
+    /// Where a pipeline cache that could not be used or written is reported.
+    pub notes: Notes,
 }
 
 fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
@@ -458,8 +478,8 @@ fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::Bind
 }
 
 impl CpuKernels {
-    /// The layouts; no shader is compiled here.
-    pub fn new(ctx: &GpuContext) -> CpuKernels {
+    /// The layouts; no shader is compiled here. Pipeline caches are kept in `cache_dir`.
+    pub fn new(ctx: &GpuContext, cache_dir: Option<std::path::PathBuf>) -> CpuKernels {
         let device = &ctx.device;
         let uniform = wgpu::BufferBindingType::Uniform;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
@@ -495,6 +515,8 @@ impl CpuKernels {
             step_layout,
             layout,
             built: Mutex::new(HashMap::new()),
+            cache_dir,
+            notes: crate::backend::silent(),
         }
     }
 
@@ -528,6 +550,12 @@ impl CpuKernels {
         Ok(pipeline)
     }
 
+    /// The kernel of `net`'s architecture if it was built already.
+    pub fn built(&self, net: &Mlp) -> Option<Arc<EpochPipeline>> {
+        let key = (net.layer_sizes.clone(), net.activation.shader_code());
+        self.built.lock().ok()?.get(&key).cloned().flatten()
+    }
+
     fn build(
         &self,
         ctx: &GpuContext,
@@ -537,6 +565,15 @@ impl CpuKernels {
     ) -> Result<EpochPipeline> {
         let started = Instant::now();
         let device = &ctx.device;
+        // The cache key holds the kernel's text (by digest), so any change to it is a miss.
+        let architecture = format!(
+            "{:?} {} wgsl {}",
+            net.layer_sizes,
+            net.activation.name(),
+            source_digest(source)
+        );
+        let (cache, mut cache_use) =
+            pipeline_cache::open(ctx, self.cache_dir.as_deref(), &architecture);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cpu-adapter train_epoch"),
             source: wgpu::ShaderSource::Wgsl(source.to_string().into()),
@@ -547,13 +584,14 @@ impl CpuKernels {
             module: &module,
             entry_point: Some("train_epoch"),
             compilation_options: Default::default(),
-            cache: None,
+            cache: cache.as_ref(),
         });
         ctx.wait("compiling the cpu-adapter training kernel")?;
         let mut built = EpochPipeline {
             pipeline,
             plan,
             build_s: 0.0,
+            cache: CacheUse::default(),
         };
         // llvmpipe compiles at the first dispatch: one epoch on one sample, results dropped.
         let probe = TrainingSet {
@@ -576,9 +614,25 @@ impl CpuKernels {
             &config,
             0,
         )?;
+        if let Some(cache) = &cache {
+            pipeline_cache::save(ctx, cache, &architecture, &mut cache_use);
+        }
+        if let Some(note) = &cache_use.note {
+            (self.notes)(&format!("note: {note}"));
+        }
+        built.cache = cache_use;
         built.build_s = started.elapsed().as_secs_f64();
         Ok(built)
     }
+}
+
+/// First 16 hex digits of the SHA-256 of a kernel's text.
+fn source_digest(source: &str) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(source.as_bytes())[..8]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// Trains one group (its samples fit a storage binding; `initial` and `sets` are checked)

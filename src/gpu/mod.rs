@@ -10,6 +10,7 @@ pub mod evaluate;
 pub mod fixed;
 pub mod lavapipe;
 pub mod layout;
+pub mod pipeline_cache;
 pub mod train;
 
 pub use context::{list_adapters, AdapterSummary, GpuContext, LimitsSummary};
@@ -54,7 +55,7 @@ impl GpuTrainer {
     pub fn open(allow_software: bool) -> Result<GpuTrainer> {
         let ctx = GpuContext::open(allow_software)?;
         let train = train::TrainPipelines::new(&ctx)?;
-        let cpu_adapter = lavapipe::CpuKernels::new(&ctx);
+        let cpu_adapter = lavapipe::CpuKernels::new(&ctx, crate::backend::probe::cache_dir());
         let eval = evaluate::EvalPipeline::new(&ctx)?;
         let buffer_limit_bytes = ctx
             .limits
@@ -82,6 +83,28 @@ impl GpuTrainer {
     pub fn with_kernels(mut self, family: KernelFamily) -> GpuTrainer {
         self.family = family;
         self
+    }
+
+    /// Keeps the CPU-adapter kernels' pipeline caches in `dir` instead of errmap's cache
+    /// folder (`None`: keep none). Takes effect for kernels not built yet.
+    pub fn with_pipeline_cache_dir(mut self, dir: Option<std::path::PathBuf>) -> GpuTrainer {
+        self.cpu_adapter.cache_dir = dir;
+        self
+    }
+
+    /// Sends notes (a pipeline cache that could not be used or written) to `notes`.
+    pub fn with_notes(mut self, notes: crate::backend::Notes) -> GpuTrainer {
+        self.cpu_adapter.notes = notes;
+        self
+    }
+
+    /// What the pipeline cache did when this architecture's CPU-adapter kernel was built
+    /// (`None` when it is not built, or this trainer uses the hardware kernels for it).
+    pub fn pipeline_cache_use(&self, config: &ModelConfig) -> Option<pipeline_cache::CacheUse> {
+        let net = Mlp::init(&config.layer_sizes(), config.activation, 0);
+        self.cpu_adapter
+            .built(&net)
+            .map(|kernel| kernel.cache.clone())
     }
 
     /// Makes the CPU-adapter kernels reduce their lanes through workgroup memory, as on a
