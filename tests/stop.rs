@@ -364,10 +364,11 @@ fn a_batch_that_stops_on_the_holdout_writes_its_timing_apart() {
             .windows(2)
             .all(|w| w[0]["seconds"].as_f64() <= w[1]["seconds"].as_f64()));
     }
-    // Everything but the timing (and run.json, which lists its hash) is the same run to run.
+    // Everything but the timing (and run.json, which lists its hash, and report.html, which
+    // carries the run's date) is the same run to run.
     let keep = |p: &Path| {
         let name = p.file_name().unwrap().to_string_lossy().to_string();
-        name != "timing.json" && name != "run.json"
+        name != "timing.json" && name != "run.json" && name != "report.html"
     };
     let before: Vec<(std::path::PathBuf, Vec<u8>)> = common::files(&d.join("out"))
         .into_iter()

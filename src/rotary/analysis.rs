@@ -148,7 +148,7 @@ pub struct SphereSummary {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Sign {
-    /// err = α − β = commanded − measured (seed 003; what `rotary table` compensates).
+    /// err = α − β = commanded − measured (what `rotary table` compensates).
     #[default]
     Errmap,
     /// error = β − α = measured − commanded: ISO 230-2's deviation x (actual − target), the
