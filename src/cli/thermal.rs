@@ -744,7 +744,10 @@ fn run_evaluate(a: EvaluateArgs, _g: Globals) -> Result<i32> {
             opt(t.after.B)
         );
     }
-    info!("wrote evaluate.csv, evaluate.png, evaluate.json in {}", out.display());
+    info!(
+        "wrote evaluate.csv, evaluate.png, evaluate.json in {}",
+        out.display()
+    );
     Ok(0)
 }
 
