@@ -1,4 +1,4 @@
-//! Seeded mutation fuzzing of every input format under `cargo test`: probe CSV, linear run CSV, temperature log and sensor table, G-code in each dialect, CSV toolpaths, job TOML and controller tables. No input may panic or take more than a second.
+//! Seeded mutation fuzzing of every input format under `cargo test`: probe CSV, linear run CSV, temperature log and sensor table, G-code in each dialect, CSV toolpaths, job TOML and controller tables. No input may panic or take more than a second of CPU.
 //!
 //! Each target starts from its seed corpus in `tests/fuzz-corpus/<corpus>/` and applies a
 //! seeded series of byte mutations (bit flips, inserts, deletes, duplicated ranges, spliced
@@ -12,9 +12,11 @@
 //! Each case costs what its input exercises: fixtures (fields, settings, the fixed half of a
 //! two-file format) are built once outside the loop, inputs are parsed from memory, and the
 //! loop runs on a one-thread rayon pool so the library's parallel loops run inline rather than
-//! handing every case to other threads. A panicking or slow input is written to
+//! handing every case to other threads. A case is timed in that thread's CPU time, so a busy
+//! machine cannot make a quick case look like a hang. A panicking or slow input is written to
 //! `target/tmp/fuzz-findings/<target>-<n>.bin` and fails the test.
 
+use cpu_time::ThreadTime;
 use errmap::geom::{Axis, ErrorField};
 use errmap::interp::{resample, Grid, Method, Surface};
 use errmap::io::CsvTable;
@@ -272,7 +274,7 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
             // Long runs say how far they are, so that a run cut short still has its figures.
             if n > 0 && n % 1_000_000 == 0 {
                 println!(
-                    "fuzz {target}: {n} execs in {:.1?}, slowest {slowest:.1?}, {} findings so far",
+                    "fuzz {target}: {n} execs in {:.1?}, slowest {slowest:.1?} CPU, {} findings so far",
                     started.elapsed(),
                     findings.len()
                 );
@@ -287,7 +289,9 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
             } else {
                 mutate(&mut rng, &bytes)
             };
-            let t0 = Instant::now();
+            // CPU time of this thread (the only one the case runs on): what the case costs,
+            // whatever else the machine is doing.
+            let t0 = ThreadTime::now();
             IN_CASE.with(|c| c.set(true));
             let result =
                 std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data, &names[k])));
@@ -300,7 +304,7 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
                         .with(|m| m.borrow_mut().take())
                         .unwrap_or_else(|| "panic".into()),
                 ),
-                Ok(()) if took > Duration::from_secs(1) => Some(format!("took {took:?}")),
+                Ok(()) if took > Duration::from_secs(1) => Some(format!("took {took:?} of CPU")),
                 Ok(()) => None,
             };
             if let Some(problem) = problem {
@@ -315,7 +319,7 @@ fn fuzz(target: &str, corpus_name: &str, salt: u64, run: impl Fn(&[u8], &str) + 
         (done, slowest, findings)
     });
     println!(
-        "fuzz {target}: {done} execs in {:.1?}, slowest {slowest:.1?}, {} findings, seed {}",
+        "fuzz {target}: {done} execs in {:.1?}, slowest {slowest:.1?} CPU, {} findings, seed {}",
         started.elapsed(),
         findings.len(),
         base_seed()

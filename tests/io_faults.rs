@@ -328,4 +328,36 @@ fn a_toolpath_that_outgrows_the_output_limit_is_refused_at_its_line_while_it_gro
     // Under the default limit the same program is written.
     ok(d, &compensate);
     assert!(std::fs::metadata(d.join("out.ngc")).unwrap().len() > 10_000_000);
+
+    // One arc of 5000 turns is 500 000 chords, some 20 MB: refused while its points are
+    // generated, once they outnumber what 1 MB can hold at 27 bytes a segment, not after.
+    std::fs::write(
+        d.join("turns.ngc"),
+        "G21 G90 G17\nG0 X60. Y30. Z5.\nG3 X60. Y30. I-10. J0. P5000 F100\nM2\n",
+    )
+    .unwrap();
+    let turns = [
+        "--max-output-mb",
+        "1",
+        "compensate",
+        "--model",
+        "m/model.json",
+        "turns.ngc",
+        "-o",
+        "turns-out.ngc",
+        "--zone",
+        "all",
+    ];
+    let run = errmap(d, &turns);
+    run.expect_code(2);
+    assert!(
+        run.stderr.contains("turns.ngc:3")
+            && run
+                .stderr
+                .contains("more segments than the output limit of 1 MB")
+            && run.stderr.contains("--max-output-mb"),
+        "{}",
+        run.report()
+    );
+    assert!(!d.join("turns-out.ngc").exists(), "{}", run.report());
 }

@@ -274,7 +274,7 @@ impl<'a> Rewriter<'a> {
         }
         self.report.dialect = Some(self.dialect);
         self.report.zone_mm = self.zone_mm;
-        self.report.lines_out = self.out.matches('\n').count() as u64
+        self.report.lines_out = self.out.bytes().filter(|&b| b == b'\n').count() as u64
             + u64::from(!self.out.is_empty() && !self.out.ends_with('\n'));
         Ok((self.out, self.report))
     }

@@ -22,7 +22,17 @@ pub(crate) fn emit_points(
     let mut out = Vec::new();
     if !path.is_empty() {
         let breaks = Breaks::Indices(path.len() - 1);
-        emit_curve(breaks, &curve, step, zone, normal, &error_at, &mut out);
+        // A CSV path's points are bounded by its rows and `max_segment`, checked by the caller.
+        emit_curve(
+            breaks,
+            &curve,
+            step,
+            zone,
+            normal,
+            &error_at,
+            usize::MAX,
+            &mut out,
+        );
     }
     out
 }
@@ -53,7 +63,10 @@ impl Breaks {
 
 /// [`emit_points`] along a curve given by its parameter: `breaks` are the parameters of the
 /// polyline's corners; intermediate and boundary points are taken on the curve. The points
-/// are appended to `out`.
+/// are appended to `out`. Returns false, with `out` cut short, as soon as it holds more than
+/// `max_points` (the output budget of the caller): a many-turn arc stops there, not after
+/// millions of points.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn emit_curve(
     breaks: Breaks,
     curve: &impl Fn(f64) -> [f64; 3],
@@ -61,8 +74,9 @@ pub(crate) fn emit_curve(
     zone: Option<(f64, f64)>,
     normal: usize,
     error_at: &impl Fn(&[f64; 3]) -> Option<f64>,
+    max_points: usize,
     out: &mut Vec<([f64; 3], Option<f64>)>,
-) {
+) -> bool {
     let first = curve(breaks.at(0));
     out.push((first, error_at(&first)));
     for i in 0..breaks.pieces() {
@@ -73,8 +87,11 @@ pub(crate) fn emit_curve(
             sa,
             sb,
         };
-        emit_piece(&piece, curve, step, zone, normal, error_at, out);
+        if !emit_piece(&piece, curve, step, zone, normal, error_at, max_points, out) {
+            return false;
+        }
     }
+    true
 }
 
 /// One piece of the polyline: its end points and their parameters on the curve.
@@ -121,7 +138,8 @@ impl Piece {
 }
 
 /// The points of one piece: every `step` in the zone, and both sides of each zone or domain
-/// edge it crosses.
+/// edge it crosses. False when `out` outgrows `max_points`.
+#[allow(clippy::too_many_arguments)]
 fn emit_piece(
     piece: &Piece,
     curve: &impl Fn(f64) -> [f64; 3],
@@ -129,8 +147,9 @@ fn emit_piece(
     zone: Option<(f64, f64)>,
     normal: usize,
     error_at: &impl Fn(&[f64; 3]) -> Option<f64>,
+    max_points: usize,
     out: &mut Vec<([f64; 3], Option<f64>)>,
-) {
+) -> bool {
     let len = dist(&piece.a, &piece.b);
     let k = (len / step).ceil().clamp(1.0, 1e7) as usize;
     let (cross, ncross) = piece.crossings(zone, normal);
@@ -161,7 +180,11 @@ fn emit_piece(
         }
         t_prev = t;
         e_prev = e_here;
+        if out.len() > max_points {
+            return false;
+        }
     }
+    true
 }
 
 /// Bisect for the zone/domain edge between fractions `span` and emit it twice: uncompensated

@@ -461,7 +461,7 @@ impl<'a> Rewriter<'a> {
                 TokenKind::Other => {
                     let (msg, hint) = match (here, prev_number) {
                         (",", Some(w)) => (
-                            format!("malformed number: `{w},` has a decimal comma"),
+                            format!("malformed number: `{},` has a decimal comma", w.trim()),
                             "write numbers with a decimal point (e.g. X20.5)".to_string(),
                         ),
                         _ => (
@@ -496,7 +496,7 @@ impl<'a> Rewriter<'a> {
                         }
                         seen[usize::from(l & 0x7f)] = true;
                     }
-                    prev_number = matches!(value, WordValue::Number(_)).then_some(here.trim());
+                    prev_number = matches!(value, WordValue::Number(_)).then_some(here);
                     first = false;
                     continue;
                 }

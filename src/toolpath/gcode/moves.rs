@@ -8,6 +8,10 @@ use super::emit::{emit_curve, Breaks};
 use super::{dist, lerp, MotionMode, Rewriter, AXES, W};
 use crate::error::{Error, Result};
 
+/// The fewest bytes a segment line errmap writes can take: `G1 X0.0000 Y0.0000 Z0.0000` and a
+/// newline (every segment writes all three axes with at least four decimals).
+const MIN_SEGMENT_BYTES: u64 = 27;
+
 /// A known point of the original program (some coordinates may be unknown).
 type Point = [Option<f64>; 3];
 
@@ -419,15 +423,20 @@ impl<'a> Rewriter<'a> {
                 Some(a) => a.point(t),
             };
             let error_at = |p: &[f64; 3]| self.error_at(p);
-            emit_curve(
+            let complete = emit_curve(
                 Breaks::Fractions(chords),
                 &curve,
                 step,
                 self.zone_now(),
                 self.normal,
                 &error_at,
+                self.points_within_output_limit(),
                 &mut emitted,
             );
+            if !complete {
+                self.emitted = emitted;
+                return Err(self.output_limit_error(line));
+            }
         }
         if self.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
@@ -440,6 +449,28 @@ impl<'a> Rewriter<'a> {
         };
         self.emitted = emitted;
         result
+    }
+
+    /// How many compensated points the output limit leaves room for: each becomes a segment of
+    /// at least [`MIN_SEGMENT_BYTES`] (`G1 X0.0000 Y0.0000 Z0.0000` and its newline) unless it
+    /// rounds onto its neighbour.
+    fn points_within_output_limit(&self) -> usize {
+        let limit = crate::io::safety::max_output_bytes();
+        let left = limit.saturating_sub(self.out.len() as u64);
+        usize::try_from(left / MIN_SEGMENT_BYTES).unwrap_or(usize::MAX)
+    }
+
+    /// The refusal of a move whose segments alone would take the output past its limit.
+    fn output_limit_error(&self, line: &Line) -> Error {
+        let limit_mb = crate::io::safety::max_output_bytes() / 1_000_000;
+        self.err(
+            line,
+            "X",
+            format!(
+                "this move is cut into more segments than the output limit of {limit_mb} MB has room for (at least {MIN_SEGMENT_BYTES} bytes each)"
+            ),
+            "check arc turn counts (P) and move lengths, raise --max-segment / --chord-tol, or raise --max-output-mb",
+        )
     }
 
     /// Chords the move is cut into (1 for a straight move); over a million is refused.
