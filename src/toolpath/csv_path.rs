@@ -62,30 +62,13 @@ pub fn compensate(
         table.require(COLUMNS[2])?,
     ];
     let zone = super::default_zone_mm(source, field, settings)?.or(settings.zone);
-    let normal = field.normal().index();
-    let (ui, vi) = field.normal().plane_axes();
-    let (ui, vi) = (ui.index(), vi.index());
-    let extrapolated = std::cell::Cell::new(false);
-    let error_at = |p: &[f64; 3]| -> Option<f64> {
-        if let Some((lo, hi)) = zone {
-            if p[normal] < lo || p[normal] > hi {
-                return None;
-            }
-        }
-        let e = field.error_mm(p[ui], p[vi]).filter(|e| e.is_finite())?;
-        let measured = field.measured(p[ui], p[vi], settings.domain_margin_mm) == Some(true);
-        if !settings.extrapolate && !measured {
-            extrapolated.set(true);
-            return None;
-        }
-        Some(e)
-    };
+    let lookup = ErrorLookup::new(field, settings, zone);
     // Lines with their terminators, so unchanged ones are copied exactly.
     let lines: Vec<&str> = text.split_inclusive('\n').collect();
     let mut rows = Rows {
         source,
         cols,
-        normal,
+        normal: lookup.normal,
         prev: None,
         prev_out: None,
         report: CompensationReport {
@@ -93,48 +76,113 @@ pub fn compensate(
             ..CompensationReport::default()
         },
     };
-    // Rewritten text per line index (0-based); `None` = copy.
-    let mut replaced: Vec<Option<String>> = vec![None; lines.len()];
-    let mut grown_bytes = 0usize;
-    for row in &table.rows {
-        let p = row_point(&table, row, cols)?;
-        let li = (row.line as usize).saturating_sub(1);
-        let (content, term) = split_terminator(lines.get(li).copied().unwrap_or(""));
-        let fields = raw_fields(content);
-        rows.check_row(
-            row.line,
-            &fields,
-            table.headers.len(),
-            &p,
-            settings.max_segment,
-        )?;
-        let path: Vec<[f64; 3]> = rows.prev.into_iter().chain([p]).collect();
-        let mut emitted = emit_points(&path, settings.max_segment, zone, normal, &error_at);
-        if extrapolated.replace(false) {
-            rows.report.moves_outside_domain += 1;
-        }
-        if rows.prev.is_some() {
-            emitted.remove(0); // the previous row, already written
-        }
-        rows.prev = Some(p);
-        if emitted.len() == 1 && emitted[0].1.is_none() {
-            rows.prev_out = Some(p);
-            continue;
-        }
-        let new_text = rows.rewrite(&emitted, &p, &fields, term);
-        grown_bytes += new_text.len();
-        super::check_output_size(source, row.line, text.len() + grown_bytes)?;
-        if let Some(slot) = replaced.get_mut(li) {
-            *slot = Some(new_text);
-        }
-    }
+    let replaced = rows.rewrite_rows(&table, &lines, &lookup, settings, text.len())?;
     let out = assemble(&lines, &replaced, text.len());
     let mut report = rows.report;
     report.lines_out = out.split_inclusive('\n').count() as u64;
     Ok((out, report))
 }
 
+/// E at a path point: inside the zone and the measured domain (or anywhere the map reaches,
+/// with `--extrapolate`), and whether a point was left out for being outside the domain.
+struct ErrorLookup<'f> {
+    field: &'f dyn ErrorField,
+    settings: &'f CompensationSettings,
+    zone: Option<(f64, f64)>,
+    normal: usize,
+    plane: (usize, usize),
+    extrapolated: std::cell::Cell<bool>,
+}
+
+impl<'f> ErrorLookup<'f> {
+    fn new(
+        field: &'f dyn ErrorField,
+        settings: &'f CompensationSettings,
+        zone: Option<(f64, f64)>,
+    ) -> Self {
+        let (u, v) = field.normal().plane_axes();
+        ErrorLookup {
+            field,
+            settings,
+            zone,
+            normal: field.normal().index(),
+            plane: (u.index(), v.index()),
+            extrapolated: std::cell::Cell::new(false),
+        }
+    }
+
+    fn at(&self, p: &[f64; 3]) -> Option<f64> {
+        if let Some((lo, hi)) = self.zone {
+            if p[self.normal] < lo || p[self.normal] > hi {
+                return None;
+            }
+        }
+        let (u, v) = (p[self.plane.0], p[self.plane.1]);
+        let e = self.field.error_mm(u, v).filter(|e| e.is_finite())?;
+        let measured = self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true);
+        if !self.settings.extrapolate && !measured {
+            self.extrapolated.set(true);
+            return None;
+        }
+        Some(e)
+    }
+}
+
 impl Rows<'_> {
+    /// Every row compensated in turn: the rewritten text per line index (0-based), `None`
+    /// where the line is copied.
+    fn rewrite_rows(
+        &mut self,
+        table: &CsvTable,
+        lines: &[&str],
+        lookup: &ErrorLookup,
+        settings: &CompensationSettings,
+        input_bytes: usize,
+    ) -> Result<Vec<Option<String>>> {
+        let mut replaced: Vec<Option<String>> = vec![None; lines.len()];
+        let mut grown_bytes = 0usize;
+        for row in &table.rows {
+            let p = row_point(table, row, self.cols)?;
+            let li = (row.line as usize).saturating_sub(1);
+            let (content, term) = split_terminator(lines.get(li).copied().unwrap_or(""));
+            let fields = raw_fields(content);
+            self.check_row(
+                row.line,
+                &fields,
+                table.headers.len(),
+                &p,
+                settings.max_segment,
+            )?;
+            let path: Vec<[f64; 3]> = self.prev.into_iter().chain([p]).collect();
+            let error_at = |q: &[f64; 3]| lookup.at(q);
+            let mut emitted = emit_points(
+                &path,
+                settings.max_segment,
+                lookup.zone,
+                self.normal,
+                &error_at,
+            );
+            if lookup.extrapolated.replace(false) {
+                self.report.moves_outside_domain += 1;
+            }
+            if self.prev.is_some() {
+                emitted.remove(0); // the previous row, already written
+            }
+            self.prev = Some(p);
+            if emitted.len() == 1 && emitted[0].1.is_none() {
+                self.prev_out = Some(p);
+                continue;
+            }
+            let new_text = self.rewrite(&emitted, &p, &fields, term);
+            grown_bytes += new_text.len();
+            super::check_output_size(self.source, row.line, input_bytes + grown_bytes)?;
+            if let Some(slot) = replaced.get_mut(li) {
+                *slot = Some(new_text);
+            }
+        }
+        Ok(replaced)
+    }
+
     /// A row must be one line, and its move from the previous row of a sane length.
     fn check_row(
         &self,
