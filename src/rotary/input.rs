@@ -245,15 +245,7 @@ fn read_row(
     row: &CsvRow,
     axis: &mut Option<(RotaryAxis, u64)>,
 ) -> Result<Row> {
-    let text = table.text(row, cols.axis);
-    let row_axis = RotaryAxis::parse(text).ok_or_else(|| {
-        table.error_at(
-            row,
-            Some(cols.axis),
-            format!("'{text}' is not a rotary axis"),
-            "write A (about X), B (about Y) or C (about Z)",
-        )
-    })?;
+    let row_axis = cell(table, row, cols.axis, RotaryAxis::parse, AXIS)?;
     match *axis {
         None => *axis = Some((row_axis, row.line)),
         Some((first, first_line)) if first != row_axis => {
@@ -266,24 +258,8 @@ fn read_row(
         }
         Some(_) => {}
     }
-    let text = table.text(row, cols.direction);
-    let direction = Direction::parse(text).ok_or_else(|| {
-        table.error_at(
-            row,
-            Some(cols.direction),
-            format!("'{text}' is not a direction"),
-            "write + (approached with increasing angle) or - (decreasing)",
-        )
-    })?;
-    let text = table.text(row, cols.repeat);
-    let repeat: u32 = text.parse().map_err(|_| {
-        table.error_at(
-            row,
-            Some(cols.repeat),
-            format!("'{text}' is not a repeat number"),
-            "write a whole number 0, 1, 2 … counting the runs",
-        )
-    })?;
+    let direction = cell(table, row, cols.direction, Direction::parse, DIRECTION)?;
+    let repeat = cell(table, row, cols.repeat, |t| t.parse::<u32>().ok(), REPEAT)?;
     let angle_deg = read_angle(table, cols, row)?;
     let sphere = read_sphere(table, cols, row)?;
     let [cx, cy, cz] = cols.xyz;
@@ -319,17 +295,46 @@ fn read_angle(table: &CsvTable, cols: &Columns, row: &CsvRow) -> Result<f64> {
 
 /// The sphere of a row: `1` → 0, `2` → 1.
 fn read_sphere(table: &CsvTable, cols: &Columns, row: &CsvRow) -> Result<usize> {
-    let text = table.text(row, cols.sphere);
-    match text {
-        "1" => Ok(0),
-        "2" => Ok(1),
-        _ => Err(table.error_at(
-            row,
-            Some(cols.sphere),
-            format!("'{text}' is not a sphere number"),
-            "write 1 for the first sphere of the bar, 2 for the second (vector a runs from 1 to 2)",
-        )),
-    }
+    let index = |text: &str| match text {
+        "1" => Some(0),
+        "2" => Some(1),
+        _ => None,
+    };
+    cell(table, row, cols.sphere, index, SPHERE)
+}
+
+/// What a cell must be and how to write it, for the message of a cell that is not.
+type Expected = (&'static str, &'static str);
+const AXIS: Expected = (
+    "a rotary axis",
+    "write A (about X), B (about Y) or C (about Z)",
+);
+const DIRECTION: Expected = (
+    "a direction",
+    "write + (approached with increasing angle) or - (decreasing)",
+);
+const REPEAT: Expected = (
+    "a repeat number",
+    "write a whole number 0, 1, 2 … counting the runs",
+);
+const SPHERE: Expected = (
+    "a sphere number",
+    "write 1 for the first sphere of the bar, 2 for the second (vector a runs from 1 to 2)",
+);
+
+/// The cell of `row` in column `col` read by `parse`; a cell it refuses is an error at the
+/// cell, "'TEXT' is not …" with the hint of `expected`.
+fn cell<T>(
+    table: &CsvTable,
+    row: &CsvRow,
+    col: usize,
+    parse: impl FnOnce(&str) -> Option<T>,
+    expected: Expected,
+) -> Result<T> {
+    let text = table.text(row, col);
+    let (what, hint) = expected;
+    parse(text)
+        .ok_or_else(|| table.error_at(row, Some(col), format!("'{text}' is not {what}"), hint))
 }
 
 /// The touch-point id of a row (must not be empty); empty when the file has no `point` column.
