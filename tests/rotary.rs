@@ -517,3 +517,146 @@ fn golden_tables_in_every_format() {
         "{ax}"
     );
 }
+
+/// Compare `got` with the golden file `name` byte for byte (rewritten with `ERRMAP_BLESS=1`).
+fn assert_golden(name: &str, got: &str) {
+    let golden = golden_dir().join(name);
+    if std::env::var_os("ERRMAP_BLESS").is_some() {
+        std::fs::write(&golden, got).unwrap();
+    }
+    let want = std::fs::read_to_string(&golden).unwrap();
+    assert_eq!(got, want, "differs from {}", golden.display());
+}
+
+/// The printed documents of `rotary analyze` (text report, both signs, a fitted axis from touch
+/// points) and `rotary table` (its summary), byte for byte. Regenerate on purpose with
+/// `ERRMAP_BLESS=1 cargo test --test rotary golden`.
+#[test]
+fn golden_text_reports_and_table_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let meas = golden_dir().join("meas.csv");
+    let meas = meas.to_str().unwrap();
+
+    let run = errmap(d, &["rotary", "analyze", meas]);
+    run.expect_code(0);
+    assert_golden("analyze.txt", &run.stdout);
+    // Hand values of the planted errors (x = −err): + 0, −10, 5, −20 and − −3, −12, 2, −24″.
+    // E = 5 − (−24) = 29; M over the bidirectional means −1.5, −11, 3.5, −22 = 25.5;
+    // B_i = x̄↑ − x̄↓ = 3, 2, 3, 4 → B = 4, B̄ = +3.
+    let out = &run.stdout;
+    assert!(
+        out.contains("\n        90    +         10.00         -    1\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains("\n       270    -         24.00         -    1\n"),
+        "{out}"
+    );
+    assert!(out.contains("E 29.00  M 25.50  B 4.00  B̄ +3.00\n"), "{out}");
+
+    let run = errmap(
+        d,
+        &[
+            "rotary",
+            "analyze",
+            meas,
+            "--sign",
+            "calibrator",
+            "--reference-angle",
+            "90",
+        ],
+    );
+    run.expect_code(0);
+    assert_golden("analyze_calibrator.txt", &run.stdout);
+    // Relative to 90° (+): err(0°, +) = 0 − 10 = −10″, printed as β − α = +10″.
+    assert!(
+        run.stdout
+            .contains("\n         0    +         10.00         -    1\n"),
+        "{}",
+        run.stdout
+    );
+
+    errmap(
+        d,
+        &[
+            "synth",
+            "rotary",
+            "--out-dir",
+            "s",
+            "--seed",
+            "4",
+            "--step-deg",
+            "30",
+            "--repeats",
+            "2",
+            "--points",
+            "9",
+            "-q",
+        ],
+    )
+    .expect_code(0);
+    let run = errmap(
+        d,
+        &[
+            "rotary",
+            "analyze",
+            "s/touch_points.csv",
+            "--sphere-diameter",
+            "25",
+            "--stylus-radius",
+            "1.5",
+            "--fit-axis",
+        ],
+    );
+    run.expect_code(0);
+    assert_golden("analyze_touch_fit.txt", &run.stdout);
+
+    let run = errmap(
+        d,
+        &[
+            "rotary",
+            "table",
+            meas,
+            "--format",
+            "sinumerik",
+            "-o",
+            "t.spf",
+            "--step-deg",
+            "45",
+        ],
+    );
+    run.expect_code(0);
+    assert_golden("table_summary.txt", &run.stdout);
+    assert!(
+        run.stdout
+            .starts_with("9 entries, 0° … 360° every 45°, written to t.spf and t_cec.spf\n"),
+        "{}",
+        run.stdout
+    );
+
+    // The JSON document's top-level fields, in their order.
+    let run = errmap(d, &["rotary", "analyze", meas, "--json"]);
+    run.expect_code(0);
+    let at: Vec<usize> = [
+        "axis",
+        "unit",
+        "sign",
+        "table",
+        "axis_fit",
+        "iso230_2",
+        "iso230_2_note",
+        "reference",
+        "spheres",
+        "sphere_fits",
+    ]
+    .iter()
+    .map(|k| {
+        run.stdout
+            .find(&format!("\n  \"{k}\":"))
+            .unwrap_or_else(|| panic!("no {k} in {}", run.stdout))
+    })
+    .collect();
+    assert!(at.windows(2).all(|w| w[0] < w[1]), "{at:?}");
+    assert!(run.stdout.ends_with("}\n"));
+}

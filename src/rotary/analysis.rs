@@ -2,7 +2,7 @@
 
 use super::angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
 use super::axis_fit::{fit_axis, AxisFit, CircleFit};
-use super::input::{Direction, Measurement, RotaryAxis};
+use super::input::{Direction, Measurement, Position, RotaryAxis};
 use super::sphere::{fit_sphere, SphereFit};
 use crate::error::{Error, Location, Result};
 use crate::linear::{self, Evaluation, Sample, Standard};
@@ -208,147 +208,214 @@ fn key(angle_deg: f64) -> i64 {
     (angle_deg * 1e6).round() as i64
 }
 
-/// Analyse a measurement: centres → a, b → err = α − β per position → table.
+/// Analyse a measurement, stage by stage: options checked → sphere centres at every position
+/// → axis direction → reference vector a → err = α − β per position → mean per angle and
+/// direction → ISO 230-2 figures and the sphere-fit summary.
 pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
-    if opts.stylus_radius_mm < 0.0 || !opts.stylus_radius_mm.is_finite() {
-        return Err(Error::usage(
-            format!("stylus radius {} mm", opts.stylus_radius_mm),
-            "give the stylus tip radius as a positive number of mm (half the ball diameter)",
-        ));
-    }
-    if let Some(d) = opts.sphere_diameter_mm {
-        if !(d > 0.0 && d.is_finite()) {
-            return Err(Error::usage(
-                format!("sphere diameter {d} mm"),
-                "give the calibrated sphere diameter in mm, e.g. 25.0",
-            ));
-        }
-    }
-    if let Some(a) = opts.reference_angle_deg {
-        if !a.is_finite() {
-            return Err(Error::usage(
-                format!("reference angle {a}"),
-                "give the reference angle in degrees, e.g. 0",
-            ));
-        }
-    }
-    if opts.radius_tolerance_mm.is_nan() || opts.radius_tolerance_mm < 0.0 {
-        return Err(Error::usage(
-            format!("radius tolerance {} mm", opts.radius_tolerance_mm),
-            "give the tolerance as a positive number of mm, e.g. 0.01",
-        ));
-    }
-    if opts.fix_radius && opts.sphere_diameter_mm.is_none() {
-        return Err(Error::usage(
-            "a fixed radius needs the sphere diameter",
-            "add --sphere-diameter MM (and --stylus-radius MM)",
-        ));
-    }
-    let nominal_radius = opts
-        .sphere_diameter_mm
-        .map(|d| d / 2.0 + opts.stylus_radius_mm);
+    opts.check()?;
+    let nominal_radius = opts.nominal_radius_mm();
+    let centres = sphere_centres(m, opts, nominal_radius)?;
+    let axis_fit = axis_direction(m, &centres.pairs, opts.fit_axis)?;
+    let reference = reference_vector(m, &centres.pairs, axis_fit.direction, opts)?;
+    let observations = angular_errors(m, &centres.pairs, &reference, axis_fit.direction)?;
+    let table = mean_over_repeats(&observations);
+    let (iso230_2, iso230_2_note) = iso_figures(&observations);
+    let spheres = sphere_summary(&centres.fits, nominal_radius);
+    Ok(Analysis {
+        axis: m.axis,
+        unit: "arcsec",
+        sign: Sign::Errmap,
+        reference,
+        table,
+        axis_fit,
+        spheres,
+        iso230_2,
+        iso230_2_note,
+        observations,
+        sphere_fits: centres.fits,
+    })
+}
 
-    // 1. Centres of both spheres at every position.
-    let mut centres: Vec<[[f64; 3]; 2]> = Vec::with_capacity(m.positions.len());
-    let mut sphere_fits = Vec::new();
+impl AnalyzeOptions {
+    /// Refuse options that cannot describe a measurement (a usage error saying which flag).
+    pub fn check(&self) -> Result<()> {
+        if self.stylus_radius_mm < 0.0 || !self.stylus_radius_mm.is_finite() {
+            return Err(Error::usage(
+                format!("stylus radius {} mm", self.stylus_radius_mm),
+                "give the stylus tip radius as a positive number of mm (half the ball diameter)",
+            ));
+        }
+        if let Some(d) = self.sphere_diameter_mm {
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(Error::usage(
+                    format!("sphere diameter {d} mm"),
+                    "give the calibrated sphere diameter in mm, e.g. 25.0",
+                ));
+            }
+        }
+        if let Some(a) = self.reference_angle_deg {
+            if !a.is_finite() {
+                return Err(Error::usage(
+                    format!("reference angle {a}"),
+                    "give the reference angle in degrees, e.g. 0",
+                ));
+            }
+        }
+        if self.radius_tolerance_mm.is_nan() || self.radius_tolerance_mm < 0.0 {
+            return Err(Error::usage(
+                format!("radius tolerance {} mm", self.radius_tolerance_mm),
+                "give the tolerance as a positive number of mm, e.g. 0.01",
+            ));
+        }
+        if self.fix_radius && self.sphere_diameter_mm.is_none() {
+            return Err(Error::usage(
+                "a fixed radius needs the sphere diameter",
+                "add --sphere-diameter MM (and --stylus-radius MM)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The radius the touch points lie on, sphere diameter / 2 + stylus radius, when the
+    /// sphere diameter is known.
+    pub fn nominal_radius_mm(&self) -> Option<f64> {
+        self.sphere_diameter_mm
+            .map(|d| d / 2.0 + self.stylus_radius_mm)
+    }
+}
+
+/// Output of the sphere stage: the centres of sphere 1 and 2 at every position (in the order
+/// of [`Measurement::positions`]) and, for touch points, every sphere fit.
+#[derive(Debug, Clone)]
+struct Centres {
+    pairs: Vec<[[f64; 3]; 2]>,
+    fits: Vec<SphereReport>,
+}
+
+/// Stage 1: the centres of both spheres at every position — read as given, or fitted to the
+/// touch points (with the radius checked against the nominal one).
+fn sphere_centres(
+    m: &Measurement,
+    opts: &AnalyzeOptions,
+    nominal_radius: Option<f64>,
+) -> Result<Centres> {
+    let mut pairs: Vec<[[f64; 3]; 2]> = Vec::with_capacity(m.positions.len());
+    let mut fits = Vec::new();
     for p in &m.positions {
         let mut pair = [[0.0; 3]; 2];
         for (k, s) in p.spheres.iter().enumerate() {
-            let line = s.lines.first().copied().unwrap_or(0);
-            let at = || Location::line(&m.path, line);
-            let what = || {
-                format!(
-                    "sphere {} at {}° ({}) repeat {}",
-                    k + 1,
-                    p.angle_deg,
-                    p.direction,
-                    p.repeat
-                )
-            };
             if !m.touch_points {
                 pair[k] = s.points_mm[0];
                 continue;
             }
-            let known = if opts.fix_radius {
-                nominal_radius
-            } else {
-                None
-            };
-            let fit = fit_sphere(&s.points_mm, known).map_err(|e| {
-                Error::input(
-                    at(),
-                    format!("{}: {e}", what()),
-                    "probe at least 4 points spread over the sphere (pole and around), not all in one plane",
-                )
-            })?;
-            let deviation = nominal_radius.map(|r| fit.radius_mm - r);
-            if let Some(dev) = deviation {
-                if dev.abs() > opts.radius_tolerance_mm {
-                    return Err(Error::input(
-                        at(),
-                        format!(
-                            "{}: fitted radius {:.4} mm differs from sphere + stylus {:.4} mm by {:+.4} mm (tolerance {} mm)",
-                            what(),
-                            fit.radius_mm,
-                            nominal_radius.unwrap_or(0.0),
-                            dev,
-                            opts.radius_tolerance_mm
-                        ),
-                        "check --sphere-diameter and --stylus-radius, then the touch points of this sphere (a stray point or the wrong sphere)",
-                    ));
-                }
-            }
-            pair[k] = fit.centre_mm;
-            sphere_fits.push(SphereReport {
-                direction: p.direction,
-                repeat: p.repeat,
-                angle_deg: p.angle_deg,
-                sphere: k as u8 + 1,
-                line,
-                fit,
-                radius_deviation_mm: deviation,
-            });
+            let fit = fit_touch_sphere(m, p, k, opts, nominal_radius)?;
+            pair[k] = fit.fit.centre_mm;
+            fits.push(fit);
         }
-        centres.push(pair);
+        pairs.push(pair);
     }
+    Ok(Centres { pairs, fits })
+}
 
-    // 2. Axis direction.
-    let nominal = m.axis.nominal_direction();
-    let axis_report = if opts.fit_axis {
-        let mut distinct: Vec<i64> = m
-            .positions
-            .iter()
-            .map(|p| key(modulo_deg(p.angle_deg)))
-            .collect();
-        distinct.sort_unstable();
-        distinct.dedup();
-        if distinct.len() < 3 {
+/// Fit sphere `k` (0 or 1) of position `p` to its touch points; a fit that fails or whose
+/// radius is off the nominal one by more than the tolerance is an error at its first line.
+fn fit_touch_sphere(
+    m: &Measurement,
+    p: &Position,
+    k: usize,
+    opts: &AnalyzeOptions,
+    nominal_radius: Option<f64>,
+) -> Result<SphereReport> {
+    let s = &p.spheres[k];
+    let line = s.lines.first().copied().unwrap_or(0);
+    let at = || Location::line(&m.path, line);
+    let what = || {
+        format!(
+            "sphere {} at {}° ({}) repeat {}",
+            k + 1,
+            p.angle_deg,
+            p.direction,
+            p.repeat
+        )
+    };
+    let known = if opts.fix_radius {
+        nominal_radius
+    } else {
+        None
+    };
+    let fit = fit_sphere(&s.points_mm, known).map_err(|e| {
+        Error::input(
+            at(),
+            format!("{}: {e}", what()),
+            "probe at least 4 points spread over the sphere (pole and around), not all in one plane",
+        )
+    })?;
+    let deviation = nominal_radius.map(|r| fit.radius_mm - r);
+    if let Some(dev) = deviation {
+        if dev.abs() > opts.radius_tolerance_mm {
             return Err(Error::input(
-                Location::file(&m.path),
+                at(),
                 format!(
-                    "--fit-axis: {} distinct angles; the circles of the sphere centres need at least 3",
-                    distinct.len()
+                    "{}: fitted radius {:.4} mm differs from sphere + stylus {:.4} mm by {:+.4} mm (tolerance {} mm)",
+                    what(),
+                    fit.radius_mm,
+                    nominal_radius.unwrap_or(0.0),
+                    dev,
+                    opts.radius_tolerance_mm
                 ),
-                "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+                "check --sphere-diameter and --stylus-radius, then the touch points of this sphere (a stray point or the wrong sphere)",
             ));
         }
-        let t1: Vec<[f64; 3]> = centres.iter().map(|c| c[0]).collect();
-        let t2: Vec<[f64; 3]> = centres.iter().map(|c| c[1]).collect();
-        let fit = fit_axis([&t1, &t2], nominal).map_err(|e| {
-            Error::input(
-                Location::file(&m.path),
-                format!("--fit-axis: {e}"),
-                "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
-            )
-        })?;
-        AxisReport::fitted(m.axis, fit)
-    } else {
-        AxisReport::nominal(m.axis)
-    };
-    let n = axis_report.direction;
+    }
+    Ok(SphereReport {
+        direction: p.direction,
+        repeat: p.repeat,
+        angle_deg: p.angle_deg,
+        sphere: k as u8 + 1,
+        line,
+        fit,
+        radius_deviation_mm: deviation,
+    })
+}
 
-    // 3. Reference vector a.
-    let reference_angle = match opts.reference_angle_deg {
+/// Stage 2: the axis direction — nominal, or fitted to the circles the sphere centres trace
+/// (which needs at least 3 distinct angles of the turn).
+fn axis_direction(m: &Measurement, centres: &[[[f64; 3]; 2]], fit: bool) -> Result<AxisReport> {
+    if !fit {
+        return Ok(AxisReport::nominal(m.axis));
+    }
+    let mut distinct: Vec<i64> = m
+        .positions
+        .iter()
+        .map(|p| key(modulo_deg(p.angle_deg)))
+        .collect();
+    distinct.sort_unstable();
+    distinct.dedup();
+    if distinct.len() < 3 {
+        return Err(Error::input(
+            Location::file(&m.path),
+            format!(
+                "--fit-axis: {} distinct angles; the circles of the sphere centres need at least 3",
+                distinct.len()
+            ),
+            "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+        ));
+    }
+    let t1: Vec<[f64; 3]> = centres.iter().map(|c| c[0]).collect();
+    let t2: Vec<[f64; 3]> = centres.iter().map(|c| c[1]).collect();
+    let fit = fit_axis([&t1, &t2], m.axis.nominal_direction()).map_err(|e| {
+        Error::input(
+            Location::file(&m.path),
+            format!("--fit-axis: {e}"),
+            "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+        )
+    })?;
+    Ok(AxisReport::fitted(m.axis, fit))
+}
+
+/// The reference angle: the one given, else 0° when measured, else the smallest measured angle.
+fn reference_angle_deg(m: &Measurement, given: Option<f64>) -> f64 {
+    match given {
         Some(a) => a,
         None => {
             if m.positions.iter().any(|p| key(p.angle_deg) == 0) {
@@ -360,7 +427,19 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
                     .fold(f64::INFINITY, f64::min)
             }
         }
-    };
+    }
+}
+
+/// Stage 3: the reference vector a = c2 − c1 at the reference angle, averaged over the repeats
+/// of the + direction (of the − direction when + was not measured there), and its lever arm
+/// about the axis `n`.
+fn reference_vector(
+    m: &Measurement,
+    centres: &[[[f64; 3]; 2]],
+    n: [f64; 3],
+    opts: &AnalyzeOptions,
+) -> Result<Reference> {
+    let reference_angle = reference_angle_deg(m, opts.reference_angle_deg);
     let at_ref = |d: Direction| -> Vec<usize> {
         (0..m.positions.len())
             .filter(|&i| {
@@ -399,17 +478,25 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
             "mount the bar in the plane normal to the axis (C: XY, A: YZ, B: XZ)",
         ));
     }
-    let reference = Reference {
+    Ok(Reference {
         angle_deg: reference_angle,
         direction: ref_dir,
         n: ref_idx.len(),
         vector_mm: a,
         lever_mm: lever,
-    };
+    })
+}
 
-    // 4. err = α − β at every position.
+/// Stage 4: err = α − β at every position, β the angle of b = c2 − c1 from a about the axis `n`.
+fn angular_errors(
+    m: &Measurement,
+    centres: &[[[f64; 3]; 2]],
+    reference: &Reference,
+    n: [f64; 3],
+) -> Result<Vec<Observation>> {
+    let a = reference.vector_mm;
     let mut observations = Vec::with_capacity(m.positions.len());
-    for (p, c) in m.positions.iter().zip(&centres) {
+    for (p, c) in m.positions.iter().zip(centres) {
         let b = [c[1][0] - c[0][0], c[1][1] - c[0][1], c[1][2] - c[0][2]];
         let beta = signed_angle_about(a, b, n).ok_or_else(|| {
             Error::input(
@@ -425,20 +512,24 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
             direction: p.direction,
             repeat: p.repeat,
             angle_deg: p.angle_deg,
-            error_arcsec: angle_error_arcsec(p.angle_deg - reference_angle, beta),
+            error_arcsec: angle_error_arcsec(p.angle_deg - reference.angle_deg, beta),
             line: p.first_line(),
         });
     }
+    Ok(observations)
+}
 
-    // 5. Average the repeats.
+/// Stage 5: the mean, spread and range of the errors per direction and angle over the repeats,
+/// direction `+` first, angles ascending.
+fn mean_over_repeats(observations: &[Observation]) -> Vec<TableRow> {
     let mut groups: BTreeMap<(Direction, i64), Vec<&Observation>> = BTreeMap::new();
-    for o in &observations {
+    for o in observations {
         groups
             .entry((o.direction, key(o.angle_deg)))
             .or_default()
             .push(o);
     }
-    let table = groups
+    groups
         .values()
         .map(|g| {
             let e: Vec<f64> = g.iter().map(|o| o.error_arcsec).collect();
@@ -452,45 +543,24 @@ pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
                 max_arcsec: e.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
             }
         })
-        .collect();
+        .collect()
+}
 
-    let (iso230_2, iso230_2_note) = iso_figures(&observations);
-
-    let spheres = if sphere_fits.is_empty() {
-        None
-    } else {
-        Some(SphereSummary {
-            fits: sphere_fits.len(),
-            max_form_rms_mm: sphere_fits
-                .iter()
-                .map(|f| f.fit.form_rms_mm)
-                .fold(0.0, f64::max),
-            max_form_pv_mm: sphere_fits
-                .iter()
-                .map(|f| f.fit.form_pv_mm)
-                .fold(0.0, f64::max),
-            mean_radius_mm: sphere_fits.iter().map(|f| f.fit.radius_mm).sum::<f64>()
-                / sphere_fits.len() as f64,
-            max_abs_radius_deviation_mm: nominal_radius.map(|_| {
-                sphere_fits
-                    .iter()
-                    .filter_map(|f| f.radius_deviation_mm)
-                    .fold(0.0, |m: f64, d| m.max(d.abs()))
-            }),
-        })
-    };
-    Ok(Analysis {
-        axis: m.axis,
-        unit: "arcsec",
-        sign: Sign::Errmap,
-        reference,
-        table,
-        axis_fit: axis_report,
-        spheres,
-        iso230_2,
-        iso230_2_note,
-        observations,
-        sphere_fits,
+/// The summary of the sphere fits of a touch-point file (`None` for a centres file).
+fn sphere_summary(fits: &[SphereReport], nominal_radius: Option<f64>) -> Option<SphereSummary> {
+    if fits.is_empty() {
+        return None;
+    }
+    Some(SphereSummary {
+        fits: fits.len(),
+        max_form_rms_mm: fits.iter().map(|f| f.fit.form_rms_mm).fold(0.0, f64::max),
+        max_form_pv_mm: fits.iter().map(|f| f.fit.form_pv_mm).fold(0.0, f64::max),
+        mean_radius_mm: fits.iter().map(|f| f.fit.radius_mm).sum::<f64>() / fits.len() as f64,
+        max_abs_radius_deviation_mm: nominal_radius.map(|_| {
+            fits.iter()
+                .filter_map(|f| f.radius_deviation_mm)
+                .fold(0.0, |m: f64, d| m.max(d.abs()))
+        }),
     })
 }
 

@@ -27,6 +27,20 @@ pub fn signed_angle_about(a: [f64; 3], b: [f64; 3], axis: [f64; 3]) -> Option<f6
     Some(ap.cross(&bp).dot(&n).atan2(ap.dot(&bp)))
 }
 
+/// Two unit vectors spanning the plane normal to the unit vector `n`, with (e1, e2, n)
+/// right-handed: e1 = n × x (n × y when n is near x), e2 = n × e1.
+pub fn normal_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    // Any vector not parallel to n gives the frame.
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    (e1, e2)
+}
+
 /// Wrap an angle in degrees into (−180, 180].
 pub fn wrap_deg(angle_deg: f64) -> f64 {
     let w = angle_deg.rem_euclid(360.0);

@@ -1,5 +1,6 @@
 //! Axis direction and location from the sphere-centre trajectories: a common plane normal and one circle per sphere.
 
+use super::angle::normal_frame;
 use nalgebra::{DMatrix, DVector, Matrix3, SymmetricEigen, Vector3};
 use serde::Serialize;
 
@@ -79,90 +80,15 @@ pub fn fit_axis(
     let mut scatter = Matrix3::zeros();
     let mut means = Vec::new();
     for (k, traj) in trajectories.iter().enumerate() {
-        let sphere = k as u8 + 1;
-        if traj.len() < 3 {
-            return Err(AxisFitError::TooFewPositions {
-                sphere,
-                n: traj.len(),
-            });
-        }
-        let pts: Vec<Vector3<f64>> = traj.iter().map(|p| Vector3::from(*p)).collect();
-        let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
-        let mut s = Matrix3::zeros();
-        for p in &pts {
-            let d = p - mean;
-            s += d * d.transpose();
-        }
-        // A line has only one non-zero principal spread.
-        let eig = SymmetricEigen::new(s);
-        let mut ev: Vec<f64> = eig.eigenvalues.iter().copied().collect();
-        ev.sort_by(f64::total_cmp);
-        if ev[1].is_nan() || ev[1] <= 1e-12 * ev[2] {
-            return Err(AxisFitError::Degenerate { sphere });
-        }
+        let (s, mean) = trajectory_scatter(traj, k as u8 + 1)?;
         scatter += s;
         means.push(mean);
     }
-    let eig = SymmetricEigen::new(scatter);
-    let imin = eig.eigenvalues.imin();
-    let mut n: Vector3<f64> = eig.eigenvectors.column(imin).into_owned().normalize();
-    if n.dot(&nominal) < 0.0 {
-        n = -n;
-    }
-    // In-plane frame.
-    let helper = if n.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let e1 = n.cross(&helper).normalize();
-    let e2 = n.cross(&e1);
-
+    let n = common_normal(scatter, &nominal);
+    let frame = normal_frame(&n);
     let mut circles = Vec::new();
     for (k, traj) in trajectories.iter().enumerate() {
-        let sphere = k as u8 + 1;
-        let mean = means[k];
-        let m = traj.len();
-        let mut a = DMatrix::zeros(m, 3);
-        let mut b = DVector::zeros(m);
-        let mut plane_sq = 0.0;
-        let uv: Vec<(f64, f64)> = traj
-            .iter()
-            .map(|p| {
-                let d = Vector3::from(*p) - mean;
-                plane_sq += n.dot(&d).powi(2);
-                (e1.dot(&d), e2.dot(&d))
-            })
-            .collect();
-        for (i, (u, v)) in uv.iter().enumerate() {
-            a[(i, 0)] = *u;
-            a[(i, 1)] = *v;
-            a[(i, 2)] = 1.0;
-            b[i] = -(u * u + v * v);
-        }
-        let sol = a
-            .svd(true, true)
-            .solve(&b, 1e-14)
-            .map_err(|_| AxisFitError::Degenerate { sphere })?;
-        let (cu, cv) = (-sol[0] / 2.0, -sol[1] / 2.0);
-        let r2 = cu * cu + cv * cv - sol[2];
-        if r2.is_nan() || r2 <= 0.0 {
-            return Err(AxisFitError::Degenerate { sphere });
-        }
-        let radius = r2.sqrt();
-        let circle_sq: f64 = uv
-            .iter()
-            .map(|(u, v)| (((u - cu).powi(2) + (v - cv).powi(2)).sqrt() - radius).powi(2))
-            .sum();
-        let c = mean + e1 * cu + e2 * cv;
-        circles.push(CircleFit {
-            sphere,
-            centre_mm: [c.x, c.y, c.z],
-            radius_mm: radius,
-            plane_rms_mm: (plane_sq / m as f64).sqrt(),
-            circle_rms_mm: (circle_sq / m as f64).sqrt(),
-            n: m,
-        });
+        circles.push(fit_circle(traj, k as u8 + 1, means[k], &n, frame)?);
     }
     let centre = circles
         .iter()
@@ -172,8 +98,117 @@ pub fn fit_axis(
     // Axis line centre + t n crossing the plane nominal · p = 0.
     let t = -nominal.dot(&centre) / n.dot(&nominal);
     let location = centre + n * t;
+    let (tilt, toward) = tilts_arcsec(&n, &nominal);
+    Ok(AxisFit {
+        direction: [n.x, n.y, n.z],
+        tilt_arcsec: tilt,
+        tilt_toward_arcsec: toward,
+        centre_mm: [centre.x, centre.y, centre.z],
+        location_mm: [location.x, location.y, location.z],
+        circles,
+    })
+}
 
-    let tilt = n.cross(&nominal).norm().atan2(n.dot(&nominal)) * ARCSEC_PER_RAD;
+/// The scatter matrix of one trajectory about its mean, and the mean; a trajectory of fewer
+/// than 3 centres or on a line is refused.
+fn trajectory_scatter(
+    traj: &[[f64; 3]],
+    sphere: u8,
+) -> Result<(Matrix3<f64>, Vector3<f64>), AxisFitError> {
+    if traj.len() < 3 {
+        return Err(AxisFitError::TooFewPositions {
+            sphere,
+            n: traj.len(),
+        });
+    }
+    let pts: Vec<Vector3<f64>> = traj.iter().map(|p| Vector3::from(*p)).collect();
+    let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+    let mut s = Matrix3::zeros();
+    for p in &pts {
+        let d = p - mean;
+        s += d * d.transpose();
+    }
+    // A line has only one non-zero principal spread.
+    let eig = SymmetricEigen::new(s);
+    let mut ev: Vec<f64> = eig.eigenvalues.iter().copied().collect();
+    ev.sort_by(f64::total_cmp);
+    if ev[1].is_nan() || ev[1] <= 1e-12 * ev[2] {
+        return Err(AxisFitError::Degenerate { sphere });
+    }
+    Ok((s, mean))
+}
+
+/// The common plane normal: the eigenvector of the smallest eigenvalue of the summed scatter,
+/// oriented like the nominal axis.
+fn common_normal(scatter: Matrix3<f64>, nominal: &Vector3<f64>) -> Vector3<f64> {
+    let eig = SymmetricEigen::new(scatter);
+    let imin = eig.eigenvalues.imin();
+    let mut n: Vector3<f64> = eig.eigenvectors.column(imin).into_owned().normalize();
+    if n.dot(nominal) < 0.0 {
+        n = -n;
+    }
+    n
+}
+
+/// The circle one trajectory traces: projected onto the plane normal to `n` through its mean
+/// (in-plane axes `frame`) and fitted algebraically (Kåsa).
+fn fit_circle(
+    traj: &[[f64; 3]],
+    sphere: u8,
+    mean: Vector3<f64>,
+    n: &Vector3<f64>,
+    (e1, e2): (Vector3<f64>, Vector3<f64>),
+) -> Result<CircleFit, AxisFitError> {
+    let m = traj.len();
+    let mut a = DMatrix::zeros(m, 3);
+    let mut b = DVector::zeros(m);
+    let mut plane_sq = 0.0;
+    let uv: Vec<(f64, f64)> = traj
+        .iter()
+        .map(|p| {
+            let d = Vector3::from(*p) - mean;
+            plane_sq += n.dot(&d).powi(2);
+            (e1.dot(&d), e2.dot(&d))
+        })
+        .collect();
+    for (i, (u, v)) in uv.iter().enumerate() {
+        a[(i, 0)] = *u;
+        a[(i, 1)] = *v;
+        a[(i, 2)] = 1.0;
+        b[i] = -(u * u + v * v);
+    }
+    let sol = a
+        .svd(true, true)
+        .solve(&b, 1e-14)
+        .map_err(|_| AxisFitError::Degenerate { sphere })?;
+    let (cu, cv) = (-sol[0] / 2.0, -sol[1] / 2.0);
+    let r2 = cu * cu + cv * cv - sol[2];
+    if r2.is_nan() || r2 <= 0.0 {
+        return Err(AxisFitError::Degenerate { sphere });
+    }
+    let radius = r2.sqrt();
+    let circle_sq: f64 = uv
+        .iter()
+        .map(|(u, v)| (((u - cu).powi(2) + (v - cv).powi(2)).sqrt() - radius).powi(2))
+        .sum();
+    let c = mean + e1 * cu + e2 * cv;
+    Ok(CircleFit {
+        sphere,
+        centre_mm: [c.x, c.y, c.z],
+        radius_mm: radius,
+        plane_rms_mm: (plane_sq / m as f64).sqrt(),
+        circle_rms_mm: (circle_sq / m as f64).sqrt(),
+        n: m,
+    })
+}
+
+/// The angle between `n` and the nominal axis, and the inclination of `n` toward each of the
+/// two other machine axes (keyed by their letters).
+fn tilts_arcsec(
+    n: &Vector3<f64>,
+    nominal: &Vector3<f64>,
+) -> (f64, std::collections::BTreeMap<String, f64>) {
+    let tilt = n.cross(nominal).norm().atan2(n.dot(nominal)) * ARCSEC_PER_RAD;
     let letters = ["x", "y", "z"];
     let main = nominal.iamax();
     let mut toward = std::collections::BTreeMap::new();
@@ -185,14 +220,7 @@ pub fn fit_axis(
             );
         }
     }
-    Ok(AxisFit {
-        direction: [n.x, n.y, n.z],
-        tilt_arcsec: tilt,
-        tilt_toward_arcsec: toward,
-        centre_mm: [centre.x, centre.y, centre.z],
-        location_mm: [location.x, location.y, location.z],
-        circles,
-    })
+    (tilt, toward)
 }
 
 #[cfg(test)]

@@ -4,6 +4,8 @@ use super::analysis::{Analysis, TableRow};
 use super::input::Direction;
 use crate::error::Result;
 use crate::report::chart::{save_png, Frame, FONT};
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -70,6 +72,14 @@ fn ticks(s: Span) -> Vec<f64> {
     (first..=last).map(|k| k as f64 * step).collect()
 }
 
+/// What a drawing step returns inside [`save_png`].
+type Drawn = std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>;
+/// The header or the whole image.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+/// The plot: commanded angle (°) against error (arcsec).
+type Plot<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
 /// Draw the error against α, one line per direction through the mean over the repeats (dots)
 /// with a bar from the smallest to the largest repeat, over the whole turn when the angles go
 /// round it (the first angle repeated at +360°, hollow dot), and the sign convention under the
@@ -77,47 +87,15 @@ fn ticks(s: Span) -> Vec<f64> {
 pub fn save_error_chart(path: &Path, analysis: &Analysis) -> Result<Frame> {
     let rows = &analysis.table;
     let s = span(rows);
-    let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
-    for r in rows {
-        y0 = y0.min(r.min_arcsec);
-        y1 = y1.max(r.max_arcsec);
-    }
-    if !(y0.is_finite() && y1.is_finite()) {
-        (y0, y1) = (-1.0, 1.0);
-    }
-    let pad = ((y1 - y0) * 0.1).max(0.5);
-    let (y0, y1) = (y0 - pad, y1 + pad);
+    let (y0, y1) = error_range(rows);
     let sign = analysis.sign;
-    let title = format!("{} axis: angular error = {}", analysis.axis, sign.formula());
-    let note = [
-        format!(
-            "sign: {}",
-            match sign {
-                super::Sign::Errmap => "errmap, error = commanded − measured (--sign errmap)",
-                super::Sign::Calibrator =>
-                    "calibrator, error = measured − commanded as ISO 230-2's x (--sign calibrator)",
-            }
-        ),
-        sign.positive(analysis.axis),
-    ];
     // A little room either side so the end points are not cut by the frame.
     let x_pad = (s.x1_deg - s.x0_deg) * 0.015;
     let (x0, x1) = (s.x0_deg - x_pad, s.x1_deg + x_pad);
     let mut frame = None;
     save_png(path, 1000, 600, |root| {
         let (header, body) = root.split_vertically(122);
-        header.draw(&Text::new(
-            title,
-            (14, 8),
-            (FONT, 22).into_font().color(&BLACK),
-        ))?;
-        for (k, line) in note.iter().enumerate() {
-            header.draw(&Text::new(
-                line.clone(),
-                (14, 38 + 19 * k as i32),
-                (FONT, 15).into_font().color(&BLACK),
-            ))?;
-        }
+        draw_title(&header, analysis)?;
         let mut chart = ChartBuilder::on(&body)
             .margin(15)
             .x_label_area_size(45)
@@ -132,96 +110,15 @@ pub fn save_error_chart(path: &Path, analysis: &Analysis) -> Result<Frame> {
             .label_style((FONT, 15))
             .axis_desc_style((FONT, 16))
             .draw()?;
-        // Angle ticks on whole multiples of 30°, 45° … with grid lines (plotters' own ticks
-        // fall on decimal steps, 50°, 100° …).
-        let font = (FONT, 15).into_font().color(&BLACK);
-        for a in ticks(s) {
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(a, y0), (a, y1)],
-                BLACK.mix(0.12).stroke_width(1),
-            )))?;
-            let (x, y) = chart.backend_coord(&(a, y0));
-            root.draw(&PathElement::new(
-                vec![(x, y), (x, y + 5)],
-                BLACK.stroke_width(1),
-            ))?;
-            let label = format!("{a}°");
-            root.draw(&Text::new(
-                label.clone(),
-                (x - 4 * label.chars().count() as i32, y + 8),
-                font.clone(),
-            ))?;
-        }
+        draw_angle_ticks(root, &mut chart, s, (y0, y1))?;
         for (dir, colour, name) in [
             (Direction::Forward, FORWARD, "+ direction"),
             (Direction::Reverse, REVERSE, "− direction"),
         ] {
-            let mut pts: Vec<TableRow> = rows
-                .iter()
-                .filter(|r| r.direction == dir)
-                .cloned()
-                .collect();
-            if pts.is_empty() {
-                continue;
-            }
-            pts.sort_by(|a, b| a.angle_deg.total_cmp(&b.angle_deg));
-            let repeated = pts
-                .first()
-                .filter(|r| s.wraps && r.angle_deg == s.x0_deg)
-                .map(|r| TableRow {
-                    angle_deg: r.angle_deg + 360.0,
-                    ..r.clone()
-                });
-            let line: Vec<(f64, f64)> = pts
-                .iter()
-                .chain(repeated.as_ref())
-                .map(|r| (r.angle_deg, r.error_arcsec))
-                .collect();
-            chart.draw_series(LineSeries::new(line, colour.stroke_width(2)))?;
-            // Legend in the header (inside the plot it would hide points): + left, − right.
-            let lx = if dir == Direction::Forward { 14 } else { 510 };
-            header.draw(&PathElement::new(
-                vec![(lx, 94), (lx + 24, 94)],
-                colour.stroke_width(2),
-            ))?;
-            header.draw(&Circle::new((lx + 12, 94), 4, colour.filled()))?;
-            header.draw(&Text::new(
-                format!("{name}: mean of the repeats (dot), bar from smallest to largest"),
-                (lx + 32, 86),
-                (FONT, 14).into_font().color(&BLACK),
-            ))?;
-            chart.draw_series(pts.iter().map(|r| {
-                ErrorBar::new_vertical(
-                    r.angle_deg,
-                    r.min_arcsec,
-                    r.error_arcsec,
-                    r.max_arcsec,
-                    colour.filled(),
-                    8,
-                )
-            }))?;
-            chart.draw_series(
-                pts.iter()
-                    .map(|r| Circle::new((r.angle_deg, r.error_arcsec), 4, colour.filled())),
-            )?;
-            if let Some(r) = &repeated {
-                chart.draw_series(std::iter::once(Circle::new(
-                    (r.angle_deg, r.error_arcsec),
-                    5,
-                    colour.stroke_width(2),
-                )))?;
-            }
+            draw_direction(&header, &mut chart, rows, s, (dir, colour, name))?;
         }
         if s.wraps {
-            header.draw(&Circle::new((26, 110), 5, BLACK.stroke_width(2)))?;
-            header.draw(&Text::new(
-                format!(
-                    "hollow dot: the {}° point repeated at {}°, closing the turn",
-                    s.x0_deg, s.x1_deg
-                ),
-                (46, 102),
-                (FONT, 14).into_font().color(&BLACK),
-            ))?;
+            draw_closing_note(&header, s)?;
         }
         frame = Some(Frame::new((x0, x1), (y0, y1), |x, y| {
             chart.backend_coord(&(x, y))
@@ -229,6 +126,161 @@ pub fn save_error_chart(path: &Path, analysis: &Analysis) -> Result<Frame> {
         Ok(())
     })?;
     frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+}
+
+/// The y extent: the smallest to the largest repeat, padded by a tenth (at least 0.5″).
+fn error_range(rows: &[TableRow]) -> (f64, f64) {
+    let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
+    for r in rows {
+        y0 = y0.min(r.min_arcsec);
+        y1 = y1.max(r.max_arcsec);
+    }
+    if !(y0.is_finite() && y1.is_finite()) {
+        (y0, y1) = (-1.0, 1.0);
+    }
+    let pad = ((y1 - y0) * 0.1).max(0.5);
+    (y0 - pad, y1 + pad)
+}
+
+/// The title and, under it, the sign convention and what a positive error means.
+fn draw_title(header: &Area<'_>, analysis: &Analysis) -> Drawn {
+    let sign = analysis.sign;
+    let title = format!("{} axis: angular error = {}", analysis.axis, sign.formula());
+    let note = [
+        format!(
+            "sign: {}",
+            match sign {
+                super::Sign::Errmap => "errmap, error = commanded − measured (--sign errmap)",
+                super::Sign::Calibrator =>
+                    "calibrator, error = measured − commanded as ISO 230-2's x (--sign calibrator)",
+            }
+        ),
+        sign.positive(analysis.axis),
+    ];
+    header.draw(&Text::new(
+        title,
+        (14, 8),
+        (FONT, 22).into_font().color(&BLACK),
+    ))?;
+    for (k, line) in note.iter().enumerate() {
+        header.draw(&Text::new(
+            line.clone(),
+            (14, 38 + 19 * k as i32),
+            (FONT, 15).into_font().color(&BLACK),
+        ))?;
+    }
+    Ok(())
+}
+
+/// Angle ticks on whole multiples of 30°, 45° … with grid lines (plotters' own ticks fall on
+/// decimal steps, 50°, 100° …), labelled under the plot on `root`.
+fn draw_angle_ticks(root: &Area<'_>, chart: &mut Plot<'_, '_>, s: Span, y: (f64, f64)) -> Drawn {
+    let (y0, y1) = y;
+    let font = (FONT, 15).into_font().color(&BLACK);
+    for a in ticks(s) {
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(a, y0), (a, y1)],
+            BLACK.mix(0.12).stroke_width(1),
+        )))?;
+        let (x, y) = chart.backend_coord(&(a, y0));
+        root.draw(&PathElement::new(
+            vec![(x, y), (x, y + 5)],
+            BLACK.stroke_width(1),
+        ))?;
+        let label = format!("{a}°");
+        root.draw(&Text::new(
+            label.clone(),
+            (x - 4 * label.chars().count() as i32, y + 8),
+            font.clone(),
+        ))?;
+    }
+    Ok(())
+}
+
+/// One direction: the line through the means (closing the turn when the angles go round it),
+/// its legend in the header, the bars of the repeats, the dots, and the hollow repeated dot.
+fn draw_direction(
+    header: &Area<'_>,
+    chart: &mut Plot<'_, '_>,
+    rows: &[TableRow],
+    s: Span,
+    (dir, colour, name): (Direction, RGBColor, &str),
+) -> Drawn {
+    let mut pts: Vec<TableRow> = rows
+        .iter()
+        .filter(|r| r.direction == dir)
+        .cloned()
+        .collect();
+    if pts.is_empty() {
+        return Ok(());
+    }
+    pts.sort_by(|a, b| a.angle_deg.total_cmp(&b.angle_deg));
+    let repeated = pts
+        .first()
+        .filter(|r| s.wraps && r.angle_deg == s.x0_deg)
+        .map(|r| TableRow {
+            angle_deg: r.angle_deg + 360.0,
+            ..r.clone()
+        });
+    let line: Vec<(f64, f64)> = pts
+        .iter()
+        .chain(repeated.as_ref())
+        .map(|r| (r.angle_deg, r.error_arcsec))
+        .collect();
+    chart.draw_series(LineSeries::new(line, colour.stroke_width(2)))?;
+    draw_legend(header, dir, colour, name)?;
+    chart.draw_series(pts.iter().map(|r| {
+        ErrorBar::new_vertical(
+            r.angle_deg,
+            r.min_arcsec,
+            r.error_arcsec,
+            r.max_arcsec,
+            colour.filled(),
+            8,
+        )
+    }))?;
+    chart.draw_series(
+        pts.iter()
+            .map(|r| Circle::new((r.angle_deg, r.error_arcsec), 4, colour.filled())),
+    )?;
+    if let Some(r) = &repeated {
+        chart.draw_series(std::iter::once(Circle::new(
+            (r.angle_deg, r.error_arcsec),
+            5,
+            colour.stroke_width(2),
+        )))?;
+    }
+    Ok(())
+}
+
+/// A direction's legend in the header (inside the plot it would hide points): + left, − right.
+fn draw_legend(header: &Area<'_>, dir: Direction, colour: RGBColor, name: &str) -> Drawn {
+    let lx = if dir == Direction::Forward { 14 } else { 510 };
+    header.draw(&PathElement::new(
+        vec![(lx, 94), (lx + 24, 94)],
+        colour.stroke_width(2),
+    ))?;
+    header.draw(&Circle::new((lx + 12, 94), 4, colour.filled()))?;
+    header.draw(&Text::new(
+        format!("{name}: mean of the repeats (dot), bar from smallest to largest"),
+        (lx + 32, 86),
+        (FONT, 14).into_font().color(&BLACK),
+    ))?;
+    Ok(())
+}
+
+/// The note on the hollow dot that closes the turn.
+fn draw_closing_note(header: &Area<'_>, s: Span) -> Drawn {
+    header.draw(&Circle::new((26, 110), 5, BLACK.stroke_width(2)))?;
+    header.draw(&Text::new(
+        format!(
+            "hollow dot: the {}° point repeated at {}°, closing the turn",
+            s.x0_deg, s.x1_deg
+        ),
+        (46, 102),
+        (FONT, 14).into_font().color(&BLACK),
+    ))?;
+    Ok(())
 }
 
 #[cfg(test)]

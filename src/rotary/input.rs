@@ -1,7 +1,7 @@
 //! Reading rotary-axis measurement files: sphere centres or raw touch points per sphere, position and repeat.
 
 use crate::error::{Error, Location, Result};
-use crate::io::CsvTable;
+use crate::io::{CsvRow, CsvTable};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -55,6 +55,15 @@ impl RotaryAxis {
             RotaryAxis::B => 1,
             RotaryAxis::C => 2,
         }
+    }
+}
+
+/// `A`, `B` or `C` (either case), for command-line parsers; the error says what is expected.
+impl std::str::FromStr for RotaryAxis {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<RotaryAxis, String> {
+        RotaryAxis::parse(s).ok_or_else(|| format!("'{s}' is not A, B or C"))
     }
 }
 
@@ -157,18 +166,10 @@ pub fn read_measurement(path: &Path) -> Result<Measurement> {
     parse_measurement(table)
 }
 
-/// Validate an already read CSV table as a measurement file.
+/// Validate an already read CSV table as a measurement file: columns → rows (each checked
+/// and grouped by position) → both spheres at every position.
 pub fn parse_measurement(table: CsvTable) -> Result<Measurement> {
-    table.reject_unknown(&COLUMNS)?;
-    let c_axis = table.require("axis")?;
-    let c_dir = table.require("direction")?;
-    let c_rep = table.require("repeat")?;
-    let c_ang = table.require("angle_deg")?;
-    let c_sph = table.require("sphere")?;
-    let c_x = table.require("x_mm")?;
-    let c_y = table.require("y_mm")?;
-    let c_z = table.require("z_mm")?;
-    let c_point = table.column("point");
+    let cols = Columns::find(&table)?;
     if table.rows.is_empty() {
         return Err(Error::input(
             Location::file(&table.path),
@@ -176,98 +177,203 @@ pub fn parse_measurement(table: CsvTable) -> Result<Measurement> {
             "add one row per sphere centre (or touch point) and position",
         ));
     }
-
-    let mut axis: Option<(RotaryAxis, u64)> = None;
-    let mut groups: BTreeMap<Key, Position> = BTreeMap::new();
-    // (key, sphere, point id) → line, to catch repeated points or centres.
-    let mut seen: BTreeMap<(Key, usize, String), u64> = BTreeMap::new();
-
+    let mut grouping = Grouping::default();
     for row in &table.rows {
-        let text = table.text(row, c_axis);
-        let row_axis = RotaryAxis::parse(text).ok_or_else(|| {
-            table.error_at(
-                row,
-                Some(c_axis),
-                format!("'{text}' is not a rotary axis"),
-                "write A (about X), B (about Y) or C (about Z)",
-            )
-        })?;
-        match axis {
-            None => axis = Some((row_axis, row.line)),
-            Some((first, first_line)) if first != row_axis => {
-                return Err(table.error_at(
-                    row,
-                    Some(c_axis),
-                    format!("axis {row_axis}, but line {first_line} says axis {first}"),
-                    "measure one rotary axis per file; split the file by axis",
-                ));
-            }
-            Some(_) => {}
-        }
-        let text = table.text(row, c_dir);
-        let direction = Direction::parse(text).ok_or_else(|| {
-            table.error_at(
-                row,
-                Some(c_dir),
-                format!("'{text}' is not a direction"),
-                "write + (approached with increasing angle) or - (decreasing)",
-            )
-        })?;
-        let text = table.text(row, c_rep);
-        let repeat: u32 = text.parse().map_err(|_| {
-            table.error_at(
-                row,
-                Some(c_rep),
-                format!("'{text}' is not a repeat number"),
-                "write a whole number 0, 1, 2 … counting the runs",
-            )
-        })?;
-        let angle_deg = table.f64(row, c_ang)? + 0.0;
-        if angle_deg.abs() > 3600.0 {
+        let r = read_row(&table, &cols, row, &mut grouping.axis)?;
+        grouping.add(&table, row, &cols, r)?;
+    }
+    let Some((axis, _)) = grouping.axis else {
+        return Err(Error::Internal("rows without an axis".into()));
+    };
+    check_both_spheres(&table.path, &grouping.positions)?;
+    Ok(Measurement {
+        path: table.path.clone(),
+        axis,
+        touch_points: cols.point.is_some(),
+        positions: grouping.positions.into_values().collect(),
+    })
+}
+
+/// Column indices of a measurement file.
+struct Columns {
+    axis: usize,
+    direction: usize,
+    repeat: usize,
+    angle: usize,
+    sphere: usize,
+    xyz: [usize; 3],
+    point: Option<usize>,
+}
+
+impl Columns {
+    /// Find the columns; an unknown or missing one is an error.
+    fn find(table: &CsvTable) -> Result<Columns> {
+        table.reject_unknown(&COLUMNS)?;
+        Ok(Columns {
+            axis: table.require("axis")?,
+            direction: table.require("direction")?,
+            repeat: table.require("repeat")?,
+            angle: table.require("angle_deg")?,
+            sphere: table.require("sphere")?,
+            xyz: [
+                table.require("x_mm")?,
+                table.require("y_mm")?,
+                table.require("z_mm")?,
+            ],
+            point: table.column("point"),
+        })
+    }
+}
+
+/// One validated row: a sphere centre or a touch point.
+struct Row {
+    direction: Direction,
+    repeat: u32,
+    angle_deg: f64,
+    /// 0 for sphere 1, 1 for sphere 2.
+    sphere: usize,
+    point_mm: [f64; 3],
+    /// The touch point's id; empty for a centre.
+    point_id: String,
+}
+
+/// Read and check one row, cell by cell in file order; `axis` holds the file's axis and the
+/// line that set it, and a row naming another axis is an error.
+fn read_row(
+    table: &CsvTable,
+    cols: &Columns,
+    row: &CsvRow,
+    axis: &mut Option<(RotaryAxis, u64)>,
+) -> Result<Row> {
+    let row_axis = cell(table, row, cols.axis, RotaryAxis::parse, AXIS)?;
+    match *axis {
+        None => *axis = Some((row_axis, row.line)),
+        Some((first, first_line)) if first != row_axis => {
             return Err(table.error_at(
                 row,
-                Some(c_ang),
-                format!("angle {angle_deg}° is more than ten turns"),
-                "write the commanded axis position in degrees, e.g. 0 … 360",
+                Some(cols.axis),
+                format!("axis {row_axis}, but line {first_line} says axis {first}"),
+                "measure one rotary axis per file; split the file by axis",
             ));
         }
-        let text = table.text(row, c_sph);
-        let sphere = match text {
-            "1" => 0usize,
-            "2" => 1usize,
-            _ => {
-                return Err(table.error_at(
-                    row,
-                    Some(c_sph),
-                    format!("'{text}' is not a sphere number"),
-                    "write 1 for the first sphere of the bar, 2 for the second (vector a runs from 1 to 2)",
-                ))
-            }
-        };
-        let point = [
-            table.f64(row, c_x)?,
-            table.f64(row, c_y)?,
-            table.f64(row, c_z)?,
-        ];
-        let point_id = match c_point {
-            Some(c) => {
-                let id = table.text(row, c);
-                if id.is_empty() {
-                    return Err(table.error_at(
-                        row,
-                        Some(c),
-                        "empty touch-point id",
-                        "number the touch points of each sphere and position 1, 2, 3 …",
-                    ));
-                }
-                id.to_string()
-            }
-            None => String::new(),
-        };
-        let key = (direction, repeat, angle_key(angle_deg));
-        if let Some(first) = seen.insert((key, sphere, point_id.clone()), row.line) {
-            let what = if c_point.is_some() {
-                format!("touch point '{point_id}'")
+        Some(_) => {}
+    }
+    let direction = cell(table, row, cols.direction, Direction::parse, DIRECTION)?;
+    let repeat = cell(table, row, cols.repeat, |t| t.parse::<u32>().ok(), REPEAT)?;
+    let angle_deg = read_angle(table, cols, row)?;
+    let sphere = read_sphere(table, cols, row)?;
+    let [cx, cy, cz] = cols.xyz;
+    let point_mm = [
+        table.f64(row, cx)?,
+        table.f64(row, cy)?,
+        table.f64(row, cz)?,
+    ];
+    let point_id = read_point_id(table, cols, row)?;
+    Ok(Row {
+        direction,
+        repeat,
+        angle_deg,
+        sphere,
+        point_mm,
+        point_id,
+    })
+}
+
+/// The commanded angle of a row, within ten turns (−0 read as 0).
+fn read_angle(table: &CsvTable, cols: &Columns, row: &CsvRow) -> Result<f64> {
+    let angle_deg = table.f64(row, cols.angle)? + 0.0;
+    if angle_deg.abs() > 3600.0 {
+        return Err(table.error_at(
+            row,
+            Some(cols.angle),
+            format!("angle {angle_deg}° is more than ten turns"),
+            "write the commanded axis position in degrees, e.g. 0 … 360",
+        ));
+    }
+    Ok(angle_deg)
+}
+
+/// The sphere of a row: `1` → 0, `2` → 1.
+fn read_sphere(table: &CsvTable, cols: &Columns, row: &CsvRow) -> Result<usize> {
+    let index = |text: &str| match text {
+        "1" => Some(0),
+        "2" => Some(1),
+        _ => None,
+    };
+    cell(table, row, cols.sphere, index, SPHERE)
+}
+
+/// What a cell must be and how to write it, for the message of a cell that is not.
+type Expected = (&'static str, &'static str);
+const AXIS: Expected = (
+    "a rotary axis",
+    "write A (about X), B (about Y) or C (about Z)",
+);
+const DIRECTION: Expected = (
+    "a direction",
+    "write + (approached with increasing angle) or - (decreasing)",
+);
+const REPEAT: Expected = (
+    "a repeat number",
+    "write a whole number 0, 1, 2 … counting the runs",
+);
+const SPHERE: Expected = (
+    "a sphere number",
+    "write 1 for the first sphere of the bar, 2 for the second (vector a runs from 1 to 2)",
+);
+
+/// The cell of `row` in column `col` read by `parse`; a cell it refuses is an error at the
+/// cell, "'TEXT' is not …" with the hint of `expected`.
+fn cell<T>(
+    table: &CsvTable,
+    row: &CsvRow,
+    col: usize,
+    parse: impl FnOnce(&str) -> Option<T>,
+    expected: Expected,
+) -> Result<T> {
+    let text = table.text(row, col);
+    let (what, hint) = expected;
+    parse(text)
+        .ok_or_else(|| table.error_at(row, Some(col), format!("'{text}' is not {what}"), hint))
+}
+
+/// The touch-point id of a row (must not be empty); empty when the file has no `point` column.
+fn read_point_id(table: &CsvTable, cols: &Columns, row: &CsvRow) -> Result<String> {
+    let Some(c) = cols.point else {
+        return Ok(String::new());
+    };
+    let id = table.text(row, c);
+    if id.is_empty() {
+        return Err(table.error_at(
+            row,
+            Some(c),
+            "empty touch-point id",
+            "number the touch points of each sphere and position 1, 2, 3 …",
+        ));
+    }
+    Ok(id.to_string())
+}
+
+/// The rows grouped by position as they are read.
+#[derive(Default)]
+struct Grouping {
+    /// The file's axis and the line that first named it.
+    axis: Option<(RotaryAxis, u64)>,
+    positions: BTreeMap<Key, Position>,
+    /// (key, sphere, point id) → line, to catch repeated points or centres.
+    seen: BTreeMap<(Key, usize, String), u64>,
+}
+
+impl Grouping {
+    /// Add a row to its position; a centre or touch point given twice is an error.
+    fn add(&mut self, table: &CsvTable, row: &CsvRow, cols: &Columns, r: Row) -> Result<()> {
+        let key = (r.direction, r.repeat, angle_key(r.angle_deg));
+        if let Some(first) = self
+            .seen
+            .insert((key, r.sphere, r.point_id.clone()), row.line)
+        {
+            let what = if cols.point.is_some() {
+                format!("touch point '{}'", r.point_id)
             } else {
                 "centre".to_string()
             };
@@ -275,31 +381,35 @@ pub fn parse_measurement(table: CsvTable) -> Result<Measurement> {
                 row,
                 None,
                 format!(
-                    "{what} of sphere {} at {angle_deg}° ({direction}) repeat {repeat} is given twice (also on line {first})",
-                    sphere + 1
+                    "{what} of sphere {} at {}° ({}) repeat {} is given twice (also on line {first})",
+                    r.sphere + 1,
+                    r.angle_deg,
+                    r.direction,
+                    r.repeat
                 ),
                 "keep one row per sphere, position and repeat (or number the repeats apart)",
             ));
         }
-        let position = groups.entry(key).or_insert_with(|| Position {
-            direction,
-            repeat,
-            angle_deg,
+        let position = self.positions.entry(key).or_insert_with(|| Position {
+            direction: r.direction,
+            repeat: r.repeat,
+            angle_deg: r.angle_deg,
             spheres: [SphereData::default(), SphereData::default()],
         });
-        position.spheres[sphere].lines.push(row.line);
-        position.spheres[sphere].points_mm.push(point);
+        position.spheres[r.sphere].lines.push(row.line);
+        position.spheres[r.sphere].points_mm.push(r.point_mm);
+        Ok(())
     }
+}
 
-    let Some((axis, _)) = axis else {
-        return Err(Error::Internal("rows without an axis".into()));
-    };
-    for p in groups.values() {
+/// Every position must have both spheres: the angle comes from the vector between them.
+fn check_both_spheres(path: &Path, positions: &BTreeMap<Key, Position>) -> Result<()> {
+    for p in positions.values() {
         for (k, s) in p.spheres.iter().enumerate() {
             if s.lines.is_empty() {
                 let other = &p.spheres[1 - k];
                 return Err(Error::input(
-                    Location::line(&table.path, other.lines.first().copied().unwrap_or(0)),
+                    Location::line(path, other.lines.first().copied().unwrap_or(0)),
                     format!(
                         "sphere {} is measured at {}° ({}) repeat {} but sphere {} is not",
                         2 - k,
@@ -313,12 +423,7 @@ pub fn parse_measurement(table: CsvTable) -> Result<Measurement> {
             }
         }
     }
-    Ok(Measurement {
-        path: table.path.clone(),
-        axis,
-        touch_points: c_point.is_some(),
-        positions: groups.into_values().collect(),
-    })
+    Ok(())
 }
 
 #[cfg(test)]

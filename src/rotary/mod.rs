@@ -3,15 +3,18 @@
 //! Data flow: [`read_measurement`] (centres or touch points) → [`fit_sphere`] per sphere and
 //! position → vector a = c2 − c1 at the reference angle and b at each α → β by
 //! [`signed_angle_about`] → err = α − β per position, averaged over repeats ([`analyze`]) →
-//! tables for controllers ([`build_table`], [`render`]) and a chart ([`chart::save_error_chart`]).
+//! tables for controllers ([`build_table`], [`render`]), a text report ([`text_report()`]) and a
+//! chart ([`chart::save_error_chart`]). [`commands`] runs each `rotary` command as one call.
 
 pub mod analysis;
 pub mod angle;
 pub mod axis_fit;
 pub mod chart;
+pub mod commands;
 pub mod input;
 pub mod sphere;
 pub mod table;
+pub mod text_report;
 
 pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, Sign, TableRow};
 pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
@@ -21,3 +24,4 @@ pub use sphere::{fit_sphere, SphereFit, SphereFitError};
 pub use table::{
     build_table, render, table_from_rows, CompTable, TableFormat, TableOptions, INTERPOLATION,
 };
+pub use text_report::text_report;

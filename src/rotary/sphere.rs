@@ -1,5 +1,6 @@
 //! Sphere fit from touch points: algebraic least squares for a start, Gauss–Newton on the geometric distances to finish.
 
+use super::angle::normal_frame;
 use nalgebra::{DMatrix, DVector, Matrix3, SymmetricEigen, Vector3};
 use serde::Serialize;
 use std::fmt;
@@ -68,10 +69,32 @@ pub fn fit_sphere(
         return Err(SphereFitError::TooFewPoints(n));
     }
     let pts: Vec<Vector3<f64>> = points_mm.iter().map(|p| Vector3::from(*p)).collect();
+    let (mean, scale) = spread(&pts)?;
+    let (centre, radius) = algebraic_start(&pts, mean, scale)?;
+    let radius = known_radius_mm.unwrap_or(radius);
+    let (centre, radius, iterations) = gauss_newton(&pts, centre, radius, known_radius_mm)?;
+    let residuals: Vec<f64> = pts.iter().map(|p| (p - centre).norm() - radius).collect();
+    let form_rms_mm = (residuals.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt();
+    let max = residuals.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let min = residuals.iter().cloned().fold(f64::INFINITY, f64::min);
+    Ok(SphereFit {
+        centre_mm: [centre.x, centre.y, centre.z],
+        radius_mm: radius,
+        form_rms_mm,
+        form_pv_mm: max - min,
+        n,
+        iterations,
+    })
+}
+
+/// The mean of the points and their largest principal spread (the scale of the algebraic
+/// fit); points with (nearly) no spread in one direction are coplanar and refused.
+fn spread(pts: &[Vector3<f64>]) -> Result<(Vector3<f64>, f64), SphereFitError> {
+    let n = pts.len();
     let mean = pts.iter().sum::<Vector3<f64>>() / n as f64;
     // Principal spreads: a plane has one (near) zero.
     let mut scatter = Matrix3::zeros();
-    for p in &pts {
+    for p in pts {
         let d = p - mean;
         scatter += d * d.transpose();
     }
@@ -84,9 +107,17 @@ pub fn fit_sphere(
     {
         return Err(SphereFitError::Degenerate);
     }
-    let scale = largest.sqrt();
+    Ok((mean, largest.sqrt()))
+}
 
-    // Algebraic start in centred, scaled coordinates q = (p − mean) / scale.
+/// The algebraic (Kåsa-type) sphere in centred, scaled coordinates q = (p − mean) / scale:
+/// centre and radius in mm.
+fn algebraic_start(
+    pts: &[Vector3<f64>],
+    mean: Vector3<f64>,
+    scale: f64,
+) -> Result<(Vector3<f64>, f64), SphereFitError> {
+    let n = pts.len();
     let mut a = DMatrix::zeros(n, 4);
     let mut b = DVector::zeros(n);
     for (i, p) in pts.iter().enumerate() {
@@ -106,10 +137,18 @@ pub fn fit_sphere(
     if r2.is_nan() || r2 <= 0.0 || !cq.iter().all(|v| v.is_finite()) {
         return Err(SphereFitError::Degenerate);
     }
-    let mut centre = mean + cq * scale;
-    let mut radius = known_radius_mm.unwrap_or(r2.sqrt() * scale);
+    Ok((mean + cq * scale, r2.sqrt() * scale))
+}
 
-    // Gauss–Newton on geometric distances.
+/// Gauss–Newton on the geometric distances from `centre`, `radius` (the radius held when
+/// `known_radius_mm` is given): the converged centre, radius and iterations taken.
+fn gauss_newton(
+    pts: &[Vector3<f64>],
+    mut centre: Vector3<f64>,
+    mut radius: f64,
+    known_radius_mm: Option<f64>,
+) -> Result<(Vector3<f64>, f64, u32), SphereFitError> {
+    let n = pts.len();
     let cols = if known_radius_mm.is_some() { 3 } else { 4 };
     let mut iterations = 0;
     let mut converged = false;
@@ -152,32 +191,14 @@ pub fn fit_sphere(
     if !converged || radius.is_nan() || radius <= 0.0 {
         return Err(SphereFitError::NoConvergence);
     }
-    let residuals: Vec<f64> = pts.iter().map(|p| (p - centre).norm() - radius).collect();
-    let form_rms_mm = (residuals.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt();
-    let max = residuals.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    let min = residuals.iter().cloned().fold(f64::INFINITY, f64::min);
-    Ok(SphereFit {
-        centre_mm: [centre.x, centre.y, centre.z],
-        radius_mm: radius,
-        form_rms_mm,
-        form_pv_mm: max - min,
-        n,
-        iterations,
-    })
+    Ok((centre, radius, iterations))
 }
 
 /// `n` unit directions spread over the cap within `half_angle_deg` of `pole`
 /// (a golden-angle spiral: evenly spread, deterministic). Used by tests and the generator.
 pub fn cap_directions(n: usize, half_angle_deg: f64, pole: [f64; 3]) -> Vec<[f64; 3]> {
     let pole = Vector3::from(pole).normalize();
-    // Any vector not parallel to the pole gives the cap's frame.
-    let helper = if pole.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let e1 = pole.cross(&helper).normalize();
-    let e2 = pole.cross(&e1);
+    let (e1, e2) = normal_frame(&pole);
     let cos_min = half_angle_deg.to_radians().cos();
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)

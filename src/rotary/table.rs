@@ -64,68 +64,21 @@ pub fn table_from_rows(
     step_deg: Option<f64>,
     start_deg: Option<f64>,
 ) -> Result<CompTable> {
-    let forward = curve(rows, Direction::Forward);
-    let reverse = curve(rows, Direction::Reverse);
-    let bidirectional = !reverse.is_empty() && !forward.is_empty();
-    let (forward, reverse) = match (forward.is_empty(), reverse.is_empty()) {
-        (false, false) => (forward, reverse),
-        (false, true) => (forward.clone(), forward),
-        (true, false) => (reverse.clone(), reverse),
-        (true, true) => {
-            return Err(Error::Internal("analysis without a table".into()));
-        }
-    };
-    for c in [&forward, &reverse] {
-        check_coverage(c)?;
-    }
+    let curves = Curves::from_rows(rows)?;
     if let Some(a) = start_deg.filter(|a| !a.is_finite()) {
         return Err(Error::usage(
             format!("start {a}° is not an angle"),
             "give --start-deg as a number of degrees, e.g. 0 or 15",
         ));
     }
-    let (step, start, grid_note) = match (step_deg, equal_spacing(&forward, &reverse)) {
-        (None, Some((s, a))) => {
-            let off = start_deg.map_or(0.0, |g| (g - a).rem_euclid(s));
-            match start_deg {
-                Some(given) if off.min(s - off) > 1e-6 => {
-                    let note = format!(
-                        "grid {given} + {s}*k deg as given: the entries between the measured angles are interpolated"
-                    );
-                    (s, given, note)
-                }
-                _ => (
-                    s,
-                    a,
-                    format!("grid {a} + {s}*k deg through the equally spaced measured angles"),
-                ),
-            }
-        }
-        (Some(s), _) => {
-            let a = start_deg.unwrap_or(0.0);
-            (check_step(s)?, a, format!("grid {a} + {s}*k deg as given"))
-        }
-        (None, None) => {
-            let min_gap = forward
-                .windows(2)
-                .chain(reverse.windows(2))
-                .map(|w| w[1].0 - w[0].0)
-                .fold(f64::INFINITY, f64::min);
-            let s = 360.0 / (360.0 / min_gap - 1e-9).ceil();
-            let a = start_deg.unwrap_or(0.0);
-            let note = format!(
-                "grid {a} + {s}*k deg: the measured angles are not equally spaced, so the entries \
-                 are interpolated (choose the grid with --step-deg and --start-deg)"
-            );
-            (s, a, note)
-        }
-    };
-    let fine = step_through_zero(step, start);
+    let grid = choose_grid(&curves, step_deg, start_deg)?;
+    let fine = step_through_zero(grid.step_deg, grid.start_deg);
     let n = (360.0 / fine).round() as usize;
     if n > MAX_ENTRIES {
         return Err(Error::usage(
             format!(
-                "a grid through {start}° every {step}° needs a {fine}° step from 0° ({n} entries per turn, at most {MAX_ENTRIES})"
+                "a grid through {}° every {}° needs a {fine}° step from 0° ({n} entries per turn, at most {MAX_ENTRIES})",
+                grid.start_deg, grid.step_deg
             ),
             "give a --start-deg that is a multiple of a coarser step (e.g. 0 or 15), or a coarser --step-deg",
         ));
@@ -142,12 +95,104 @@ pub fn table_from_rows(
     Ok(CompTable {
         axis: axis.to_string(),
         step_deg: fine,
-        forward_arcsec: sample(&forward),
-        reverse_arcsec: sample(&reverse),
+        forward_arcsec: sample(&curves.forward),
+        reverse_arcsec: sample(&curves.reverse),
         angles_deg,
-        bidirectional,
-        grid_note,
+        bidirectional: curves.bidirectional,
+        grid_note: grid.note,
     })
+}
+
+/// The measured curves of both directions, each covering the turn.
+struct Curves {
+    /// Mean error per angle in [0, 360) of the + direction (of − when + was not measured).
+    forward: Vec<(f64, f64)>,
+    /// … of the − direction (of + when − was not measured).
+    reverse: Vec<(f64, f64)>,
+    /// Whether both directions were measured.
+    bidirectional: bool,
+}
+
+impl Curves {
+    /// Curves of the table rows; a direction measured alone stands for both, and a gap wider
+    /// than [`MAX_GAP_DEG`] in either is an error.
+    fn from_rows(rows: &[TableRow]) -> Result<Curves> {
+        let forward = curve(rows, Direction::Forward);
+        let reverse = curve(rows, Direction::Reverse);
+        let bidirectional = !reverse.is_empty() && !forward.is_empty();
+        let (forward, reverse) = match (forward.is_empty(), reverse.is_empty()) {
+            (false, false) => (forward, reverse),
+            (false, true) => (forward.clone(), forward),
+            (true, false) => (reverse.clone(), reverse),
+            (true, true) => {
+                return Err(Error::Internal("analysis without a table".into()));
+            }
+        };
+        for c in [&forward, &reverse] {
+            check_coverage(c)?;
+        }
+        Ok(Curves {
+            forward,
+            reverse,
+            bidirectional,
+        })
+    }
+}
+
+/// A grid start + step·k before it is refined to pass through 0°, and how it was chosen.
+struct Grid {
+    step_deg: f64,
+    start_deg: f64,
+    note: String,
+}
+
+/// The grid: through the measured angles when they are equally spaced (unless a start off them
+/// is given), else as given, else the smallest measured spacing rounded down to a divisor of 360.
+fn choose_grid(curves: &Curves, step_deg: Option<f64>, start_deg: Option<f64>) -> Result<Grid> {
+    let grid = |step_deg, start_deg, note| Grid {
+        step_deg,
+        start_deg,
+        note,
+    };
+    Ok(
+        match (step_deg, equal_spacing(&curves.forward, &curves.reverse)) {
+            (None, Some((s, a))) => {
+                let off = start_deg.map_or(0.0, |g| (g - a).rem_euclid(s));
+                match start_deg {
+                    Some(given) if off.min(s - off) > 1e-6 => {
+                        let note = format!(
+                            "grid {given} + {s}*k deg as given: the entries between the measured angles are interpolated"
+                        );
+                        grid(s, given, note)
+                    }
+                    _ => grid(
+                        s,
+                        a,
+                        format!("grid {a} + {s}*k deg through the equally spaced measured angles"),
+                    ),
+                }
+            }
+            (Some(s), _) => {
+                let a = start_deg.unwrap_or(0.0);
+                grid(check_step(s)?, a, format!("grid {a} + {s}*k deg as given"))
+            }
+            (None, None) => {
+                let min_gap = curves
+                    .forward
+                    .windows(2)
+                    .chain(curves.reverse.windows(2))
+                    .map(|w| w[1].0 - w[0].0)
+                    .fold(f64::INFINITY, f64::min);
+                let s = 360.0 / (360.0 / min_gap - 1e-9).ceil();
+                let a = start_deg.unwrap_or(0.0);
+                let note = format!(
+                    "grid {a} + {s}*k deg: the measured angles are not equally spaced, so the entries \
+                     are interpolated (choose the grid with --step-deg and --start-deg)"
+                );
+                grid(s, a, note)
+            }
+        },
+    )
 }
 
 fn check_step(s: f64) -> Result<f64> {

@@ -6,7 +6,7 @@
 //! the + direction, the reference). Touch points are stylus-centre positions on a sphere of
 //! radius sphere + stylus, spread over the upper cap, with Gaussian noise along the normal.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::io::{write_atomic, write_json};
 use crate::rotary::input::{Direction, RotaryAxis};
 use crate::rotary::sphere::cap_directions;
@@ -128,7 +128,55 @@ fn other_axes(axis: RotaryAxis) -> [usize; 2] {
     }
 }
 
+/// Smallest angle step the generator takes: 36 000 positions a turn.
+pub const MIN_STEP_DEG: f64 = 0.01;
+/// Most probe points the generator makes (positions × repeats × 2 spheres × points).
+pub const MAX_SAMPLES: f64 = 1e7;
+
 impl RotarySynthConfig {
+    /// Refuse a configuration the generator cannot honour (a usage error naming the flag):
+    /// a step below [`MIN_STEP_DEG`] or not dividing the turn, more than [`MAX_SAMPLES`]
+    /// probe points, no repeats, fewer than 4 points a sphere, or a noise that is not a
+    /// finite number ≥ 0.
+    pub fn check(&self) -> Result<()> {
+        if self.step_deg > 0.0 && self.step_deg < MIN_STEP_DEG {
+            return Err(Error::usage(
+                format!(
+                    "--step-deg {:?} is below the smallest step of {MIN_STEP_DEG}°",
+                    self.step_deg
+                ),
+                "choose a step that divides 360, e.g. 10, 15, 30",
+            ));
+        }
+        let samples =
+            360.0 / self.step_deg * self.repeats as f64 * 2.0 * self.points_per_sphere as f64;
+        if samples > MAX_SAMPLES {
+            return Err(Error::usage(
+                format!(
+                    "{samples:.3e} probe points would be generated, more than {MAX_SAMPLES:.0e}"
+                ),
+                "use a larger --step-deg or fewer --repeats or --points",
+            ));
+        }
+        let turns = 360.0 / self.step_deg;
+        if turns.round() < 1.0 || (turns - turns.round()).abs() > 1e-9 {
+            return Err(Error::usage(
+                format!("step {}° does not divide the turn", self.step_deg),
+                "choose a step that divides 360, e.g. 10, 15, 30",
+            ));
+        }
+        if self.repeats == 0
+            || self.points_per_sphere < 4
+            || !(self.probe_noise_um.is_finite() && self.probe_noise_um >= 0.0)
+        {
+            return Err(Error::usage(
+                "synth rotary needs --repeats ≥ 1, --points ≥ 4 and a finite --noise-um ≥ 0",
+                "e.g. --repeats 3 --points 25 --noise-um 0.5",
+            ));
+        }
+        Ok(())
+    }
+
     /// Planted err = α − β (arcsec) at commanded `angle_deg` approached in `direction`.
     pub fn planted_error_arcsec(&self, angle_deg: f64, direction: Direction) -> f64 {
         let curve = |a: f64| {
@@ -152,91 +200,16 @@ impl RotarySynthConfig {
     }
 }
 
-/// Generate the data set described by `config`.
+/// Generate the data set described by `config`: the real axis → the planted errors → the
+/// probed centres and touch points of every run.
 pub fn generate(config: &RotarySynthConfig) -> RotarySynth {
+    let axis = RealAxis::of(config);
+    let (touch_points, centres) = probe(config, &axis);
     let main = config.axis.index();
-    let [i, j] = other_axes(config.axis);
-    let unit = |k: usize| {
-        let mut v = Vector3::zeros();
-        v[k] = 1.0;
-        v
-    };
-    let mut dir = unit(main);
-    dir += unit(i) * (config.tilt_arcsec[0] / ARCSEC_PER_RAD).tan();
-    dir += unit(j) * (config.tilt_arcsec[1] / ARCSEC_PER_RAD).tan();
-    let dir = dir.normalize();
-    let origin = unit(i) * config.offset_mm[0] + unit(j) * config.offset_mm[1];
-    // Bar along e_i (made normal to the real axis), spheres raised along the axis.
-    let radial = (unit(i) - dir * dir.dot(&unit(i))).normalize();
-    let start = [
-        origin + radial * config.inner_radius_mm + dir * config.heights_mm[0],
-        origin
-            + radial * (config.inner_radius_mm + config.bar_length_mm)
-            + dir * config.heights_mm[1],
-    ];
-    let touch_radius = config.sphere_diameter_mm / 2.0 + config.stylus_radius_mm;
-    let pole = config.axis.nominal_direction();
-    let dirs = cap_directions(config.points_per_sphere, config.cap_half_angle_deg, pole);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
-    let sigma_mm = config.probe_noise_um * 1e-3;
-    // A non-finite or negative σ gives no noise rather than a panic.
-    let normal = Normal::new(0.0, sigma_mm).ok();
-    let noise = move |rng: &mut rand_chacha::ChaCha8Rng| normal.map_or(0.0, |n| n.sample(rng));
-
-    let mut touch_points = Vec::new();
-    let mut centres = Vec::new();
-    let mut table = Vec::new();
-    let ascending = config.angles_deg();
-    for direction in [Direction::Forward, Direction::Reverse] {
-        let run: Vec<f64> = match direction {
-            Direction::Forward => ascending.clone(),
-            Direction::Reverse => ascending.iter().rev().copied().collect(),
-        };
-        for &alpha in &ascending {
-            table.push(TruthRow {
-                angle_deg: alpha,
-                direction,
-                error_arcsec: config.planted_error_arcsec(alpha, direction),
-            });
-        }
-        for repeat in 0..config.repeats {
-            for &alpha in &run {
-                let theta =
-                    (alpha - config.planted_error_arcsec(alpha, direction) / 3600.0).to_radians();
-                let rot = Rotation3::from_axis_angle(&Unit::new_normalize(dir), theta);
-                for (k, p0) in start.iter().enumerate() {
-                    let c = origin + rot * (p0 - origin);
-                    let mut noisy = c;
-                    for v in noisy.iter_mut() {
-                        *v += noise(&mut rng);
-                    }
-                    centres.push(SynthRow {
-                        direction,
-                        repeat,
-                        angle_deg: alpha,
-                        sphere: k as u8 + 1,
-                        point: None,
-                        xyz_mm: [noisy.x, noisy.y, noisy.z],
-                    });
-                    for (q, d) in dirs.iter().enumerate() {
-                        let u = Vector3::from(*d);
-                        let p = c + u * (touch_radius + noise(&mut rng));
-                        touch_points.push(SynthRow {
-                            direction,
-                            repeat,
-                            angle_deg: alpha,
-                            sphere: k as u8 + 1,
-                            point: Some(q + 1),
-                            xyz_mm: [p.x, p.y, p.z],
-                        });
-                    }
-                }
-            }
-        }
-    }
-    let nominal = Vector3::from(pole);
+    let nominal = Vector3::from(config.axis.nominal_direction());
+    let dir = axis.direction;
     let letters = ["x", "y", "z"];
-    let tilt_toward = [i, j]
+    let tilt_toward = other_axes(config.axis)
         .iter()
         .map(|&k| {
             (
@@ -253,11 +226,118 @@ pub fn generate(config: &RotarySynthConfig) -> RotarySynth {
             direction: [dir.x, dir.y, dir.z],
             tilt_arcsec: dir.angle(&nominal) * ARCSEC_PER_RAD,
             tilt_toward_arcsec: tilt_toward,
-            location_mm: [origin.x, origin.y, origin.z],
-            table,
+            location_mm: [axis.origin.x, axis.origin.y, axis.origin.z],
+            table: planted_table(config),
             config: config.clone(),
         },
     }
+}
+
+/// The real axis of a configuration and where the spheres are at α = 0.
+struct RealAxis {
+    /// Unit direction, tilted from nominal.
+    direction: Vector3<f64>,
+    /// Where the axis crosses the plane through the origin normal to the nominal axis.
+    origin: Vector3<f64>,
+    /// Centres of sphere 1 and 2 before turning.
+    start: [Vector3<f64>; 2],
+}
+
+impl RealAxis {
+    fn of(config: &RotarySynthConfig) -> RealAxis {
+        let main = config.axis.index();
+        let [i, j] = other_axes(config.axis);
+        let unit = |k: usize| {
+            let mut v = Vector3::zeros();
+            v[k] = 1.0;
+            v
+        };
+        let mut dir = unit(main);
+        dir += unit(i) * (config.tilt_arcsec[0] / ARCSEC_PER_RAD).tan();
+        dir += unit(j) * (config.tilt_arcsec[1] / ARCSEC_PER_RAD).tan();
+        let dir = dir.normalize();
+        let origin = unit(i) * config.offset_mm[0] + unit(j) * config.offset_mm[1];
+        // Bar along e_i (made normal to the real axis), spheres raised along the axis.
+        let radial = (unit(i) - dir * dir.dot(&unit(i))).normalize();
+        let start = [
+            origin + radial * config.inner_radius_mm + dir * config.heights_mm[0],
+            origin
+                + radial * (config.inner_radius_mm + config.bar_length_mm)
+                + dir * config.heights_mm[1],
+        ];
+        RealAxis {
+            direction: dir,
+            origin,
+            start,
+        }
+    }
+}
+
+/// The planted error at every commanded angle, + direction first.
+fn planted_table(config: &RotarySynthConfig) -> Vec<TruthRow> {
+    let mut table = Vec::new();
+    for direction in [Direction::Forward, Direction::Reverse] {
+        for alpha in config.angles_deg() {
+            table.push(TruthRow {
+                angle_deg: alpha,
+                direction,
+                error_arcsec: config.planted_error_arcsec(alpha, direction),
+            });
+        }
+    }
+    table
+}
+
+/// Probe both spheres at every position of every run (+ runs ascending, − runs descending):
+/// the touch points and the noisy centres, noise drawn from the seed in probing order.
+fn probe(config: &RotarySynthConfig, axis: &RealAxis) -> (Vec<SynthRow>, Vec<SynthRow>) {
+    let touch_radius = config.sphere_diameter_mm / 2.0 + config.stylus_radius_mm;
+    let pole = config.axis.nominal_direction();
+    let dirs = cap_directions(config.points_per_sphere, config.cap_half_angle_deg, pole);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(config.seed);
+    let sigma_mm = config.probe_noise_um * 1e-3;
+    // A non-finite or negative σ gives no noise rather than a panic.
+    let normal = Normal::new(0.0, sigma_mm).ok();
+    let noise = move |rng: &mut rand_chacha::ChaCha8Rng| normal.map_or(0.0, |n| n.sample(rng));
+    let (origin, dir) = (axis.origin, axis.direction);
+    let mut touch_points = Vec::new();
+    let mut centres = Vec::new();
+    let ascending = config.angles_deg();
+    for direction in [Direction::Forward, Direction::Reverse] {
+        let run: Vec<f64> = match direction {
+            Direction::Forward => ascending.clone(),
+            Direction::Reverse => ascending.iter().rev().copied().collect(),
+        };
+        for repeat in 0..config.repeats {
+            for &alpha in &run {
+                let theta =
+                    (alpha - config.planted_error_arcsec(alpha, direction) / 3600.0).to_radians();
+                let rot = Rotation3::from_axis_angle(&Unit::new_normalize(dir), theta);
+                for (k, p0) in axis.start.iter().enumerate() {
+                    let row = |point, p: Vector3<f64>| SynthRow {
+                        direction,
+                        repeat,
+                        angle_deg: alpha,
+                        sphere: k as u8 + 1,
+                        point,
+                        xyz_mm: [p.x, p.y, p.z],
+                    };
+                    let c = origin + rot * (p0 - origin);
+                    let mut noisy = c;
+                    for v in noisy.iter_mut() {
+                        *v += noise(&mut rng);
+                    }
+                    centres.push(row(None, noisy));
+                    for (q, d) in dirs.iter().enumerate() {
+                        let u = Vector3::from(*d);
+                        let p = c + u * (touch_radius + noise(&mut rng));
+                        touch_points.push(row(Some(q + 1), p));
+                    }
+                }
+            }
+        }
+    }
+    (touch_points, centres)
 }
 
 /// Write rows as a measurement CSV (with a `point` column when the rows are touch points).
@@ -281,9 +361,10 @@ pub fn write_rows(path: &Path, axis: RotaryAxis, rows: &[SynthRow]) -> Result<()
     })
 }
 
-/// Generate and write `touch_points.csv`, `centres.csv` and `truth.json` into `dir`;
-/// returns the paths written.
+/// Check the configuration ([`RotarySynthConfig::check`]), generate and write
+/// `touch_points.csv`, `centres.csv` and `truth.json` into `dir`; returns the paths written.
 pub fn write_set(dir: &Path, config: &RotarySynthConfig) -> Result<Vec<PathBuf>> {
+    config.check()?;
     let synth = generate(config);
     let touch = dir.join("touch_points.csv");
     let centres = dir.join("centres.csv");
