@@ -139,6 +139,13 @@ impl RotarySynthConfig {
     /// probe points, no repeats, fewer than 4 points a sphere, or a noise that is not a
     /// finite number ≥ 0.
     pub fn check(&self) -> Result<()> {
+        // NaN passes every comparison below: refuse it by name.
+        if self.step_deg.is_nan() {
+            return Err(Error::usage(
+                "--step-deg NaN is not a number of degrees",
+                "choose a step that divides 360, e.g. 10, 15, 30",
+            ));
+        }
         if self.step_deg > 0.0 && self.step_deg < MIN_STEP_DEG {
             return Err(Error::usage(
                 format!(
