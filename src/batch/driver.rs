@@ -586,34 +586,9 @@ fn reduce_into(
     manifests: &[RunManifest],
     trainer_for: &dyn Fn(crate::nn::Backend) -> Result<Box<dyn Trainer>>,
 ) -> Result<JobRun> {
-    let mut summaries = Vec::new();
-    for ((_, dir), m) in folders.values().zip(manifests) {
-        let path = dir.join("summary.json");
-        if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
-            return Err(Error::input(
-                Location::file(&path),
-                "the summary differs from the one the shard's run.json lists",
-                "rerun that shard",
-            ));
-        }
-        summaries.push((path.clone(), BatchSummary::read(&path)?));
-    }
+    let summaries = shard_summaries(folders, manifests)?;
     let mut merged = super::merge(&summaries)?;
-    // Each part's reduce inputs come from its own shard's folder, in batch order.
-    let mut parts = Vec::new();
-    for p in merged.parts.iter().filter(|p| p.ok) {
-        let (k, _) = summaries
-            .iter()
-            .enumerate()
-            .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
-            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
-        let one = BatchSummary {
-            parts: vec![p.clone()],
-            ..summaries[k].1.clone()
-        };
-        let dir = &folders.values().nth(k).expect("one folder per summary").1;
-        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
-    }
+    let parts = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
     let trainer = trainer_for(file.job.model.backend)?;
     let opts = BatchOptions::default();
     let plan = plan_job(file, &opts, batch_dir)?;
@@ -656,6 +631,51 @@ fn reduce_into(
         folder: batch_dir.to_path_buf(),
         reused: Vec::new(),
     })
+}
+
+/// Every shard's summary, checked against its manifest, in shard order.
+fn shard_summaries(
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<(PathBuf, BatchSummary)>> {
+    let mut summaries = Vec::new();
+    for ((_, dir), m) in folders.values().zip(manifests) {
+        let path = dir.join("summary.json");
+        if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
+            return Err(Error::input(
+                Location::file(&path),
+                "the summary differs from the one the shard's run.json lists",
+                "rerun that shard",
+            ));
+        }
+        summaries.push((path.clone(), BatchSummary::read(&path)?));
+    }
+    Ok(summaries)
+}
+
+/// The reduce inputs of the merged summary's mapped parts, in batch order, each from its own
+/// shard's folder.
+fn shard_reduce_parts(
+    merged: &BatchSummary,
+    summaries: &[(PathBuf, BatchSummary)],
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<PartReduce>> {
+    let mut parts = Vec::new();
+    for p in merged.parts.iter().filter(|p| p.ok) {
+        let (k, _) = summaries
+            .iter()
+            .enumerate()
+            .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
+            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
+        let one = BatchSummary {
+            parts: vec![p.clone()],
+            ..summaries[k].1.clone()
+        };
+        let dir = &folders.values().nth(k).expect("one folder per summary").1;
+        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
+    }
+    Ok(parts)
 }
 
 /// Remove the part files an earlier unsharded run listed (and the folders left empty).

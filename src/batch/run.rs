@@ -1236,6 +1236,76 @@ mod tests {
         pts
     }
 
+    /// A 6 × 6 probe grid on a tilted plane (E = 2 µm per 10 mm along x), 50 mm square.
+    fn tilted_plate(dir: &Path) -> PathBuf {
+        let mut text = String::from("x_mm,y_mm,z_mm\n");
+        for j in 0..6 {
+            for i in 0..6 {
+                let (x, y) = (i as f64 * 10.0, j as f64 * 10.0);
+                text.push_str(&format!("{x},{y},{}\n", x * 0.2e-3));
+            }
+        }
+        let path = dir.join("plate.csv");
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_run_reports_every_step_to_the_reporter_it_is_given() {
+        let root = tempfile::tempdir().unwrap();
+        let out_dir = root.path().join("out");
+        let plan = super::super::MapRequest {
+            probes: tilted_plate(root.path()),
+            out_dir: out_dir.clone(),
+            normal: Axis::Z,
+            nominal_plane_mm: Some(0.0),
+            domain: None,
+            grid_step_mm: 10.0,
+            method: Method::NaturalNeighbour,
+            spacing_mm: 10.0,
+            k_sigma: 3.0,
+            epochs: Some(20),
+            seed: Some(1),
+            backend: crate::nn::Backend::CpuReference,
+            max_deviation_mm: 1.0,
+        }
+        .plan()
+        .unwrap();
+        let trainer = crate::nn::CpuTrainer::reference();
+        let recorder = crate::progress::Recorder::default();
+        let summary = execute(&plan, &trainer, &recorder).unwrap();
+        assert_eq!(summary.failed_parts, 0, "{:?}", summary.parts[0].error);
+        use crate::progress::Event;
+        let events = recorder.events();
+        let stages: Vec<&Event> = events
+            .iter()
+            .filter(|e| matches!(e, Event::Stage(..)))
+            .collect();
+        assert_eq!(
+            stages,
+            [
+                &Event::Stage("clean".into(), 1),
+                &Event::Stage("interpolate".into(), 1),
+                &Event::Stage("train".into(), 1),
+                &Event::Stage("write".into(), 1),
+            ]
+        );
+        // 36 points: 4 held out (round(0.1 · 36)), so a hold-out and a delivered network.
+        assert_eq!(summary.parts[0].holdout_points, 4);
+        let Some(Event::Detail(line)) = events.iter().find(|e| matches!(e, Event::Detail(_)))
+        else {
+            panic!("no detail line in {events:?}");
+        };
+        assert!(
+            line.starts_with("training 2 networks (") && line.contains("; 20 epochs) on "),
+            "{line}"
+        );
+        // The silent reporter changes nothing of the outcome.
+        let again = execute(&plan, &trainer, &crate::progress::Silent).unwrap();
+        assert_eq!(again.parts[0].rms_um, summary.parts[0].rms_um);
+        assert!(out_dir.join("summary.json").is_file());
+    }
+
     #[test]
     fn hull_boundary_is_the_outer_ring_of_a_grid() {
         let pts = grid_points(5, 4);
