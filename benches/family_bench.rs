@@ -63,7 +63,12 @@ pub fn family_benches(c: &mut Criterion) {
     let mut group = c.benchmark_group("family");
     group.sample_size(10);
     group.bench_function("batch_2_parts_144_probes_50_epochs_cpu", |b| {
-        b.iter(|| black_box(batch::execute(&plan, &CpuTrainer::reference(), true).expect("batch")))
+        b.iter(|| {
+            black_box(
+                batch::execute(&plan, &CpuTrainer::reference(), &errmap::progress::Silent)
+                    .expect("batch"),
+            )
+        })
     });
     group.finish();
 }

@@ -49,6 +49,11 @@ impl Axis {
             _ => None,
         }
     }
+
+    /// [`Axis::parse`] for a command-line value: the message says what to write.
+    pub fn parse_arg(text: &str) -> std::result::Result<Axis, String> {
+        Axis::parse(text).ok_or_else(|| format!("'{text}' is not an axis: use x, y or z"))
+    }
 }
 
 /// An axis-aligned rectangle in the map plane, in mm.
@@ -72,6 +77,29 @@ impl Domain {
     }
     pub fn height_mm(&self) -> f64 {
         self.v_max_mm - self.v_min_mm
+    }
+
+    /// A command-line value `UMIN,VMIN,UMAX,VMAX` (mm, finite, each minimum below its maximum).
+    pub fn parse_arg(text: &str) -> std::result::Result<Domain, String> {
+        let v: Vec<f64> = text
+            .split(',')
+            .map(|p| {
+                p.trim()
+                    .parse::<f64>()
+                    .map_err(|_| format!("'{p}' is not a number"))
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        match v.as_slice() {
+            &[a, b, c, d] if [a, b, c, d].iter().all(|x| x.is_finite()) && a < c && b < d => {
+                Ok(Domain {
+                    u_min_mm: a,
+                    v_min_mm: b,
+                    u_max_mm: c,
+                    v_max_mm: d,
+                })
+            }
+            _ => Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".into()),
+        }
     }
 }
 
@@ -185,6 +213,31 @@ mod tests {
         // A triangle's hypotenuse: (1.5, 1.5) is 0.5·√2 from x + y = 2.
         let t = convex_hull(&[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]);
         assert!((hull_distance_mm(&t, [1.5, 1.5]) - 0.5 * 2f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn command_line_axes_and_domains_parse_or_say_what_to_write() {
+        assert_eq!(Axis::parse_arg("Y"), Ok(Axis::Y));
+        assert_eq!(
+            Axis::parse_arg("w"),
+            Err("'w' is not an axis: use x, y or z".to_string())
+        );
+        let d = Domain::parse_arg("-10, 0,600,300.5").unwrap();
+        assert_eq!(
+            [d.u_min_mm, d.v_min_mm, d.u_max_mm, d.v_max_mm],
+            [-10.0, 0.0, 600.0, 300.5]
+        );
+        assert_eq!(
+            Domain::parse_arg("0,a,1,1"),
+            Err("'a' is not a number".to_string())
+        );
+        for bad in ["0,0,1", "1,0,0,1", "0,0,1,0", "0,0,inf,1"] {
+            assert_eq!(
+                Domain::parse_arg(bad),
+                Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".to_string()),
+                "{bad}"
+            );
+        }
     }
 
     #[test]

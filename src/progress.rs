@@ -1,10 +1,9 @@
-//! What a run tells the user on stderr, by verbosity: progress bars (shown on a terminal, hidden
-//! when piped or with --quiet), informational lines (hidden by --quiet), details (only with
-//! --verbose) and warnings (always).
+//! What a long run tells its caller while it works: a [`Reporter`] the caller passes in, with
+//! informational lines, details, warnings and progress handles. The library never writes to
+//! stderr itself; the CLI's reporter draws bars and honours --quiet / --verbose, [`Silent`]
+//! says nothing (tests, library users).
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::io::{IsTerminal, Write};
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::Mutex;
 
 /// How much a run says on stderr besides its results and errors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -17,57 +16,99 @@ pub enum Verbosity {
     Verbose = 2,
 }
 
-static LEVEL: AtomicU8 = AtomicU8::new(Verbosity::Normal as u8);
-
-/// Set the verbosity of this process (the CLI does it once, from --quiet / --verbose).
-pub fn set_verbosity(v: Verbosity) {
-    LEVEL.store(v as u8, Ordering::Relaxed);
+/// The progress of one stage of a run: `len` steps, counted as they finish.
+pub trait Progress: Send + Sync {
+    /// `n` more steps done.
+    fn inc(&self, n: u64);
+    /// The stage is over: the handle disappears from the terminal.
+    fn finish(&self);
 }
 
-/// The verbosity of this process.
-pub fn verbosity() -> Verbosity {
-    match LEVEL.load(Ordering::Relaxed) {
-        0 => Verbosity::Quiet,
-        2 => Verbosity::Verbose,
-        _ => Verbosity::Normal,
+/// Where a run's notes and progress go; the caller decides what is shown and how.
+pub trait Reporter: Send + Sync {
+    /// A line a normal run shows ("wrote …").
+    fn info(&self, line: &str);
+    /// A line for a verbose run (which trainer, on which device, how much work).
+    fn detail(&self, line: &str);
+    /// A warning the user should act on (a deprecated flag, a fallback).
+    fn warn(&self, line: &str);
+    /// Whether detail lines are shown: a caller may skip composing them otherwise.
+    fn shows_detail(&self) -> bool {
+        false
+    }
+    /// A handle for a stage of `len` steps named `message`.
+    fn progress(&self, len: u64, message: &str) -> Box<dyn Progress>;
+    /// A handle for one long step (a training call) that shows it is alive while it runs.
+    fn activity(&self, message: &str) -> Box<dyn Progress> {
+        self.progress(1, message)
     }
 }
 
-fn line_at(level: Verbosity, line: &str) {
-    if verbosity() >= level {
-        // A closed stderr has nowhere to report to: the line is dropped.
-        let _ = writeln!(std::io::stderr().lock(), "{line}");
+/// A reporter that says nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Progress for Silent {
+    fn inc(&self, _n: u64) {}
+    fn finish(&self) {}
+}
+
+impl Reporter for Silent {
+    fn info(&self, _line: &str) {}
+    fn detail(&self, _line: &str) {}
+    fn warn(&self, _line: &str) {}
+    fn progress(&self, _len: u64, _message: &str) -> Box<dyn Progress> {
+        Box::new(Silent)
     }
 }
 
-/// A line a normal run shows ("wrote …"); hidden by --quiet.
-pub fn info(line: &str) {
-    line_at(Verbosity::Normal, line);
+/// One thing a [`Recorder`] was told.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Event {
+    Info(String),
+    Detail(String),
+    Warn(String),
+    /// A progress handle opened: its message and length.
+    Stage(String, u64),
 }
 
-/// A line shown only with --verbose (which trainer, on which device, how much work).
-pub fn detail(line: &str) {
-    line_at(Verbosity::Verbose, line);
+/// A reporter that keeps everything it is told, in order (for tests and for callers that show
+/// a run's notes their own way).
+#[derive(Debug, Default)]
+pub struct Recorder {
+    events: Mutex<Vec<Event>>,
 }
 
-/// A warning the user should act on (a deprecated flag, a fallback); shown even with --quiet.
-pub fn warn(line: &str) {
-    line_at(Verbosity::Quiet, line);
-}
-
-/// A progress bar of `len` steps with a message, drawn on stderr only when it is a terminal and `quiet` is off.
-pub fn bar(len: u64, message: &str, quiet: bool) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if quiet || verbosity() == Verbosity::Quiet || !std::io::stderr().is_terminal() {
-        bar.set_draw_target(ProgressDrawTarget::hidden());
+impl Recorder {
+    /// Everything reported so far.
+    pub fn events(&self) -> Vec<Event> {
+        self.events.lock().map(|e| e.clone()).unwrap_or_default()
     }
-    bar.set_style(
-        ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} {elapsed_precise}")
-            .expect("progress template is valid")
-            .progress_chars("=> "),
-    );
-    bar.set_message(message.to_string());
-    bar
+
+    fn push(&self, event: Event) {
+        if let Ok(mut events) = self.events.lock() {
+            events.push(event);
+        }
+    }
+}
+
+impl Reporter for Recorder {
+    fn info(&self, line: &str) {
+        self.push(Event::Info(line.into()));
+    }
+    fn detail(&self, line: &str) {
+        self.push(Event::Detail(line.into()));
+    }
+    fn warn(&self, line: &str) {
+        self.push(Event::Warn(line.into()));
+    }
+    fn shows_detail(&self) -> bool {
+        true
+    }
+    fn progress(&self, len: u64, message: &str) -> Box<dyn Progress> {
+        self.push(Event::Stage(message.into(), len));
+        Box::new(Silent)
+    }
 }
 
 #[cfg(test)]
@@ -75,13 +116,30 @@ mod tests {
     use super::*;
 
     #[test]
-    fn verbosity_levels_are_ordered_and_stored() {
+    fn verbosity_levels_are_ordered() {
         assert!(Verbosity::Quiet < Verbosity::Normal && Verbosity::Normal < Verbosity::Verbose);
-        set_verbosity(Verbosity::Verbose);
-        assert_eq!(verbosity(), Verbosity::Verbose);
-        set_verbosity(Verbosity::Quiet);
-        assert_eq!(verbosity(), Verbosity::Quiet);
-        set_verbosity(Verbosity::Normal);
-        assert_eq!(verbosity(), Verbosity::Normal);
+    }
+
+    #[test]
+    fn a_recorder_keeps_every_line_and_stage_in_order() {
+        let r = Recorder::default();
+        r.info("wrote a");
+        let bar = r.progress(3, "clean");
+        bar.inc(3);
+        bar.finish();
+        r.detail("trainer: cpu");
+        r.warn("careful");
+        let _ = r.activity("train");
+        assert_eq!(
+            r.events(),
+            vec![
+                Event::Info("wrote a".into()),
+                Event::Stage("clean".into(), 3),
+                Event::Detail("trainer: cpu".into()),
+                Event::Warn("careful".into()),
+                Event::Stage("train".into(), 1),
+            ]
+        );
+        assert!(r.shows_detail() && !Silent.shows_detail());
     }
 }

@@ -7,6 +7,7 @@
 //! (lost, out of memory) hands the batch to the CPU with one note.
 
 pub mod bench;
+pub mod info;
 pub mod probe;
 
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -7,6 +7,7 @@ use super::summary::{BatchSummary, PartSummary};
 use super::{plan_job, BatchOptions, JobFile, Shard};
 use crate::error::{Error, Location, Result};
 use crate::nn::Trainer;
+use crate::progress::Reporter;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -75,15 +76,10 @@ pub fn run_job(
     file: &JobFile,
     opts: &BatchOptions,
     trainer: &dyn Trainer,
-    quiet: bool,
+    reporter: &dyn Reporter,
 ) -> Result<JobRun> {
     let file = effective_job(file, opts.backend);
-    if let Some(s) = opts.shard {
-        require_domain(&file, &format!("--shard {}/{}", s.index, s.count))?;
-    }
-    if opts.resume {
-        require_domain(&file, "--resume")?;
-    }
+    require_shared_domain(&file, opts)?;
     let probe_files = file.probe_files()?;
     let job_hash = manifest::job_hash(&file.job, &probe_files, &file.base_dir())?;
     let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
@@ -100,66 +96,145 @@ pub fn run_job(
     };
     let input_hashes = manifest::hash_inputs(&inputs)?;
     let staging = Staging::begin(&target)?;
-    let dir = staging.path().to_path_buf();
-    let mut plan = plan_job(&file, opts, &dir)?;
-    let reused = match &previous {
-        Some(prev) => reuse_parts(prev, &target, &dir, &plan, &input_hashes)?,
-        None => Vec::new(),
+    let folders = RunFolders {
+        staging: staging.path().to_path_buf(),
+        target,
     };
-    let all_parts = plan.parts.clone();
-    plan.parts.retain(|p| !reused.contains(&p.name));
-    if !reused.is_empty() {
-        // The family needs every part: the reduce builds it below. Parts that start from the
-        // family network get it rebuilt from every part, as the whole run builds it.
-        plan.family_dir = None;
-        if plan.family_parts.is_empty() {
-            plan.family_parts = all_parts;
-        }
-    }
-    let mut summary = super::execute(&plan, trainer, quiet)?;
-    relocate_summary(&mut summary, &dir, &target);
+    let (plan, reused) = plan_resumed(&file, opts, &folders, previous.as_ref(), &input_hashes)?;
+    let mut summary = super::execute(&plan, trainer, reporter)?;
+    relocate_summary(&mut summary, &folders.staging, &folders.target);
     for p in summary.parts.iter().filter(|p| p.ok) {
-        crate::io::write_json(&dir.join(&p.part).join("summary.json"), p)?;
+        crate::io::write_json(&folders.staging.join(&p.part).join("summary.json"), p)?;
     }
     if !reused.is_empty() {
-        add_reused(&mut summary, &file, &target, &dir, &reused)?;
+        add_reused(
+            &mut summary,
+            &file,
+            &folders.target,
+            &folders.staging,
+            &reused,
+        )?;
         if opts.shard.is_none() {
-            let full = plan_job(&file, opts, &dir)?;
-            let parts = read_reduce_parts(&summary, &dir, None)?;
-            let outcome = reduce::reduce_family(
-                &parts,
-                &full.settings,
-                &domain_of(&file)?,
-                &dir.join("family"),
-                full.toolpaths.as_ref(),
-                trainer,
-            )?;
-            summary.family_map = outcome.family;
-            summary.toolpaths.extend(outcome.toolpaths);
-            relocate_summary(&mut summary, &dir, &target);
+            reduce_resumed_family(&mut summary, &file, opts, &folders, trainer)?;
         }
-    }
-    crate::io::write_json(&dir.join("summary.json"), &summary)?;
-    if let Some(timing) = &summary.timing {
-        timing.write(&dir)?;
     }
     let kind = if opts.shard.is_some() {
         "shard"
     } else {
         "batch"
     };
-    let files = manifest::hash_tree(&dir)?;
-    let mut m = RunManifest::build(files, kind, job_hash, &summary, input_hashes, &reused)?;
-    m.metadata = file.job.metadata_json();
-    m.k_sigma = Some(file.job.clean.k_sigma);
-    write_report(&dir, &mut m)?;
-    m.write(&dir)?;
+    let sealed = Sealed {
+        kind,
+        job_hash,
+        input_hashes,
+        reused: &reused,
+    };
+    seal_run(&file, &folders.staging, &summary, sealed)?;
     staging.commit()?;
     Ok(JobRun {
         summary,
-        folder: target,
+        folder: folders.target,
         reused,
     })
+}
+
+/// Sharding and `--resume` put parts mapped by different processes into one family.
+fn require_shared_domain(file: &JobFile, opts: &BatchOptions) -> Result<()> {
+    if let Some(s) = opts.shard {
+        require_domain(file, &format!("--shard {}/{}", s.index, s.count))?;
+    }
+    if opts.resume {
+        require_domain(file, "--resume")?;
+    }
+    Ok(())
+}
+
+/// Where a run is written (`staging`) and the folder it then replaces (`target`).
+struct RunFolders {
+    staging: PathBuf,
+    target: PathBuf,
+}
+
+/// The plan of the parts left to map after `--resume` kept those of the previous run that
+/// still match (hard-linked into the staging folder), and the names of the kept parts.
+fn plan_resumed(
+    file: &JobFile,
+    opts: &BatchOptions,
+    folders: &RunFolders,
+    previous: Option<&RunManifest>,
+    input_hashes: &BTreeMap<PathBuf, String>,
+) -> Result<(super::Plan, Vec<String>)> {
+    let mut plan = plan_job(file, opts, &folders.staging)?;
+    let reused = match previous {
+        Some(prev) => reuse_parts(prev, &folders.target, &folders.staging, &plan, input_hashes)?,
+        None => Vec::new(),
+    };
+    let all_parts = plan.parts.clone();
+    plan.parts.retain(|p| !reused.contains(&p.name));
+    if !reused.is_empty() {
+        // The family needs every part: the reduce builds it after the run. Parts that start
+        // from the family network get it rebuilt from every part, as the whole run builds it.
+        plan.family_dir = None;
+        if plan.family_parts.is_empty() {
+            plan.family_parts = all_parts;
+        }
+    }
+    Ok((plan, reused))
+}
+
+/// The family of a resumed unsharded run, rebuilt from every part's reduce inputs.
+fn reduce_resumed_family(
+    summary: &mut BatchSummary,
+    file: &JobFile,
+    opts: &BatchOptions,
+    folders: &RunFolders,
+    trainer: &dyn Trainer,
+) -> Result<()> {
+    let dir = &folders.staging;
+    let full = plan_job(file, opts, dir)?;
+    let parts = read_reduce_parts(summary, dir, None)?;
+    let outcome = reduce::reduce_family(
+        &parts,
+        &full.settings,
+        &domain_of(file)?,
+        &dir.join("family"),
+        full.toolpaths.as_ref(),
+        trainer,
+    )?;
+    summary.family_map = outcome.family;
+    summary.toolpaths.extend(outcome.toolpaths);
+    relocate_summary(summary, dir, &folders.target);
+    Ok(())
+}
+
+/// What a run's manifest records besides its files.
+struct Sealed<'a> {
+    kind: &'a str,
+    job_hash: String,
+    input_hashes: BTreeMap<PathBuf, String>,
+    reused: &'a [String],
+}
+
+/// The run's last files in its staging folder: `summary.json`, the timing, `report.html` and
+/// `run.json` (last: it vouches for the rest).
+fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) -> Result<()> {
+    crate::io::write_json(&dir.join("summary.json"), summary)?;
+    if let Some(timing) = &summary.timing {
+        timing.write(dir)?;
+    }
+    let files = manifest::hash_tree(dir)?;
+    let mut m = RunManifest::build(
+        files,
+        sealed.kind,
+        sealed.job_hash,
+        summary,
+        sealed.input_hashes,
+        sealed.reused,
+    )?;
+    m.metadata = file.job.metadata_json();
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(dir, &mut m)?;
+    m.write(dir)
 }
 
 /// Write `report.html` into the run's folder and list it in the manifest (before `run.json`).
@@ -405,13 +480,22 @@ pub fn merge_job(
     req: &MergeRequest,
     trainer_for: &dyn Fn(crate::nn::Backend) -> Result<Box<dyn Trainer>>,
 ) -> Result<JobRun> {
+    let (batch_dir, folders) = complete_shards(req)?;
+    let manifests = shard_manifests(&folders)?;
+    let file = merged_job(req, &manifests[0], &batch_dir)?;
+    reduce_into(&file, &batch_dir, &folders, &manifests, trainer_for)
+}
+
+/// The batch folder and its shard folders once every shard has committed its run (waiting up
+/// to `req.wait` for them); the missing shards are an error naming how to rerun them.
+fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders)> {
     let start = std::time::Instant::now();
-    let (batch_dir, folders) = loop {
+    loop {
         let (batch_dir, folders) = shard_folders(&req.inputs, req.shards)?;
         let count = shard_count(req, &folders)?;
         let missing = missing_shards(&folders, count);
         if missing.is_empty() {
-            break (batch_dir, folders);
+            return Ok((batch_dir, folders));
         }
         if req.wait.is_some_and(|w| start.elapsed() < w) {
             std::thread::sleep(std::time::Duration::from_secs(2));
@@ -429,7 +513,11 @@ pub fn merge_job(
             ),
             format!("rerun only those: errmap slurm JOB --shards {count} --array {ids} --submit, or errmap batch JOB --shard I/{count} for each; then merge again"),
         ));
-    };
+    }
+}
+
+/// Every shard's manifest, checked to be that shard's run and of one job.
+fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
     let mut manifests = Vec::new();
     for (s, dir) in folders.values() {
         let m = RunManifest::read(dir)?
@@ -464,6 +552,12 @@ pub fn merge_job(
             ));
         }
     }
+    Ok(manifests)
+}
+
+/// The job the shards ran (`--job` or the one their manifests name), checked against their
+/// job hash, with a fixed domain and its inputs outside the batch folder.
+fn merged_job(req: &MergeRequest, first: &RunManifest, batch_dir: &Path) -> Result<JobFile> {
     let job_path = req
         .job
         .clone()
@@ -471,7 +565,7 @@ pub fn merge_job(
         .ok_or_else(|| Error::usage("the shards name no job file", "pass --job JOB.toml"))?;
     let file = effective_job(&super::Job::read(&job_path)?, req.backend);
     require_domain(&file, "the reduce")?;
-    commit::check_inputs_outside(&batch_dir, &job_inputs(&file)?)?;
+    commit::check_inputs_outside(batch_dir, &job_inputs(&file)?)?;
     let hash = manifest::job_hash(&file.job, &file.probe_files()?, &file.base_dir())?;
     if hash != first.job_hash {
         return Err(Error::input(
@@ -480,7 +574,7 @@ pub fn merge_job(
             "pass the shards' job file unchanged and the same --backend as the shards",
         ));
     }
-    reduce_into(&file, &batch_dir, &folders, &manifests, trainer_for)
+    Ok(file)
 }
 
 /// Merge the shards' summaries and write the family, `summary.json` and `run.json` into the
@@ -492,34 +586,9 @@ fn reduce_into(
     manifests: &[RunManifest],
     trainer_for: &dyn Fn(crate::nn::Backend) -> Result<Box<dyn Trainer>>,
 ) -> Result<JobRun> {
-    let mut summaries = Vec::new();
-    for ((_, dir), m) in folders.values().zip(manifests) {
-        let path = dir.join("summary.json");
-        if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
-            return Err(Error::input(
-                Location::file(&path),
-                "the summary differs from the one the shard's run.json lists",
-                "rerun that shard",
-            ));
-        }
-        summaries.push((path.clone(), BatchSummary::read(&path)?));
-    }
+    let summaries = shard_summaries(folders, manifests)?;
     let mut merged = super::merge(&summaries)?;
-    // Each part's reduce inputs come from its own shard's folder, in batch order.
-    let mut parts = Vec::new();
-    for p in merged.parts.iter().filter(|p| p.ok) {
-        let (k, _) = summaries
-            .iter()
-            .enumerate()
-            .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
-            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
-        let one = BatchSummary {
-            parts: vec![p.clone()],
-            ..summaries[k].1.clone()
-        };
-        let dir = &folders.values().nth(k).expect("one folder per summary").1;
-        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
-    }
+    let parts = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
     let trainer = trainer_for(file.job.model.backend)?;
     let opts = BatchOptions::default();
     let plan = plan_job(file, &opts, batch_dir)?;
@@ -562,6 +631,51 @@ fn reduce_into(
         folder: batch_dir.to_path_buf(),
         reused: Vec::new(),
     })
+}
+
+/// Every shard's summary, checked against its manifest, in shard order.
+fn shard_summaries(
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<(PathBuf, BatchSummary)>> {
+    let mut summaries = Vec::new();
+    for ((_, dir), m) in folders.values().zip(manifests) {
+        let path = dir.join("summary.json");
+        if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
+            return Err(Error::input(
+                Location::file(&path),
+                "the summary differs from the one the shard's run.json lists",
+                "rerun that shard",
+            ));
+        }
+        summaries.push((path.clone(), BatchSummary::read(&path)?));
+    }
+    Ok(summaries)
+}
+
+/// The reduce inputs of the merged summary's mapped parts, in batch order, each from its own
+/// shard's folder.
+fn shard_reduce_parts(
+    merged: &BatchSummary,
+    summaries: &[(PathBuf, BatchSummary)],
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<PartReduce>> {
+    let mut parts = Vec::new();
+    for p in merged.parts.iter().filter(|p| p.ok) {
+        let (k, _) = summaries
+            .iter()
+            .enumerate()
+            .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
+            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
+        let one = BatchSummary {
+            parts: vec![p.clone()],
+            ..summaries[k].1.clone()
+        };
+        let dir = &folders.values().nth(k).expect("one folder per summary").1;
+        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
+    }
+    Ok(parts)
 }
 
 /// Remove the part files an earlier unsharded run listed (and the folders left empty).

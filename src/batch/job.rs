@@ -270,6 +270,20 @@ impl Job {
                 hint.to_string(),
             )
         };
+        self.validate_family(&bad)?;
+        self.validate_metadata(&bad)?;
+        self.validate_geometry(&bad)?;
+        self.validate_numbers(&bad)?;
+        self.validate_model(path)
+    }
+}
+
+/// A validation error at a key: `(key, message, hint)`.
+type Bad<'a> = &'a dyn Fn(&str, String, &str) -> Error;
+
+impl Job {
+    /// The family names the output folder.
+    fn validate_family(&self, bad: Bad) -> Result<()> {
         if self.family.is_empty()
             || self.family.starts_with('.')
             || self
@@ -283,7 +297,11 @@ impl Job {
                 "use letters, digits, '-', '_' or '.', e.g. family = \"web-plate\"",
             ));
         }
-        self.validate_metadata(&bad)?;
+        Ok(())
+    }
+
+    /// A finite nominal plane and a domain that is a rectangle.
+    fn validate_geometry(&self, bad: Bad) -> Result<()> {
         if let Some(z) = self.nominal_plane_mm {
             if !z.is_finite() {
                 return Err(bad(
@@ -303,6 +321,11 @@ impl Job {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Positive steps and bounds, a toolpath band, a small hold-out share, a usable segment.
+    fn validate_numbers(&self, bad: Bad) -> Result<()> {
         let positive = [
             ("grid_step_mm", self.grid_step_mm),
             ("max_deviation_mm", self.max_deviation_mm),
@@ -347,6 +370,11 @@ impl Job {
                 "see docs/job.md for the default",
             ));
         }
+        Ok(())
+    }
+
+    /// The `[model]` table's own checks, located at the key its message names.
+    fn validate_model(&self, path: &Path) -> Result<()> {
         self.model.validate().map_err(|e| {
             let (message, hint) = match &e {
                 Error::Usage { message, hint } => (message.clone(), hint.clone()),
@@ -368,7 +396,7 @@ impl Job {
 
 impl Job {
     /// `[metadata]` values are strings or finite numbers under non-empty keys.
-    fn validate_metadata(&self, bad: &dyn Fn(&str, String, &str) -> Error) -> Result<()> {
+    fn validate_metadata(&self, bad: Bad) -> Result<()> {
         let hint = "write key = \"text\" or key = number, e.g. machine = \"DMU 50\", spindle_temp_c = 21.4";
         for (key, value) in &self.metadata {
             let at = format!("metadata.{key}");

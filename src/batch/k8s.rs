@@ -3,7 +3,9 @@
 //! Both are `batch/v1` Jobs in JSON (which `kubectl apply -f` reads like YAML); the tests
 //! check them against the `k8s-openapi` types.
 
+use crate::error::{Error, Result};
 use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
 
 /// What the manifests run and where.
 #[derive(Debug, Clone)]
@@ -135,6 +137,27 @@ impl K8sPlan {
             },
         })
     }
+}
+
+/// The manifests as files: `(file name, pretty JSON)` of the shards' Job and the merge Job.
+pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2]> {
+    let text =
+        |v: &Value| serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()));
+    Ok([
+        ("shards-job.json", text(&plan.shards_job())?),
+        ("merge-job.json", text(&plan.merge_job())?),
+    ])
+}
+
+/// Write the manifests into `dir` (each ends with a newline); their paths, shards' first.
+pub fn write_manifests(plan: &K8sPlan, dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut paths = Vec::new();
+    for (name, text) in manifest_files(plan)? {
+        let path = dir.join(name);
+        crate::io::write_atomic_bytes(&path, format!("{text}\n").as_bytes())?;
+        paths.push(path);
+    }
+    Ok(paths)
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@ pub mod k8s;
 pub mod manifest;
 pub mod reduce;
 pub mod run;
+pub mod single;
 pub mod slurm;
 pub mod summary;
 pub mod timing;
@@ -15,6 +16,7 @@ pub mod train_step;
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};
 pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
+pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 
 use crate::error::{Error, Result};
@@ -131,6 +133,31 @@ pub struct BatchOptions {
     pub output: Option<PathBuf>,
     /// Keep the parts of the folder's run whose input and outputs still match its `run.json`.
     pub resume: bool,
+}
+
+/// The number of shards of a scale-out run (`--shards`): 1 to 10000.
+pub fn check_shard_count(shards: usize) -> Result<()> {
+    if !(1..=10_000).contains(&shards) {
+        return Err(Error::usage(
+            format!("--shards {shards} is not between 1 and 10000"),
+            "one shard per array task / completion, e.g. --shards 4",
+        ));
+    }
+    Ok(())
+}
+
+/// Shards of a scale-out run share one map domain, which only the job can fix.
+pub fn require_shard_domain(file: &JobFile) -> Result<()> {
+    if file.job.domain.is_none() {
+        return Err(Error::usage(
+            format!(
+                "{} has no `domain`, and shards need one",
+                file.path.display()
+            ),
+            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
+        ));
+    }
+    Ok(())
 }
 
 impl Shard {

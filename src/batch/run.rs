@@ -13,8 +13,9 @@ use crate::geom::{Axis, Domain};
 use crate::interp::{self, Grid, Method, Surface};
 use crate::map::{family_stats, ErrorMap, FittedModel};
 use crate::nn::stop::Holdout;
-use crate::nn::{ModelConfig, Normalisation, Trainer, TrainingSet};
+use crate::nn::{Mlp, ModelConfig, Normalisation, Trainer, TrainingSet};
 use crate::probe::{self, ProbePoint, ProbeSpec, Rejected};
+use crate::progress::Reporter;
 use crate::report::heatmap::{self, Heatmap, Scale};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -74,6 +75,29 @@ pub struct Plan {
     pub shard: Option<[usize; 2]>,
 }
 
+impl Plan {
+    /// Every file the plan reads is an input no output may replace: protect them all, then
+    /// check every part's outputs before the first is written, so a refused plan writes nothing.
+    pub fn protect_files(&self) -> Result<()> {
+        use crate::io::safety::{check_output, protect};
+        for part in &self.parts {
+            protect(&part.probe_file);
+        }
+        if let Some(job) = &self.job {
+            protect(job);
+        }
+        for f in self.toolpaths.iter().flat_map(|t| &t.files) {
+            protect(f);
+        }
+        for part in &self.parts {
+            for name in PART_OUTPUTS {
+                check_output(&part.out_dir.join(name))?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A part after reading and cleaning.
 struct Prepared {
     input: PartInput,
@@ -94,62 +118,27 @@ struct Interpolated {
     kriging_holdout_rmse_um: Option<f64>,
 }
 
-/// Indices of points on the boundary of the convex hull (vertices and points on its edges).
+/// Which points lie on the boundary of their convex hull (vertices and points on its edges).
 fn hull_boundary(points: &[ProbePoint]) -> Vec<bool> {
-    let n = points.len();
-    let mut idx: Vec<usize> = (0..n).collect();
-    idx.sort_by(|&a, &b| {
-        points[a]
-            .u_mm
-            .total_cmp(&points[b].u_mm)
-            .then(points[a].v_mm.total_cmp(&points[b].v_mm))
-    });
-    let cross = |o: usize, a: usize, b: usize| {
-        (points[a].u_mm - points[o].u_mm) * (points[b].v_mm - points[o].v_mm)
-            - (points[a].v_mm - points[o].v_mm) * (points[b].u_mm - points[o].u_mm)
-    };
-    // Andrew's monotone chain (strict hull).
-    let mut hull: Vec<usize> = Vec::new();
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &usize>> = if pass == 0 {
-            Box::new(idx.iter())
-        } else {
-            Box::new(idx.iter().rev())
-        };
-        for &p in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(p);
-        }
-        hull.pop();
-    }
-    let scale = points
-        .iter()
-        .map(|p| p.u_mm.abs().max(p.v_mm.abs()))
-        .fold(1.0, f64::max);
-    let mut on = vec![false; n];
+    let uv: Vec<[f64; 2]> = points.iter().map(|p| [p.u_mm, p.v_mm]).collect();
+    let hull = crate::geom::convex_hull(&uv);
     if hull.len() < 2 {
-        return vec![true; n];
+        return vec![true; points.len()];
     }
-    for k in 0..hull.len() {
-        let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
-        let len = (points[b].u_mm - points[a].u_mm).hypot(points[b].v_mm - points[a].v_mm);
-        for (i, flag) in on.iter_mut().enumerate() {
-            if len > 0.0 && (cross(a, b, i) / len).abs() <= 1e-9 * scale {
-                let t = ((points[i].u_mm - points[a].u_mm) * (points[b].u_mm - points[a].u_mm)
-                    + (points[i].v_mm - points[a].v_mm) * (points[b].v_mm - points[a].v_mm))
-                    / (len * len);
-                if (-1e-12..=1.0 + 1e-12).contains(&t) {
-                    *flag = true;
-                }
-            }
-        }
-    }
-    on
+    let scale = uv
+        .iter()
+        .map(|q| q[0].abs().max(q[1].abs()))
+        .fold(1.0, f64::max);
+    let on_edge = |a: [f64; 2], b: [f64; 2], q: [f64; 2]| {
+        let (du, dv) = (b[0] - a[0], b[1] - a[1]);
+        let len = du.hypot(dv);
+        let cross = du * (q[1] - a[1]) - dv * (q[0] - a[0]);
+        let t = ((q[0] - a[0]) * du + (q[1] - a[1]) * dv) / (len * len);
+        len > 0.0 && (cross / len).abs() <= 1e-9 * scale && (-1e-12..=1.0 + 1e-12).contains(&t)
+    };
+    uv.iter()
+        .map(|&q| (0..hull.len()).any(|k| on_edge(hull[k], hull[(k + 1) % hull.len()], q)))
+        .collect()
 }
 
 /// Seeded choice of the held-out points: interior points only (the hull stays the same, so the
@@ -229,14 +218,7 @@ fn interpolate(
     let holdout_nodes = if prep.holdout.is_empty() {
         None
     } else {
-        let kept: Vec<ProbePoint> = prep
-            .clean
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| prep.holdout.binary_search(i).is_err())
-            .map(|(_, p)| p.clone())
-            .collect();
-        match Surface::new(&probe::uve(&kept)) {
+        match Surface::new(&probe::uve(&kept_points(&prep))) {
             Ok(surface) => Some(interp::resample(&surface, s.method, train_grid)),
             Err(e) => return Err(Box::new((prep.input, e))),
         }
@@ -260,6 +242,16 @@ fn interpolate(
     })
 }
 
+/// The clean points the hold-out fits see: all but the held-out ones.
+fn kept_points(prep: &Prepared) -> Vec<ProbePoint> {
+    prep.clean
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| prep.holdout.binary_search(i).is_err())
+        .map(|(_, p)| p.clone())
+        .collect()
+}
+
 /// The kriging baseline a metrologist would compare the map with: fitted on the points the
 /// hold-out network saw, RMS of its misses at the held-out points (µm); `None` without a
 /// hold-out or when the points cannot be kriged.
@@ -267,14 +259,7 @@ fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
     if prep.holdout.is_empty() {
         return None;
     }
-    let kept: Vec<ProbePoint> = prep
-        .clean
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| prep.holdout.binary_search(i).is_err())
-        .map(|(_, p)| p.clone())
-        .collect();
-    let k = interp::kriging::Kriging::fit(&probe::uve(&kept)).ok()?;
+    let k = interp::kriging::Kriging::fit(&probe::uve(&kept_points(prep))).ok()?;
     let sq: f64 = prep
         .holdout
         .iter()
@@ -362,323 +347,516 @@ fn union_box(parts: &[Prepared]) -> Option<Domain> {
     all
 }
 
-/// Run the plan with `trainer`; every part's outcome (and its error) is in the summary.
-pub fn execute(plan: &Plan, trainer: &dyn Trainer, quiet: bool) -> Result<BatchSummary> {
+/// Run the plan with `trainer`, telling `reporter` how it goes; every part's outcome (and its
+/// error) is in the summary. The steps: read → clean → grid → train → evaluate → write.
+pub fn execute(
+    plan: &Plan,
+    trainer: &dyn Trainer,
+    reporter: &dyn Reporter,
+) -> Result<BatchSummary> {
     let s = &plan.settings;
-    let mut failed: Vec<PartSummary> = Vec::new();
-    let fail =
-        |input: &PartInput, e: &Error| PartSummary::failed(&input.name, &input.probe_file, e);
+    let Cleaned { parts, mut failed } = read_and_clean(plan, reporter);
+    let Some(domain) = map_domain(s, &parts)? else {
+        // Nothing could be fitted: every part failed before training.
+        return Ok(finish(plan, trainer, None, failed, None, Vec::new()));
+    };
+    let grids = Grids::new(&domain, s)?;
+    let (interpolated, mut lost) = interpolate_all(parts, s, &grids.train, reporter);
+    failed.append(&mut lost);
+    let sets = training_sets(plan, &interpolated, &grids.train, &domain);
+    if sets.sets.is_empty() {
+        return Ok(finish(
+            plan,
+            trainer,
+            Some(domain),
+            failed,
+            None,
+            Vec::new(),
+        ));
+    }
+    let networks = train(trainer, &sets, &interpolated, s, reporter)?;
+    let fit = Fit {
+        settings: s,
+        domain,
+        grid: grids.map,
+        sets: &sets,
+        nets: &networks.nets,
+    };
+    let outputs = evaluate(plan, trainer, &fit)?;
+    let mut delivered = write_parts(&fit, &interpolated, &outputs, &networks.timings, reporter);
+    delivered.summaries.append(&mut failed);
+    let (family_model, family_summary) = write_family_maps(plan, &fit, &delivered)?;
+    let toolpaths = compensate_toolpaths(plan, &delivered.maps, family_model.as_ref());
+    let mut summary = finish(
+        plan,
+        trainer,
+        Some(domain),
+        delivered.summaries,
+        family_summary,
+        toolpaths,
+    );
+    let timings: Vec<PartTiming> = networks.timings.into_iter().flatten().collect();
+    if !timings.is_empty() {
+        summary.timing = Some(Timing::new(trainer.name(), timings));
+    }
+    Ok(summary)
+}
 
-    // 1. Read and clean every part (rayon).
-    let bar = crate::progress::bar(plan.parts.len() as u64, "clean", quiet);
+/// Step 1's outcome: the parts read and cleaned, and the summaries of those that failed.
+struct Cleaned {
+    parts: Vec<Prepared>,
+    failed: Vec<PartSummary>,
+}
+
+/// The summary of a part that failed.
+fn failed_part(input: &PartInput, e: &Error) -> PartSummary {
+    PartSummary::failed(&input.name, &input.probe_file, e)
+}
+
+/// Step 1: read and clean every part (rayon).
+fn read_and_clean(plan: &Plan, reporter: &dyn Reporter) -> Cleaned {
+    let bar = reporter.progress(plan.parts.len() as u64, "clean");
     let prepared: Vec<_> = plan
         .parts
         .par_iter()
         .map(|p| {
-            let r = prepare(p.clone(), s);
+            let r = prepare(p.clone(), &plan.settings);
             bar.inc(1);
             r
         })
         .collect();
-    bar.finish_and_clear();
-    let mut ok_parts = Vec::new();
+    bar.finish();
+    let mut cleaned = Cleaned {
+        parts: Vec::new(),
+        failed: Vec::new(),
+    };
     for r in prepared {
         match r {
-            Ok(p) => ok_parts.push(p),
-            Err(b) => failed.push(fail(&b.0, &b.1)),
+            Ok(p) => cleaned.parts.push(p),
+            Err(b) => cleaned.failed.push(failed_part(&b.0, &b.1)),
         }
     }
+    cleaned
+}
 
-    // 2. The domain every network is scaled over and the training grid.
-    let domain = match s.domain.or_else(|| union_box(&ok_parts)) {
-        Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Some(d),
-        Some(_) => {
-            return Err(Error::usage(
-                "the probe points span no area (zero width or height)",
-                "give a map domain",
-            ))
-        }
-        None => None,
-    };
+/// The domain every network is scaled over: the settings' or the clean points' box; `None`
+/// when no part has a clean point.
+fn map_domain(s: &Settings, parts: &[Prepared]) -> Result<Option<Domain>> {
+    match s.domain.or_else(|| union_box(parts)) {
+        Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Ok(Some(d)),
+        Some(_) => Err(Error::usage(
+            "the probe points span no area (zero width or height)",
+            "give a map domain",
+        )),
+        None => Ok(None),
+    }
+}
+
+/// The training grid (the networks' training points) and the map grid (the outputs).
+struct Grids {
+    train: Grid,
+    map: Grid,
+}
+
+impl Grids {
+    fn new(domain: &Domain, s: &Settings) -> Result<Grids> {
+        Ok(Grids {
+            train: Grid::covering(domain, s.spacing_mm)?,
+            map: Grid::covering(domain, s.grid_step_mm)?,
+        })
+    }
+}
+
+/// Step 2: every part's training-grid values (rayon); the parts that fail are summarised.
+fn interpolate_all(
+    parts: Vec<Prepared>,
+    s: &Settings,
+    train_grid: &Grid,
+    reporter: &dyn Reporter,
+) -> (Vec<Interpolated>, Vec<PartSummary>) {
+    let bar = reporter.progress(parts.len() as u64, "interpolate");
+    let results: Vec<_> = parts
+        .into_par_iter()
+        .map(|p| {
+            let r = interpolate(p, s, train_grid);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish();
     let mut interpolated = Vec::new();
-    if let Some(domain) = domain {
-        let train_grid = Grid::covering(&domain, s.spacing_mm)?;
-        let grid = Grid::covering(&domain, s.grid_step_mm)?;
-        let bar = crate::progress::bar(ok_parts.len() as u64, "interpolate", quiet);
-        let results: Vec<_> = ok_parts
-            .into_par_iter()
-            .map(|p| {
-                let r = interpolate(p, s, &train_grid);
-                bar.inc(1);
-                r
-            })
-            .collect();
-        bar.finish_and_clear();
-        for r in results {
-            match r {
-                Ok(p) => interpolated.push(p),
-                Err(b) => failed.push(fail(&b.0, &b.1)),
-            }
-        }
-        // 3. All training sets: per part [hold-out fit], delivered fit; then the family.
-        let mut sets = Vec::new();
-        let mut norms = Vec::new();
-        let mut roles = Vec::new();
-        let mut slots = Vec::new(); // (holdout slot, delivered slot) per part
-        let mut holdouts = Vec::new(); // held-out points of each hold-out slot
-        for p in &interpolated {
-            let name = &p.prep.input.name;
-            let h = p.holdout_nodes.as_ref().map(|nodes| {
-                let (set, norm) = training_set(&train_grid, nodes, &domain);
-                holdouts.push(Some(held_out(p, &norm)));
-                sets.push(set);
-                norms.push(norm);
-                roles.push(Role::Holdout(name.clone()));
-                sets.len() - 1
-            });
-            let (set, norm) = training_set(&train_grid, &p.full_nodes, &domain);
-            sets.push(set);
-            norms.push(norm);
-            holdouts.push(None);
-            roles.push(Role::Delivered(name.clone()));
-            slots.push((h, sets.len() - 1));
-        }
-        let members = family_members(plan, &interpolated, s, &train_grid);
-        let family_slot = if !members.is_empty() {
-            let mean: Vec<Option<f64>> = (0..train_grid.len())
-                .map(|k| {
-                    let vals: Option<Vec<f64>> = members.iter().map(|p| p[k]).collect();
-                    vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
-                })
-                .collect();
-            if mean.iter().flatten().count() >= 3 {
-                let (set, norm) = training_set(&train_grid, &mean, &domain);
-                sets.push(set);
-                norms.push(norm);
-                roles.push(Role::Family);
-                Some(sets.len() - 1)
-            } else {
-                None
-            }
-        } else {
-            None
-        };
-        if !sets.is_empty() {
-            if crate::progress::verbosity() == crate::progress::Verbosity::Verbose {
-                let warm = s.model.warm_start == crate::nn::WarmStart::Family
-                    && roles.contains(&Role::Family);
-                let epochs = if warm {
-                    format!(
-                        "the family network {} epochs, then the parts {} epochs from it",
-                        s.model.epochs, s.model.warm_epochs
-                    )
-                } else {
-                    format!("{} epochs", s.model.epochs)
-                };
-                let epochs = if s.model.stop == crate::nn::Stop::Holdout {
-                    format!(
-                        "{epochs} at most, stopping on the hold-out RMS: a check every {} epochs, patience {} checks",
-                        s.model.check_every_epochs, s.model.patience_checks
-                    )
-                } else {
-                    epochs
-                };
-                crate::progress::detail(&format!(
-                    "training {} networks ({} points each at most; {epochs}) on {}",
-                    sets.len(),
-                    sets.iter().map(|t| t.len()).max().unwrap_or(0),
-                    trainer.name()
-                ));
-            }
-            // One call trains every network; the bar ticks so a terminal shows it is alive.
-            let bar = crate::progress::bar(1, "train", quiet);
-            bar.enable_steady_tick(std::time::Duration::from_millis(200));
-            let trained = train_all(trainer, &sets, &norms, &roles, &s.model, &holdouts);
-            bar.finish_and_clear();
-            let trained = trained?;
-            let nets = trained.nets;
-            let timings: Vec<Option<PartTiming>> = interpolated
-                .iter()
-                .zip(&slots)
-                .map(|(p, &(h, _))| {
-                    let outcome = trained.stops.get(h?)?.as_ref()?;
-                    Some(PartTiming::new(&p.prep.input.name, outcome))
-                })
-                .collect();
-            if nets.len() != sets.len() {
-                return Err(Error::Internal(format!(
-                    "trainer returned {} networks for {} training sets",
-                    nets.len(),
-                    sets.len()
-                )));
-            }
-            // 4. Evaluate the delivered and family networks on the map grid.
-            let scale = Normalisation::new(&domain, &[]);
-            let mut inputs = Vec::with_capacity(grid.len());
-            for j in 0..grid.nv {
-                for i in 0..grid.nu {
-                    let (u, v) = grid.node(i, j);
-                    inputs.push(scale.scale_input(u, v));
-                }
-            }
-            let mut eval_slots: Vec<usize> = slots.iter().map(|&(_, d)| d).collect();
-            eval_slots.extend(family_slot.filter(|_| plan.family_dir.is_some()));
-            let eval_nets: Vec<_> = eval_slots.iter().map(|&k| nets[k].clone()).collect();
-            let outputs = trainer.evaluate_batch(&eval_nets, &inputs)?;
-            let to_map = |slot: usize, out: &[f32]| ErrorMap {
-                grid,
-                normal: s.normal,
-                values: out.iter().map(|&y| norms[slot].unscale_output(y)).collect(),
-            };
-            // 5. Outputs per part (rayon).
-            let bar = crate::progress::bar(interpolated.len() as u64, "write", quiet);
-            let (ua, va) = s.normal.plane_axes();
-            let part_results: Vec<(PartSummary, Option<Fitted>)> = interpolated
-                .par_iter()
-                .zip(slots.par_iter())
-                .zip(outputs.par_iter())
-                .zip(timings.par_iter())
-                .map(|(((p, &(h, d)), out), timing)| {
-                    let map = to_map(d, out);
-                    let model = FittedModel::new(
-                        &p.prep.input.name,
-                        s.normal,
-                        domain,
-                        norms[d].clone(),
-                        nets[d].clone(),
-                    )
-                    .with_probes(&p.prep.clean);
-                    let holdout_rmse_um = h.map(|h| {
-                        let hm = FittedModel::new(
-                            "holdout",
-                            s.normal,
-                            domain,
-                            norms[h].clone(),
-                            nets[h].clone(),
-                        );
-                        let sq: f64 = p
-                            .prep
-                            .holdout
-                            .iter()
-                            .map(|&i| {
-                                let q = &p.prep.clean[i];
-                                (q.e_um - hm.e_um(q.u_mm, q.v_mm)).powi(2)
-                            })
-                            .sum();
-                        (sq / p.prep.holdout.len() as f64).sqrt()
-                    });
-                    // The delivered map: the kriging when it fits the held-out points better
-                    // (fitted to every clean point only then: it costs a likelihood search).
-                    let kriging_full = (better_fit(p, holdout_rmse_um) == Some("kriging"))
-                        .then(|| interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok())
-                        .flatten();
-                    let (map, model) = match &kriging_full {
-                        Some(k) => {
-                            let values = (0..grid.nv)
-                                .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
-                                .map(|(i, j)| {
-                                    let (u, v) = grid.node(i, j);
-                                    k.predict(u, v)
-                                })
-                                .collect();
-                            let map = ErrorMap {
-                                grid,
-                                normal: s.normal,
-                                values,
-                            };
-                            (map, model.with_kriging(k.clone()))
-                        }
-                        _ => (map, model),
-                    };
-                    let stopping = timing.as_ref().map(PartTiming::stopping);
-                    let r = write_part(p, &map, &model, holdout_rmse_um, stopping, s, (ua, va));
-                    bar.inc(1);
-                    match r {
-                        Ok(summary) => (summary, Some((map, model, part_marks(p)))),
-                        Err(e) => (fail(&p.prep.input, &e), None),
-                    }
-                })
-                .collect();
-            bar.finish_and_clear();
-            let mut summaries = Vec::new();
-            let mut part_maps = Vec::new();
-            // Every part's probe and rejected points, in batch order, for the family maps.
-            let mut marks = Marks::default();
-            for (summary, fitted) in part_results {
-                if let Some((map, model, part)) = fitted {
-                    part_maps.push((summary.part.clone(), summary.output_dir.clone(), map, model));
-                    marks.probes.extend(part.probes);
-                    marks.rejected.extend(part.rejected);
-                }
-                summaries.push(summary);
-            }
-            summaries.append(&mut failed);
-            failed = summaries;
-
-            // 6. Family maps.
-            let mut family_model = None;
-            let mut family_summary = None;
-            if let (Some(dir), Some(fslot)) = (&plan.family_dir, family_slot) {
-                let maps: Vec<&ErrorMap> = part_maps.iter().map(|(_, _, m, _)| m).collect();
-                if let Some((mean, std)) = family_stats(&maps) {
-                    let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
-                    check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
-                    let parts: Vec<&FittedModel> = part_maps.iter().map(|(_, _, _, m)| m).collect();
-                    let model = FittedModel::new(
-                        "family",
-                        s.normal,
-                        domain,
-                        norms[fslot].clone(),
-                        nets[fslot].clone(),
-                    )
-                    .with_parts(&parts);
-                    family_summary = Some(write_family(
-                        dir,
-                        &mean,
-                        &std,
-                        &model,
-                        maps.len(),
-                        &marks,
-                        s,
-                    )?);
-                    family_model = Some(model);
-                }
-            }
-
-            // 7. Toolpaths.
-            let mut toolpaths = Vec::new();
-            if let Some(tp) = &plan.toolpaths {
-                if tp.per_part {
-                    for (name, dir, _, model) in &part_maps {
-                        if let Some(dir) = dir {
-                            for f in &tp.files {
-                                toolpaths.push(compensate_one(f, dir, name, model, &tp.settings));
-                            }
-                        }
-                    }
-                } else if let (Some(model), Some(dir)) = (&family_model, &plan.family_dir) {
-                    for f in &tp.files {
-                        toolpaths.push(compensate_one(f, dir, "family", model, &tp.settings));
-                    }
-                }
-            }
-            let mut summary = finish(
-                plan,
-                trainer,
-                Some(domain),
-                failed,
-                family_summary,
-                toolpaths,
-            );
-            let timings: Vec<PartTiming> = timings.into_iter().flatten().collect();
-            if !timings.is_empty() {
-                summary.timing = Some(Timing::new(trainer.name(), timings));
-            }
-            return Ok(summary);
+    let mut failed = Vec::new();
+    for r in results {
+        match r {
+            Ok(p) => interpolated.push(p),
+            Err(b) => failed.push(failed_part(&b.0, &b.1)),
         }
     }
-    // Nothing could be fitted: every part failed before training.
-    Ok(finish(plan, trainer, domain, failed, None, Vec::new()))
+    (interpolated, failed)
+}
+
+/// Step 3's outcome: every training set of the batch with its scaling and role: per part
+/// [hold-out fit], delivered fit; then the family.
+struct TrainingSets {
+    sets: Vec<TrainingSet>,
+    norms: Vec<Normalisation>,
+    roles: Vec<Role>,
+    /// Per part: (hold-out slot, delivered slot).
+    slots: Vec<(Option<usize>, usize)>,
+    /// The held-out points of each part's slot (none for the family).
+    holdouts: Vec<Option<Holdout>>,
+    family_slot: Option<usize>,
+}
+
+impl TrainingSets {
+    fn push(&mut self, (set, norm): (TrainingSet, Normalisation), role: Role) -> usize {
+        self.sets.push(set);
+        self.norms.push(norm);
+        self.roles.push(role);
+        self.sets.len() - 1
+    }
+}
+
+/// Step 3: the training sets of every part and of the family.
+fn training_sets(
+    plan: &Plan,
+    interpolated: &[Interpolated],
+    train_grid: &Grid,
+    domain: &Domain,
+) -> TrainingSets {
+    let mut t = TrainingSets {
+        sets: Vec::new(),
+        norms: Vec::new(),
+        roles: Vec::new(),
+        slots: Vec::new(),
+        holdouts: Vec::new(),
+        family_slot: None,
+    };
+    for p in interpolated {
+        let name = &p.prep.input.name;
+        let h = p.holdout_nodes.as_ref().map(|nodes| {
+            let (set, norm) = training_set(train_grid, nodes, domain);
+            t.holdouts.push(Some(held_out(p, &norm)));
+            t.push((set, norm), Role::Holdout(name.clone()))
+        });
+        let delivered = training_set(train_grid, &p.full_nodes, domain);
+        t.holdouts.push(None);
+        let d = t.push(delivered, Role::Delivered(name.clone()));
+        t.slots.push((h, d));
+    }
+    let members = family_members(plan, interpolated, &plan.settings, train_grid);
+    if let Some(mean) = family_mean(&members, train_grid) {
+        let set = training_set(train_grid, &mean, domain);
+        t.family_slot = Some(t.push(set, Role::Family));
+    }
+    t
+}
+
+/// The node-wise mean of the family members' training-grid values (a node counts where every
+/// member has a value); `None` without members or with fewer than 3 such nodes.
+fn family_mean(members: &[Vec<Option<f64>>], train_grid: &Grid) -> Option<Vec<Option<f64>>> {
+    if members.is_empty() {
+        return None;
+    }
+    let mean: Vec<Option<f64>> = (0..train_grid.len())
+        .map(|k| {
+            let vals: Option<Vec<f64>> = members.iter().map(|p| p[k]).collect();
+            vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
+        })
+        .collect();
+    (mean.iter().flatten().count() >= 3).then_some(mean)
+}
+
+/// The `--verbose` line on the training work: how many networks, how many points, which
+/// schedule, on which trainer.
+fn describe_training(t: &TrainingSets, s: &Settings, trainer: &dyn Trainer) -> String {
+    let warm =
+        s.model.warm_start == crate::nn::WarmStart::Family && t.roles.contains(&Role::Family);
+    let epochs = if warm {
+        format!(
+            "the family network {} epochs, then the parts {} epochs from it",
+            s.model.epochs, s.model.warm_epochs
+        )
+    } else {
+        format!("{} epochs", s.model.epochs)
+    };
+    let epochs = if s.model.stop == crate::nn::Stop::Holdout {
+        format!(
+            "{epochs} at most, stopping on the hold-out RMS: a check every {} epochs, patience {} checks",
+            s.model.check_every_epochs, s.model.patience_checks
+        )
+    } else {
+        epochs
+    };
+    format!(
+        "training {} networks ({} points each at most; {epochs}) on {}",
+        t.sets.len(),
+        t.sets.iter().map(|t| t.len()).max().unwrap_or(0),
+        trainer.name()
+    )
+}
+
+/// Step 4's outcome: one network per training set, and per part its hold-out stopping.
+struct Networks {
+    nets: Vec<Mlp>,
+    timings: Vec<Option<PartTiming>>,
+}
+
+/// Step 4: train every network of the batch in one trainer call.
+fn train(
+    trainer: &dyn Trainer,
+    t: &TrainingSets,
+    interpolated: &[Interpolated],
+    s: &Settings,
+    reporter: &dyn Reporter,
+) -> Result<Networks> {
+    if reporter.shows_detail() {
+        reporter.detail(&describe_training(t, s, trainer));
+    }
+    let bar = reporter.activity("train");
+    let trained = train_all(trainer, &t.sets, &t.norms, &t.roles, &s.model, &t.holdouts);
+    bar.finish();
+    let trained = trained?;
+    let timings = interpolated
+        .iter()
+        .zip(&t.slots)
+        .map(|(p, &(h, _))| {
+            let outcome = trained.stops.get(h?)?.as_ref()?;
+            Some(PartTiming::new(&p.prep.input.name, outcome))
+        })
+        .collect();
+    if trained.nets.len() != t.sets.len() {
+        return Err(Error::Internal(format!(
+            "trainer returned {} networks for {} training sets",
+            trained.nets.len(),
+            t.sets.len()
+        )));
+    }
+    Ok(Networks {
+        nets: trained.nets,
+        timings,
+    })
+}
+
+/// What the steps after training share: the settings, the domain and map grid, the training
+/// sets and their networks.
+struct Fit<'a> {
+    settings: &'a Settings,
+    domain: Domain,
+    grid: Grid,
+    sets: &'a TrainingSets,
+    nets: &'a [Mlp],
+}
+
+impl Fit<'_> {
+    /// The fitted model of training slot `slot`.
+    fn model(&self, name: &str, slot: usize) -> FittedModel {
+        FittedModel::new(
+            name,
+            self.settings.normal,
+            self.domain,
+            self.sets.norms[slot].clone(),
+            self.nets[slot].clone(),
+        )
+    }
+}
+
+/// Step 5: the delivered networks of every part (and the family's, when this run writes the
+/// family) on the map grid, in network outputs.
+fn evaluate(plan: &Plan, trainer: &dyn Trainer, fit: &Fit) -> Result<Vec<Vec<f32>>> {
+    let scale = Normalisation::new(&fit.domain, &[]);
+    let grid = &fit.grid;
+    let mut inputs = Vec::with_capacity(grid.len());
+    for j in 0..grid.nv {
+        for i in 0..grid.nu {
+            let (u, v) = grid.node(i, j);
+            inputs.push(scale.scale_input(u, v));
+        }
+    }
+    let mut eval_slots: Vec<usize> = fit.sets.slots.iter().map(|&(_, d)| d).collect();
+    eval_slots.extend(fit.sets.family_slot.filter(|_| plan.family_dir.is_some()));
+    let eval_nets: Vec<_> = eval_slots.iter().map(|&k| fit.nets[k].clone()).collect();
+    trainer.evaluate_batch(&eval_nets, &inputs)
+}
+
+/// A delivered part: its name, folder, map and model.
+struct PartMap {
+    name: String,
+    dir: Option<PathBuf>,
+    map: ErrorMap,
+    model: FittedModel,
+}
+
+/// Step 6's outcome: every part's summary, the delivered maps, and every part's probe and
+/// rejected points in batch order (for the family maps).
+struct Delivered {
+    summaries: Vec<PartSummary>,
+    maps: Vec<PartMap>,
+    marks: Marks,
+}
+
+/// Step 6: every part's outputs (rayon).
+fn write_parts(
+    fit: &Fit,
+    interpolated: &[Interpolated],
+    outputs: &[Vec<f32>],
+    timings: &[Option<PartTiming>],
+    reporter: &dyn Reporter,
+) -> Delivered {
+    let bar = reporter.progress(interpolated.len() as u64, "write");
+    let results: Vec<(PartSummary, Option<Fitted>)> = interpolated
+        .par_iter()
+        .zip(fit.sets.slots.par_iter())
+        .zip(outputs.par_iter())
+        .zip(timings.par_iter())
+        .map(|(((p, &slots), out), timing)| {
+            let r = deliver_part(fit, p, slots, out, timing.as_ref());
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish();
+    let mut delivered = Delivered {
+        summaries: Vec::new(),
+        maps: Vec::new(),
+        marks: Marks::default(),
+    };
+    for (summary, fitted) in results {
+        if let Some((map, model, part)) = fitted {
+            delivered.maps.push(PartMap {
+                name: summary.part.clone(),
+                dir: summary.output_dir.clone(),
+                map,
+                model,
+            });
+            delivered.marks.probes.extend(part.probes);
+            delivered.marks.rejected.extend(part.rejected);
+        }
+        delivered.summaries.push(summary);
+    }
+    delivered
+}
+
+/// One part's delivered map and model, written with its summary; a part that fails here is
+/// summarised with its error.
+fn deliver_part(
+    fit: &Fit,
+    p: &Interpolated,
+    (h, d): (Option<usize>, usize),
+    out: &[f32],
+    timing: Option<&PartTiming>,
+) -> (PartSummary, Option<Fitted>) {
+    let s = fit.settings;
+    let map = ErrorMap {
+        grid: fit.grid,
+        normal: s.normal,
+        values: out
+            .iter()
+            .map(|&y| fit.sets.norms[d].unscale_output(y))
+            .collect(),
+    };
+    let model = fit.model(&p.prep.input.name, d).with_probes(&p.prep.clean);
+    let holdout_rmse_um = h.map(|h| holdout_rmse(p, &fit.model("holdout", h)));
+    let (map, model) = match kriging_if_better(p, holdout_rmse_um) {
+        Some(k) => (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k)),
+        None => (map, model),
+    };
+    let stopping = timing.map(PartTiming::stopping);
+    let axes = s.normal.plane_axes();
+    match write_part(p, &map, &model, holdout_rmse_um, stopping, s, axes) {
+        Ok(summary) => (summary, Some((map, model, part_marks(p)))),
+        Err(e) => (failed_part(&p.prep.input, &e), None),
+    }
+}
+
+/// RMS of a hold-out network's misses at the part's held-out points, µm.
+fn holdout_rmse(p: &Interpolated, holdout_model: &FittedModel) -> f64 {
+    let sq: f64 = p
+        .prep
+        .holdout
+        .iter()
+        .map(|&i| {
+            let q = &p.prep.clean[i];
+            (q.e_um - holdout_model.e_um(q.u_mm, q.v_mm)).powi(2)
+        })
+        .sum();
+    (sq / p.prep.holdout.len() as f64).sqrt()
+}
+
+/// The kriging of every clean point, when it fits the held-out points better than the network
+/// (fitted only then: it costs a likelihood search).
+fn kriging_if_better(
+    p: &Interpolated,
+    network_holdout_rmse_um: Option<f64>,
+) -> Option<interp::kriging::Kriging> {
+    if better_fit(p, network_holdout_rmse_um) != Some("kriging") {
+        return None;
+    }
+    interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok()
+}
+
+/// A kriging's values on the map grid.
+fn kriging_map(k: &interp::kriging::Kriging, grid: Grid, normal: Axis) -> ErrorMap {
+    let values = (0..grid.nv)
+        .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let (u, v) = grid.node(i, j);
+            k.predict(u, v)
+        })
+        .collect();
+    ErrorMap {
+        grid,
+        normal,
+        values,
+    }
+}
+
+/// Step 7: the family maps and network, when this run writes the family.
+fn write_family_maps(
+    plan: &Plan,
+    fit: &Fit,
+    delivered: &Delivered,
+) -> Result<(Option<FittedModel>, Option<FamilySummary>)> {
+    let (Some(dir), Some(fslot)) = (&plan.family_dir, fit.sets.family_slot) else {
+        return Ok((None, None));
+    };
+    let maps: Vec<&ErrorMap> = delivered.maps.iter().map(|m| &m.map).collect();
+    let Some((mean, std)) = family_stats(&maps) else {
+        return Ok((None, None));
+    };
+    let s = fit.settings;
+    let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
+    check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
+    let parts: Vec<&FittedModel> = delivered.maps.iter().map(|m| &m.model).collect();
+    let model = fit.model("family", fslot).with_parts(&parts);
+    let summary = write_family(dir, &mean, &std, &model, maps.len(), &delivered.marks, s)?;
+    Ok((Some(model), Some(summary)))
+}
+
+/// Step 8: the toolpaths compensated with each part's map or with the family map.
+fn compensate_toolpaths(
+    plan: &Plan,
+    maps: &[PartMap],
+    family_model: Option<&FittedModel>,
+) -> Vec<ToolpathSummary> {
+    let mut toolpaths = Vec::new();
+    let Some(tp) = &plan.toolpaths else {
+        return toolpaths;
+    };
+    if tp.per_part {
+        for m in maps {
+            if let Some(dir) = &m.dir {
+                for f in &tp.files {
+                    toolpaths.push(compensate_one(f, dir, &m.name, &m.model, &tp.settings));
+                }
+            }
+        }
+    } else if let (Some(model), Some(dir)) = (family_model, &plan.family_dir) {
+        for f in &tp.files {
+            toolpaths.push(compensate_one(f, dir, "family", model, &tp.settings));
+        }
+    }
+    toolpaths
 }
 
 fn finish(
@@ -948,19 +1126,17 @@ fn write_part(
         }
         .write(dir)?;
     }
-    // Accuracy figures over the measured domain; the extrapolated rest reported apart.
-    let extrapolated = map.extrapolated_nodes(model.hull_mm.as_deref());
-    let (pv, rms) = map
-        .pv_rms_where_um(&extrapolated, false)
-        .unwrap_or((0.0, 0.0));
-    let outside = map.pv_rms_where_um(&extrapolated, true);
+    let acc = Accuracy::of(map, model);
     // `errmap map` names the family after the part: say it once.
     let label = if s.family == *name {
         name.clone()
     } else {
         format!("{} {name}", s.family)
     };
-    let title = format!("{label} — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)");
+    let title = format!(
+        "{label} — PV {:.1} µm, RMS {:.1} µm (measured area)",
+        acc.pv_um, acc.rms_um
+    );
     draw_shaded(
         &dir.join("map.png"),
         &title,
@@ -970,10 +1146,49 @@ fn write_part(
         Scale::Diverging,
         axes,
         "E (µm)",
-        &extrapolated,
+        &acc.extrapolated,
     )?;
-    let summary = PartSummary {
-        part: name.clone(),
+    let summary = part_summary(p, holdout_rmse_um, stopping, &acc);
+    crate::io::write_json(&dir.join("summary.json"), &summary)?;
+    Ok(summary)
+}
+
+/// A map's accuracy figures over the measured domain, the extrapolated rest reported apart.
+struct Accuracy {
+    /// Nodes outside the measured hull.
+    extrapolated: Vec<bool>,
+    pv_um: f64,
+    rms_um: f64,
+    /// (PV, RMS) of the extrapolated nodes, µm; `None` when there are none.
+    outside_um: Option<(f64, f64)>,
+}
+
+impl Accuracy {
+    fn of(map: &ErrorMap, model: &FittedModel) -> Accuracy {
+        let extrapolated = map.extrapolated_nodes(model.hull_mm.as_deref());
+        let (pv_um, rms_um) = map
+            .pv_rms_where_um(&extrapolated, false)
+            .unwrap_or((0.0, 0.0));
+        let outside_um = map.pv_rms_where_um(&extrapolated, true);
+        Accuracy {
+            extrapolated,
+            pv_um,
+            rms_um,
+            outside_um,
+        }
+    }
+}
+
+/// The summary of a delivered part.
+fn part_summary(
+    p: &Interpolated,
+    holdout_rmse_um: Option<f64>,
+    stopping: Option<Stopping>,
+    acc: &Accuracy,
+) -> PartSummary {
+    let extrapolated = &acc.extrapolated;
+    PartSummary {
+        part: p.prep.input.name.clone(),
         probe_file: p.prep.input.probe_file.clone(),
         ok: true,
         points: p.prep.points,
@@ -984,19 +1199,17 @@ fn write_part(
         holdout_rmse_um,
         kriging_holdout_rmse_um: p.kriging_holdout_rmse_um,
         better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
-        rms_um: Some(rms),
-        pv_um: Some(pv),
+        rms_um: Some(acc.rms_um),
+        pv_um: Some(acc.pv_um),
         extrapolated_fraction: Some(
             extrapolated.iter().filter(|&&x| x).count() as f64 / extrapolated.len().max(1) as f64,
         ),
-        rms_extrapolated_um: outside.map(|o| o.1),
-        pv_extrapolated_um: outside.map(|o| o.0),
+        rms_extrapolated_um: acc.outside_um.map(|o| o.1),
+        pv_extrapolated_um: acc.outside_um.map(|o| o.0),
         stopping,
-        output_dir: Some(dir.clone()),
+        output_dir: Some(p.prep.input.out_dir.clone()),
         error: None,
-    };
-    crate::io::write_json(&dir.join("summary.json"), &summary)?;
-    Ok(summary)
+    }
 }
 
 #[cfg(test)]
@@ -1021,6 +1234,76 @@ mod tests {
             }
         }
         pts
+    }
+
+    /// A 6 × 6 probe grid on a tilted plane (E = 2 µm per 10 mm along x), 50 mm square.
+    fn tilted_plate(dir: &Path) -> PathBuf {
+        let mut text = String::from("x_mm,y_mm,z_mm\n");
+        for j in 0..6 {
+            for i in 0..6 {
+                let (x, y) = (i as f64 * 10.0, j as f64 * 10.0);
+                text.push_str(&format!("{x},{y},{}\n", x * 0.2e-3));
+            }
+        }
+        let path = dir.join("plate.csv");
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_run_reports_every_step_to_the_reporter_it_is_given() {
+        let root = tempfile::tempdir().unwrap();
+        let out_dir = root.path().join("out");
+        let plan = super::super::MapRequest {
+            probes: tilted_plate(root.path()),
+            out_dir: out_dir.clone(),
+            normal: Axis::Z,
+            nominal_plane_mm: Some(0.0),
+            domain: None,
+            grid_step_mm: 10.0,
+            method: Method::NaturalNeighbour,
+            spacing_mm: 10.0,
+            k_sigma: 3.0,
+            epochs: Some(20),
+            seed: Some(1),
+            backend: crate::nn::Backend::CpuReference,
+            max_deviation_mm: 1.0,
+        }
+        .plan()
+        .unwrap();
+        let trainer = crate::nn::CpuTrainer::reference();
+        let recorder = crate::progress::Recorder::default();
+        let summary = execute(&plan, &trainer, &recorder).unwrap();
+        assert_eq!(summary.failed_parts, 0, "{:?}", summary.parts[0].error);
+        use crate::progress::Event;
+        let events = recorder.events();
+        let stages: Vec<&Event> = events
+            .iter()
+            .filter(|e| matches!(e, Event::Stage(..)))
+            .collect();
+        assert_eq!(
+            stages,
+            [
+                &Event::Stage("clean".into(), 1),
+                &Event::Stage("interpolate".into(), 1),
+                &Event::Stage("train".into(), 1),
+                &Event::Stage("write".into(), 1),
+            ]
+        );
+        // 36 points: 4 held out (round(0.1 · 36)), so a hold-out and a delivered network.
+        assert_eq!(summary.parts[0].holdout_points, 4);
+        let Some(Event::Detail(line)) = events.iter().find(|e| matches!(e, Event::Detail(_)))
+        else {
+            panic!("no detail line in {events:?}");
+        };
+        assert!(
+            line.starts_with("training 2 networks (") && line.contains("; 20 epochs) on "),
+            "{line}"
+        );
+        // The silent reporter changes nothing of the outcome.
+        let again = execute(&plan, &trainer, &crate::progress::Silent).unwrap();
+        assert_eq!(again.parts[0].rms_um, summary.parts[0].rms_um);
+        assert!(out_dir.join("summary.json").is_file());
     }
 
     #[test]

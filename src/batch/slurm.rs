@@ -1,5 +1,6 @@
 //! Slurm batch scripts for a sharded job: an array job with one task per shard and a merge job that runs after it (`--dependency=afterok`).
 
+use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// What the scripts run and where.
@@ -143,6 +144,60 @@ pub fn valid_array_ids(ids: &str, count: usize) -> bool {
                 _ => false,
             }
         })
+}
+
+/// `--array IDS` checked against the shard count.
+pub fn check_array_ids(ids: &str, count: usize) -> Result<()> {
+    if valid_array_ids(ids, count) {
+        return Ok(());
+    }
+    Err(Error::usage(
+        format!("--array '{ids}' is not a list of task ids below {count}"),
+        "e.g. --array 1,3 or --array 0-2",
+    ))
+}
+
+/// The scripts of `plan` written into its Slurm folder: `[shards.sbatch, merge.sbatch]`.
+pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2]> {
+    let dir = plan.slurm_dir();
+    let paths = [dir.join("shards.sbatch"), dir.join("merge.sbatch")];
+    crate::io::write_atomic_bytes(&paths[0], plan.shards_script().as_bytes())?;
+    crate::io::write_atomic_bytes(&paths[1], plan.merge_script().as_bytes())?;
+    Ok(paths)
+}
+
+/// Run `sbatch --parsable …` and return the job id.
+pub fn sbatch(args: &[String]) -> Result<String> {
+    let out = std::process::Command::new("sbatch")
+        .args(args)
+        .output()
+        .map_err(|e| {
+            Error::usage(
+                format!("cannot run sbatch: {e}"),
+                "run on a Slurm login node, or use --dry-run and submit the scripts yourself",
+            )
+        })?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    match (out.status.success(), parse_job_id(&stdout)) {
+        (true, Some(id)) => Ok(id),
+        _ => Err(Error::device(
+            format!(
+                "sbatch {} failed: {}{}",
+                args.join(" "),
+                stdout.trim(),
+                String::from_utf8_lossy(&out.stderr).trim()
+            ),
+            "check the partition and time limit with sinfo, or submit the scripts in OUT/slurm/ by hand",
+        )),
+    }
+}
+
+/// Submit the array job (only task ids `array` when given), then the merge job after it:
+/// `(array job id, merge job id)`.
+pub fn submit(plan: &SlurmPlan, array: Option<&str>) -> Result<(String, String)> {
+    let array_id = sbatch(&plan.sbatch_shards_args(array))?;
+    let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
+    Ok((array_id, merge_id))
 }
 
 #[cfg(test)]

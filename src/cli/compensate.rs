@@ -1,8 +1,9 @@
 //! CLI of `errmap compensate`: rewrite a G-code or CSV toolpath with P' = P − E.
 
 use super::Globals;
-use errmap::toolpath::{compensate_file, CompensationSettings, Dialect, FanucNumbers, Units};
-use errmap::{Error, Result};
+use errmap::toolpath::compensate_file;
+use errmap::toolpath::zone_spec::SettingsText;
+use errmap::Result;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -75,68 +76,19 @@ pub struct CompensateArgs {
     pub max_deviation_mm: f64,
 }
 
-/// Parse `MIN,MAX`.
-pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
-    let bad = || {
-        Error::usage(
-            format!("--zone '{text}' is not MIN,MAX"),
-            "give two numbers in program units, e.g. --zone -5,0 (or --zone all)",
-        )
-    };
-    let (a, b) = text.split_once(',').ok_or_else(bad)?;
-    let lo: f64 = a.trim().parse().map_err(|_| bad())?;
-    let hi: f64 = b.trim().parse().map_err(|_| bad())?;
-    Ok((lo, hi))
-}
-
-/// Parse an enumerated flag value, or a usage error listing the choices.
-fn choice<T>(
-    flag: &str,
-    text: Option<&str>,
-    parse: fn(&str) -> Option<T>,
-    choices: &str,
-) -> Result<Option<T>> {
-    text.map(|t| {
-        parse(t).ok_or_else(|| {
-            Error::usage(
-                format!("--{flag} '{t}' is not one of {choices}"),
-                format!("use --{flag} with one of {choices}"),
-            )
-        })
-    })
-    .transpose()
-}
-
 pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
-    let everywhere = args.zone.as_deref() == Some("all");
-    let settings = CompensationSettings {
-        zone: args
-            .zone
-            .as_deref()
-            .filter(|z| *z != "all")
-            .map(parse_zone)
-            .transpose()?,
-        everywhere,
+    let settings = SettingsText {
+        zone: args.zone.as_deref(),
         surface_tol_mm: args.surface_tol,
-        max_segment: args.max_segment,
-        chord_tol: args.chord_tol,
-        dialect: choice(
-            "dialect",
-            args.dialect.as_deref(),
-            Dialect::parse,
-            "linuxcnc, fanuc, sinumerik, heidenhain",
-        )?,
-        units: choice("units", args.units.as_deref(), Units::parse, "mm, inch")?,
-        fanuc_numbers: choice(
-            "fanuc-numbers",
-            args.fanuc_numbers.as_deref(),
-            FanucNumbers::parse,
-            "calculator, is-a, is-b, is-c",
-        )?,
+        max_segment_mm: args.max_segment,
+        chord_tol_mm: args.chord_tol,
+        dialect: args.dialect.as_deref(),
+        units: args.units.as_deref(),
+        fanuc_numbers: args.fanuc_numbers.as_deref(),
         extrapolate: args.extrapolate,
         domain_margin_mm: args.domain_margin,
-    };
-    settings.validate()?;
+    }
+    .settings()?;
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     let model = errmap::map::FittedModel::read(&args.model)?;
     model.check_plausible(args.max_deviation_mm, &args.model)?;

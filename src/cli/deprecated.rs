@@ -16,7 +16,7 @@ pub fn renamed<T>(new: Option<T>, old: Option<T>, old_flag: &str, new_flag: &str
     match (new, old) {
         (Some(v), _) => Some(v),
         (None, Some(v)) => {
-            errmap::progress::warn(&note(old_flag, new_flag));
+            super::terminal::warn(&note(old_flag, new_flag));
             Some(v)
         }
         (None, None) => None,

@@ -1,11 +1,7 @@
 //! CLI of `errmap gpu-info`: adapters, the one chosen and its limits.
 
-use serde::Serialize;
-
 use super::Globals;
-use errmap::backend::probe::{self, Verdict};
-use errmap::gpu::{list_adapters, AdapterSummary, GpuTrainer, LimitsSummary};
-use errmap::nn::ModelConfig;
+use errmap::backend::info::GpuInfo;
 use errmap::Result;
 
 /// List GPU adapters, the one `--backend auto|gpu` would use, and its limits.
@@ -16,119 +12,81 @@ pub struct GpuInfoArgs {
     pub json: bool,
 }
 
-#[derive(Serialize)]
-struct GpuInfo {
-    adapters: Vec<AdapterSummary>,
-    /// The adapter `--backend gpu` uses (hardware first, else software).
-    chosen: Option<AdapterSummary>,
-    limits: Option<LimitsSummary>,
-    /// What `--backend auto` trains the default architecture on: "gpu" or "cpu".
-    auto_backend: &'static str,
-    /// Why: the probe's figures (cached per machine, driver and architecture).
-    auto_reason: String,
-    auto_probe: Option<Verdict>,
-    /// Where the probe's figures are cached.
-    probe_cache: Option<String>,
-    /// Why no device could be opened, when none could.
-    error: Option<String>,
-}
-
 pub fn run(args: GpuInfoArgs, _globals: Globals) -> Result<i32> {
-    let adapters = list_adapters();
-    let config = ModelConfig::default();
-    let cache = probe::cache_file().map(|p| p.display().to_string());
-    let info = match GpuTrainer::new() {
-        Ok(gpu) => {
-            let verdict = probe::compare(&gpu, &config)?;
-            let gpu_wins = verdict.gpu_is_faster();
-            GpuInfo {
-                adapters,
-                chosen: Some(gpu.context().adapter.clone()),
-                limits: Some(LimitsSummary::of(&gpu.context().limits)),
-                auto_backend: if gpu_wins { "gpu" } else { "cpu" },
-                auto_reason: verdict.describe(gpu_wins),
-                auto_probe: Some(verdict),
-                probe_cache: cache,
-                error: None,
-            }
-        }
-        Err(e) => GpuInfo {
-            adapters,
-            chosen: None,
-            limits: None,
-            auto_backend: "cpu",
-            auto_reason: format!("no usable GPU ({e})"),
-            auto_probe: None,
-            probe_cache: cache,
-            error: Some(e.to_string()),
-        },
-    };
+    let info = GpuInfo::gather()?;
     if args.json {
-        let text = serde_json::to_string_pretty(&info)
-            .map_err(|e| errmap::Error::Internal(format!("gpu-info JSON: {e}")))?;
-        outln!("{text}");
+        outln!("{}", info.to_json()?);
         return Ok(0);
     }
+    print_adapters(&info)?;
+    print_choice(&info)?;
+    Ok(0)
+}
+
+fn print_adapters(info: &GpuInfo) -> Result<()> {
     if info.adapters.is_empty() {
         outln!("adapters: none");
-    } else {
-        outln!("adapters (best first):");
-        for a in &info.adapters {
-            outln!(
-                "  {} — {} {}{}, driver {} {}",
-                a.name,
-                a.backend,
-                a.device_type,
-                if a.software { " (software)" } else { "" },
-                a.driver,
-                a.driver_info
-            );
-        }
+        return Ok(());
     }
-    match (&info.chosen, &info.limits) {
-        (Some(chosen), Some(limits)) => {
-            outln!("chosen: {} ({})", chosen.name, chosen.backend);
-            outln!("limits:");
-            outln!(
-                "  max_buffer_size                      {}",
-                limits.max_buffer_size
-            );
-            outln!(
-                "  max_storage_buffer_binding_size      {}",
-                limits.max_storage_buffer_binding_size
-            );
-            outln!(
-                "  max_storage_buffers_per_shader_stage {}",
-                limits.max_storage_buffers_per_shader_stage
-            );
-            outln!(
-                "  max_compute_workgroups_per_dimension {}",
-                limits.max_compute_workgroups_per_dimension
-            );
-            outln!(
-                "  max_compute_invocations_per_workgroup {}",
-                limits.max_compute_invocations_per_workgroup
-            );
-            outln!(
-                "  min_uniform_buffer_offset_alignment  {}",
-                limits.min_uniform_buffer_offset_alignment
-            );
-            outln!(
-                "--backend auto trains on the {}: {}",
-                info.auto_backend.to_uppercase(),
-                info.auto_reason
-            );
-            if let Some(cache) = &info.probe_cache {
-                outln!("probe cache: {cache} (delete it to measure again)");
-            }
-        }
-        _ => {
-            outln!(
-                "chosen: none ({})",
-                info.error.as_deref().unwrap_or("no adapter")
-            );
-            outln!("--backend auto trains on the CPU; --backend gpu fails");
-        }
+    outln!("adapters (best first):");
+    for a in &info.adapters {
+        outln!(
+            "  {} — {} {}{}, driver {} {}",
+            a.name,
+            a.backend,
+            a.device_type,
+            if a.software { " (software)" } else { "" },
+            a.driver,
+            a.driver_info
+        );
     }
-    Ok(0)
+    Ok(())
+}
+
+fn print_choice(info: &GpuInfo) -> Result<()> {
+    let (Some(chosen), Some(limits)) = (&info.chosen, &info.limits) else {
+        outln!(
+            "chosen: none ({})",
+            info.error.as_deref().unwrap_or("no adapter")
+        );
+        outln!("--backend auto trains on the CPU; --backend gpu fails");
+        return Ok(());
+    };
+    outln!("chosen: {} ({})", chosen.name, chosen.backend);
+    outln!("limits:");
+    // Names padded to one column (the longest keeps its one space).
+    for (name, value) in [
+        ("max_buffer_size", limits.max_buffer_size),
+        (
+            "max_storage_buffer_binding_size",
+            limits.max_storage_buffer_binding_size,
+        ),
+        (
+            "max_storage_buffers_per_shader_stage",
+            u64::from(limits.max_storage_buffers_per_shader_stage),
+        ),
+        (
+            "max_compute_workgroups_per_dimension",
+            u64::from(limits.max_compute_workgroups_per_dimension),
+        ),
+        (
+            "max_compute_invocations_per_workgroup",
+            u64::from(limits.max_compute_invocations_per_workgroup),
+        ),
+        (
+            "min_uniform_buffer_offset_alignment",
+            u64::from(limits.min_uniform_buffer_offset_alignment),
+        ),
+    ] {
+        outln!("  {name:<36} {value}");
+    }
+    outln!(
+        "--backend auto trains on the {}: {}",
+        info.auto_backend.to_uppercase(),
+        info.auto_reason
+    );
+    if let Some(cache) = &info.probe_cache {
+        outln!("probe cache: {cache} (delete it to measure again)");
+    }
+    Ok(())
 }

@@ -2,10 +2,10 @@
 
 use super::Globals;
 use errmap::geom::Axis;
-use errmap::interp::{resample, Grid, Method, Surface};
-use errmap::io::write_atomic;
-use errmap::probe::{parse_domain, read_probes, ProbeSpec};
-use errmap::{Error, Location, Result};
+use errmap::interp::grid_file::{grid_probes, GridRequest};
+use errmap::interp::Method;
+use errmap::probe::parse_domain;
+use errmap::Result;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -23,7 +23,7 @@ pub struct GridArgs {
     #[arg(long, value_name = "UMIN,VMIN,UMAX,VMAX", allow_hyphen_values = true)]
     pub domain: Option<String>,
     /// Error direction: the axis E is measured along (x, y or z).
-    #[arg(long, default_value = "z", value_parser = parse_axis)]
+    #[arg(long, default_value = "z", value_parser = Axis::parse_arg)]
     pub normal: Axis,
     /// Nominal coordinate of the surface along the normal, in mm, for files without
     /// nx_mm,ny_mm,nz_mm columns (the columns win when present).
@@ -39,73 +39,23 @@ pub struct GridArgs {
     pub max_deviation_mm: f64,
 }
 
-fn parse_axis(text: &str) -> std::result::Result<Axis, String> {
-    Axis::parse(text).ok_or_else(|| format!("'{text}' is not an axis: use x, y or z"))
-}
-
-/// Round to a multiple of 1/`scale` for output, without a negative zero.
-fn rounded(x: f64, scale: f64) -> f64 {
-    let r = (x * scale).round() / scale;
-    if r == 0.0 {
-        0.0
-    } else {
-        r
-    }
-}
-
 pub fn run(args: GridArgs, _globals: Globals) -> Result<i32> {
     let domain = args.domain.as_deref().map(parse_domain).transpose()?;
-    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
-    let spec = ProbeSpec {
+    let req = GridRequest {
+        probes: args.probes,
+        method: args.method,
+        step_mm: args.step,
+        domain,
         normal: args.normal,
         nominal_plane_mm: args.nominal_plane,
-        domain,
         max_deviation_mm: args.max_deviation_mm,
     };
-    let set = read_probes(&args.probes, &spec)?;
-    let domain = match domain.or_else(|| set.bounding_box()) {
-        Some(d) => d,
-        None => {
-            return Err(Error::Internal(
-                "a validated probe set has no points".into(),
-            ))
-        }
-    };
-    let grid = Grid::covering(&domain, args.step)?;
-    let surface = Surface::new(&set.uve()).map_err(|e| {
-        Error::input(
-            Location::file(&args.probes),
-            e.to_string(),
-            "the probes must span an area in the map plane",
-        )
-    })?;
-    let values = resample(&surface, args.method, &grid);
-    let (ua, va) = args.normal.plane_axes();
-    let mut inside = 0usize;
-    write_atomic(&args.output, |w| {
-        writeln!(w, "{}_mm,{}_mm,e_um", ua.name(), va.name())?;
-        for j in 0..grid.nv {
-            for i in 0..grid.nu {
-                if let Some(e) = values[j * grid.nu + i] {
-                    let (u, v) = grid.node(i, j);
-                    // Nodes to 1 nm (no 0.30000000000000004), E to 1e-6 µm.
-                    writeln!(
-                        w,
-                        "{},{},{}",
-                        rounded(u, 1e6),
-                        rounded(v, 1e6),
-                        rounded(e, 1e6)
-                    )?;
-                    inside += 1;
-                }
-            }
-        }
-        Ok(())
-    })?;
+    let done = grid_probes(&req, &args.output)?;
+    let grid = done.grid;
     info!(
         "errmap grid: {} probe points → {} of {} nodes ({} × {}, step {} mm) inside their hull, {} → {}",
-        set.points.len(),
-        inside,
+        done.points,
+        done.inside,
         grid.len(),
         grid.nu,
         grid.nv,

@@ -22,7 +22,7 @@ macro_rules! out {
 /// An informational line on stderr ("wrote …"), hidden by `--quiet`.
 macro_rules! info {
     ($($arg:tt)*) => {
-        errmap::progress::info(&format!($($arg)*))
+        $crate::cli::terminal::info(&format!($($arg)*))
     };
 }
 
@@ -38,6 +38,7 @@ mod report;
 mod rotary;
 mod scale;
 mod synth_web_plate;
+mod terminal;
 mod thermal;
 
 use clap::{Parser, Subcommand};
@@ -122,7 +123,7 @@ pub enum SynthCommand {
 
 /// Notes from the library (a trainer falling back to the CPU) go to stderr unless `--quiet`.
 pub fn notes(_globals: Globals) -> errmap::backend::Notes {
-    std::sync::Arc::new(|line: &str| errmap::progress::info(line))
+    std::sync::Arc::new(|line: &str| terminal::info(line))
 }
 
 /// Write text to stdout and flush it; an error (a closed pipe) is returned, never a panic.
@@ -159,8 +160,8 @@ pub fn run(cli: Cli) -> Result<i32> {
     }
     errmap::io::safety::set_max_output_mb(cli.max_output_mb);
     let globals = Globals { quiet: cli.quiet };
-    use errmap::progress::{set_verbosity, Verbosity};
-    set_verbosity(match (cli.quiet, cli.verbose) {
+    use errmap::progress::Verbosity;
+    terminal::set_verbosity(match (cli.quiet, cli.verbose) {
         (true, _) => Verbosity::Quiet,
         (false, true) => Verbosity::Verbose,
         (false, false) => Verbosity::Normal,

@@ -1,9 +1,8 @@
 //! CLI of part-family mapping: `batch`, `map` and `merge`.
 
+use super::terminal::Terminal;
 use super::Globals;
-use errmap::batch::{
-    self, BatchOptions, BatchSummary, Job, MergeRequest, PartInput, Plan, Settings, Shard,
-};
+use errmap::batch::{self, BatchOptions, BatchSummary, Job, MapRequest, MergeRequest, Shard};
 use errmap::geom::{Axis, Domain};
 use errmap::interp::Method;
 use errmap::nn::{Backend, ModelConfig};
@@ -58,13 +57,13 @@ pub struct MapArgs {
     )]
     pub old_out: Option<PathBuf>,
     /// Error direction: z maps E over x,y; x over y,z; y over z,x.
-    #[arg(long, default_value = "z", value_parser = parse_axis)]
+    #[arg(long, default_value = "z", value_parser = Axis::parse_arg)]
     pub normal: Axis,
     /// Nominal coordinate along the normal for every point (when the file has no nominal columns).
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     pub nominal_plane: Option<f64>,
     /// Map domain UMIN,VMIN,UMAX,VMAX in mm (default: the probes' bounding box).
-    #[arg(long, value_name = "UMIN,VMIN,UMAX,VMAX", value_parser = parse_domain, allow_hyphen_values = true)]
+    #[arg(long, value_name = "UMIN,VMIN,UMAX,VMAX", value_parser = Domain::parse_arg, allow_hyphen_values = true)]
     pub domain: Option<Domain>,
     /// Step of the output grid, mm.
     #[arg(long, value_name = "MM", default_value_t = 5.0)]
@@ -118,32 +117,6 @@ pub struct MergeArgs {
     pub json: bool,
 }
 
-fn parse_axis(text: &str) -> std::result::Result<Axis, String> {
-    Axis::parse(text).ok_or_else(|| format!("'{text}' is not an axis: use x, y or z"))
-}
-
-fn parse_domain(text: &str) -> std::result::Result<Domain, String> {
-    let v: Vec<f64> = text
-        .split(',')
-        .map(|p| {
-            p.trim()
-                .parse::<f64>()
-                .map_err(|_| format!("'{p}' is not a number"))
-        })
-        .collect::<std::result::Result<_, _>>()?;
-    match v.as_slice() {
-        &[a, b, c, d] if [a, b, c, d].iter().all(|x| x.is_finite()) && a < c && b < d => {
-            Ok(Domain {
-                u_min_mm: a,
-                v_min_mm: b,
-                u_max_mm: c,
-                v_max_mm: d,
-            })
-        }
-        _ => Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".into()),
-    }
-}
-
 fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: bool) -> Result<()> {
     if json {
         let text =
@@ -156,6 +129,17 @@ fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: boo
         }
     }
     Ok(())
+}
+
+/// The trainer for `backend`, its choice explained with --verbose.
+fn select(
+    backend: Backend,
+    model: &ModelConfig,
+    globals: Globals,
+) -> Result<Box<dyn errmap::nn::Trainer>> {
+    let selection = errmap::backend::select_trainer(backend, model, super::notes(globals))?;
+    super::terminal::detail(&format!("trainer: {}", selection.reason));
+    Ok(selection.trainer)
 }
 
 pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
@@ -174,10 +158,8 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
         info!("note: {note}");
     }
     let backend = args.backend.unwrap_or(file.job.model.backend);
-    let selection =
-        errmap::backend::select_trainer(backend, &file.job.model, super::notes(globals))?;
-    errmap::progress::detail(&format!("trainer: {}", selection.reason));
-    let run = batch::run_job(&file, &opts, selection.trainer.as_ref(), globals.quiet)?;
+    let trainer = select(backend, &file.job.model, globals)?;
+    let run = batch::run_job(&file, &opts, trainer.as_ref(), &Terminal)?;
     if args.resume && !args.json {
         info!(
             "resume: kept {} part(s) of the previous run{}",
@@ -199,103 +181,34 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     Ok(run.summary.exit_code())
 }
 
-/// Every file a plan reads is an input no output may replace: protect them all, then check
-/// every part's outputs before the first is written, so a refused plan writes nothing.
-fn protect_plan(plan: &Plan) -> Result<()> {
-    use errmap::io::safety::{check_output, protect};
-    for part in &plan.parts {
-        protect(&part.probe_file);
-    }
-    if let Some(job) = &plan.job {
-        protect(job);
-    }
-    for f in plan.toolpaths.iter().flat_map(|t| &t.files) {
-        protect(f);
-    }
-    for part in &plan.parts {
-        for name in batch::PART_OUTPUTS {
-            check_output(&part.out_dir.join(name))?;
-        }
-    }
-    Ok(())
-}
-
 pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
     let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
-    if let Some(z) = args.nominal_plane {
-        if !z.is_finite() {
-            return Err(Error::usage(
-                "--nominal-plane must be a finite number",
-                "e.g. --nominal-plane 5.0",
-            ));
-        }
-    }
-    let mut model = ModelConfig {
+    let plan = MapRequest {
+        probes: args.probes,
+        out_dir: out_dir.clone(),
+        normal: args.normal,
+        nominal_plane_mm: args.nominal_plane,
+        domain: args.domain,
+        grid_step_mm: args.grid_step,
+        method: args.method,
+        spacing_mm: args.spacing,
+        k_sigma: args.k_sigma,
+        epochs: args.epochs,
+        seed: args.seed,
         backend: args.backend,
-        ..ModelConfig::default()
-    };
-    if let Some(e) = args.epochs {
-        model.epochs = e;
+        max_deviation_mm: args.max_deviation_mm,
     }
-    if let Some(s) = args.seed {
-        model.seed = s;
-    }
-    model.validate()?;
-    errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
-    for (flag, v) in [
-        ("--grid-step", args.grid_step),
-        ("--spacing", args.spacing),
-        ("--k-sigma", args.k_sigma),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(Error::usage(
-                format!("{flag} {v} must be a positive number"),
-                "see errmap map --help",
-            ));
-        }
-    }
-    let name = args
-        .probes
-        .file_stem()
-        .map_or("part".to_string(), |s| s.to_string_lossy().to_string());
-    let plan = Plan {
-        settings: Settings {
-            family: name.clone(),
-            normal: args.normal,
-            nominal_plane_mm: args.nominal_plane,
-            domain: args.domain,
-            grid_step_mm: args.grid_step,
-            k_sigma: args.k_sigma,
-            method: args.method,
-            spacing_mm: args.spacing,
-            model,
-            max_deviation_mm: args.max_deviation_mm,
-            reduce_inputs: false,
-        },
-        parts: vec![PartInput {
-            name,
-            probe_file: args.probes.clone(),
-            out_dir: out_dir.clone(),
-        }],
-        family_parts: Vec::new(),
-        family_dir: None,
-        toolpaths: None,
-        job: None,
-        shard: None,
-    };
+    .plan()?;
     errmap::io::safety::confine_to(&out_dir)?;
-    protect_plan(&plan)?;
-    let selection =
-        errmap::backend::select_trainer(args.backend, &plan.settings.model, super::notes(globals))?;
-    errmap::progress::detail(&format!("trainer: {}", selection.reason));
-    let summary = batch::execute(&plan, selection.trainer.as_ref(), globals.quiet)?;
-    // A single part has no batch to finish: its failure is the command's error, with its
-    // kind (and exit code), place and fix.
-    if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
-        return Err(err.into_error());
-    }
-    let path = out_dir.join("summary.json");
-    report(&summary, &path, args.json, globals.quiet)?;
+    plan.protect_files()?;
+    let trainer = select(args.backend, &plan.settings.model, globals)?;
+    let summary = batch::map_part(&plan, trainer.as_ref(), &Terminal)?;
+    report(
+        &summary,
+        &out_dir.join("summary.json"),
+        args.json,
+        globals.quiet,
+    )?;
     Ok(0)
 }
 
@@ -307,12 +220,7 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
         backend: args.backend,
         wait: args.wait.map(std::time::Duration::from_secs),
     };
-    let trainer_for = |b: Backend| -> errmap::Result<Box<dyn errmap::nn::Trainer>> {
-        let notes = super::notes(globals);
-        let selection = errmap::backend::select_trainer(b, &ModelConfig::default(), notes)?;
-        errmap::progress::detail(&format!("trainer: {}", selection.reason));
-        Ok(selection.trainer)
-    };
+    let trainer_for = |b: Backend| select(b, &ModelConfig::default(), globals);
     let run = batch::merge_job(&req, &trainer_for)?;
     super::ignore_closed_pipe(report(
         &run.summary,

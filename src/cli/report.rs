@@ -19,7 +19,7 @@ pub struct ReportArgs {
     pub pdf: Option<PathBuf>,
 }
 
-pub fn run(args: ReportArgs, globals: Globals) -> Result<i32> {
+pub fn run(args: ReportArgs, _globals: Globals) -> Result<i32> {
     let html = render_path(&args.source)?;
     let output = match &args.output {
         Some(o) => o.clone(),
@@ -30,14 +30,10 @@ pub fn run(args: ReportArgs, globals: Globals) -> Result<i32> {
         None => args.source.with_extension("html"),
     };
     errmap::io::write_atomic_bytes(&output, html.as_bytes())?;
-    if !globals.quiet {
-        eprintln!("wrote {}", output.display());
-    }
+    info!("wrote {}", output.display());
     if let Some(pdf) = &args.pdf {
         print_pdf(&output, pdf)?;
-        if !globals.quiet {
-            eprintln!("wrote {}", pdf.display());
-        }
+        info!("wrote {}", pdf.display());
     }
     Ok(0)
 }

@@ -1,9 +1,9 @@
 //! CLI of scale-out: `slurm` (array job + merge job, written or submitted) and `k8s` (Indexed Job + merge Job manifests).
 
 use super::Globals;
-use errmap::batch::k8s::K8sPlan;
+use errmap::batch::k8s::{self, K8sPlan};
 use errmap::batch::slurm::{self, SlurmPlan};
-use errmap::batch::Job;
+use errmap::batch::{self, Job};
 use errmap::nn::Backend;
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -103,19 +103,8 @@ pub struct K8sArgs {
     pub dry_run: bool,
 }
 
-fn check_shards(shards: usize) -> Result<()> {
-    if !(1..=10_000).contains(&shards) {
-        return Err(Error::usage(
-            format!("--shards {shards} is not between 1 and 10000"),
-            "one shard per array task / completion, e.g. --shards 4",
-        ));
-    }
-    Ok(())
-}
-
 fn backend_name(b: Option<Backend>) -> Option<String> {
-    use clap::ValueEnum;
-    b.and_then(|b| b.to_possible_value().map(|v| v.get_name().to_string()))
+    b.map(|b| b.name().to_string())
 }
 
 fn absolute(p: &Path) -> Result<PathBuf> {
@@ -123,83 +112,63 @@ fn absolute(p: &Path) -> Result<PathBuf> {
 }
 
 pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
-    check_shards(args.shards)?;
+    batch::check_shard_count(args.shards)?;
     let file = Job::read(&args.job)?;
-    if file.job.domain.is_none() {
-        return Err(Error::usage(
-            format!(
-                "{} has no `domain`, and shards need one",
-                args.job.display()
-            ),
-            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
-        ));
-    }
+    batch::require_shard_domain(&file)?;
     if let Some(ids) = &args.array {
-        if !slurm::valid_array_ids(ids, args.shards) {
-            return Err(Error::usage(
-                format!(
-                    "--array '{ids}' is not a list of task ids below {}",
-                    args.shards
-                ),
-                "e.g. --array 1,3 or --array 0-2",
-            ));
-        }
+        slurm::check_array_ids(ids, args.shards)?;
     }
     let errmap = match args.errmap {
         Some(p) => p,
         None => std::env::current_exe().map_err(|e| Error::io("find the running", "errmap", e))?,
     };
+    let out = super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
+        .unwrap_or_else(|| file.output_dir());
     let plan = SlurmPlan {
         errmap,
         job: args
             .job
             .canonicalize()
             .map_err(|e| Error::read(&args.job, e))?,
-        out: absolute(
-            &super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
-                .unwrap_or_else(|| file.output_dir()),
-        )?,
+        out: absolute(&out)?,
         family: file.job.family.clone(),
         shards: args.shards,
         partition: args.partition,
         time: args.time,
         backend: backend_name(args.backend),
     };
-    let (shards_script, merge_script) = (plan.shards_script(), plan.merge_script());
-    let shards_cmd = format!(
-        "sbatch {}",
-        plan.sbatch_shards_args(args.array.as_deref()).join(" ")
-    );
+    let array = args.array.as_deref();
+    let shards_cmd = format!("sbatch {}", plan.sbatch_shards_args(array).join(" "));
     let merge_cmd = format!(
         "sbatch {}",
         plan.sbatch_merge_args("<ARRAY_JOB_ID>").join(" ")
     );
     if args.dry_run {
+        let dir = plan.slurm_dir();
         println!(
-            "# {}\n{shards_script}",
-            plan.slurm_dir().join("shards.sbatch").display()
+            "# {}\n{}",
+            dir.join("shards.sbatch").display(),
+            plan.shards_script()
         );
         println!(
-            "# {}\n{merge_script}",
-            plan.slurm_dir().join("merge.sbatch").display()
+            "# {}\n{}",
+            dir.join("merge.sbatch").display(),
+            plan.merge_script()
         );
         println!("# submit:\n{shards_cmd}\n{merge_cmd}");
         return Ok(0);
     }
-    let dir = plan.slurm_dir();
-    errmap::io::write_atomic_bytes(&dir.join("shards.sbatch"), shards_script.as_bytes())?;
-    errmap::io::write_atomic_bytes(&dir.join("merge.sbatch"), merge_script.as_bytes())?;
+    let [shards_file, merge_file] = slurm::write_scripts(&plan)?;
     if !args.submit {
         println!(
             "wrote {} and {}",
-            dir.join("shards.sbatch").display(),
-            dir.join("merge.sbatch").display()
+            shards_file.display(),
+            merge_file.display()
         );
         println!("submit with:\n  {shards_cmd}\n  {merge_cmd}");
         return Ok(0);
     }
-    let array_id = sbatch(&plan.sbatch_shards_args(args.array.as_deref()))?;
-    let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
+    let (array_id, merge_id) = slurm::submit(&plan, array)?;
     info!(
         "slurm: array job {array_id} ({} shards), merge job {merge_id} after it",
         args.shards
@@ -208,44 +177,10 @@ pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
     Ok(0)
 }
 
-/// Run `sbatch --parsable …` and return the job id.
-fn sbatch(args: &[String]) -> Result<String> {
-    let out = std::process::Command::new("sbatch")
-        .args(args)
-        .output()
-        .map_err(|e| {
-            Error::usage(
-                format!("cannot run sbatch: {e}"),
-                "run on a Slurm login node, or use --dry-run and submit the scripts yourself",
-            )
-        })?;
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    match (out.status.success(), slurm::parse_job_id(&stdout)) {
-        (true, Some(id)) => Ok(id),
-        _ => Err(Error::device(
-            format!(
-                "sbatch {} failed: {}{}",
-                args.join(" "),
-                stdout.trim(),
-                String::from_utf8_lossy(&out.stderr).trim()
-            ),
-            "check the partition and time limit with sinfo, or submit the scripts in OUT/slurm/ by hand",
-        )),
-    }
-}
-
 pub fn run_k8s(args: K8sArgs, _globals: Globals) -> Result<i32> {
-    check_shards(args.shards)?;
+    batch::check_shard_count(args.shards)?;
     let file = Job::read(&args.job)?;
-    if file.job.domain.is_none() {
-        return Err(Error::usage(
-            format!(
-                "{} has no `domain`, and shards need one",
-                args.job.display()
-            ),
-            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
-        ));
-    }
+    batch::require_shard_domain(&file)?;
     let out = super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
         .unwrap_or_else(|| file.output_dir());
     let manifest_dir = super::deprecated::old_output_folder(
@@ -266,25 +201,17 @@ pub fn run_k8s(args: K8sArgs, _globals: Globals) -> Result<i32> {
         wait_s: args.wait,
         retries: args.retries,
     };
-    let docs = [
-        ("shards-job.json", plan.shards_job()),
-        ("merge-job.json", plan.merge_job()),
-    ];
-    let to_text = |v: &serde_json::Value| {
-        serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()))
-    };
     if args.dry_run {
-        for (_, doc) in &docs {
-            println!("{}", to_text(doc)?);
+        for (_, text) in k8s::manifest_files(&plan)? {
+            println!("{text}");
         }
         return Ok(0);
     }
     let dir = manifest_dir.unwrap_or_else(|| out.join("k8s"));
-    for (name, doc) in &docs {
-        errmap::io::write_atomic_bytes(&dir.join(name), format!("{}\n", to_text(doc)?).as_bytes())?;
-    }
+    let paths = k8s::write_manifests(&plan, &dir)?;
     info!("apply with: kubectl apply -f {}", dir.display());
-    println!("{}", dir.join("shards-job.json").display());
-    println!("{}", dir.join("merge-job.json").display());
+    for path in paths {
+        println!("{}", path.display());
+    }
     Ok(0)
 }

@@ -1,8 +1,9 @@
 //! CLI of `errmap synth web-plate`: write a sample web-plate family with its ground truth.
 
 use super::Globals;
-use errmap::synth::web_plate::{self, Layout, WebPlateSpec};
-use errmap::{Error, Result};
+use errmap::synth::web_plate::{self, WebPlateSpec};
+use errmap::synth::web_plate_args;
+use errmap::Result;
 
 #[derive(Debug, clap::Args)]
 pub struct SynthWebPlateArgs {
@@ -24,13 +25,13 @@ pub struct SynthWebPlateArgs {
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
     /// Plate size XxY in mm.
-    #[arg(long, value_name = "XxY", default_value = "600x300", value_parser = parse_pair_x)]
+    #[arg(long, value_name = "XxY", default_value = "600x300", value_parser = web_plate_args::parse_size)]
     pub size: (f64, f64),
     /// Lower-left corner of the plate X,Y in mm.
-    #[arg(long, value_name = "X,Y", default_value = "0,0", value_parser = parse_pair_comma, allow_hyphen_values = true)]
+    #[arg(long, value_name = "X,Y", default_value = "0,0", value_parser = web_plate_args::parse_origin, allow_hyphen_values = true)]
     pub origin: (f64, f64),
     /// Regular probe grid NXxNY, points along X and Y (default 12x12).
-    #[arg(long, value_name = "NXxNY", value_parser = parse_grid, conflicts_with = "irregular")]
+    #[arg(long, value_name = "NXxNY", value_parser = web_plate_args::parse_grid, conflicts_with = "irregular")]
     pub grid: Option<(usize, usize)>,
     /// Scattered probe layout of N points (plus the 4 corners of the probed rectangle) instead of a grid.
     #[arg(long, value_name = "N")]
@@ -56,55 +57,10 @@ pub struct SynthWebPlateArgs {
     pub family: String,
 }
 
-fn parse_two(text: &str, sep: char) -> std::result::Result<(f64, f64), String> {
-    let (a, b) = text
-        .split_once(sep)
-        .ok_or_else(|| format!("expected two numbers separated by '{sep}'"))?;
-    let a: f64 = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a number"))?;
-    let b: f64 = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a number"))?;
-    if !a.is_finite() || !b.is_finite() {
-        return Err("numbers must be finite".into());
-    }
-    Ok((a, b))
-}
-
-fn parse_pair_x(text: &str) -> std::result::Result<(f64, f64), String> {
-    parse_two(text, 'x')
-}
-
-fn parse_pair_comma(text: &str) -> std::result::Result<(f64, f64), String> {
-    parse_two(text, ',')
-}
-
-fn parse_grid(text: &str) -> std::result::Result<(usize, usize), String> {
-    let (a, b) = text.split_once('x').ok_or("expected NXxNY, e.g. 12x12")?;
-    let a = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a count"))?;
-    let b = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a count"))?;
-    Ok((a, b))
-}
-
 pub fn run(args: SynthWebPlateArgs, _globals: Globals) -> Result<i32> {
     let out_dir = super::deprecated::required(args.out_dir, args.old_out, "--out", "--out-dir")?;
-    if !(args.noise_um.is_finite() && args.noise_um >= 0.0) {
-        return Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1"));
-    }
-    let layout = match (args.grid, args.irregular) {
-        (_, Some(n)) => Layout::Irregular { n },
-        (Some((nx, ny)), None) => Layout::Grid { nx, ny },
-        (None, None) => Layout::Grid { nx: 12, ny: 12 },
-    };
+    web_plate_args::check_noise_um(args.noise_um)?;
+    let layout = web_plate_args::layout(args.grid, args.irregular);
     let spec = WebPlateSpec {
         family: args.family.clone(),
         parts: args.parts,

@@ -6,3 +6,4 @@ pub mod rotary;
 pub mod thermal;
 pub mod training;
 pub mod web_plate;
+pub mod web_plate_args;

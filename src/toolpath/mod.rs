@@ -17,6 +17,7 @@ pub mod dialect;
 mod expr;
 mod gcode;
 pub mod lexer;
+pub mod zone_spec;
 
 pub use arc::{Arc, Plane};
 pub use dialect::{Dialect, FanucNumbers, Units};
