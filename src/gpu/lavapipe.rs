@@ -26,18 +26,17 @@ use std::fmt::Write;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
-
 use super::context::GpuContext;
+use super::epochs::{init_buffer, sized, slot_offset, step_buffer, uniform_align, EpochLoop};
 use super::layout::{pack_samples, Step};
 use super::pipeline_cache::{self, CacheUse};
 use crate::backend::Notes;
 use crate::nn::{
-    diverged, layer_spans, Activation, LayerSpan, Mlp, ModelConfig, TrainingSet, ADAM_BETA1,
-    ADAM_BETA2, ADAM_EPSILON, ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2,
+    layer_spans, Activation, LayerSpan, Mlp, ModelConfig, TrainingSet, ADAM_BETA1, ADAM_BETA2,
+    ADAM_EPSILON, ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2,
 };
 use crate::{Error, Result};
+use bytemuck::{Pod, Zeroable};
 
 /// Declarations shared with the other kernels (`tanh_f32`).
 const COMMON_WGSL: &str = include_str!("../../shaders/common.wgsl");
@@ -404,9 +403,6 @@ pub struct BatchInfo {
     pub _pad2: u32,
 }
 
-/// Most epochs recorded into one submission (and Step slots in the step buffer).
-const EPOCHS_PER_SUBMISSION: u32 = 256;
-
 /// Where networks sit in the parameter buffers on this device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ParamPlan {
@@ -646,196 +642,198 @@ pub fn train_group(
     config: &ModelConfig,
     first_index: usize,
 ) -> Result<Vec<Mlp>> {
-    let device = &ctx.device;
-    let net_count = initial.len();
-    let Some(first) = initial.first() else {
+    if initial.is_empty() {
         return Ok(Vec::new());
-    };
-    let param_count = first.params.len();
-    let ParamPlan {
-        stride_floats: stride,
-        nets_per_binding: per_binding,
-    } = pipe.plan;
-    let bindings = net_count.div_ceil(per_binding);
-    // Every binding is as large as the kernel declares, the last one included.
-    let mut params = vec![0.0f32; bindings * per_binding * stride];
-    for (k, net) in initial.iter().enumerate() {
-        params[k * stride..][..param_count].copy_from_slice(&net.params);
     }
-    let (net_infos, samples) = pack_samples(sets, 0);
-    let align = ctx.limits.min_uniform_buffer_offset_alignment.max(16) as u64;
-
-    let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage,
-        })
+    let net_count = initial.len();
+    let plan = pipe.plan;
+    let bindings = net_count.div_ceil(plan.nets_per_binding);
+    let buffers = GroupBuffers::new(ctx, initial, sets, plan)?;
+    let (data_groups, step_group) = buffers.bind(ctx, kernels, plan)?;
+    let align = buffers.align;
+    let binding_bytes = (plan.nets_per_binding * plan.stride_floats * 4) as u64;
+    let epochs = EpochLoop {
+        ctx,
+        config,
+        steps: &buffers.steps,
+        align,
+        losses: &buffers.losses,
+        net_count,
+        first_index,
     };
-    let param_usage =
-        wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-    let storage = wgpu::BufferUsages::STORAGE;
-    let ping = [
-        init("params a", bytemuck::cast_slice(&params), param_usage),
-        init("params b", bytemuck::cast_slice(&params), param_usage),
-    ];
-    // Moments start at zero (wgpu zero-initialises buffers).
-    let moments = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("moments"),
-        size: (2 * net_count * stride * 4) as u64,
-        usage: storage,
-        mapped_at_creation: false,
-    });
-    let nets_buf = init("nets", bytemuck::cast_slice(&net_infos), storage);
-    let samples_buf = init("samples", bytemuck::cast_slice(&samples), storage);
-    let losses = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("losses"),
-        size: (net_count * 4) as u64,
-        usage: storage | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let mut batch_slots = vec![0u8; (bindings as u64 * align) as usize];
+    // The kernel's loss is written every epoch: nothing more to record for the read-back.
+    epochs.run(|pass, epochs, _read_loss| {
+        pass.set_pipeline(&pipe.pipeline);
+        for e in epochs.clone() {
+            let step_offset = slot_offset(e - epochs.start, align);
+            for b in 0..bindings {
+                let w_offset = (b as u64 * binding_bytes) as u32;
+                pass.set_bind_group(0, &data_groups[(e % 2) as usize], &[w_offset]);
+                pass.set_bind_group(1, &step_group, &[step_offset, slot_offset(b as u32, align)]);
+                let count = (net_count - b * plan.nets_per_binding).min(plan.nets_per_binding);
+                pass.dispatch_workgroups(count as u32, 1, 1);
+            }
+        }
+    })?;
+    let last = &buffers.ping[(config.epochs % 2) as usize];
+    epochs.read_trained(last, initial, plan.stride_floats)
+}
+
+/// The buffers of one group's training with the epoch kernel.
+struct GroupBuffers {
+    /// The parameters; epoch e reads `ping[e % 2]` and writes `ping[(e + 1) % 2]`.
+    ping: [wgpu::Buffer; 2],
+    moments: wgpu::Buffer,
+    nets: wgpu::Buffer,
+    samples: wgpu::Buffer,
+    losses: wgpu::Buffer,
+    /// One [`BatchInfo`] slot per uniform binding of the parameters.
+    batches: wgpu::Buffer,
+    adam: wgpu::Buffer,
+    steps: wgpu::Buffer,
+    /// Bytes between Step (and BatchInfo) slots.
+    align: u64,
+}
+
+impl GroupBuffers {
+    /// Lays the networks out by `plan`, packs the samples and allocates the buffers.
+    fn new(
+        ctx: &GpuContext,
+        initial: &[Mlp],
+        sets: &[TrainingSet],
+        plan: ParamPlan,
+    ) -> Result<GroupBuffers> {
+        let device = &ctx.device;
+        let net_count = initial.len();
+        let params = padded_params(initial, plan);
+        let (net_infos, samples) = pack_samples(sets, 0);
+        let align = uniform_align(ctx);
+        let param_usage = wgpu::BufferUsages::UNIFORM
+            | wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC;
+        let storage = wgpu::BufferUsages::STORAGE;
+        let buffers = GroupBuffers {
+            ping: [
+                init_buffer(
+                    device,
+                    "params a",
+                    bytemuck::cast_slice(&params),
+                    param_usage,
+                ),
+                init_buffer(
+                    device,
+                    "params b",
+                    bytemuck::cast_slice(&params),
+                    param_usage,
+                ),
+            ],
+            // Moments start at zero (wgpu zero-initialises buffers).
+            moments: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("moments"),
+                size: (2 * net_count * plan.stride_floats * 4) as u64,
+                usage: storage,
+                mapped_at_creation: false,
+            }),
+            nets: init_buffer(device, "nets", bytemuck::cast_slice(&net_infos), storage),
+            samples: init_buffer(device, "samples", bytemuck::cast_slice(&samples), storage),
+            losses: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("losses"),
+                size: (net_count * 4) as u64,
+                usage: storage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            batches: init_buffer(
+                device,
+                "batches",
+                &batch_slots(net_count, plan, align),
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            adam: init_buffer(
+                device,
+                "adam constants",
+                bytemuck::bytes_of(&AdamConstants::reference()),
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            steps: step_buffer(device, align),
+            align,
+        };
+        ctx.check("allocating training buffers")?;
+        Ok(buffers)
+    }
+
+    /// Group 0 for even and odd epochs (the ping-pong of the parameters) and group 1.
+    fn bind(
+        &self,
+        ctx: &GpuContext,
+        kernels: &CpuKernels,
+        plan: ParamPlan,
+    ) -> Result<(Vec<wgpu::BindGroup>, wgpu::BindGroup)> {
+        let device = &ctx.device;
+        let binding_bytes = (plan.nets_per_binding * plan.stride_floats * 4) as u64;
+        let data_groups: Vec<wgpu::BindGroup> = (0..2)
+            .map(|i| {
+                let (read, write) = (&self.ping[i], &self.ping[1 - i]);
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("cpu-adapter train data"),
+                    layout: &kernels.data_layout,
+                    entries: &[
+                        (0, sized(read, binding_bytes)),
+                        (1, read.as_entire_binding()),
+                        (2, write.as_entire_binding()),
+                        (3, self.moments.as_entire_binding()),
+                        (4, self.nets.as_entire_binding()),
+                        (5, self.samples.as_entire_binding()),
+                        (6, self.losses.as_entire_binding()),
+                    ]
+                    .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }),
+                })
+            })
+            .collect();
+        let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cpu-adapter train step"),
+            layout: &kernels.step_layout,
+            entries: &[
+                (0, sized(&self.steps, std::mem::size_of::<Step>() as u64)),
+                (
+                    1,
+                    sized(&self.batches, std::mem::size_of::<BatchInfo>() as u64),
+                ),
+                (2, self.adam.as_entire_binding()),
+            ]
+            .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }),
+        });
+        ctx.check("binding training buffers")?;
+        Ok((data_groups, step_group))
+    }
+}
+
+/// The networks' parameters, network k at float `k * stride`; every binding is as large as
+/// the kernel declares, the last one included.
+fn padded_params(initial: &[Mlp], plan: ParamPlan) -> Vec<f32> {
+    let stride = plan.stride_floats;
+    let bindings = initial.len().div_ceil(plan.nets_per_binding);
+    let mut params = vec![0.0f32; bindings * plan.nets_per_binding * stride];
+    for (k, net) in initial.iter().enumerate() {
+        params[k * stride..][..net.params.len()].copy_from_slice(&net.params);
+    }
+    params
+}
+
+/// One [`BatchInfo`] per uniform binding of the parameters, `align` bytes apart.
+fn batch_slots(net_count: usize, plan: ParamPlan, align: u64) -> Vec<u8> {
+    let bindings = net_count.div_ceil(plan.nets_per_binding);
+    let mut slots = vec![0u8; (bindings as u64 * align) as usize];
     for b in 0..bindings {
         let info = BatchInfo {
-            first_net: (b * per_binding) as u32,
+            first_net: (b * plan.nets_per_binding) as u32,
             _pad0: 0,
             _pad1: 0,
             _pad2: 0,
         };
-        batch_slots[(b as u64 * align) as usize..][..std::mem::size_of::<BatchInfo>()]
+        slots[(b as u64 * align) as usize..][..std::mem::size_of::<BatchInfo>()]
             .copy_from_slice(bytemuck::bytes_of(&info));
     }
-    let batch_buf = init("batches", &batch_slots, wgpu::BufferUsages::UNIFORM);
-    let adam_buf = init(
-        "adam constants",
-        bytemuck::bytes_of(&AdamConstants::reference()),
-        wgpu::BufferUsages::UNIFORM,
-    );
-    let step_buf = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("steps"),
-        size: EPOCHS_PER_SUBMISSION as u64 * align,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    ctx.check("allocating training buffers")?;
-
-    let binding_bytes = (per_binding * stride * 4) as u64;
-    fn sized(buffer: &wgpu::Buffer, size: u64) -> wgpu::BindingResource<'_> {
-        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer,
-            offset: 0,
-            size: std::num::NonZeroU64::new(size),
-        })
-    }
-    // Epoch e reads ping[e % 2] and writes ping[(e + 1) % 2].
-    let data_groups: Vec<wgpu::BindGroup> = (0..2)
-        .map(|i| {
-            let (read, write) = (&ping[i], &ping[1 - i]);
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("cpu-adapter train data"),
-                layout: &kernels.data_layout,
-                entries: &[
-                    (0, sized(read, binding_bytes)),
-                    (1, read.as_entire_binding()),
-                    (2, write.as_entire_binding()),
-                    (3, moments.as_entire_binding()),
-                    (4, nets_buf.as_entire_binding()),
-                    (5, samples_buf.as_entire_binding()),
-                    (6, losses.as_entire_binding()),
-                ]
-                .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }),
-            })
-        })
-        .collect();
-    let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("cpu-adapter train step"),
-        layout: &kernels.step_layout,
-        entries: &[
-            (0, sized(&step_buf, std::mem::size_of::<Step>() as u64)),
-            (
-                1,
-                sized(&batch_buf, std::mem::size_of::<BatchInfo>() as u64),
-            ),
-            (2, adam_buf.as_entire_binding()),
-        ]
-        .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }),
-    });
-    ctx.check("binding training buffers")?;
-
-    let mut epoch = 0u32;
-    while epoch < config.epochs {
-        // Chunks end at loss read-back epochs so the loss is read only there.
-        let next_loss = (epoch / config.loss_every + 1) * config.loss_every;
-        let end = config
-            .epochs
-            .min(epoch + EPOCHS_PER_SUBMISSION)
-            .min(next_loss);
-        let read_loss = end == next_loss || end == config.epochs;
-        let mut slots = vec![0u8; ((end - epoch) as u64 * align) as usize];
-        for e in epoch..end {
-            let at = ((e - epoch) as u64 * align) as usize;
-            slots[at..at + std::mem::size_of::<Step>()]
-                .copy_from_slice(bytemuck::bytes_of(&Step::at(config, e)));
-        }
-        ctx.queue.write_buffer(&step_buf, 0, &slots);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("epochs"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("epochs"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipe.pipeline);
-            for e in epoch..end {
-                let step_offset = ((e - epoch) as u64 * align) as u32;
-                for b in 0..bindings {
-                    let w_offset = (b as u64 * binding_bytes) as u32;
-                    let batch_offset = (b as u64 * align) as u32;
-                    pass.set_bind_group(0, &data_groups[(e % 2) as usize], &[w_offset]);
-                    pass.set_bind_group(1, &step_group, &[step_offset, batch_offset]);
-                    let count = (net_count - b * per_binding).min(per_binding);
-                    pass.dispatch_workgroups(count as u32, 1, 1);
-                }
-            }
-        }
-        ctx.queue.submit([encoder.finish()]);
-        if read_loss {
-            let bytes = ctx.read_buffer(&losses, net_count as u64 * 4, "training")?;
-            let values: &[f32] = bytemuck::try_cast_slice(&bytes)
-                .map_err(|e| Error::Internal(format!("loss read-back: {e}")))?;
-            if let Some(k) = values.iter().position(|l| !l.is_finite()) {
-                return Err(diverged(first_index + k, end - 1));
-            }
-        }
-        ctx.check("training")?;
-        epoch = end;
-    }
-
-    let last = &ping[(config.epochs % 2) as usize];
-    let bytes = ctx.read_buffer(
-        last,
-        (net_count * stride * 4) as u64,
-        "reading trained weights",
-    )?;
-    let trained: &[f32] = bytemuck::try_cast_slice(&bytes)
-        .map_err(|e| Error::Internal(format!("parameter read-back: {e}")))?;
-    let nets: Vec<Mlp> = initial
-        .iter()
-        .zip(trained.chunks_exact(stride))
-        .map(|(net, p)| Mlp {
-            layer_sizes: net.layer_sizes.clone(),
-            activation: net.activation,
-            params: p[..param_count].to_vec(),
-        })
-        .collect();
-    if let Some(k) = nets
-        .iter()
-        .position(|n| n.params.iter().any(|p| !p.is_finite()))
-    {
-        return Err(diverged(first_index + k, config.epochs));
-    }
-    Ok(nets)
+    slots
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! adapter and turns device failures into [`Error::device`].
 
 pub mod context;
+pub mod epochs;
 pub mod evaluate;
 pub mod fixed;
 pub mod lavapipe;
@@ -167,6 +168,19 @@ fn check_gpu_shape(nets: &[Mlp]) -> Result<()> {
     Ok(())
 }
 
+/// The networks of every group in order, each group trained by `train_group`.
+fn train_in_groups(
+    groups: Vec<std::ops::Range<usize>>,
+    net_count: usize,
+    mut train_group: impl FnMut(std::ops::Range<usize>) -> Result<Vec<Mlp>>,
+) -> Result<Vec<Mlp>> {
+    let mut out = Vec::with_capacity(net_count);
+    for range in groups {
+        out.extend(train_group(range)?);
+    }
+    Ok(out)
+}
+
 impl Trainer for GpuTrainer {
     fn name(&self) -> String {
         format!("gpu: {}", self.ctx.describe())
@@ -199,9 +213,8 @@ impl Trainer for GpuTrainer {
                 4,
                 plan.stride_floats as u64,
             )?;
-            let mut out = Vec::with_capacity(initial.len());
-            for range in groups {
-                out.extend(lavapipe::train_group(
+            return train_in_groups(groups, initial.len(), |range| {
+                lavapipe::train_group(
                     &self.ctx,
                     &self.cpu_adapter,
                     &kernel,
@@ -209,9 +222,8 @@ impl Trainer for GpuTrainer {
                     &sets[range.clone()],
                     config,
                     range.start,
-                )?);
-            }
-            return Ok(out);
+                )
+            });
         }
         let dims = layout::dims_for(first, 1, 0);
         let groups = train::plan_groups(
@@ -221,18 +233,16 @@ impl Trainer for GpuTrainer {
             dims.unit_count as u64,
             dims.param_count as u64,
         )?;
-        let mut out = Vec::with_capacity(initial.len());
-        for range in groups {
-            out.extend(train::train_group(
+        train_in_groups(groups, initial.len(), |range| {
+            train::train_group(
                 &self.ctx,
                 &self.train,
                 &initial[range.clone()],
                 &sets[range.clone()],
                 config,
                 range.start,
-            )?);
-        }
-        Ok(out)
+            )
+        })
     }
 
     fn evaluate_batch(&self, nets: &[Mlp], inputs: &[[f32; 2]]) -> Result<Vec<Vec<f32>>> {

@@ -3,11 +3,10 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use wgpu::util::DeviceExt;
-
 use super::context::GpuContext;
+use super::epochs::{init_buffer, sized, slot_offset, step_buffer, uniform_align, EpochLoop};
 use super::layout::{dims_for, pack_samples, Dims, NetInfo, Sample, Step};
-use crate::nn::{diverged, Mlp, ModelConfig, TrainingSet, GRAD_LANES};
+use crate::nn::{Mlp, ModelConfig, TrainingSet, GRAD_LANES};
 use crate::{Error, Result};
 
 /// WGSL source: the shared declarations, then the training kernels.
@@ -16,8 +15,6 @@ pub const TRAIN_WGSL: &str = concat!(
     include_str!("../../shaders/train.wgsl")
 );
 
-/// Most epochs recorded into one submission (and Step slots in the step buffer).
-const EPOCHS_PER_SUBMISSION: u32 = 256;
 const FORWARD_WORKGROUP: u32 = 64;
 
 pub struct TrainPipelines {
@@ -226,190 +223,213 @@ pub fn train_group(
     config: &ModelConfig,
     first_index: usize,
 ) -> Result<Vec<Mlp>> {
-    let device = &ctx.device;
-    let net_count = initial.len();
     let Some(first) = initial.first() else {
         return Ok(Vec::new());
     };
-    let total: usize = sets.iter().map(|s| s.len()).sum();
-    let dims: Dims = dims_for(first, net_count, total);
-    let (net_infos, samples): (Vec<NetInfo>, Vec<Sample>) = pack_samples(sets, dims.unit_count);
-    let param_count = dims.param_count as usize;
-    let params: Vec<f32> = initial
-        .iter()
-        .flat_map(|n| n.params.iter().copied())
-        .collect();
-    let units = total as u64 * dims.unit_count as u64;
-
-    let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage,
-        })
-    };
-    let zeroed = |label: &str, floats: u64| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: floats.max(1) * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        })
-    };
-    let storage = wgpu::BufferUsages::STORAGE;
-    let dims_buf = init(
-        "dims",
-        bytemuck::bytes_of(&dims),
-        wgpu::BufferUsages::UNIFORM,
-    );
-    let nets_buf = init("nets", bytemuck::cast_slice(&net_infos), storage);
-    let samples_buf = init("samples", bytemuck::cast_slice(&samples), storage);
-    let params_buf = init(
-        "params",
-        bytemuck::cast_slice(&params),
-        storage | wgpu::BufferUsages::COPY_SRC,
-    );
-    // Moments start at zero (wgpu zero-initialises buffers).
-    let moments_buf = zeroed("moments", 2 * params.len() as u64);
-    let acts_buf = zeroed("acts", units);
-    let deltas_buf = zeroed("deltas", units);
-    let sq_err_buf = zeroed("sq_err", total as u64);
-    let losses_buf = zeroed("losses", net_count as u64);
-    let align = ctx.limits.min_uniform_buffer_offset_alignment.max(16) as u64;
-    let step_buf = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("steps"),
-        size: EPOCHS_PER_SUBMISSION as u64 * align,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    ctx.check("allocating training buffers")?;
-
-    let data_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("train data"),
-        layout: &pipelines.data_layout,
-        entries: &[
-            (0, &dims_buf),
-            (1, &nets_buf),
-            (2, &samples_buf),
-            (3, &params_buf),
-            (4, &moments_buf),
-            (5, &acts_buf),
-            (6, &deltas_buf),
-            (7, &sq_err_buf),
-            (8, &losses_buf),
-        ]
-        .map(|(binding, buffer)| wgpu::BindGroupEntry {
-            binding,
-            resource: buffer.as_entire_binding(),
-        }),
-    });
-    let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("train step"),
-        layout: &pipelines.step_layout,
-        entries: &[wgpu::BindGroupEntry {
-            binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &step_buf,
-                offset: 0,
-                size: std::num::NonZeroU64::new(std::mem::size_of::<Step>() as u64),
-            }),
-        }],
-    });
-    ctx.check("binding training buffers")?;
-
+    let buffers = GroupBuffers::new(ctx, initial, sets)?;
+    let (data_group, step_group) = buffers.bind(ctx, pipelines)?;
     let fixed = pipelines.fixed_for(ctx, first)?;
-    let forward_pipeline = fixed
-        .as_deref()
-        .and_then(|f| f.forward_backward.as_ref())
-        .unwrap_or(&pipelines.forward_backward);
-    let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1);
-    // x: samples of the largest network, y: networks.
-    let largest = sets.iter().map(|s| s.len()).max().unwrap_or(1) as u32;
-    let forward_groups = largest.div_ceil(FORWARD_WORKGROUP).clamp(1, max_groups);
-    // Gradient: the row kernel (one workgroup per weight row) where the architecture has
-    // one, else one thread per parameter.
-    let (gradient_pipeline, gradient_groups) = match fixed.as_deref() {
-        Some(f) if f.rows <= max_groups => (&f.gradient_adam, f.rows),
-        _ => (
-            &pipelines.gradient_adam,
-            (param_count as u32).div_ceil(64).clamp(1, max_groups),
-        ),
+    let dispatch = Dispatch::plan(
+        ctx,
+        pipelines,
+        fixed.as_deref(),
+        sets,
+        initial.len(),
+        first.params.len(),
+    );
+    let align = buffers.align;
+    let epochs = EpochLoop {
+        ctx,
+        config,
+        steps: &buffers.steps,
+        align,
+        losses: &buffers.losses,
+        net_count: initial.len(),
+        first_index,
     };
-    let loss_groups = (net_count as u32).clamp(1, max_groups);
-    debug_assert_eq!(GRAD_LANES, 64);
-
-    let mut epoch = 0u32;
-    while epoch < config.epochs {
-        // Chunks end at loss read-back epochs so the loss is read only there.
-        let next_loss = (epoch / config.loss_every + 1) * config.loss_every;
-        let end = config
-            .epochs
-            .min(epoch + EPOCHS_PER_SUBMISSION)
-            .min(next_loss);
-        let read_loss = end == next_loss || end == config.epochs;
-        let mut slots = vec![0u8; ((end - epoch) as u64 * align) as usize];
-        for e in epoch..end {
-            let at = ((e - epoch) as u64 * align) as usize;
-            slots[at..at + std::mem::size_of::<Step>()]
-                .copy_from_slice(bytemuck::bytes_of(&Step::at(config, e)));
+    epochs.run(|pass, epochs, read_loss| {
+        pass.set_bind_group(0, &data_group, &[]);
+        for e in epochs.clone() {
+            let step_offset = slot_offset(e - epochs.start, align);
+            dispatch.record_epoch(pass, &step_group, step_offset);
         }
-        ctx.queue.write_buffer(&step_buf, 0, &slots);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("epochs"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("epochs"),
-                timestamp_writes: None,
-            });
-            pass.set_bind_group(0, &data_group, &[]);
-            for e in epoch..end {
-                pass.set_pipeline(forward_pipeline);
-                pass.set_bind_group(1, &step_group, &[((e - epoch) as u64 * align) as u32]);
-                pass.dispatch_workgroups(forward_groups, net_count as u32, 1);
-                pass.set_pipeline(gradient_pipeline);
-                pass.dispatch_workgroups(gradient_groups, net_count as u32, 1);
-            }
-            if read_loss {
-                pass.set_pipeline(&pipelines.loss_reduce);
-                pass.dispatch_workgroups(loss_groups, 1, 1);
-            }
-        }
-        ctx.queue.submit([encoder.finish()]);
         if read_loss {
-            let bytes = ctx.read_buffer(&losses_buf, net_count as u64 * 4, "training")?;
-            let losses: &[f32] = bytemuck::try_cast_slice(&bytes)
-                .map_err(|e| Error::Internal(format!("loss read-back: {e}")))?;
-            if let Some(k) = losses.iter().position(|l| !l.is_finite()) {
-                return Err(diverged(first_index + k, end - 1));
-            }
+            dispatch.record_loss(pass, pipelines);
         }
-        ctx.check("training")?;
-        epoch = end;
+    })?;
+    epochs.read_trained(&buffers.params, initial, first.params.len())
+}
+
+/// The buffers of one group's training: group 0's bindings in order, then the Step slots.
+struct GroupBuffers {
+    dims: wgpu::Buffer,
+    nets: wgpu::Buffer,
+    samples: wgpu::Buffer,
+    params: wgpu::Buffer,
+    moments: wgpu::Buffer,
+    acts: wgpu::Buffer,
+    deltas: wgpu::Buffer,
+    sq_err: wgpu::Buffer,
+    losses: wgpu::Buffer,
+    steps: wgpu::Buffer,
+    /// Bytes between Step slots.
+    align: u64,
+}
+
+impl GroupBuffers {
+    /// Packs the networks and their samples and allocates the group's buffers.
+    fn new(ctx: &GpuContext, initial: &[Mlp], sets: &[TrainingSet]) -> Result<GroupBuffers> {
+        let device = &ctx.device;
+        let net_count = initial.len();
+        let total: usize = sets.iter().map(|s| s.len()).sum();
+        let dims: Dims = dims_for(&initial[0], net_count, total);
+        let (net_infos, samples): (Vec<NetInfo>, Vec<Sample>) = pack_samples(sets, dims.unit_count);
+        let params: Vec<f32> = initial
+            .iter()
+            .flat_map(|n| n.params.iter().copied())
+            .collect();
+        let units = total as u64 * dims.unit_count as u64;
+        let zeroed = |label: &str, floats: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: floats.max(1) * 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let align = uniform_align(ctx);
+        let buffers = GroupBuffers {
+            dims: init_buffer(
+                device,
+                "dims",
+                bytemuck::bytes_of(&dims),
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            nets: init_buffer(device, "nets", bytemuck::cast_slice(&net_infos), storage),
+            samples: init_buffer(device, "samples", bytemuck::cast_slice(&samples), storage),
+            params: init_buffer(
+                device,
+                "params",
+                bytemuck::cast_slice(&params),
+                storage | wgpu::BufferUsages::COPY_SRC,
+            ),
+            // Moments start at zero (wgpu zero-initialises buffers).
+            moments: zeroed("moments", 2 * params.len() as u64),
+            acts: zeroed("acts", units),
+            deltas: zeroed("deltas", units),
+            sq_err: zeroed("sq_err", total as u64),
+            losses: zeroed("losses", net_count as u64),
+            steps: step_buffer(device, align),
+            align,
+        };
+        ctx.check("allocating training buffers")?;
+        Ok(buffers)
     }
 
-    let bytes = ctx.read_buffer(
-        &params_buf,
-        params.len() as u64 * 4,
-        "reading trained weights",
-    )?;
-    let trained: Vec<f32> = bytemuck::try_cast_slice::<u8, f32>(&bytes)
-        .map_err(|e| Error::Internal(format!("parameter read-back: {e}")))?
-        .to_vec();
-    let nets: Vec<Mlp> = initial
-        .iter()
-        .zip(trained.chunks_exact(param_count))
-        .map(|(net, p)| Mlp {
-            layer_sizes: net.layer_sizes.clone(),
-            activation: net.activation,
-            params: p.to_vec(),
-        })
-        .collect();
-    if let Some(k) = nets
-        .iter()
-        .position(|n| n.params.iter().any(|p| !p.is_finite()))
-    {
-        return Err(diverged(first_index + k, config.epochs));
+    /// Group 0 (the data) and group 1 (one Step slot, dynamically offset).
+    fn bind(
+        &self,
+        ctx: &GpuContext,
+        pipelines: &TrainPipelines,
+    ) -> Result<(wgpu::BindGroup, wgpu::BindGroup)> {
+        let device = &ctx.device;
+        let data_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("train data"),
+            layout: &pipelines.data_layout,
+            entries: &[
+                (0, &self.dims),
+                (1, &self.nets),
+                (2, &self.samples),
+                (3, &self.params),
+                (4, &self.moments),
+                (5, &self.acts),
+                (6, &self.deltas),
+                (7, &self.sq_err),
+                (8, &self.losses),
+            ]
+            .map(|(binding, buffer)| wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }),
+        });
+        let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("train step"),
+            layout: &pipelines.step_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: sized(&self.steps, std::mem::size_of::<Step>() as u64),
+            }],
+        });
+        ctx.check("binding training buffers")?;
+        Ok((data_group, step_group))
     }
-    Ok(nets)
+}
+
+/// The pipelines one group's epochs run and their workgroup counts.
+struct Dispatch<'a> {
+    forward: &'a wgpu::ComputePipeline,
+    forward_groups: u32,
+    gradient: &'a wgpu::ComputePipeline,
+    gradient_groups: u32,
+    loss_groups: u32,
+    net_count: u32,
+}
+
+impl<'a> Dispatch<'a> {
+    /// The row kernels of `fixed` where the architecture has them, else the generic ones.
+    fn plan(
+        ctx: &GpuContext,
+        pipelines: &'a TrainPipelines,
+        fixed: Option<&'a FixedPipelines>,
+        sets: &[TrainingSet],
+        net_count: usize,
+        param_count: usize,
+    ) -> Dispatch<'a> {
+        let forward = fixed
+            .and_then(|f| f.forward_backward.as_ref())
+            .unwrap_or(&pipelines.forward_backward);
+        let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1);
+        // x: samples of the largest network, y: networks.
+        let largest = sets.iter().map(|s| s.len()).max().unwrap_or(1) as u32;
+        let forward_groups = largest.div_ceil(FORWARD_WORKGROUP).clamp(1, max_groups);
+        // Gradient: the row kernel (one workgroup per weight row) where the architecture has
+        // one, else one thread per parameter.
+        let (gradient, gradient_groups) = match fixed {
+            Some(f) if f.rows <= max_groups => (&f.gradient_adam, f.rows),
+            _ => (
+                &pipelines.gradient_adam,
+                (param_count as u32).div_ceil(64).clamp(1, max_groups),
+            ),
+        };
+        debug_assert_eq!(GRAD_LANES, 64);
+        Dispatch {
+            forward,
+            forward_groups,
+            gradient,
+            gradient_groups,
+            loss_groups: (net_count as u32).clamp(1, max_groups),
+            net_count: net_count as u32,
+        }
+    }
+
+    /// One epoch: forward and backward, then gradient and Adam, with the Step at `step_offset`.
+    fn record_epoch(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        step_group: &wgpu::BindGroup,
+        step_offset: u32,
+    ) {
+        pass.set_pipeline(self.forward);
+        pass.set_bind_group(1, step_group, &[step_offset]);
+        pass.dispatch_workgroups(self.forward_groups, self.net_count, 1);
+        pass.set_pipeline(self.gradient);
+        pass.dispatch_workgroups(self.gradient_groups, self.net_count, 1);
+    }
+
+    /// The reduction of each network's squared errors into its loss.
+    fn record_loss(&self, pass: &mut wgpu::ComputePass<'_>, pipelines: &TrainPipelines) {
+        pass.set_pipeline(&pipelines.loss_reduce);
+        pass.dispatch_workgroups(self.loss_groups, 1, 1);
+    }
 }

@@ -77,39 +77,91 @@ fn profile(
         .then(|| (nll, mean, variance, w.iter().copied().collect()))
 }
 
+/// Refuses fewer than 3 sites, more than [`MAX_SITES`], or a non-finite number.
+fn check_sites(points_uve: &[[f64; 3]]) -> Result<()> {
+    let n = points_uve.len();
+    if n < 3 {
+        return Err(Error::numeric(
+            format!("kriging needs at least 3 points, got {n}"),
+            "probe more points",
+        ));
+    }
+    if n > MAX_SITES {
+        return Err(Error::usage(
+            format!("kriging solves one {n}×{n} system; at most {MAX_SITES} points"),
+            "use another [interp] method for this many points",
+        ));
+    }
+    if points_uve.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(Error::numeric(
+            "a kriging site has a non-finite coordinate or value",
+            "remove NaN and infinite values",
+        ));
+    }
+    Ok(())
+}
+
+/// The diagonal of the sites' bounding box, mm.
+fn diagonal_mm(sites: &[[f64; 2]]) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for s in sites {
+        for k in 0..2 {
+            lo[k] = lo[k].min(s[k]);
+            hi[k] = hi[k].max(s[k]);
+        }
+    }
+    ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2)).sqrt()
+}
+
+/// The (ℓ, g) of least negative log-likelihood: a coarse grid (ℓ from 1 % to 200 % of the
+/// diagonal `diag`, g from 1e-6 to 1), then one refinement around its best node.
+fn best_length_and_nugget(distances: &DMatrix<f64>, e: &[f64], diag: f64) -> Result<(f64, f64)> {
+    let lengths: Vec<f64> = (0..7)
+        .map(|k| diag * 0.01 * 200f64.powf(k as f64 / 6.0))
+        .collect();
+    let nuggets = [1e-6, 1e-3, 1e-2, 0.1, 1.0];
+    let mut best: Option<(f64, f64, f64)> = None; // (nll, l, g)
+    let consider = |l: f64, g: f64, best: &mut Option<(f64, f64, f64)>| {
+        if let Some((nll, ..)) = profile(distances, e, l, g) {
+            if best.is_none_or(|b| nll < b.0) {
+                *best = Some((nll, l, g));
+            }
+        }
+    };
+    for &l in &lengths {
+        for &g in &nuggets {
+            consider(l, g, &mut best);
+        }
+    }
+    // One refinement around the best node (half a grid step each way, in log scale).
+    if let Some((_, l0, g0)) = best {
+        let step_l = 200f64.powf(1.0 / 12.0);
+        for fl in [1.0 / step_l, 1.0, step_l] {
+            for fg in [1.0 / 3.0, 1.0, 3.0] {
+                if fl != 1.0 || fg != 1.0 {
+                    consider(l0 * fl, (g0 * fg).min(1.0), &mut best);
+                }
+            }
+        }
+    }
+    let (_, length_mm, nugget_ratio) = best.ok_or_else(|| {
+        Error::numeric(
+            "no kriging length and nugget gave a positive-definite system",
+            "check the probe file for repeated points with different values",
+        )
+    })?;
+    Ok((length_mm, nugget_ratio))
+}
+
 impl Kriging {
     /// Fit to sites `(u_mm, v_mm, e)`. Errors: fewer than 3 sites, non-finite numbers, more
     /// than [`MAX_SITES`], or no (ℓ, g) giving a positive-definite system.
     pub fn fit(points_uve: &[[f64; 3]]) -> Result<Kriging> {
+        check_sites(points_uve)?;
         let n = points_uve.len();
-        if n < 3 {
-            return Err(Error::numeric(
-                format!("kriging needs at least 3 points, got {n}"),
-                "probe more points",
-            ));
-        }
-        if n > MAX_SITES {
-            return Err(Error::usage(
-                format!("kriging solves one {n}×{n} system; at most {MAX_SITES} points"),
-                "use another [interp] method for this many points",
-            ));
-        }
-        if points_uve.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(Error::numeric(
-                "a kriging site has a non-finite coordinate or value",
-                "remove NaN and infinite values",
-            ));
-        }
         let sites: Vec<[f64; 2]> = points_uve.iter().map(|p| [p[0], p[1]]).collect();
         let e: Vec<f64> = points_uve.iter().map(|p| p[2]).collect();
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for s in &sites {
-            for k in 0..2 {
-                lo[k] = lo[k].min(s[k]);
-                hi[k] = hi[k].max(s[k]);
-            }
-        }
-        let diag = ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2)).sqrt();
+        let diag = diagonal_mm(&sites);
         if diag <= 0.0 {
             return Err(Error::numeric(
                 "all kriging sites are at one position",
@@ -119,41 +171,7 @@ impl Kriging {
         let distances = DMatrix::from_fn(n, n, |i, j| {
             (sites[i][0] - sites[j][0]).hypot(sites[i][1] - sites[j][1])
         });
-        // Coarse grid: ℓ from 1 % to 200 % of the diagonal, g from 1e-6 to 1.
-        let lengths: Vec<f64> = (0..7)
-            .map(|k| diag * 0.01 * 200f64.powf(k as f64 / 6.0))
-            .collect();
-        let nuggets = [1e-6, 1e-3, 1e-2, 0.1, 1.0];
-        let mut best: Option<(f64, f64, f64)> = None; // (nll, l, g)
-        let consider = |l: f64, g: f64, best: &mut Option<(f64, f64, f64)>| {
-            if let Some((nll, ..)) = profile(&distances, &e, l, g) {
-                if best.is_none_or(|b| nll < b.0) {
-                    *best = Some((nll, l, g));
-                }
-            }
-        };
-        for &l in &lengths {
-            for &g in &nuggets {
-                consider(l, g, &mut best);
-            }
-        }
-        // One refinement around the best node (half a grid step each way, in log scale).
-        if let Some((_, l0, g0)) = best {
-            let step_l = 200f64.powf(1.0 / 12.0);
-            for fl in [1.0 / step_l, 1.0, step_l] {
-                for fg in [1.0 / 3.0, 1.0, 3.0] {
-                    if fl != 1.0 || fg != 1.0 {
-                        consider(l0 * fl, (g0 * fg).min(1.0), &mut best);
-                    }
-                }
-            }
-        }
-        let (_, length_mm, nugget_ratio) = best.ok_or_else(|| {
-            Error::numeric(
-                "no kriging length and nugget gave a positive-definite system",
-                "check the probe file for repeated points with different values",
-            )
-        })?;
+        let (length_mm, nugget_ratio) = best_length_and_nugget(&distances, &e, diag)?;
         let (_, mean, variance, weights) = profile(&distances, &e, length_mm, nugget_ratio)
             .ok_or_else(|| Error::Internal("kriging refit failed".into()))?;
         Ok(Kriging {

@@ -113,6 +113,110 @@ pub struct Surface {
     hull_eps: f64,
 }
 
+/// Refuses a site with a non-finite coordinate or value.
+fn check_finite(points_uve: &[[f64; 3]]) -> Result<()> {
+    for p in points_uve {
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(Error::numeric(
+                format!("interpolation site {p:?} is not a finite number"),
+                "remove NaN or infinite values before interpolating",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The sites sorted by position, positions snapped to a lattice of 1e-12 of the sites'
+/// extent and sites at the same snapped position merged (their values averaged), so a
+/// site's value is not decided by insertion order and two sites a rounding error apart
+/// (a corner written twice, `3` and `3.0000000000000004`) cannot make a sliver triangle
+/// that breaks every interpolant near it.
+fn merged_sites(points_uve: &[[f64; 3]]) -> Vec<Site> {
+    let quantum = snap_quantum(points_uve);
+    let snap = |x: f64| {
+        if quantum > 0.0 {
+            (x / quantum).round() * quantum
+        } else {
+            x
+        }
+    };
+    let mut sorted: Vec<(usize, [f64; 3])> = points_uve
+        .iter()
+        .map(|p| [snap(p[0]), snap(p[1]), p[2]])
+        .enumerate()
+        .collect();
+    sorted.sort_by(|(_, a), (_, b)| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let mut sites: Vec<Site> = Vec::with_capacity(sorted.len());
+    let mut count = 0.0;
+    for (index, p) in sorted {
+        match sites.last_mut() {
+            Some(last) if last.position.x == p[0] && last.position.y == p[1] => {
+                count += 1.0;
+                last.e += (p[2] - last.e) / count;
+            }
+            _ => {
+                count = 1.0;
+                sites.push(Site {
+                    position: Point2::new(p[0], p[1]),
+                    e: p[2],
+                    grad: [0.0, 0.0],
+                    index,
+                });
+            }
+        }
+    }
+    sites
+}
+
+/// The bounding box of the sites.
+fn sites_bbox(sites: &[Site]) -> Domain {
+    let mut bbox = Domain {
+        u_min_mm: f64::INFINITY,
+        v_min_mm: f64::INFINITY,
+        u_max_mm: f64::NEG_INFINITY,
+        v_max_mm: f64::NEG_INFINITY,
+    };
+    for s in sites {
+        bbox.u_min_mm = bbox.u_min_mm.min(s.position.x);
+        bbox.u_max_mm = bbox.u_max_mm.max(s.position.x);
+        bbox.v_min_mm = bbox.v_min_mm.min(s.position.y);
+        bbox.v_max_mm = bbox.v_max_mm.max(s.position.y);
+    }
+    bbox
+}
+
+/// The Delaunay triangulation of the sites; refuses sites that all lie on one line.
+fn triangulate(sites: Vec<Site>) -> Result<Tri> {
+    let tri = Tri::bulk_load(sites).map_err(|e| {
+        Error::numeric(
+            format!("cannot triangulate the sites: {e}"),
+            "coordinates must be finite and between 1e-30 and 1e30 in magnitude (or zero)",
+        )
+    })?;
+    if tri.all_vertices_on_line() {
+        return Err(Error::numeric(
+            "all interpolation sites lie on one line: no surface can be spanned",
+            "measure points off that line so they span an area",
+        ));
+    }
+    Ok(tri)
+}
+
+/// The convex hull's edges with the values at their ends.
+fn hull_edges(tri: &Tri) -> Vec<HullEdge> {
+    tri.convex_hull()
+        .map(|e| {
+            let [a, b] = e.positions();
+            HullEdge {
+                a: [a.x, a.y],
+                b: [b.x, b.y],
+                ea: e.from().data().e,
+                eb: e.to().data().e,
+            }
+        })
+        .collect()
+}
+
 /// One edge of the convex hull: its ends and their values.
 #[derive(Debug, Clone, Copy)]
 struct HullEdge {
@@ -142,51 +246,8 @@ impl Surface {
     /// The triangulation alone (all gradients zero): what leave-one-out prediction builds
     /// many times, estimating gradients only where it needs them.
     pub(crate) fn without_gradients(points_uve: &[[f64; 3]]) -> Result<Surface> {
-        for p in points_uve {
-            if !p.iter().all(|x| x.is_finite()) {
-                return Err(Error::numeric(
-                    format!("interpolation site {p:?} is not a finite number"),
-                    "remove NaN or infinite values before interpolating",
-                ));
-            }
-        }
-        // Snap positions to a lattice of 1e-12 of the sites' extent, then merge duplicates, so a
-        // site's value is not decided by insertion order and two sites a rounding error apart
-        // (a corner written twice, `3` and `3.0000000000000004`) cannot make a sliver triangle
-        // that breaks every interpolant near it.
-        let quantum = snap_quantum(points_uve);
-        let snap = |x: f64| {
-            if quantum > 0.0 {
-                (x / quantum).round() * quantum
-            } else {
-                x
-            }
-        };
-        let mut sorted: Vec<(usize, [f64; 3])> = points_uve
-            .iter()
-            .map(|p| [snap(p[0]), snap(p[1]), p[2]])
-            .enumerate()
-            .collect();
-        sorted.sort_by(|(_, a), (_, b)| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-        let mut sites: Vec<Site> = Vec::with_capacity(sorted.len());
-        let mut count = 0.0;
-        for (index, p) in sorted {
-            match sites.last_mut() {
-                Some(last) if last.position.x == p[0] && last.position.y == p[1] => {
-                    count += 1.0;
-                    last.e += (p[2] - last.e) / count;
-                }
-                _ => {
-                    count = 1.0;
-                    sites.push(Site {
-                        position: Point2::new(p[0], p[1]),
-                        e: p[2],
-                        grad: [0.0, 0.0],
-                        index,
-                    });
-                }
-            }
-        }
+        check_finite(points_uve)?;
+        let sites = merged_sites(points_uve);
         if sites.len() < 3 {
             return Err(Error::numeric(
                 format!(
@@ -196,42 +257,9 @@ impl Surface {
                 "measure at least 3 points spread over the surface",
             ));
         }
-        let mut bbox = Domain {
-            u_min_mm: f64::INFINITY,
-            v_min_mm: f64::INFINITY,
-            u_max_mm: f64::NEG_INFINITY,
-            v_max_mm: f64::NEG_INFINITY,
-        };
-        for s in &sites {
-            bbox.u_min_mm = bbox.u_min_mm.min(s.position.x);
-            bbox.u_max_mm = bbox.u_max_mm.max(s.position.x);
-            bbox.v_min_mm = bbox.v_min_mm.min(s.position.y);
-            bbox.v_max_mm = bbox.v_max_mm.max(s.position.y);
-        }
-        let tri = Tri::bulk_load(sites).map_err(|e| {
-            Error::numeric(
-                format!("cannot triangulate the sites: {e}"),
-                "coordinates must be finite and between 1e-30 and 1e30 in magnitude (or zero)",
-            )
-        })?;
-        if tri.all_vertices_on_line() {
-            return Err(Error::numeric(
-                "all interpolation sites lie on one line: no surface can be spanned",
-                "measure points off that line so they span an area",
-            ));
-        }
-        let hull = tri
-            .convex_hull()
-            .map(|e| {
-                let [a, b] = e.positions();
-                HullEdge {
-                    a: [a.x, a.y],
-                    b: [b.x, b.y],
-                    ea: e.from().data().e,
-                    eb: e.to().data().e,
-                }
-            })
-            .collect();
+        let bbox = sites_bbox(&sites);
+        let tri = triangulate(sites)?;
+        let hull = hull_edges(&tri);
         let extent = bbox.width_mm().max(bbox.height_mm());
         Ok(Surface {
             tri,

@@ -58,9 +58,7 @@ impl Trainer for FastCpuTrainer {
         train_each(initial, sets, config, |net, set, k| {
             let mut fast = FastGradient::new(net, set);
             fit_one(net, config, k, |params, grad| {
-                let loss = fast.compute(params, set);
-                grad.copy_from_slice(&fast.sum);
-                loss
+                fast.loss_and_gradient(params, set, grad)
             })
         })
     }
@@ -75,9 +73,7 @@ impl Trainer for FastCpuTrainer {
         continue_each(runs, sets, config, to_epoch, |run, set, k| {
             let mut fast = FastGradient::new(&run.net, set);
             adam_steps(run, config, to_epoch, k, |params, grad| {
-                let loss = fast.compute(params, set);
-                grad.copy_from_slice(&fast.sum);
-                loss
+                fast.loss_and_gradient(params, set, grad)
             })
         })
     }
@@ -144,6 +140,18 @@ impl FastGradient {
             total: vec![[0.0; W]; params],
             sum: vec![0.0; params],
         }
+    }
+
+    /// [`FastGradient::compute`], the gradient copied into `grad`; returns the loss.
+    pub fn loss_and_gradient(
+        &mut self,
+        params: &[f32],
+        set: &TrainingSet,
+        grad: &mut [f32],
+    ) -> f64 {
+        let loss = self.compute(params, set);
+        grad.copy_from_slice(&self.sum);
+        loss
     }
 
     /// Gradient of the mean squared error at `params` into [`FastGradient::sum`]; returns
@@ -348,7 +356,8 @@ fn layer_rows(params: &[f32], span: &LayerSpan, i0: usize, prev: &[V]) -> [V; RO
 
 /// Forward and backward pass of the block of samples s0 … s0 + count − 1 (count ≤ 8; the
 /// other lanes carry zero deltas). Leaves each layer's outputs in `acts` and deltas in
-/// `deltas`; returns the block's squared error.
+/// `deltas`; returns the block's squared error. The stages are `#[inline(always)]`: this is
+/// the hot loop, one function once compiled.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn forward_backward(
@@ -362,11 +371,30 @@ fn forward_backward(
     deltas: &mut [V],
 ) -> f64 {
     let input = block_inputs(set, s0, count);
+    forward(shape, params, &input, acts);
+    let out_unit = shape.unit_offset[shape.spans.len() - 1];
+    let sq_err = output_deltas(
+        &acts[out_unit],
+        set,
+        s0,
+        count,
+        grad_scale,
+        &mut deltas[out_unit],
+    );
+    for l in (1..shape.spans.len()).rev() {
+        backward_layer(shape, params, l, acts, deltas);
+    }
+    sq_err
+}
+
+/// Forward pass of the block: each layer's outputs (activated except the last) into `acts`.
+#[inline(always)]
+fn forward(shape: &Shape, params: &[f32], input: &[V; 2], acts: &mut [V]) {
     let last = shape.spans.len() - 1;
     for (l, span) in shape.spans.iter().enumerate() {
         let (done, rest) = acts.split_at_mut(shape.unit_offset[l]);
         let prev: &[V] = if l == 0 {
-            &input
+            input
         } else {
             &done[shape.unit_offset[l - 1]..][..span.inputs]
         };
@@ -385,52 +413,68 @@ fn forward_backward(
             }
         }
     }
-    let out_unit = shape.unit_offset[last];
+}
+
+/// δ_out = (y − t)·grad_scale in the lanes of the block's samples (zero past `count`);
+/// returns the block's squared error.
+#[inline(always)]
+fn output_deltas(
+    output: &V,
+    set: &TrainingSet,
+    s0: usize,
+    count: usize,
+    grad_scale: f32,
+    delta: &mut V,
+) -> f64 {
     let mut sq_err = 0.0f64;
     for b in 0..W {
         let err = if b < count {
-            acts[out_unit][b] - set.targets[s0 + b]
+            output[b] - set.targets[s0 + b]
         } else {
             0.0
         };
         sq_err += err as f64 * err as f64;
-        deltas[out_unit][b] = err * grad_scale;
-    }
-    for l in (1..shape.spans.len()).rev() {
-        let span = shape.spans[l];
-        let (before, current) = deltas.split_at_mut(shape.unit_offset[l]);
-        let delta = &current[..span.outputs];
-        let prev_acts = &acts[shape.unit_offset[l - 1]..][..span.inputs];
-        let prev_delta = &mut before[shape.unit_offset[l - 1]..][..span.inputs];
-        // back_j = Σ_i W[i][j]·δ_i, i ascending: rows of W two at a time, every column j an
-        // independent sum.
-        let back = &mut prev_delta[..];
-        back.iter_mut().for_each(|b| *b = [0.0; W]);
-        let mut i = 0;
-        while i + 1 < span.outputs {
-            let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-            let w1 = &params[span.weight_offset + (i + 1) * span.inputs..][..span.inputs];
-            let (d0, d1) = (delta[i], delta[i + 1]);
-            for ((b, x0), x1) in back.iter_mut().zip(w0).zip(w1) {
-                *b = fma(splat(*x1), d1, fma(splat(*x0), d0, *b));
-            }
-            i += 2;
-        }
-        if i < span.outputs {
-            let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-            for (b, x0) in back.iter_mut().zip(w0) {
-                *b = fma(splat(*x0), delta[i], *b);
-            }
-        }
-        for (b, a) in back.iter_mut().zip(prev_acts) {
-            let slope = match shape.activation {
-                Activation::Tanh => fma(*a, a.map(|v| -v), splat(1.0)),
-                Activation::Relu => a.map(|v| if v > 0.0 { 1.0 } else { 0.0 }),
-            };
-            *b = mul(*b, slope);
-        }
+        delta[b] = err * grad_scale;
     }
     sq_err
+}
+
+/// The deltas of layer `l`'s inputs from its output deltas:
+/// δ_prev[j] = (Σ_i W[i][j]·δ_i, i ascending)·f'(a_prev[j]).
+#[inline(always)]
+fn backward_layer(shape: &Shape, params: &[f32], l: usize, acts: &[V], deltas: &mut [V]) {
+    let span = shape.spans[l];
+    let (before, current) = deltas.split_at_mut(shape.unit_offset[l]);
+    let delta = &current[..span.outputs];
+    let prev_acts = &acts[shape.unit_offset[l - 1]..][..span.inputs];
+    let prev_delta = &mut before[shape.unit_offset[l - 1]..][..span.inputs];
+    // back_j = Σ_i W[i][j]·δ_i, i ascending: rows of W two at a time, every column j an
+    // independent sum.
+    let back = &mut prev_delta[..];
+    back.iter_mut().for_each(|b| *b = [0.0; W]);
+    let mut i = 0;
+    while i + 1 < span.outputs {
+        let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+        let w1 = &params[span.weight_offset + (i + 1) * span.inputs..][..span.inputs];
+        let (d0, d1) = (delta[i], delta[i + 1]);
+        for ((b, x0), x1) in back.iter_mut().zip(w0).zip(w1) {
+            *b = fma(splat(*x1), d1, fma(splat(*x0), d0, *b));
+        }
+        i += 2;
+    }
+    if i < span.outputs {
+        let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+        for (b, x0) in back.iter_mut().zip(w0) {
+            *b = fma(splat(*x0), delta[i], *b);
+        }
+    }
+    for (b, a) in back.iter_mut().zip(prev_acts) {
+        let slope = match shape.activation {
+            Activation::Tanh => fma(*a, a.map(|v| -v), splat(1.0)),
+            Activation::Relu => a.map(|v| if v > 0.0 { 1.0 } else { 0.0 }),
+        };
+        *b = mul(*b, slope);
+    }
 }
 
 /// The two inputs of samples s0 … s0 + count − 1, zero in the lanes past them.

@@ -98,6 +98,79 @@ struct Tracker {
     active: bool,
 }
 
+/// The current network of run `k` (`None` while the run is out in a segment).
+fn current(runs: &[Option<AdamRun>], k: usize) -> Option<Mlp> {
+    runs[k].as_ref().map(|r| r.net.clone())
+}
+
+impl Tracker {
+    /// The group at epoch 0: its judge's starting hold-out RMS is the first check and the best.
+    fn start(group: &StopGroup, runs: &[Option<AdamRun>]) -> Tracker {
+        let start = runs[group.judge]
+            .as_ref()
+            .map_or(f64::NAN, |r| group.holdout.rms_um(&r.net));
+        Tracker {
+            outcome: GroupOutcome {
+                curve: vec![CurvePoint {
+                    epochs: 0,
+                    seconds: 0.0,
+                    holdout_rmse_um: start,
+                }],
+                best_epochs: 0,
+                stopped_epochs: 0,
+            },
+            best_rmse_um: start,
+            best_nets: group
+                .members
+                .iter()
+                .filter_map(|&k| current(runs, k))
+                .collect(),
+            stale: 0,
+            active: true,
+        }
+    }
+
+    /// Records the check at `epoch` (`seconds` of training so far), keeps the members if the
+    /// judge is the best yet, and deactivates the group after `patience_checks` stale checks.
+    /// Returns whether the group stops here.
+    fn check(
+        &mut self,
+        group: &StopGroup,
+        runs: &[Option<AdamRun>],
+        epoch: u32,
+        seconds: f64,
+        patience_checks: u32,
+    ) -> bool {
+        let Some(judge) = runs[group.judge].as_ref() else {
+            return false;
+        };
+        let rmse_um = group.holdout.rms_um(&judge.net);
+        self.outcome.curve.push(CurvePoint {
+            epochs: epoch,
+            seconds,
+            holdout_rmse_um: rmse_um,
+        });
+        self.outcome.stopped_epochs = epoch;
+        // Strictly lower (NaN never is): ties keep the earlier, cheaper parameters.
+        if rmse_um < self.best_rmse_um || (!self.best_rmse_um.is_finite() && rmse_um.is_finite()) {
+            self.best_rmse_um = rmse_um;
+            self.outcome.best_epochs = epoch;
+            self.best_nets = group
+                .members
+                .iter()
+                .filter_map(|&k| current(runs, k))
+                .collect();
+            self.stale = 0;
+        } else {
+            self.stale += 1;
+        }
+        if self.stale >= patience_checks {
+            self.active = false;
+        }
+        !self.active
+    }
+}
+
 /// Trains `initial[k]` on `sets[k]` with Adam for at most `config.epochs` steps in segments
 /// of `config.check_every_epochs`; after each, every active group's judge is measured on its
 /// hold-out points, and a group whose RMS has not fallen below its best for
@@ -113,79 +186,54 @@ pub fn train_until_holdout_stops(
 ) -> Result<(Vec<Mlp>, Vec<GroupOutcome>)> {
     let mut runs: Vec<Option<AdamRun>> =
         initial.into_iter().map(|n| Some(AdamRun::new(n))).collect();
-    let net = |runs: &[Option<AdamRun>], k: usize| runs[k].as_ref().map(|r| r.net.clone());
-    let mut trackers: Vec<Tracker> = groups
-        .iter()
-        .map(|g| {
-            let start = runs[g.judge]
-                .as_ref()
-                .map_or(f64::NAN, |r| g.holdout.rms_um(&r.net));
-            Tracker {
-                outcome: GroupOutcome {
-                    curve: vec![CurvePoint {
-                        epochs: 0,
-                        seconds: 0.0,
-                        holdout_rmse_um: start,
-                    }],
-                    best_epochs: 0,
-                    stopped_epochs: 0,
-                },
-                best_rmse_um: start,
-                best_nets: g.members.iter().filter_map(|&k| net(&runs, k)).collect(),
-                stale: 0,
-                active: true,
-            }
-        })
-        .collect();
+    let mut trackers: Vec<Tracker> = groups.iter().map(|g| Tracker::start(g, &runs)).collect();
     let mut stopped = vec![false; runs.len()];
     let (mut epoch, mut seconds) = (0u32, 0.0f64);
     while epoch < config.epochs && stopped.iter().any(|s| !s) {
         let to = epoch
             .saturating_add(config.check_every_epochs)
             .min(config.epochs);
-        let active: Vec<usize> = (0..runs.len()).filter(|&k| !stopped[k]).collect();
-        let mut batch: Vec<AdamRun> = active.iter().filter_map(|&k| runs[k].take()).collect();
-        let batch_sets: Vec<TrainingSet> = active.iter().map(|&k| sets[k].clone()).collect();
-        let started = Instant::now();
-        let trained = trainer.train_segment(&mut batch, &batch_sets, config, to);
-        seconds += started.elapsed().as_secs_f64();
-        for (&k, run) in active.iter().zip(batch) {
-            runs[k] = Some(run);
-        }
-        trained?;
+        seconds += train_segment_of_active(trainer, &mut runs, sets, &stopped, config, to)?;
         epoch = to;
         for (group, tracker) in groups.iter().zip(&mut trackers).filter(|(_, t)| t.active) {
-            let Some(judge) = runs[group.judge].as_ref() else {
-                continue;
-            };
-            let rmse_um = group.holdout.rms_um(&judge.net);
-            tracker.outcome.curve.push(CurvePoint {
-                epochs: epoch,
-                seconds,
-                holdout_rmse_um: rmse_um,
-            });
-            tracker.outcome.stopped_epochs = epoch;
-            // Strictly lower (NaN never is): ties keep the earlier, cheaper parameters.
-            if rmse_um < tracker.best_rmse_um
-                || (!tracker.best_rmse_um.is_finite() && rmse_um.is_finite())
-            {
-                tracker.best_rmse_um = rmse_um;
-                tracker.outcome.best_epochs = epoch;
-                tracker.best_nets = group
-                    .members
-                    .iter()
-                    .filter_map(|&k| net(&runs, k))
-                    .collect();
-                tracker.stale = 0;
-            } else {
-                tracker.stale += 1;
-            }
-            if tracker.stale >= config.patience_checks {
-                tracker.active = false;
+            if tracker.check(group, &runs, epoch, seconds, config.patience_checks) {
                 group.members.iter().for_each(|&k| stopped[k] = true);
             }
         }
     }
+    Ok(best_of_groups(runs, groups, trackers))
+}
+
+/// Continues every run not `stopped` to epoch `to` in one batch; returns the seconds it took.
+/// The runs come back to `runs` even when training fails.
+fn train_segment_of_active(
+    trainer: &dyn Trainer,
+    runs: &mut [Option<AdamRun>],
+    sets: &[TrainingSet],
+    stopped: &[bool],
+    config: &ModelConfig,
+    to: u32,
+) -> Result<f64> {
+    let active: Vec<usize> = (0..runs.len()).filter(|&k| !stopped[k]).collect();
+    let mut batch: Vec<AdamRun> = active.iter().filter_map(|&k| runs[k].take()).collect();
+    let batch_sets: Vec<TrainingSet> = active.iter().map(|&k| sets[k].clone()).collect();
+    let started = Instant::now();
+    let trained = trainer.train_segment(&mut batch, &batch_sets, config, to);
+    let seconds = started.elapsed().as_secs_f64();
+    for (&k, run) in active.iter().zip(batch) {
+        runs[k] = Some(run);
+    }
+    trained?;
+    Ok(seconds)
+}
+
+/// The final networks (each group's members with their parameters of its best check) and
+/// the groups' outcomes.
+fn best_of_groups(
+    runs: Vec<Option<AdamRun>>,
+    groups: &[StopGroup],
+    trackers: Vec<Tracker>,
+) -> (Vec<Mlp>, Vec<GroupOutcome>) {
     let mut nets: Vec<Mlp> = runs.into_iter().flatten().map(|r| r.net).collect();
     let mut outcomes = Vec::with_capacity(groups.len());
     for (group, tracker) in groups.iter().zip(trackers) {
@@ -194,5 +242,5 @@ pub fn train_until_holdout_stops(
         }
         outcomes.push(tracker.outcome);
     }
-    Ok((nets, outcomes))
+    (nets, outcomes)
 }

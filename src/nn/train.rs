@@ -341,9 +341,7 @@ impl Trainer for CpuTrainer {
             let mut ws = GradientWorkspace::new(&run.net, lanes);
             let activation = run.net.activation;
             adam_steps(run, config, to_epoch, k, |params, grad| {
-                let loss = ws.gradient(params, activation, set);
-                grad.copy_from_slice(&ws.lanes[..params.len()]);
-                loss
+                ws.loss_and_gradient(params, activation, set, grad)
             })
         })
     }
@@ -516,6 +514,19 @@ impl GradientWorkspace {
         }
     }
 
+    /// [`GradientWorkspace::gradient`], the sum copied into `grad`; returns the loss.
+    fn loss_and_gradient(
+        &mut self,
+        params: &[f32],
+        activation: Activation,
+        set: &TrainingSet,
+        grad: &mut [f32],
+    ) -> f64 {
+        let loss = self.gradient(params, activation, set);
+        grad.copy_from_slice(&self.lanes[..params.len()]);
+        loss
+    }
+
     /// Gradient of the mean squared error over `set` w.r.t. `params` into `lanes[..P]`;
     /// returns the mean squared error (f64, for progress only).
     ///
@@ -587,24 +598,61 @@ fn block_pass(
     scratch: &mut BlockScratch,
     lanes: &mut [f32],
 ) -> f64 {
-    let n_params = params.len();
     let last = spans.len() - 1;
-    let mut input = [[0.0f32; BLOCK]; 2];
-    for (b, x) in set.inputs[s0..s0 + count].iter().enumerate() {
-        input[0][b] = x[0];
-        input[1][b] = x[1];
-    }
+    let input = block_inputs(set, s0, count);
     let BlockScratch {
         acts,
         deltas,
         back,
         column,
     } = scratch;
-    // Forward.
+    block_forward(params, activation, spans, unit_offset, &input, acts);
+    let out = unit_offset[last];
+    let loss = output_deltas(&acts[out], set, s0, count, grad_scale, &mut deltas[out]);
+    // Backward.
+    for l in (0..spans.len()).rev() {
+        let span = spans[l];
+        let (before, current) = deltas.split_at_mut(unit_offset[l]);
+        let delta = &current[..span.outputs];
+        let prev: &[[f32; BLOCK]] = if l == 0 {
+            &input
+        } else {
+            &acts[unit_offset[l - 1]..][..span.inputs]
+        };
+        add_lane_terms(&span, delta, prev, s0, count, column, lanes);
+        if l > 0 {
+            let prev_delta = &mut before[unit_offset[l - 1]..][..span.inputs];
+            back_propagate(params, activation, &span, delta, prev, back, prev_delta);
+        }
+    }
+    loss
+}
+
+/// The block's inputs by coordinate: `[x or y][sample of the block]`, zero past `count`.
+fn block_inputs(set: &TrainingSet, s0: usize, count: usize) -> [[f32; BLOCK]; 2] {
+    let mut input = [[0.0f32; BLOCK]; 2];
+    for (b, x) in set.inputs[s0..s0 + count].iter().enumerate() {
+        input[0][b] = x[0];
+        input[1][b] = x[1];
+    }
+    input
+}
+
+/// Forward pass of the block: z = b[i] + Σ_j W[i][j]·a[j] (j ascending), activated except
+/// in the last layer, into `acts` (units in layer order).
+fn block_forward(
+    params: &[f32],
+    activation: Activation,
+    spans: &[LayerSpan],
+    unit_offset: &[usize],
+    input: &[[f32; BLOCK]; 2],
+    acts: &mut [[f32; BLOCK]],
+) {
+    let last = spans.len() - 1;
     for (l, span) in spans.iter().enumerate() {
         let (done, rest) = acts.split_at_mut(unit_offset[l]);
         let prev: &[[f32; BLOCK]] = if l == 0 {
-            &input
+            input
         } else {
             &done[unit_offset[l - 1]..][..span.inputs]
         };
@@ -624,62 +672,84 @@ fn block_pass(
             *out = z;
         }
     }
+}
+
+/// The output deltas δ_out = (y − t)·grad_scale (zero past `count`); returns the block's sum
+/// of squared errors.
+fn output_deltas(
+    output: &[f32; BLOCK],
+    set: &TrainingSet,
+    s0: usize,
+    count: usize,
+    grad_scale: f32,
+    delta: &mut [f32; BLOCK],
+) -> f64 {
     let mut loss = 0.0f64;
-    let out = unit_offset[last];
     for b in 0..BLOCK {
         let err = if b < count {
-            acts[out][b] - set.targets[s0 + b]
+            output[b] - set.targets[s0 + b]
         } else {
             0.0
         };
         loss += (err as f64) * (err as f64);
-        deltas[out][b] = err * grad_scale;
-    }
-    // Backward.
-    for l in (0..spans.len()).rev() {
-        let span = spans[l];
-        let (before, current) = deltas.split_at_mut(unit_offset[l]);
-        let delta = &current[..span.outputs];
-        let prev: &[[f32; BLOCK]] = if l == 0 {
-            &input
-        } else {
-            &acts[unit_offset[l - 1]..][..span.inputs]
-        };
-        for b in 0..count {
-            let lane = &mut lanes[((s0 + b) % BLOCK) * n_params..][..n_params];
-            let column = &mut column[..span.inputs];
-            for (c, a) in column.iter_mut().zip(prev) {
-                *c = a[b];
-            }
-            for (i, d) in delta.iter().enumerate() {
-                let d = d[b];
-                lane[span.bias_offset + i] += d;
-                let row = &mut lane[span.weight_offset + i * span.inputs..][..span.inputs];
-                for (g, a) in row.iter_mut().zip(column.iter()) {
-                    *g += d * a;
-                }
-            }
-        }
-        if l > 0 {
-            let back = &mut back[..span.inputs];
-            back.iter_mut().for_each(|v| *v = [0.0; BLOCK]);
-            for (i, d) in delta.iter().enumerate() {
-                let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-                for (bj, w) in back.iter_mut().zip(row) {
-                    for b in 0..BLOCK {
-                        bj[b] += w * d[b];
-                    }
-                }
-            }
-            let prev_delta = &mut before[unit_offset[l - 1]..][..span.inputs];
-            for ((pd, bj), a) in prev_delta.iter_mut().zip(back.iter()).zip(prev) {
-                for b in 0..BLOCK {
-                    pd[b] = bj[b] * activation.derivative_from_output(a[b]);
-                }
-            }
-        }
+        delta[b] = err * grad_scale;
     }
     loss
+}
+
+/// Adds sample s0 + b's terms δ[i]·a[j] (and δ[i]) of one layer to lane (s0 + b) mod BLOCK.
+fn add_lane_terms(
+    span: &LayerSpan,
+    delta: &[[f32; BLOCK]],
+    prev: &[[f32; BLOCK]],
+    s0: usize,
+    count: usize,
+    column: &mut [f32],
+    lanes: &mut [f32],
+) {
+    let n_params = lanes.len() / BLOCK;
+    for b in 0..count {
+        let lane = &mut lanes[((s0 + b) % BLOCK) * n_params..][..n_params];
+        let column = &mut column[..span.inputs];
+        for (c, a) in column.iter_mut().zip(prev) {
+            *c = a[b];
+        }
+        for (i, d) in delta.iter().enumerate() {
+            let d = d[b];
+            lane[span.bias_offset + i] += d;
+            let row = &mut lane[span.weight_offset + i * span.inputs..][..span.inputs];
+            for (g, a) in row.iter_mut().zip(column.iter()) {
+                *g += d * a;
+            }
+        }
+    }
+}
+
+/// δ_prev[j] = (Σ_i W[i][j]·δ[i], i ascending)·f'(a_prev[j]) of one layer into `prev_delta`.
+fn back_propagate(
+    params: &[f32],
+    activation: Activation,
+    span: &LayerSpan,
+    delta: &[[f32; BLOCK]],
+    prev: &[[f32; BLOCK]],
+    back: &mut [[f32; BLOCK]],
+    prev_delta: &mut [[f32; BLOCK]],
+) {
+    let back = &mut back[..span.inputs];
+    back.iter_mut().for_each(|v| *v = [0.0; BLOCK]);
+    for (i, d) in delta.iter().enumerate() {
+        let row = &params[span.weight_offset + i * span.inputs..][..span.inputs];
+        for (bj, w) in back.iter_mut().zip(row) {
+            for b in 0..BLOCK {
+                bj[b] += w * d[b];
+            }
+        }
+    }
+    for ((pd, bj), a) in prev_delta.iter_mut().zip(back.iter()).zip(prev) {
+        for b in 0..BLOCK {
+            pd[b] = bj[b] * activation.derivative_from_output(a[b]);
+        }
+    }
 }
 
 /// Gradient of the mean squared error of `net` on `set` w.r.t. its parameters, summed
@@ -728,9 +798,7 @@ fn fit_reference(
     let mut ws = GradientWorkspace::new(net, lanes);
     let activation = net.activation;
     fit_one(net, config, k, |params, grad| {
-        let loss = ws.gradient(params, activation, set);
-        grad.copy_from_slice(&ws.lanes[..params.len()]);
-        loss
+        ws.loss_and_gradient(params, activation, set, grad)
     })
 }
 

@@ -9,6 +9,7 @@
 use crate::error::Result;
 use crate::report::chart::{self, Frame, FONT};
 use crate::report::colormap::{draw_colour_bar, ColourBar, ColourMap};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -168,20 +169,11 @@ pub fn frame(map: &Heatmap<'_>) -> Frame {
 
 /// Draw the heatmap and write it to `path` as PNG (atomically); returns where the plot lies.
 pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
-    let Layout {
-        step,
-        u: (u_lo, u_hi),
-        v: (v_lo, v_hi),
-        plot_w,
-        plot_h,
-    } = Layout::of(map);
-    let half = step / 2.0;
-    let main_w = plot_w + Y_LABELS + 2 * MARGIN;
+    let layout = Layout::of(map);
+    let main_w = layout.plot_w + Y_LABELS + 2 * MARGIN;
     let width = main_w + BAR;
-    let height = HEADER + plot_h + X_LABELS + 2 * MARGIN;
+    let height = HEADER + layout.plot_h + X_LABELS + 2 * MARGIN;
     let (lo, hi) = limits(map.values, map.scale);
-    let values = map.values;
-    let (nu, nv) = (map.nu, map.nv);
     let mut frame = None;
     chart::save_png(path, width, height, |root| {
         let (header, body) = root.split_vertically(HEADER);
@@ -193,58 +185,16 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
         draw_legend(&header, map, lo, hi)?;
 
         let (main, _bar) = body.split_horizontally(main_w);
-        let mut chart = ChartBuilder::on(&main)
-            .margin(MARGIN)
-            .x_label_area_size(X_LABELS)
-            .y_label_area_size(Y_LABELS)
-            .build_cartesian_2d(u_lo..u_hi, v_lo..v_hi)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc(format!("{} (mm)", map.u_name))
-            .y_desc(format!("{} (mm)", map.v_name))
-            .label_style((FONT, 14))
-            .axis_desc_style((FONT, 16))
-            .draw()?;
-        let grey = RGBColor(200, 200, 200);
-        chart.draw_series(
-            (0..nv)
-                .flat_map(|j| (0..nu).map(move |i| (i, j)))
-                .map(|(i, j)| {
-                    let u = map.u0_mm + step * i as f64;
-                    let v = map.v0_mm + step * j as f64;
-                    let mut colour = match values.get(j * nu + i).copied().flatten() {
-                        Some(e) => colour_of(e, lo, hi, map.scale),
-                        None => grey,
-                    };
-                    if map.extrapolated.get(j * nu + i) == Some(&true) {
-                        colour = lighten(colour);
-                    }
-                    Rectangle::new(
-                        [(u - half, v - half), (u + half, v + half)],
-                        colour.filled(),
-                    )
-                }),
-        )?;
-        if map.hull.len() >= 2 {
-            let mut ring: Vec<(f64, f64)> = map.hull.iter().map(|p| (p[0], p[1])).collect();
-            ring.push(ring[0]);
-            chart.draw_series(std::iter::once(PathElement::new(
-                ring.clone(),
-                WHITE.stroke_width(4),
-            )))?;
-            chart.draw_series(std::iter::once(PathElement::new(
-                ring,
-                BLACK.stroke_width(2),
-            )))?;
-        }
+        let mut chart = draw_axes(&main, map, &layout)?;
+        draw_cells(&mut chart, map, layout.step, lo, hi)?;
+        draw_hull(&mut chart, map.hull)?;
         for &(u, v) in map.probes {
             draw_probe_mark(root, chart.backend_coord(&(u, v)))?;
         }
         for &(u, v) in map.rejected {
             draw_rejected_mark(root, chart.backend_coord(&(u, v)))?;
         }
-        frame = Some(Frame::new((u_lo, u_hi), (v_lo, v_hi), |u, v| {
+        frame = Some(Frame::new(layout.u, layout.v, |u, v| {
             chart.backend_coord(&(u, v))
         }));
 
@@ -265,6 +215,86 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
         Ok(())
     })?;
     frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+}
+
+/// The plot of a heatmap: plane coordinates in mm on a bitmap.
+type MapChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// What a drawing step returns.
+type Drawn<T> = std::result::Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// The plot area with its axes (mm along the two plane axes), no mesh.
+fn draw_axes<'a, 'b>(
+    main: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    map: &Heatmap<'_>,
+    layout: &Layout,
+) -> Drawn<MapChart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(main)
+        .margin(MARGIN)
+        .x_label_area_size(X_LABELS)
+        .y_label_area_size(Y_LABELS)
+        .build_cartesian_2d(layout.u.0..layout.u.1, layout.v.0..layout.v.1)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(format!("{} (mm)", map.u_name))
+        .y_desc(format!("{} (mm)", map.v_name))
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        .draw()?;
+    Ok(chart)
+}
+
+/// One cell per node, centred on it and `step` wide: its value's colour between `lo` and
+/// `hi`, grey where there is none, lightened where it is extrapolated.
+fn draw_cells(
+    chart: &mut MapChart<'_, '_>,
+    map: &Heatmap<'_>,
+    step: f64,
+    lo: f64,
+    hi: f64,
+) -> Drawn<()> {
+    let half = step / 2.0;
+    let (nu, nv) = (map.nu, map.nv);
+    let grey = RGBColor(200, 200, 200);
+    chart.draw_series(
+        (0..nv)
+            .flat_map(|j| (0..nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let u = map.u0_mm + step * i as f64;
+                let v = map.v0_mm + step * j as f64;
+                let mut colour = match map.values.get(j * nu + i).copied().flatten() {
+                    Some(e) => colour_of(e, lo, hi, map.scale),
+                    None => grey,
+                };
+                if map.extrapolated.get(j * nu + i) == Some(&true) {
+                    colour = lighten(colour);
+                }
+                Rectangle::new(
+                    [(u - half, v - half), (u + half, v + half)],
+                    colour.filled(),
+                )
+            }),
+    )?;
+    Ok(())
+}
+
+/// The measured hull as a black outline on a white rim (nothing for fewer than 2 corners).
+fn draw_hull(chart: &mut MapChart<'_, '_>, hull: &[[f64; 2]]) -> Drawn<()> {
+    if hull.len() >= 2 {
+        let mut ring: Vec<(f64, f64)> = hull.iter().map(|p| (p[0], p[1])).collect();
+        ring.push(ring[0]);
+        chart.draw_series(std::iter::once(PathElement::new(
+            ring.clone(),
+            WHITE.stroke_width(4),
+        )))?;
+        chart.draw_series(std::iter::once(PathElement::new(
+            ring,
+            BLACK.stroke_width(2),
+        )))?;
+    }
+    Ok(())
 }
 
 /// Halfway to white: nodes outside the measured hull (extrapolated), so the measured domain stands out.

@@ -314,68 +314,20 @@ pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Genera
     let mut probe_files = Vec::new();
     let probes_dir = out.join("probes");
     for k in 0..spec.parts {
+        // One generator per part, drawn in this order: truth, outliers, repeats, noise.
         let mut rng = ChaCha8Rng::seed_from_u64(part_seed(spec.seed, k));
         let truth = part_truth(k, &mut rng);
-        // Outliers: interior points, well apart so no two mask each other.
-        let spacing_mm = typical_spacing_mm(spec, layout.len());
-        let mut chosen: Vec<usize> = Vec::new();
         let interior: Vec<usize> = (0..layout.len()).filter(|&i| layout[i].2).collect();
-        let mut guard = 0;
-        while chosen.len() < spec.outliers_per_part && guard < 100_000 && !interior.is_empty() {
-            guard += 1;
-            let cand = interior[rng.random_range(0..interior.len())];
-            let far = chosen.iter().all(|&c| {
-                (layout[c].0 - layout[cand].0).hypot(layout[c].1 - layout[cand].1)
-                    > 2.5 * spacing_mm
-            });
-            if far {
-                chosen.push(cand);
-            }
-        }
-        chosen.sort_unstable();
-        // Two repeated measurements per part, away from the outliers.
-        let mut repeats: Vec<usize> = Vec::new();
-        let spare = interior.iter().filter(|i| !chosen.contains(i)).count();
-        while repeats.len() < spare.min(2) {
-            let cand = interior[rng.random_range(0..interior.len())];
-            if !chosen.contains(&cand) && !repeats.contains(&cand) {
-                repeats.push(cand);
-            }
-        }
-        let mut text = String::new();
-        if spec.nominal_columns {
-            text.push_str("id,x_mm,y_mm,z_mm,nx_mm,ny_mm,nz_mm\n");
-        } else {
-            text.push_str("id,x_mm,y_mm,z_mm\n");
-        }
-        let row = |id: usize, x: f64, y: f64, e_um: f64, text: &mut String| {
-            let z = spec.floor_z_mm + e_um / 1000.0;
-            let _ = write!(text, "P{:03},{x:.3},{y:.3},{z:.4}", id + 1);
-            if spec.nominal_columns {
-                let _ = write!(text, ",{x:.3},{y:.3},{:.4}", spec.floor_z_mm);
-            }
-            text.push('\n');
-        };
-        for (i, &(x, y, _)) in layout.iter().enumerate() {
-            let mut e =
-                truth.e_um(spec, x, y) + spec.noise_um * rng.sample::<f64, _>(StandardNormal);
-            if chosen.contains(&i) {
-                e += spec.outlier_um;
-                outliers.push(PlantedOutlier {
-                    part: truth.part.clone(),
-                    id: format!("P{:03}", i + 1),
-                    x_mm: round3(x),
-                    y_mm: round3(y),
-                    added_um: spec.outlier_um,
-                });
-            }
-            row(i, x, y, e, &mut text);
-        }
-        for &i in &repeats {
-            let (x, y, _) = layout[i];
-            let e = truth.e_um(spec, x, y) + spec.noise_um * rng.sample::<f64, _>(StandardNormal);
-            row(i, x, y, e, &mut text);
-        }
+        let chosen = pick_outliers(spec, &layout, &interior, &mut rng);
+        let repeats = pick_repeats(&interior, &chosen, &mut rng);
+        let text = probe_csv(
+            spec,
+            &layout,
+            &truth,
+            (&chosen, &repeats),
+            &mut rng,
+            &mut outliers,
+        );
         let path = probes_dir.join(format!("{}.csv", truth.part));
         io::write_atomic_bytes(&path, text.as_bytes())?;
         probe_files.push(path);
@@ -388,7 +340,101 @@ pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Genera
         parts,
         outliers,
     };
-    io::write_json(&out.join("truth.json"), &truth)?;
+    write_family_files(spec, out, &truth, command)?;
+    Ok(Generated {
+        truth,
+        probe_files,
+        points_per_part: layout.len(),
+    })
+}
+
+/// The outliers of one part: interior points, well apart so no two mask each other (sorted).
+fn pick_outliers(
+    spec: &WebPlateSpec,
+    layout: &[(f64, f64, bool)],
+    interior: &[usize],
+    rng: &mut ChaCha8Rng,
+) -> Vec<usize> {
+    let spacing_mm = typical_spacing_mm(spec, layout.len());
+    let mut chosen: Vec<usize> = Vec::new();
+    let mut guard = 0;
+    while chosen.len() < spec.outliers_per_part && guard < 100_000 && !interior.is_empty() {
+        guard += 1;
+        let cand = interior[rng.random_range(0..interior.len())];
+        let far = chosen.iter().all(|&c| {
+            (layout[c].0 - layout[cand].0).hypot(layout[c].1 - layout[cand].1) > 2.5 * spacing_mm
+        });
+        if far {
+            chosen.push(cand);
+        }
+    }
+    chosen.sort_unstable();
+    chosen
+}
+
+/// Two repeated measurements per part (fewer if the interior has no room), away from the
+/// outliers `chosen`.
+fn pick_repeats(interior: &[usize], chosen: &[usize], rng: &mut ChaCha8Rng) -> Vec<usize> {
+    let mut repeats: Vec<usize> = Vec::new();
+    let spare = interior.iter().filter(|i| !chosen.contains(i)).count();
+    while repeats.len() < spare.min(2) {
+        let cand = interior[rng.random_range(0..interior.len())];
+        if !chosen.contains(&cand) && !repeats.contains(&cand) {
+            repeats.push(cand);
+        }
+    }
+    repeats
+}
+
+/// The probe file of one part: every layout point with its truth plus noise (plus the outlier
+/// offset for the `chosen`, recorded in `outliers`), then the `repeats` measured again.
+fn probe_csv(
+    spec: &WebPlateSpec,
+    layout: &[(f64, f64, bool)],
+    truth: &PartTruth,
+    (chosen, repeats): (&[usize], &[usize]),
+    rng: &mut ChaCha8Rng,
+    outliers: &mut Vec<PlantedOutlier>,
+) -> String {
+    let mut text = String::new();
+    if spec.nominal_columns {
+        text.push_str("id,x_mm,y_mm,z_mm,nx_mm,ny_mm,nz_mm\n");
+    } else {
+        text.push_str("id,x_mm,y_mm,z_mm\n");
+    }
+    let row = |id: usize, x: f64, y: f64, e_um: f64, text: &mut String| {
+        let z = spec.floor_z_mm + e_um / 1000.0;
+        let _ = write!(text, "P{:03},{x:.3},{y:.3},{z:.4}", id + 1);
+        if spec.nominal_columns {
+            let _ = write!(text, ",{x:.3},{y:.3},{:.4}", spec.floor_z_mm);
+        }
+        text.push('\n');
+    };
+    for (i, &(x, y, _)) in layout.iter().enumerate() {
+        let mut e = truth.e_um(spec, x, y) + spec.noise_um * rng.sample::<f64, _>(StandardNormal);
+        if chosen.contains(&i) {
+            e += spec.outlier_um;
+            outliers.push(PlantedOutlier {
+                part: truth.part.clone(),
+                id: format!("P{:03}", i + 1),
+                x_mm: round3(x),
+                y_mm: round3(y),
+                added_um: spec.outlier_um,
+            });
+        }
+        row(i, x, y, e, &mut text);
+    }
+    for &i in repeats {
+        let (x, y, _) = layout[i];
+        let e = truth.e_um(spec, x, y) + spec.noise_um * rng.sample::<f64, _>(StandardNormal);
+        row(i, x, y, e, &mut text);
+    }
+    text
+}
+
+/// `truth.json`, `outliers.csv`, `finish.ngc`, `job.toml` and `README.md` of the family.
+fn write_family_files(spec: &WebPlateSpec, out: &Path, truth: &Truth, command: &str) -> Result<()> {
+    io::write_json(&out.join("truth.json"), truth)?;
     let mut text = String::from("part,id,x_mm,y_mm,added_um\n");
     for o in &truth.outliers {
         let _ = writeln!(
@@ -400,12 +446,7 @@ pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Genera
     io::write_atomic_bytes(&out.join("outliers.csv"), text.as_bytes())?;
     io::write_atomic_bytes(&out.join("finish.ngc"), finishing_program(spec).as_bytes())?;
     io::write_atomic_bytes(&out.join("job.toml"), job_toml(spec).as_bytes())?;
-    io::write_atomic_bytes(&out.join("README.md"), readme(spec, command).as_bytes())?;
-    Ok(Generated {
-        truth,
-        probe_files,
-        points_per_part: layout.len(),
-    })
+    io::write_atomic_bytes(&out.join("README.md"), readme(spec, command).as_bytes())
 }
 
 fn typical_spacing_mm(spec: &WebPlateSpec, n: usize) -> f64 {
