@@ -79,27 +79,10 @@ impl Domain {
         self.v_max_mm - self.v_min_mm
     }
 
-    /// A command-line value `UMIN,VMIN,UMAX,VMAX` (mm, finite, each minimum below its maximum).
+    /// A command-line value `UMIN,VMIN,UMAX,VMAX` (mm, finite, each minimum below its maximum),
+    /// for clap: [`crate::probe::parse_domain`]'s message as a string.
     pub fn parse_arg(text: &str) -> std::result::Result<Domain, String> {
-        let v: Vec<f64> = text
-            .split(',')
-            .map(|p| {
-                p.trim()
-                    .parse::<f64>()
-                    .map_err(|_| format!("'{p}' is not a number"))
-            })
-            .collect::<std::result::Result<_, _>>()?;
-        match v.as_slice() {
-            &[a, b, c, d] if [a, b, c, d].iter().all(|x| x.is_finite()) && a < c && b < d => {
-                Ok(Domain {
-                    u_min_mm: a,
-                    v_min_mm: b,
-                    u_max_mm: c,
-                    v_max_mm: d,
-                })
-            }
-            _ => Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".into()),
-        }
+        crate::probe::parse_domain(text).map_err(|e| e.to_string())
     }
 }
 
@@ -227,16 +210,13 @@ mod tests {
             [d.u_min_mm, d.v_min_mm, d.u_max_mm, d.v_max_mm],
             [-10.0, 0.0, 600.0, 300.5]
         );
-        assert_eq!(
-            Domain::parse_arg("0,a,1,1"),
-            Err("'a' is not a number".to_string())
-        );
-        for bad in ["0,0,1", "1,0,0,1", "0,0,1,0", "0,0,inf,1"] {
-            assert_eq!(
-                Domain::parse_arg(bad),
-                Err("write UMIN,VMIN,UMAX,VMAX in mm with min < max".to_string()),
-                "{bad}"
-            );
+        let refusal = |text: &str| Domain::parse_arg(text).unwrap_err();
+        assert!(refusal("0,a,1,1").contains("is not four numbers"));
+        assert!(refusal("0,0,1").contains("has 3 values, not 4"));
+        for bad in ["1,0,0,1", "0,0,1,0", "0,0,inf,1"] {
+            let message = refusal(bad);
+            assert!(message.contains("is not a rectangle"), "{bad}: {message}");
+            assert!(message.contains("UMIN,VMIN,UMAX,VMAX"), "{bad}: {message}");
         }
     }
 
