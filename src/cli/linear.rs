@@ -4,11 +4,11 @@ use super::Globals;
 use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
 use errmap::linear::{
     compute_budget, read_budget_setup, render_table, target_symbols, AirConditions, AirCorrection,
-    AirFormula, AirIndexJson, AnalyzeRequest, Corrections, Evaluation, Standard, TableFormat,
-    TableOptions, TableRequest, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+    AirFormula, AirIndexJson, AnalyzeRequest, Corrections, Evaluation, RunSource, Standard,
+    TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Subcommand)]
 pub enum LinearCommand {
@@ -213,17 +213,21 @@ pub fn run_synth(args: SynthLinearArgs, _globals: Globals) -> Result<i32> {
 }
 
 impl CorrectionArgs {
-    /// The corrections these flags ask for.
-    fn corrections(&self) -> Corrections {
-        Corrections {
-            air: self.correct_air.then_some(AirCorrection {
-                formula: self.air_formula,
-                wavelength_nm: self.wavelength_nm,
-                co2_ppm: self.co2_ppm,
+    /// The run file at `path` (through the column map `columns`) with these corrections.
+    fn source<'a>(&self, path: &'a Path, columns: Option<&'a str>) -> RunSource<'a> {
+        RunSource {
+            path,
+            columns,
+            corrections: Corrections {
+                air: self.correct_air.then_some(AirCorrection {
+                    formula: self.air_formula,
+                    wavelength_nm: self.wavelength_nm,
+                    co2_ppm: self.co2_ppm,
+                    datum_mm: self.datum_mm,
+                }),
+                material_expansion_ppm_per_k: self.material_expansion,
                 datum_mm: self.datum_mm,
-            }),
-            material_expansion_ppm_per_k: self.material_expansion,
-            datum_mm: self.datum_mm,
+            },
         }
     }
 }
@@ -328,10 +332,8 @@ fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
 
 fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
     let analysis = errmap::linear::analyze(&AnalyzeRequest {
-        runs: &args.runs,
-        columns: args.columns.as_deref(),
+        runs: args.corrections.source(&args.runs, args.columns.as_deref()),
         standard: args.standard,
-        corrections: args.corrections.corrections(),
         fit_pitch_lead_mm: args.fit_pitch,
         apply_table: args.apply_table.as_deref(),
         table_format: args.table_format,
@@ -399,12 +401,8 @@ fn budget(args: BudgetArgs) -> Result<i32> {
 }
 
 fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
-    let plan = errmap::linear::plan_table(&TableRequest {
-        runs: &args.runs,
-        columns: args.columns.as_deref(),
-        corrections: args.corrections.corrections(),
-        spacing_mm: args.spacing,
-    })?;
+    let runs = args.corrections.source(&args.runs, args.columns.as_deref());
+    let plan = errmap::linear::plan_table(&runs, args.spacing)?;
     if let Some(d) = plan.unidirectional {
         info!(
             "unidirectional runs (direction {} only): the table carries the same values for both directions",

@@ -22,43 +22,46 @@ pub struct Corrections {
     pub datum_mm: f64,
 }
 
-/// Read a run file (through an instrument's column map `columns`, if given) and apply the
-/// corrections; returns the file and a note per correction applied.
-pub fn load_runs(
-    path: &Path,
-    columns: Option<&str>,
-    corrections: &Corrections,
-) -> Result<(RunFile, Vec<String>)> {
-    let mut notes = Vec::new();
-    let mut file = match columns {
-        Some(spec) => read_runs_mapped(path, &ColumnMap::parse(spec)?)?,
-        None => read_runs(path)?,
-    };
-    if let Some(air) = &corrections.air {
-        let (corrected, n) = correct_air(&file, air)?;
-        let mean = n.iter().sum::<f64>() / n.len().max(1) as f64;
-        notes.push(format!(
-            "air-corrected with {} at {} nm: mean n = {mean:.9}",
-            air.formula.name(),
-            air.wavelength_nm
-        ));
-        file = corrected;
+/// A run file to read: through an instrument's column map (`FIELD=COLUMN[unit],…`) if given,
+/// with corrections applied.
+#[derive(Debug, Clone, Copy)]
+pub struct RunSource<'a> {
+    pub path: &'a Path,
+    pub columns: Option<&'a str>,
+    pub corrections: Corrections,
+}
+
+impl RunSource<'_> {
+    /// Read the runs and apply the corrections; returns the file and a note per correction.
+    pub fn load(&self) -> Result<(RunFile, Vec<String>)> {
+        let mut notes = Vec::new();
+        let mut file = match self.columns {
+            Some(spec) => read_runs_mapped(self.path, &ColumnMap::parse(spec)?)?,
+            None => read_runs(self.path)?,
+        };
+        if let Some(air) = &self.corrections.air {
+            let (corrected, n) = correct_air(&file, air)?;
+            let mean = n.iter().sum::<f64>() / n.len().max(1) as f64;
+            notes.push(format!(
+                "air-corrected with {} at {} nm: mean n = {mean:.9}",
+                air.formula.name(),
+                air.wavelength_nm
+            ));
+            file = corrected;
+        }
+        if let Some(alpha) = self.corrections.material_expansion_ppm_per_k {
+            file = normalise_material(&file, alpha, self.corrections.datum_mm)?;
+            notes.push(format!("normalised to 20 °C with α = {alpha} µm/(m·K)"));
+        }
+        Ok((file, notes))
     }
-    if let Some(alpha) = corrections.material_expansion_ppm_per_k {
-        file = normalise_material(&file, alpha, corrections.datum_mm)?;
-        notes.push(format!("normalised to 20 °C with α = {alpha} µm/(m·K)"));
-    }
-    Ok((file, notes))
 }
 
 /// What `linear analyze` does.
 #[derive(Debug, Clone)]
 pub struct AnalyzeRequest<'a> {
-    pub runs: &'a Path,
-    /// An instrument's column map (`FIELD=COLUMN[unit],…`).
-    pub columns: Option<&'a str>,
+    pub runs: RunSource<'a>,
     pub standard: Standard,
-    pub corrections: Corrections,
     /// Fit the pitch error with this screw lead (mm).
     pub fit_pitch_lead_mm: Option<f64>,
     /// Apply this compensation table and evaluate again.
@@ -97,7 +100,7 @@ impl Analysis {
 /// Evaluate laser runs by a standard, with the pitch fit, the table check and the chart (and
 /// its result file) that `req` asks for.
 pub fn analyze(req: &AnalyzeRequest<'_>) -> Result<Analysis> {
-    let (file, notes) = load_runs(req.runs, req.columns, &req.corrections)?;
+    let (file, notes) = req.runs.load()?;
     let samples = file.samples();
     let ev = evaluate(&samples, req.standard)?;
     let fit = match req.fit_pitch_lead_mm {
@@ -140,6 +143,7 @@ fn write_chart(req: &AnalyzeRequest<'_>, a: &Analysis, png: &Path) -> Result<()>
     let title = format!(
         "{} — positioning deviation",
         req.runs
+            .path
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default()
@@ -154,7 +158,7 @@ fn write_chart(req: &AnalyzeRequest<'_>, a: &Analysis, png: &Path) -> Result<()>
             fit: a.fit.as_ref(),
         },
     )?;
-    let mut inputs: Vec<&Path> = vec![req.runs];
+    let mut inputs: Vec<&Path> = vec![req.runs.path];
     inputs.extend(req.apply_table);
     crate::report::result::write_result(
         &crate::report::result::beside(png),
@@ -162,7 +166,7 @@ fn write_chart(req: &AnalyzeRequest<'_>, a: &Analysis, png: &Path) -> Result<()>
             kind: "linear-analysis",
             title: format!(
                 "Linear axis {} ({})",
-                req.runs.display(),
+                req.runs.path.display(),
                 a.evaluation.standard
             ),
             inputs: &inputs,
@@ -171,16 +175,6 @@ fn write_chart(req: &AnalyzeRequest<'_>, a: &Analysis, png: &Path) -> Result<()>
         },
         &a.document(),
     )
-}
-
-/// What `linear table` reads and how it spaces the table.
-#[derive(Debug, Clone)]
-pub struct TableRequest<'a> {
-    pub runs: &'a Path,
-    pub columns: Option<&'a str>,
-    pub corrections: Corrections,
-    /// Spacing of the table points (mm), from the first target.
-    pub spacing_mm: f64,
 }
 
 /// A compensation table ready to render (`render_table`), and what the user should know.
@@ -193,11 +187,12 @@ pub struct TablePlan {
     pub notes: Vec<String>,
 }
 
-/// Evaluate runs by ISO 230-2:2014 and build their compensation table.
-pub fn plan_table(req: &TableRequest<'_>) -> Result<TablePlan> {
-    let (file, mut notes) = load_runs(req.runs, req.columns, &req.corrections)?;
+/// Evaluate runs by ISO 230-2:2014 and build their compensation table with points every
+/// `spacing_mm` from the first target.
+pub fn plan_table(runs: &RunSource<'_>, spacing_mm: f64) -> Result<TablePlan> {
+    let (file, mut notes) = runs.load()?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
-    let table = CompTable::from_evaluation(&ev, req.spacing_mm)?;
+    let table = CompTable::from_evaluation(&ev, spacing_mm)?;
     notes.extend(table.notes.iter().cloned());
     Ok(TablePlan {
         table,

@@ -17,7 +17,7 @@ pub use air::{
     AirConditions, AirFormula, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
 pub use analysis::{
-    analyze, load_runs, plan_table, Analysis, AnalyzeRequest, Corrections, TablePlan, TableRequest,
+    analyze, plan_table, Analysis, AnalyzeRequest, Corrections, RunSource, TablePlan,
 };
 pub use budget::{
     compute_budget, read_budget_setup, AbbeSetup, AirSetup, AlignmentSetup, Budget, BudgetSetup,

@@ -7,6 +7,10 @@ use super::runs::Direction;
 use std::path::Path;
 
 /// One target of the analyze document (issue 4's shape, in its order).
+///
+/// A projection of [`super::TargetFigures`] kept as its own type on purpose: its keys and their
+/// order are a published format (docs/linear.md) that must not follow changes to the library's
+/// struct, which other documents serialize whole.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct TargetJson {
     pub target_mm: f64,
