@@ -864,3 +864,55 @@ fn vdi_and_gb_text_use_their_own_symbols() {
         gb.stdout
     );
 }
+
+#[test]
+fn air_index_json_has_its_keys_in_order_and_the_air_wavelength() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = ok(
+        dir.path(),
+        &[
+            "linear",
+            "air-index",
+            "--temp-c",
+            "20",
+            "--pressure-kpa",
+            "101.325",
+            "--humidity-pct",
+            "50",
+            "--wavelength-nm",
+            "633",
+            "--json",
+        ],
+    );
+    let out = &run.stdout;
+    // The document's keys in their published order: the equation, n, λ_air, then the inputs.
+    let keys = [
+        "\"formula\"",
+        "\"n\"",
+        "\"air_wavelength_nm\"",
+        "\"temp_c\"",
+        "\"pressure_kpa\"",
+        "\"humidity_pct\"",
+        "\"wavelength_nm\"",
+        "\"co2_ppm\"",
+    ];
+    let at: Vec<usize> = keys
+        .iter()
+        .map(|k| out.find(k).unwrap_or_else(|| panic!("no {k} in {out}")))
+        .collect();
+    assert!(at.windows(2).all(|w| w[0] < w[1]), "key order: {out}");
+    let doc = json(&run);
+    assert_eq!(doc["formula"], "ciddor", "{doc}");
+    // NIST's calculator: n = 1.000271373 at 20 °C, 101.325 kPa, 50 %, 633 nm; λ_air = λ₀ / n.
+    close(&doc["n"], 1.000_271_373, "n");
+    let lambda_air = doc["air_wavelength_nm"].as_f64().unwrap();
+    assert!(
+        (lambda_air - 633.0 / 1.000_271_373).abs() < 1e-6,
+        "{lambda_air}"
+    );
+    close(&doc["temp_c"], 20.0, "temp_c");
+    close(&doc["pressure_kpa"], 101.325, "pressure_kpa");
+    close(&doc["humidity_pct"], 50.0, "humidity_pct");
+    close(&doc["wavelength_nm"], 633.0, "wavelength_nm");
+    close(&doc["co2_ppm"], 450.0, "co2_ppm");
+}

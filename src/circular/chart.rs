@@ -1,10 +1,11 @@
 //! Polar chart of a circular test: magnified deviation on a ring for both directions, the minimum-zone band of G, and the figures with the largest contributors named.
 
-use super::figures::Centred;
+use super::figures::{Centred, ZoneReport};
 use super::input::Direction;
 use super::Evaluation;
 use crate::error::Result;
 use crate::report::chart::{save_png, FONT};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::f64::consts::TAU;
 use std::path::Path;
@@ -85,7 +86,7 @@ fn side_text(eval: &Evaluation, span_um: f64) -> Vec<String> {
 
 /// The minimum-zone band as one closed polygon: its outer circle, then its inner one backwards
 /// (both about the zone centre, drawn in the chart's LSC coordinates).
-fn zone_band(zone: &super::figures::ZoneReport, polar: Polar) -> Vec<(f64, f64)> {
+fn zone_band(zone: &ZoneReport, polar: Polar) -> Vec<(f64, f64)> {
     let [a, b] = zone.centre_from_lsc_um;
     let curve = |level: f64| {
         (0..=360).map(move |k| {
@@ -122,71 +123,29 @@ fn grid_paths(polar: Polar) -> Vec<(Vec<(f64, f64)>, bool)> {
     paths
 }
 
+/// The polar plot area: chart units, the nominal circle at radius 1.
+type Plot<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// What a drawing stage returns (plotters' errors, turned into ours by `save_png`).
+type Drawn = std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
 /// Draw the polar chart and write it as PNG.
 pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<()> {
     let zone = &eval.figures.zone;
     let max_abs = c.dev_um.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     let span = nice_span(max_abs.max(zone.outer_um.abs()).max(zone.inner_um.abs()));
     let polar = Polar { span_um: span };
-    let to_xy = move |angle: f64, dev_um: f64| polar.xy(angle, dev_um);
-    let [first, second] = eval.axes;
     let text = side_text(eval, span);
-    let band = zone_band(zone, polar);
     save_png(path, 1250, 900, |root| {
         let (left, right) = root.split_horizontally(900);
         let mut chart = ChartBuilder::on(&left)
             .caption("Circular test (ISO 230-4)", (FONT, 22))
             .margin(20)
             .build_cartesian_2d(-1.5..1.5, -1.5..1.5)?;
-        chart
-            .draw_series(std::iter::once(Polygon::new(band.clone(), GREEN.mix(0.18))))?
-            .label(format!(
-                "minimum zone G = {:.2} µm",
-                zone.outer_um - zone.inner_um
-            ))
-            .legend(|(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 20, y + 5)], GREEN.mix(0.3).filled())
-            });
-        for (path, major) in grid_paths(polar) {
-            let style = if major {
-                BLACK.stroke_width(2)
-            } else {
-                BLACK.mix(0.25).stroke_width(1)
-            };
-            chart.draw_series(std::iter::once(PathElement::new(path, style)))?;
-        }
-        for (label, pos) in [
-            (format!("+{first}"), (1.42, -0.03)),
-            (format!("+{second}"), (-0.04, 1.45)),
-            (
-                format!("+{span} µm"),
-                (to_xy(0.3, span).0, to_xy(0.3, span).1),
-            ),
-        ] {
-            chart.draw_series(std::iter::once(Text::new(label, pos, (FONT, 16))))?;
-        }
-        for (d, colour) in [(Direction::Ccw, BLUE), (Direction::Cw, RED)] {
-            let mut pts: Vec<(f64, f64)> = c
-                .of(d)
-                .iter()
-                .map(|&i| (c.angle_rad[i], c.dev_um[i]))
-                .collect();
-            if pts.is_empty() {
-                continue;
-            }
-            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            pts.push(pts[0]);
-            chart
-                .draw_series(LineSeries::new(
-                    pts.iter().map(|&(a, v)| to_xy(a, v)),
-                    // Width 1: plotters joins wide polylines with miters that spike on noise.
-                    colour.stroke_width(1),
-                ))?
-                .label(d.name())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-        }
+        draw_zone_and_grid(&mut chart, zone, polar)?;
+        draw_axis_labels(&mut chart, eval.axes, polar)?;
+        draw_paths(&mut chart, c, polar)?;
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::LowerLeft)
@@ -203,4 +162,68 @@ pub fn save_polar_chart(path: &Path, eval: &Evaluation, c: &Centred) -> Result<(
         }
         Ok(())
     })
+}
+
+/// The minimum-zone band (with its legend entry) under the rings and spokes of the grid.
+fn draw_zone_and_grid(chart: &mut Plot<'_, '_>, zone: &ZoneReport, polar: Polar) -> Drawn {
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            zone_band(zone, polar),
+            GREEN.mix(0.18),
+        )))?
+        .label(format!(
+            "minimum zone G = {:.2} µm",
+            zone.outer_um - zone.inner_um
+        ))
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], GREEN.mix(0.3).filled()));
+    for (path, major) in grid_paths(polar) {
+        let style = if major {
+            BLACK.stroke_width(2)
+        } else {
+            BLACK.mix(0.25).stroke_width(1)
+        };
+        chart.draw_series(std::iter::once(PathElement::new(path, style)))?;
+    }
+    Ok(())
+}
+
+/// The axis directions and the scale of the outer ring.
+fn draw_axis_labels(chart: &mut Plot<'_, '_>, axes: [&str; 2], polar: Polar) -> Drawn {
+    let [first, second] = axes;
+    let span = polar.span_um;
+    for (label, pos) in [
+        (format!("+{first}"), (1.42, -0.03)),
+        (format!("+{second}"), (-0.04, 1.45)),
+        (format!("+{span} µm"), polar.xy(0.3, span)),
+    ] {
+        chart.draw_series(std::iter::once(Text::new(label, pos, (FONT, 16))))?;
+    }
+    Ok(())
+}
+
+/// Each direction's path, closed, sorted by angle about the least-squares centre.
+fn draw_paths(chart: &mut Plot<'_, '_>, c: &Centred, polar: Polar) -> Drawn {
+    for (d, colour) in [(Direction::Ccw, BLUE), (Direction::Cw, RED)] {
+        let mut pts: Vec<(f64, f64)> = c
+            .of(d)
+            .iter()
+            .map(|&i| (c.angle_rad[i], c.dev_um[i]))
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pts.push(pts[0]);
+        chart
+            .draw_series(LineSeries::new(
+                pts.iter().map(|&(a, v)| polar.xy(a, v)),
+                // Width 1: plotters joins wide polylines with miters that spike on noise.
+                colour.stroke_width(1),
+            ))?
+            .label(d.name())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
+    }
+    Ok(())
 }

@@ -140,14 +140,19 @@ fn g_of(points: &[[f64; 2]], start_mm: [f64; 2], radius_mm: f64) -> f64 {
     max - min
 }
 
-/// F max and min about the least-squares centre of the points.
-fn f_of(points: &[[f64; 2]], radius_mm: f64) -> Result<(f64, f64, [f64; 2])> {
-    let fit = fit_circle(points, radius_mm).ok_or_else(|| {
+/// The least-squares circle through points (nominal radius `radius_mm`).
+fn lsq_circle(points: &[[f64; 2]], radius_mm: f64) -> Result<super::CircleFit> {
+    fit_circle(points, radius_mm).ok_or_else(|| {
         Error::numeric(
             "no least-squares circle through the readings",
             "readings must lie around a full circle",
         )
-    })?;
+    })
+}
+
+/// F max and min about the least-squares centre of the points.
+fn f_of(points: &[[f64; 2]], radius_mm: f64) -> Result<(f64, f64, [f64; 2])> {
+    let fit = lsq_circle(points, radius_mm)?;
     let (dev, _) = about(points, fit.centre_mm, radius_mm);
     let max = dev.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     let min = dev.iter().cloned().fold(f64::INFINITY, f64::min);
@@ -158,46 +163,16 @@ fn f_of(points: &[[f64; 2]], radius_mm: f64) -> Result<(f64, f64, [f64; 2])> {
 pub fn evaluate(run: &CircularRun) -> Result<(Figures, Centred)> {
     let r_mm = run.radius_mm;
     let all: Vec<[f64; 2]> = run.readings.iter().map(|r| r.point_mm).collect();
-    let fit = fit_circle(&all, r_mm).ok_or_else(|| {
-        Error::numeric(
-            "no least-squares circle through the readings",
-            "readings must lie around a full circle",
-        )
-    })?;
-    let dirs = run.directions();
-    let both = dirs.len() == 2;
-    let mut g = PerDirection {
-        cw: None,
-        ccw: None,
-        bidirectional: None,
-    };
-    let mut fmax = g;
-    let mut fmin = g;
-    for d in &dirs {
-        let pts: Vec<[f64; 2]> = run.direction(*d).iter().map(|r| r.point_mm).collect();
-        let (hi, lo, centre) = f_of(&pts, r_mm)?;
-        let gd = g_of(&pts, centre, r_mm);
-        match d {
-            Direction::Ccw => (g.ccw, fmax.ccw, fmin.ccw) = (Some(gd), Some(hi), Some(lo)),
-            Direction::Cw => (g.cw, fmax.cw, fmin.cw) = (Some(gd), Some(hi), Some(lo)),
-        }
-    }
+    let fit = lsq_circle(&all, r_mm)?;
+    let [mut g, mut fmax, mut fmin] = per_direction(run)?;
     let (dev, angle) = about(&all, fit.centre_mm, r_mm);
-    let (zc, zdev, zone) = exact_zone(&all, fit.centre_mm, r_mm);
-    let outer = zdev.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    let inner = zdev.iter().cloned().fold(f64::INFINITY, f64::min);
+    let zone = zone_report(run, &all, fit.centre_mm);
+    let both = run.directions().len() == 2;
     if both {
-        g.bidirectional = Some(outer - inner);
+        g.bidirectional = Some(zone.outer_um - zone.inner_um);
         fmax.bidirectional = dev.iter().cloned().reduce(f64::max);
         fmin.bidirectional = dev.iter().cloned().reduce(f64::min);
     }
-    let lines = |outer_side: bool| {
-        zone.contacts
-            .iter()
-            .filter(|c| c.1 == outer_side)
-            .map(|c| run.readings[c.0].line)
-            .collect()
-    };
     let centred = Centred {
         direction: run.readings.iter().map(|r| r.direction).collect(),
         angle_rad: angle,
@@ -224,18 +199,50 @@ pub fn evaluate(run: &CircularRun) -> Result<(Figures, Centred)> {
         f_min_um: fmin,
         centre_offset_um: [fit.centre_mm[0] * 1e3, fit.centre_mm[1] * 1e3],
         mean_radius_deviation_um: (fit.radius_mm - r_mm) * 1e3,
-        zone: ZoneReport {
-            centre_from_lsc_um: [
-                (zc[0] - fit.centre_mm[0]) * 1e3,
-                (zc[1] - fit.centre_mm[1]) * 1e3,
-            ],
-            inner_um: inner,
-            outer_um: outer,
-            outer_lines: lines(true),
-            inner_lines: lines(false),
-        },
+        zone,
     };
     Ok((figures, centred))
+}
+
+/// G, F max and F min of each direction on its own (the `bidirectional` fields left `None`).
+fn per_direction(run: &CircularRun) -> Result<[PerDirection; 3]> {
+    let none = PerDirection {
+        cw: None,
+        ccw: None,
+        bidirectional: None,
+    };
+    let (mut g, mut fmax, mut fmin) = (none, none, none);
+    for d in &run.directions() {
+        let pts: Vec<[f64; 2]> = run.direction(*d).iter().map(|r| r.point_mm).collect();
+        let (hi, lo, centre) = f_of(&pts, run.radius_mm)?;
+        let gd = g_of(&pts, centre, run.radius_mm);
+        match d {
+            Direction::Ccw => (g.ccw, fmax.ccw, fmin.ccw) = (Some(gd), Some(hi), Some(lo)),
+            Direction::Cw => (g.cw, fmax.cw, fmin.cw) = (Some(gd), Some(hi), Some(lo)),
+        }
+    }
+    Ok([g, fmax, fmin])
+}
+
+/// The minimum zone of all readings (`all`), started from the least-squares centre `lsc_mm`.
+fn zone_report(run: &CircularRun, all: &[[f64; 2]], lsc_mm: [f64; 2]) -> ZoneReport {
+    let (zc, zdev, zone) = exact_zone(all, lsc_mm, run.radius_mm);
+    let outer = zdev.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let inner = zdev.iter().cloned().fold(f64::INFINITY, f64::min);
+    let lines = |outer_side: bool| {
+        zone.contacts
+            .iter()
+            .filter(|c| c.1 == outer_side)
+            .map(|c| run.readings[c.0].line)
+            .collect()
+    };
+    ZoneReport {
+        centre_from_lsc_um: [(zc[0] - lsc_mm[0]) * 1e3, (zc[1] - lsc_mm[1]) * 1e3],
+        inner_um: inner,
+        outer_um: outer,
+        outer_lines: lines(true),
+        inner_lines: lines(false),
+    }
 }
 
 /// Linear interpolation of a periodic curve sorted by angle (angles in [0, 2π)).

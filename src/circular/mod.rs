@@ -11,12 +11,14 @@ pub mod diagnosis;
 pub mod figures;
 pub mod input;
 pub mod model;
+pub mod report;
 pub mod zone;
 
 pub use circle::{fit_circle, CircleFit};
 pub use diagnosis::{diagnose, Diagnosis, Term, Terms};
 pub use figures::{evaluate, Centred, Figures, PerDirection};
 pub use input::{parse_run, read_run, CircularRun, Direction, Form, Plane, ReadOptions, Reading};
+pub use report::{human_report, parse_centre_mm, run_test, TestRequest};
 pub use zone::{min_zone, Zone};
 
 use serde::Serialize;

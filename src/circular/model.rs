@@ -51,6 +51,10 @@ pub struct Shape {
 
 impl Shape {
     /// The columns of the design, in a fixed order.
+    ///
+    /// The first nine repeat the enum's first nine variants on purpose: this list is the
+    /// design's column order (the coefficients and their standard errors follow it), the enum
+    /// only names the kinds.
     pub fn columns(&self) -> Vec<Column> {
         use Column::*;
         let mut cols = vec![

@@ -2,13 +2,10 @@
 
 use super::Globals;
 use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
-use errmap::linear::ColumnMap;
 use errmap::linear::{
-    compute_budget, correct_air, evaluate, fit_pitch, normalise_material, read_budget_setup,
-    read_runs, read_table, refractive_index, render_table, save_chart, target_symbols,
-    AirConditions, AirCorrection, AirFormula, AxisFigures, ChartInput, CompTable, Evaluation,
-    Figure, PitchFit, RunFile, Sample, Standard, TableFormat, TableOptions, DEFAULT_CO2_PPM,
-    HENE_WAVELENGTH_NM,
+    compute_budget, read_budget_setup, render_table, target_symbols, AirConditions, AirCorrection,
+    AirFormula, AirIndexJson, AnalyzeRequest, Corrections, Evaluation, RunSource, Standard,
+    TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -215,40 +212,24 @@ pub fn run_synth(args: SynthLinearArgs, _globals: Globals) -> Result<i32> {
     Ok(0)
 }
 
-/// Read the runs and apply the requested corrections; notes go to `notes`.
-fn load_runs(
-    path: &Path,
-    columns: Option<&str>,
-    c: &CorrectionArgs,
-    notes: &mut Vec<String>,
-) -> Result<RunFile> {
-    let mut file = match columns {
-        Some(spec) => errmap::linear::read_runs_mapped(path, &ColumnMap::parse(spec)?)?,
-        None => read_runs(path)?,
-    };
-    if c.correct_air {
-        let (corrected, n) = correct_air(
-            &file,
-            &AirCorrection {
-                formula: c.air_formula,
-                wavelength_nm: c.wavelength_nm,
-                co2_ppm: c.co2_ppm,
-                datum_mm: c.datum_mm,
+impl CorrectionArgs {
+    /// The run file at `path` (through the column map `columns`) with these corrections.
+    fn source<'a>(&self, path: &'a Path, columns: Option<&'a str>) -> RunSource<'a> {
+        RunSource {
+            path,
+            columns,
+            corrections: Corrections {
+                air: self.correct_air.then_some(AirCorrection {
+                    formula: self.air_formula,
+                    wavelength_nm: self.wavelength_nm,
+                    co2_ppm: self.co2_ppm,
+                    datum_mm: self.datum_mm,
+                }),
+                material_expansion_ppm_per_k: self.material_expansion,
+                datum_mm: self.datum_mm,
             },
-        )?;
-        let mean = n.iter().sum::<f64>() / n.len().max(1) as f64;
-        notes.push(format!(
-            "air-corrected with {} at {} nm: mean n = {mean:.9}",
-            c.air_formula.name(),
-            c.wavelength_nm
-        ));
-        file = corrected;
+        }
     }
-    if let Some(alpha) = c.material_expansion {
-        file = normalise_material(&file, alpha, c.datum_mm)?;
-        notes.push(format!("normalised to 20 °C with α = {alpha} µm/(m·K)"));
-    }
-    Ok(file)
 }
 
 fn table_options(t: &TableOptionArgs, axis: Option<String>, cec_table: u32) -> TableOptions {
@@ -269,68 +250,6 @@ impl ControllerArgs {
         opts.fanuc_magnification = self.fanuc_magnification;
         opts.sinumerik_max_points = self.sinumerik_max_points;
     }
-}
-
-/// One target of the analyze JSON (issue 4's shape, in its order).
-#[derive(serde::Serialize)]
-struct TargetJson {
-    target_mm: f64,
-    mean_up: Option<f64>,
-    mean_down: Option<f64>,
-    s_up: Option<f64>,
-    s_down: Option<f64>,
-    reversal: Option<f64>,
-    repeatability_up: Option<f64>,
-    repeatability_down: Option<f64>,
-    repeatability: Option<f64>,
-}
-
-fn targets_json(ev: &Evaluation) -> Vec<TargetJson> {
-    ev.targets
-        .iter()
-        .map(|t| TargetJson {
-            target_mm: t.target,
-            mean_up: t.mean_up,
-            mean_down: t.mean_down,
-            s_up: t.s_up,
-            s_down: t.s_down,
-            reversal: t.reversal,
-            repeatability_up: t.repeatability_up,
-            repeatability_down: t.repeatability_down,
-            repeatability: t.repeatability,
-        })
-        .collect()
-}
-
-#[derive(serde::Serialize)]
-struct AfterJson<'a> {
-    table: String,
-    targets: Vec<TargetJson>,
-    axis: &'a AxisFigures,
-    figures: Vec<Figure>,
-}
-
-/// The analyze document: `standard`, `unit`, `targets`, `axis`, then the optional parts.
-#[derive(serde::Serialize)]
-struct AnalyzeJson<'a> {
-    standard: &'static str,
-    unit: &'static str,
-    /// Present only for a unidirectional test: the one direction measured.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    unidirectional: Option<errmap::linear::Direction>,
-    /// Headings of the `targets` keys mean_up … repeatability in the standard's own symbols
-    /// (empty: the standard defines no such figure).
-    target_symbols: [&'static str; 8],
-    targets: Vec<TargetJson>,
-    axis: &'a AxisFigures,
-    /// The axis figures in the standard's own symbols, with their definitions.
-    figures: Vec<Figure>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pitch_fit: Option<&'a PitchFit>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    after: Option<AfterJson<'a>>,
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    corrections: Vec<String>,
 }
 
 fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
@@ -412,108 +331,33 @@ fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
 }
 
 fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
-    let mut notes = Vec::new();
-    let file = load_runs(
-        &args.runs,
-        args.columns.as_deref(),
-        &args.corrections,
-        &mut notes,
-    )?;
-    let samples = file.samples();
-    let ev = evaluate(&samples, args.standard)?;
-    let fit = match args.fit_pitch {
-        Some(lead) => {
-            let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
-            let es: Vec<f64> = ev.targets.iter().map(|t| t.mean_any()).collect();
-            Some(fit_pitch(&xs, &es, lead)?)
-        }
-        None => None,
-    };
-    let after = match &args.apply_table {
-        Some(path) => {
-            let opts = table_options(&args.table_options, None, 0);
-            let opts = TableOptions {
-                reference_mm: opts.reference_mm.or(ev.targets.first().map(|t| t.target)),
-                ..opts
-            };
-            let table = read_table(path, args.table_format, &opts)?;
-            Some((
-                path.clone(),
-                evaluate(&apply(&samples, &table), args.standard)?,
-            ))
-        }
-        None => None,
-    };
-    if let Some(png) = &args.chart {
-        let title = format!(
-            "{} — positioning deviation",
-            args.runs
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        );
-        save_chart(
-            png,
-            &ChartInput {
-                title,
-                unit: "µm",
-                before: &ev,
-                after: after.as_ref().map(|a| &a.1),
-                fit: fit.as_ref(),
-            },
-        )?;
-    }
-    let doc = AnalyzeJson {
-        standard: ev.standard.name(),
-        unit: "um",
-        unidirectional: ev.unidirectional,
-        target_symbols: target_symbols(ev.standard),
-        targets: targets_json(&ev),
-        axis: &ev.axis,
-        figures: ev.figures(),
-        pitch_fit: fit.as_ref(),
-        after: after.as_ref().map(|(path, a)| AfterJson {
-            table: path.display().to_string(),
-            targets: targets_json(a),
-            axis: &a.axis,
-            figures: a.figures(),
-        }),
-        corrections: notes.clone(),
-    };
-    if let Some(png) = &args.chart {
-        // The result beside the chart, for `errmap report`.
-        let mut inputs: Vec<&Path> = vec![args.runs.as_path()];
-        inputs.extend(args.apply_table.as_deref());
-        errmap::report::result::write_result(
-            &errmap::report::result::beside(png),
-            &errmap::report::result::ResultSpec {
-                kind: "linear-analysis",
-                title: format!("Linear axis {} ({})", args.runs.display(), ev.standard),
-                inputs: &inputs,
-                charts: &[png.as_path()],
-                table: args.apply_table.as_deref(),
-            },
-            &doc,
-        )?;
-    }
+    let analysis = errmap::linear::analyze(&AnalyzeRequest {
+        runs: args.corrections.source(&args.runs, args.columns.as_deref()),
+        standard: args.standard,
+        fit_pitch_lead_mm: args.fit_pitch,
+        apply_table: args.apply_table.as_deref(),
+        table_format: args.table_format,
+        table_options: table_options(&args.table_options, None, 0),
+        chart: args.chart.as_deref(),
+    })?;
     if args.json {
-        print_json(&doc)?;
-    } else {
-        for n in &notes {
-            outln!("{n}");
-        }
-        print_evaluation(&args.runs.display().to_string(), &ev)?;
-        if let Some(f) = &fit {
-            outln!(
-                "pitch fit (P = {} mm, {} targets): a = {:.3} µm, k = {:.3} µm/m, d = {:.3} µm, φ = {:.4} rad, residual RMS = {:.3} µm",
-                f.lead_mm, f.points, f.a_um, f.k_um_per_m, f.d_um, f.phi_rad, f.residual_rms_um
-            );
-        }
-        if let Some((path, after_ev)) = &after {
-            print_evaluation(&format!("after applying {}", path.display()), after_ev)?;
-        }
+        print_json(&analysis.document())?;
+        return Ok(0);
     }
-    if let (Some(png), false) = (&args.chart, args.json) {
+    for n in &analysis.notes {
+        outln!("{n}");
+    }
+    print_evaluation(&args.runs.display().to_string(), &analysis.evaluation)?;
+    if let Some(f) = &analysis.fit {
+        outln!(
+            "pitch fit (P = {} mm, {} targets): a = {:.3} µm, k = {:.3} µm/m, d = {:.3} µm, φ = {:.4} rad, residual RMS = {:.3} µm",
+            f.lead_mm, f.points, f.a_um, f.k_um_per_m, f.d_um, f.phi_rad, f.residual_rms_um
+        );
+    }
+    if let Some((path, after_ev)) = &analysis.after {
+        print_evaluation(&format!("after applying {}", path.display()), after_ev)?;
+    }
+    if let Some(png) = &args.chart {
         info!(
             "chart written to {} (result: {})",
             png.display(),
@@ -521,17 +365,6 @@ fn analyze(args: AnalyzeArgs, _globals: Globals) -> Result<i32> {
         );
     }
     Ok(0)
-}
-
-/// The deviations the runs would show with the table active: e − e_table(direction, x).
-fn apply(samples: &[Sample], table: &CompTable) -> Vec<Sample> {
-    samples
-        .iter()
-        .map(|s| Sample {
-            deviation: s.deviation - table.error_at(s.direction, s.target),
-            ..*s
-        })
-        .collect()
 }
 
 fn air_index(args: AirIndexArgs) -> Result<i32> {
@@ -542,25 +375,12 @@ fn air_index(args: AirIndexArgs) -> Result<i32> {
         wavelength_nm: args.wavelength_nm,
         co2_ppm: args.co2_ppm,
     };
-    let n = refractive_index(&cond, args.formula)?;
+    let doc = AirIndexJson::compute(cond, args.formula)?;
     if args.json {
-        #[derive(serde::Serialize)]
-        struct AirJson {
-            formula: &'static str,
-            n: f64,
-            air_wavelength_nm: f64,
-            #[serde(flatten)]
-            conditions: AirConditions,
-        }
-        print_json(&AirJson {
-            formula: args.formula.name(),
-            n,
-            air_wavelength_nm: cond.wavelength_nm / n,
-            conditions: cond,
-        })?;
+        print_json(&doc)?;
     } else {
-        outln!("n = {n:.9} ({})", args.formula.name());
-        outln!("air wavelength = {:.6} nm", cond.wavelength_nm / n);
+        outln!("n = {:.9} ({})", doc.n, doc.formula);
+        outln!("air wavelength = {:.6} nm", doc.air_wavelength_nm);
     }
     Ok(0)
 }
@@ -581,16 +401,9 @@ fn budget(args: BudgetArgs) -> Result<i32> {
 }
 
 fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
-    let mut notes = Vec::new();
-    let file = load_runs(
-        &args.runs,
-        args.columns.as_deref(),
-        &args.corrections,
-        &mut notes,
-    )?;
-    let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
-    let table = CompTable::from_evaluation(&ev, args.spacing)?;
-    if let Some(d) = ev.unidirectional {
+    let runs = args.corrections.source(&args.runs, args.columns.as_deref());
+    let plan = errmap::linear::plan_table(&runs, args.spacing)?;
+    if let Some(d) = plan.unidirectional {
         info!(
             "unidirectional runs (direction {} only): the table carries the same values for both directions",
             d.symbol()
@@ -598,22 +411,19 @@ fn table(args: TableArgs, _globals: Globals) -> Result<i32> {
     }
     let mut opts = table_options(&args.table_options, args.axis.clone(), args.cec_table);
     args.controller.apply(&mut opts);
-    for note in &table.notes {
-        notes.push(note.clone());
-    }
-    for (path, text) in render_table(&table, args.format, &opts, &args.output)? {
+    for (path, text) in render_table(&plan.table, args.format, &opts, &args.output)? {
         errmap::io::write_atomic_bytes(&path, text.as_bytes())?;
         info!(
             "wrote {} ({} points, {} format)",
             path.display(),
-            table.positions_mm.len(),
+            plan.table.positions_mm.len(),
             args.format.name()
         );
     }
-    for n in &notes {
+    for n in &plan.notes {
         info!("{n}");
     }
-    if args.format == TableFormat::Fanuc && ev.unidirectional.is_none() {
+    if args.format == TableFormat::Fanuc && plan.unidirectional.is_none() {
         info!("Fanuc: set bit 3605#0 = 1 for bidirectional compensation; the reference return is taken as + direction");
     }
     Ok(0)

@@ -70,15 +70,7 @@ fn usage(message: String, hint: impl Into<String>) -> Error {
 fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
     let lim = opts.fanuc_series.limits();
     let series = opts.fanuc_series.name();
-    let axis: u32 = match &opts.axis {
-        None => 1,
-        Some(a) => a.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
-            usage(
-                format!("Fanuc axis '{a}' is not an axis number"),
-                "give the controlled-axis number, e.g. --axis 1 for X",
-            )
-        })?,
-    };
+    let axis = axis_number(opts.axis.as_deref())?;
     let unit = opts.fanuc_unit_um;
     if !(unit.is_finite() && unit > 0.0) {
         return Err(usage(
@@ -96,6 +88,39 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
             "give --fanuc-magnification between 1 and 100",
         ));
     }
+    check_point_count(t, opts.fanuc_series)?;
+    let interval_counts = interval_counts(t, unit, opts.fanuc_series)?;
+    let reference_index = t.reference_index()?;
+    if t.kind == AxisKind::Rotary && reference_index != 0 {
+        return Err(Error::Internal(
+            "rotary Fanuc table not starting at its reference".into(),
+        ));
+    }
+    Ok(Layout {
+        axis,
+        step_units: unit * mag as f64,
+        reference_index,
+        interval_counts,
+    })
+}
+
+/// The controlled-axis number of `--axis` (default 1).
+fn axis_number(axis: Option<&str>) -> Result<u32> {
+    match axis {
+        None => Ok(1),
+        Some(a) => a.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
+            usage(
+                format!("Fanuc axis '{a}' is not an axis number"),
+                "give the controlled-axis number, e.g. --axis 1 for X",
+            )
+        }),
+    }
+}
+
+/// Both directions' blocks of points must fit the series' point numbers.
+fn check_point_count(t: &ControllerTable, fanuc_series: FanucSeries) -> Result<()> {
+    let lim = fanuc_series.limits();
+    let series = fanuc_series.name();
     let highest = 2 * t.len() as i64 - 1;
     if highest > lim.max_point_number {
         return Err(usage(
@@ -111,6 +136,14 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
             ),
         ));
     }
+    Ok(())
+}
+
+/// The spacing in detection units of `unit` thousandths (parameter 3624): a whole number
+/// within the series' limit.
+fn interval_counts(t: &ControllerTable, unit: f64, fanuc_series: FanucSeries) -> Result<i64> {
+    let lim = fanuc_series.limits();
+    let series = fanuc_series.name();
     let spacing_counts = t.step * 1e3 / unit;
     let interval_counts = spacing_counts.round() as i64;
     if (spacing_counts - interval_counts as f64).abs() > 1e-6 || interval_counts <= 0 {
@@ -132,18 +165,7 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
             "choose a smaller spacing",
         ));
     }
-    let reference_index = t.reference_index()?;
-    if t.kind == AxisKind::Rotary && reference_index != 0 {
-        return Err(Error::Internal(
-            "rotary Fanuc table not starting at its reference".into(),
-        ));
-    }
-    Ok(Layout {
-        axis,
-        step_units: unit * mag as f64,
-        reference_index,
-        interval_counts,
-    })
+    Ok(interval_counts)
 }
 
 /// Absolute compensation per entry in steps, C = round(-e / step). The tape carries increments

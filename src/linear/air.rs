@@ -184,6 +184,32 @@ pub fn refractive_index(c: &AirConditions, formula: AirFormula) -> Result<f64> {
     })
 }
 
+/// The conditions in the units both equations take.
+struct Terms {
+    /// Temperature, °C and K.
+    t: f64,
+    t_k: f64,
+    /// Pressure and water-vapour pressure, Pa.
+    p: f64,
+    pv: f64,
+    /// Wavenumber squared σ² = 1/λ², µm⁻².
+    s: f64,
+}
+
+impl Terms {
+    fn of(c: &AirConditions) -> Terms {
+        let t = c.temp_c;
+        let lambda_um = c.wavelength_nm * 1e-3;
+        Terms {
+            t,
+            t_k: t + 273.15,
+            p: c.pressure_kpa * 1e3,
+            pv: vapour_pressure_pa(t, c.humidity_pct),
+            s: 1.0 / (lambda_um * lambda_um),
+        }
+    }
+}
+
 /// Ciddor (1996) as NIST EMT Appendix A-III computes it.
 fn ciddor(c: &AirConditions) -> f64 {
     const W0: f64 = 295.235;
@@ -214,12 +240,7 @@ fn ciddor(c: &AirConditions) -> f64 {
     const BETA: f64 = 3.14e-8;
     const GAMMA: f64 = 5.60e-7;
 
-    let t = c.temp_c;
-    let t_k = t + 273.15;
-    let p = c.pressure_kpa * 1e3;
-    let pv = vapour_pressure_pa(t, c.humidity_pct);
-    let lambda_um = c.wavelength_nm * 1e-3;
-    let s = 1.0 / (lambda_um * lambda_um);
+    let Terms { t, t_k, p, pv, s } = Terms::of(c);
     // Refractivities of standard dry air (15 °C, 101 325 Pa, 450 µmol/mol CO2) and standard
     // water vapour (20 °C, 1333 Pa).
     let r_as = 1e-8 * (K1 / (K0 - s) + K3 / (K2 - s));
@@ -250,12 +271,7 @@ fn edlen(c: &AirConditions) -> f64 {
     const E: f64 = 0.601;
     const F: f64 = 0.009_72;
     const G: f64 = 0.003_661;
-    let t = c.temp_c;
-    let t_k = t + 273.15;
-    let p = c.pressure_kpa * 1e3;
-    let pv = vapour_pressure_pa(t, c.humidity_pct);
-    let lambda_um = c.wavelength_nm * 1e-3;
-    let s = 1.0 / (lambda_um * lambda_um);
+    let Terms { t, t_k, p, pv, s } = Terms::of(c);
     let ns = 1.0 + 1e-8 * (A + B / (130.0 - s) + C / (38.9 - s));
     let x = (1.0 + 1e-8 * (E - F * t) * p) / (1.0 + G * t);
     let ntp = 1.0 + p * (ns - 1.0) * x / D;

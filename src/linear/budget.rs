@@ -147,78 +147,23 @@ pub fn compute_budget(setup: &BudgetSetup) -> Result<Budget> {
         ));
     }
     let l_um = l_mm * 1e3;
-    let mut terms = Vec::new();
     // δ1: laser wavelength stability, ppm of the length.
-    terms.push(BudgetTerm {
+    let mut terms = vec![BudgetTerm {
         name: "laser_stability",
         value_um: setup.laser_stability_ppm * 1e-6 * l_um,
         formula: format!("{} ppm × {l_mm} mm", setup.laser_stability_ppm),
-    });
-    // δ2: wavelength correction: L · √Σ(∂n/∂q · u_q)², sensitivities from the index equation.
+    }];
     if let Some(air) = &setup.air {
-        let cond = AirConditions {
-            temp_c: air.temp_c,
-            pressure_kpa: air.pressure_kpa,
-            humidity_pct: air.humidity_pct,
-            wavelength_nm: air.wavelength_nm,
-            co2_ppm: DEFAULT_CO2_PPM,
-        };
-        let [dn_dt, dn_dp, dn_dh] = sensitivities(&cond, air.formula)?;
-        let u = ((dn_dt * air.temp_uncertainty_c).powi(2)
-            + (dn_dp * air.pressure_uncertainty_kpa).powi(2)
-            + (dn_dh * air.humidity_uncertainty_pct).powi(2))
-        .sqrt();
-        terms.push(BudgetTerm {
-            name: "wavelength_correction",
-            value_um: u * l_um,
-            formula: format!(
-                "L·√((∂n/∂t·{})² + (∂n/∂p·{})² + (∂n/∂RH·{})²), ∂n/∂t = {:.3e}/K, ∂n/∂p = {:.3e}/kPa, ∂n/∂RH = {:.3e}/% ({})",
-                air.temp_uncertainty_c,
-                air.pressure_uncertainty_kpa,
-                air.humidity_uncertainty_pct,
-                dn_dt,
-                dn_dp,
-                dn_dh,
-                air.formula.name()
-            ),
-        });
+        terms.push(wavelength_term(air, l_um)?);
     }
-    // δ3: Abbe error, offset × tan(angle).
     if let Some(abbe) = &setup.abbe {
-        terms.push(BudgetTerm {
-            name: "abbe",
-            value_um: abbe.offset_mm * 1e3 * (abbe.angle_arcsec * ARCSEC_TO_RAD).tan().abs(),
-            formula: format!("{} mm × tan({}″)", abbe.offset_mm, abbe.angle_arcsec),
-        });
+        terms.push(abbe_term(abbe));
     }
-    // δ4: cosine error of beam/travel misalignment, L·(1 − cos θ).
     if let Some(al) = &setup.alignment {
-        let theta = match (al.angle_arcsec, al.lateral_offset_mm) {
-            (Some(a), None) => a * ARCSEC_TO_RAD,
-            (None, Some(off)) => (off / l_mm).atan(),
-            _ => {
-                return Err(Error::usage(
-                    "[alignment] needs exactly one of angle_arcsec or lateral_offset_mm",
-                    "give the beam angle, or the beam's lateral walk over the travel",
-                ))
-            }
-        };
-        terms.push(BudgetTerm {
-            name: "cosine_misalignment",
-            value_um: l_um * (1.0 - theta.cos()),
-            formula: format!("L·(1 − cos θ), θ = {:.3}″", theta / ARCSEC_TO_RAD),
-        });
+        terms.push(cosine_term(al, l_mm)?);
     }
-    // δ5: thermal expansion, α·ΔT·L.
     if let Some(th) = &setup.thermal {
-        terms.push(BudgetTerm {
-            name: "thermal_expansion",
-            value_um: th.expansion_ppm_per_k * 1e-6 * th.temp_uncertainty_c * l_um,
-            formula: format!(
-                "{} ppm/K × {} K × {l_mm} mm",
-                th.expansion_ppm_per_k, th.temp_uncertainty_c
-            ),
-        });
+        terms.push(thermal_term(th, l_mm));
     }
     let total_um = terms
         .iter()
@@ -230,4 +175,74 @@ pub fn compute_budget(setup: &BudgetSetup) -> Result<Budget> {
         terms,
         total_um,
     })
+}
+
+/// δ2: wavelength correction: L · √Σ(∂n/∂q · u_q)², sensitivities from the index equation.
+fn wavelength_term(air: &AirSetup, l_um: f64) -> Result<BudgetTerm> {
+    let cond = AirConditions {
+        temp_c: air.temp_c,
+        pressure_kpa: air.pressure_kpa,
+        humidity_pct: air.humidity_pct,
+        wavelength_nm: air.wavelength_nm,
+        co2_ppm: DEFAULT_CO2_PPM,
+    };
+    let [dn_dt, dn_dp, dn_dh] = sensitivities(&cond, air.formula)?;
+    let u = ((dn_dt * air.temp_uncertainty_c).powi(2)
+        + (dn_dp * air.pressure_uncertainty_kpa).powi(2)
+        + (dn_dh * air.humidity_uncertainty_pct).powi(2))
+    .sqrt();
+    Ok(BudgetTerm {
+        name: "wavelength_correction",
+        value_um: u * l_um,
+        formula: format!(
+            "L·√((∂n/∂t·{})² + (∂n/∂p·{})² + (∂n/∂RH·{})²), ∂n/∂t = {:.3e}/K, ∂n/∂p = {:.3e}/kPa, ∂n/∂RH = {:.3e}/% ({})",
+            air.temp_uncertainty_c,
+            air.pressure_uncertainty_kpa,
+            air.humidity_uncertainty_pct,
+            dn_dt,
+            dn_dp,
+            dn_dh,
+            air.formula.name()
+        ),
+    })
+}
+
+/// δ3: Abbe error, offset × tan(angle).
+fn abbe_term(abbe: &AbbeSetup) -> BudgetTerm {
+    BudgetTerm {
+        name: "abbe",
+        value_um: abbe.offset_mm * 1e3 * (abbe.angle_arcsec * ARCSEC_TO_RAD).tan().abs(),
+        formula: format!("{} mm × tan({}″)", abbe.offset_mm, abbe.angle_arcsec),
+    }
+}
+
+/// δ4: cosine error of beam/travel misalignment, L·(1 − cos θ).
+fn cosine_term(al: &AlignmentSetup, l_mm: f64) -> Result<BudgetTerm> {
+    let theta = match (al.angle_arcsec, al.lateral_offset_mm) {
+        (Some(a), None) => a * ARCSEC_TO_RAD,
+        (None, Some(off)) => (off / l_mm).atan(),
+        _ => {
+            return Err(Error::usage(
+                "[alignment] needs exactly one of angle_arcsec or lateral_offset_mm",
+                "give the beam angle, or the beam's lateral walk over the travel",
+            ))
+        }
+    };
+    Ok(BudgetTerm {
+        name: "cosine_misalignment",
+        value_um: l_mm * 1e3 * (1.0 - theta.cos()),
+        formula: format!("L·(1 − cos θ), θ = {:.3}″", theta / ARCSEC_TO_RAD),
+    })
+}
+
+/// δ5: thermal expansion, α·ΔT·L.
+fn thermal_term(th: &ThermalSetup, l_mm: f64) -> BudgetTerm {
+    BudgetTerm {
+        name: "thermal_expansion",
+        value_um: th.expansion_ppm_per_k * 1e-6 * th.temp_uncertainty_c * (l_mm * 1e3),
+        formula: format!(
+            "{} ppm/K × {} K × {l_mm} mm",
+            th.expansion_ppm_per_k, th.temp_uncertainty_c
+        ),
+    }
 }

@@ -4,6 +4,8 @@ use super::eval::Evaluation;
 use super::pitch::PitchFit;
 use crate::error::Result;
 use crate::report::chart::{save_png, Frame, FONT};
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -78,18 +80,74 @@ pub fn fit_curve(fit: &PitchFit, x_min: f64, x_max: f64, plot_px: f64) -> Vec<(f
         .collect()
 }
 
+/// The plot area: target position (mm) × deviation.
+type Plot<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// What a drawing stage returns (plotters' errors, turned into ours by `save_png`).
+type Drawn = std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
 /// Draw the chart to `path` (PNG, 1280 × 720); returns where the plot lies.
 pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<Frame> {
     let ev = input.before;
-    let k = ev.k;
+    let (y0, y1) = deviation_range(ev, input.after);
     let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();
+    let x_min = xs.first().copied().unwrap_or(0.0);
+    let x_max = xs.last().copied().unwrap_or(1.0).max(x_min + 1e-9);
+    let x_pad = (x_max - x_min) * 0.03;
+    let unit = input.unit;
+    let mut frame = None;
+    save_png(path, 1280, 720, |root| {
+        let (left, right) = root.split_horizontally(900);
+        let mut chart = ChartBuilder::on(&left)
+            .caption(&input.title, (FONT, 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x_min - x_pad)..(x_max + x_pad), y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc("target position (mm)")
+            .y_desc(format!("deviation ({unit})"))
+            .label_style((FONT, 14))
+            .axis_desc_style((FONT, 16))
+            .draw()?;
+        draw_bands(&mut chart, ev)?;
+        draw_means(&mut chart, ev)?;
+        draw_widest_reversal(&mut chart, ev)?;
+        if let Some(fit) = input.fit {
+            draw_fit(&mut chart, fit, (x_min, x_max), unit)?;
+        }
+        if let Some(after) = input.after {
+            draw_after(&mut chart, after)?;
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FONT, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        frame = Some(Frame::new(
+            (x_min - x_pad, x_max + x_pad),
+            (y0, y1),
+            |x, y| chart.backend_coord(&(x, y)),
+        ));
+        draw_side_table(&right, input)
+    })?;
+    frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+}
+
+/// The deviation axis: every mean ± k·s of both evaluations, with a margin.
+fn deviation_range(ev: &Evaluation, after: Option<&Evaluation>) -> (f64, f64) {
+    let k = ev.k;
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
     let mut grow = |v: f64| {
         lo = lo.min(v);
         hi = hi.max(v);
     };
-    for e in std::iter::once(ev).chain(input.after) {
+    for e in std::iter::once(ev).chain(after) {
         for t in &e.targets {
             // A direction not measured (unidirectional test) adds nothing.
             for (x, s) in [(t.mean_up, t.s_up), (t.mean_down, t.s_down)] {
@@ -105,209 +163,189 @@ pub fn save_chart(path: &Path, input: &ChartInput<'_>) -> Result<Frame> {
         hi = 1.0;
     }
     let pad = ((hi - lo) * 0.12).max(0.5);
-    let (y0, y1) = (lo - pad, hi + pad);
-    let x_min = xs.first().copied().unwrap_or(0.0);
-    let x_max = xs.last().copied().unwrap_or(1.0).max(x_min + 1e-9);
-    let x_pad = (x_max - x_min) * 0.03;
-    let unit = input.unit.to_string();
-    let title = input.title.clone();
-    let rows = figure_rows(ev, input.after);
-    let standard = ev.standard.name().to_string();
-    let band = format!("±{k}s");
-    let mut frame = None;
-    save_png(path, 1280, 720, |root| {
-        let (left, right) = root.split_horizontally(900);
-        let mut chart = ChartBuilder::on(&left)
-            .caption(&title, (FONT, 22))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d((x_min - x_pad)..(x_max + x_pad), y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("target position (mm)")
-            .y_desc(format!("deviation ({unit})"))
-            .label_style((FONT, 14))
-            .axis_desc_style((FONT, 16))
-            .draw()?;
-        let blue = RGBColor(31, 90, 200);
-        let red = RGBColor(200, 40, 40);
-        let series = |e: &Evaluation, up: bool| -> Vec<(f64, f64)> {
-            e.targets
-                .iter()
-                .filter_map(|t| {
-                    let x = if up { t.mean_up } else { t.mean_down };
-                    x.map(|x| (t.target, x))
-                })
-                .collect()
-        };
-        // Bands ±k·s at each target (error bars), both directions.
-        for t in &ev.targets {
-            if let Some((x, s)) = t.mean_up.zip(t.s_up) {
-                chart.draw_series(std::iter::once(ErrorBar::new_vertical(
-                    t.target,
-                    x - k * s,
-                    x,
-                    x + k * s,
-                    blue.stroke_width(1),
-                    8,
-                )))?;
-            }
-            if let Some((x, s)) = t.mean_down.zip(t.s_down) {
-                chart.draw_series(std::iter::once(ErrorBar::new_vertical(
-                    t.target,
-                    x - k * s,
-                    x,
-                    x + k * s,
-                    red.stroke_width(1),
-                    8,
-                )))?;
-            }
-        }
-        // Only the measured directions are drawn (a unidirectional test has one line).
-        // Measured means as dots, joined by thin straight lines (vendor style); a unidirectional
-        // test has one direction.
-        for (up, colour, name) in [
-            (true, blue, "mean ↑ (forward)"),
-            (false, red, "mean ↓ (reverse)"),
-        ] {
-            let pts = series(ev, up);
-            if pts.is_empty() {
-                continue;
-            }
-            chart.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(1)))?;
-            chart
-                .draw_series(
-                    pts.iter()
-                        .map(|&(x, e)| Circle::new((x, e), 4, colour.filled())),
-                )?
-                .label(format!("{name} at each target (dot), bar {band}"))
-                .legend(move |(x, y)| {
-                    EmptyElement::at((x + 10, y))
-                        + PathElement::new(vec![(-10, 0), (10, 0)], colour.stroke_width(1))
-                        + Circle::new((0, 0), 4, colour.filled())
-                });
-        }
-        // Reversal: mark the target with the largest |B_i| (none in a unidirectional test).
-        let widest = ev
-            .targets
-            .iter()
-            .filter_map(|t| Some((t, t.reversal?, t.mean_up?, t.mean_down?)))
-            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-        if let Some((t, b_i, x_up, x_down)) = widest {
-            let grey = RGBColor(90, 90, 90);
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(t.target, x_up), (t.target, x_down)],
-                grey.stroke_width(3),
-            )))?;
-            chart.draw_series(std::iter::once(Text::new(
-                format!(" B = {:.2}", b_i.abs()),
-                (t.target, (x_up + x_down) / 2.0),
-                (FONT, 14).into_font().color(&grey),
-            )))?;
-        }
-        if let Some(fit) = input.fit {
-            chart
-                .draw_series(LineSeries::new(
-                    fit_curve(fit, x_min, x_max, PLOT_PX),
-                    FIT.stroke_width(1),
-                ))?
-                .label(format!(
-                    "pitch fit a + k·x + d·sin(2πx/P + φ): k = {:.2} {unit}/m, d = {:.2} {unit}, P = {} mm",
-                    fit.k_um_per_m, fit.d_um, fit.lead_mm
-                ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], FIT.stroke_width(1))
-                });
-            let trend = |x: f64| fit.a_um + fit.k_um_per_m * x * 1e-3;
-            chart
-                .draw_series(DashedLineSeries::new(
-                    [(x_min, trend(x_min)), (x_max, trend(x_max))],
-                    6,
-                    4,
-                    FIT.stroke_width(2),
-                ))?
-                .label("pitch fit without its periodic term: a + k·x")
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 8, y)], FIT.stroke_width(2))
-                });
-        }
-        if let Some(after) = input.after {
-            let light_blue = RGBColor(120, 160, 240);
-            let light_red = RGBColor(240, 140, 140);
-            chart
-                .draw_series(LineSeries::new(
-                    series(after, true),
-                    light_blue.stroke_width(2),
-                ))?
-                .label("after table ↑")
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], light_blue.stroke_width(2))
-                });
-            chart
-                .draw_series(LineSeries::new(
-                    series(after, false),
-                    light_red.stroke_width(2),
-                ))?
-                .label("after table ↓")
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], light_red.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 13))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()?;
-        frame = Some(Frame::new(
-            (x_min - x_pad, x_max + x_pad),
-            (y0, y1),
-            |x, y| chart.backend_coord(&(x, y)),
-        ));
+    (lo - pad, hi + pad)
+}
 
-        // The figures table.
-        let font = (FONT, 15).into_font();
-        let bold = (FONT, 17).into_font().style(FontStyle::Bold);
-        right.draw(&Text::new(
-            format!("{standard} ({unit})"),
-            (10, 30),
-            bold.clone(),
-        ))?;
-        let has_after = input.after.is_some();
-        let header = if has_after { "before      after" } else { "" };
-        right.draw(&Text::new(header.to_string(), (200, 60), font.clone()))?;
-        for (i, (label, before, after)) in rows.iter().enumerate() {
-            let y = 90 + 28 * i as i32;
-            right.draw(&Text::new(label.clone(), (10, y), font.clone()))?;
-            right.draw(&Text::new(before.clone(), (200, y), font.clone()))?;
-            if has_after {
-                right.draw(&Text::new(after.clone(), (290, y), font.clone()))?;
+/// Colours of the forward (↑) and reverse (↓) means.
+const BLUE_UP: RGBColor = RGBColor(31, 90, 200);
+const RED_DOWN: RGBColor = RGBColor(200, 40, 40);
+
+/// (target, mean) of one direction's measured targets.
+fn mean_series(e: &Evaluation, up: bool) -> Vec<(f64, f64)> {
+    e.targets
+        .iter()
+        .filter_map(|t| {
+            let x = if up { t.mean_up } else { t.mean_down };
+            x.map(|x| (t.target, x))
+        })
+        .collect()
+}
+
+/// Bands ±k·s at each target (error bars), both directions.
+fn draw_bands(chart: &mut Plot<'_, '_>, ev: &Evaluation) -> Drawn {
+    let k = ev.k;
+    for t in &ev.targets {
+        for (mean, s, colour) in [
+            (t.mean_up, t.s_up, BLUE_UP),
+            (t.mean_down, t.s_down, RED_DOWN),
+        ] {
+            if let Some((x, s)) = mean.zip(s) {
+                chart.draw_series(std::iter::once(ErrorBar::new_vertical(
+                    t.target,
+                    x - k * s,
+                    x,
+                    x + k * s,
+                    colour.stroke_width(1),
+                    8,
+                )))?;
             }
         }
-        let mut y = 90 + 28 * rows.len() as i32 + 20;
-        let n_note = format!(
-            "targets: {}, runs ↑ {} ↓ {}",
-            ev.targets.len(),
-            ev.targets.first().map(|t| t.n_up).unwrap_or(0),
-            ev.targets.first().map(|t| t.n_down).unwrap_or(0)
-        );
-        right.draw(&Text::new(n_note, (10, y), font.clone()))?;
-        if let Some(fit) = input.fit {
-            for line in [
-                format!("fit a = {:.3} {unit}", fit.a_um),
-                format!("fit k = {:.3} {unit}/m", fit.k_um_per_m),
-                format!("fit d = {:.3} {unit}, φ = {:.3} rad", fit.d_um, fit.phi_rad),
-                format!("fit residual RMS = {:.3} {unit}", fit.residual_rms_um),
-            ] {
-                y += 26;
-                right.draw(&Text::new(line, (10, y), font.clone()))?;
-            }
+    }
+    Ok(())
+}
+
+/// Measured means as dots, joined by thin straight lines (vendor style); only the measured
+/// directions are drawn (a unidirectional test has one line).
+fn draw_means<'a, 'b: 'a>(chart: &mut Plot<'a, 'b>, ev: &Evaluation) -> Drawn {
+    let band = format!("±{}s", ev.k);
+    for (up, colour, name) in [
+        (true, BLUE_UP, "mean ↑ (forward)"),
+        (false, RED_DOWN, "mean ↓ (reverse)"),
+    ] {
+        let pts = mean_series(ev, up);
+        if pts.is_empty() {
+            continue;
         }
-        Ok(())
-    })?;
-    frame.ok_or_else(|| crate::Error::Internal(format!("{}: no plot drawn", path.display())))
+        chart.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(1)))?;
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&(x, e)| Circle::new((x, e), 4, colour.filled())),
+            )?
+            .label(format!("{name} at each target (dot), bar {band}"))
+            .legend(move |(x, y)| {
+                EmptyElement::at((x + 10, y))
+                    + PathElement::new(vec![(-10, 0), (10, 0)], colour.stroke_width(1))
+                    + Circle::new((0, 0), 4, colour.filled())
+            });
+    }
+    Ok(())
+}
+
+/// Reversal: mark the target with the largest |B_i| (none in a unidirectional test).
+fn draw_widest_reversal(chart: &mut Plot<'_, '_>, ev: &Evaluation) -> Drawn {
+    let widest = ev
+        .targets
+        .iter()
+        .filter_map(|t| Some((t, t.reversal?, t.mean_up?, t.mean_down?)))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+    if let Some((t, b_i, x_up, x_down)) = widest {
+        let grey = RGBColor(90, 90, 90);
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(t.target, x_up), (t.target, x_down)],
+            grey.stroke_width(3),
+        )))?;
+        chart.draw_series(std::iter::once(Text::new(
+            format!(" B = {:.2}", b_i.abs()),
+            (t.target, (x_up + x_down) / 2.0),
+            (FONT, 14).into_font().color(&grey),
+        )))?;
+    }
+    Ok(())
+}
+
+/// The pitch fit as a curve over `x_range_mm`, and its trend a + k·x dashed.
+fn draw_fit(
+    chart: &mut Plot<'_, '_>,
+    fit: &PitchFit,
+    (x_min, x_max): (f64, f64),
+    unit: &str,
+) -> Drawn {
+    chart
+        .draw_series(LineSeries::new(
+            fit_curve(fit, x_min, x_max, PLOT_PX),
+            FIT.stroke_width(1),
+        ))?
+        .label(format!(
+            "pitch fit a + k·x + d·sin(2πx/P + φ): k = {:.2} {unit}/m, d = {:.2} {unit}, P = {} mm",
+            fit.k_um_per_m, fit.d_um, fit.lead_mm
+        ))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], FIT.stroke_width(1)));
+    let trend = |x: f64| fit.a_um + fit.k_um_per_m * x * 1e-3;
+    chart
+        .draw_series(DashedLineSeries::new(
+            [(x_min, trend(x_min)), (x_max, trend(x_max))],
+            6,
+            4,
+            FIT.stroke_width(2),
+        ))?
+        .label("pitch fit without its periodic term: a + k·x")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 8, y)], FIT.stroke_width(2)));
+    Ok(())
+}
+
+/// The means after applying a compensation table, in light colours.
+fn draw_after(chart: &mut Plot<'_, '_>, after: &Evaluation) -> Drawn {
+    for (up, colour, label) in [
+        (true, RGBColor(120, 160, 240), "after table ↑"),
+        (false, RGBColor(240, 140, 140), "after table ↓"),
+    ] {
+        chart
+            .draw_series(LineSeries::new(
+                mean_series(after, up),
+                colour.stroke_width(2),
+            ))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
+    }
+    Ok(())
+}
+
+/// The figures table beside the plot: before (and after), the counts, the fit.
+fn draw_side_table(right: &DrawingArea<BitMapBackend<'_>, Shift>, input: &ChartInput<'_>) -> Drawn {
+    let ev = input.before;
+    let unit = input.unit;
+    let font = (FONT, 15).into_font();
+    let bold = (FONT, 17).into_font().style(FontStyle::Bold);
+    right.draw(&Text::new(
+        format!("{} ({unit})", ev.standard.name()),
+        (10, 30),
+        bold.clone(),
+    ))?;
+    let has_after = input.after.is_some();
+    let header = if has_after { "before      after" } else { "" };
+    right.draw(&Text::new(header.to_string(), (200, 60), font.clone()))?;
+    let rows = figure_rows(ev, input.after);
+    for (i, (label, before, after)) in rows.iter().enumerate() {
+        let y = 90 + 28 * i as i32;
+        right.draw(&Text::new(label.clone(), (10, y), font.clone()))?;
+        right.draw(&Text::new(before.clone(), (200, y), font.clone()))?;
+        if has_after {
+            right.draw(&Text::new(after.clone(), (290, y), font.clone()))?;
+        }
+    }
+    let mut y = 90 + 28 * rows.len() as i32 + 20;
+    let n_note = format!(
+        "targets: {}, runs ↑ {} ↓ {}",
+        ev.targets.len(),
+        ev.targets.first().map(|t| t.n_up).unwrap_or(0),
+        ev.targets.first().map(|t| t.n_down).unwrap_or(0)
+    );
+    right.draw(&Text::new(n_note, (10, y), font.clone()))?;
+    if let Some(fit) = input.fit {
+        for line in [
+            format!("fit a = {:.3} {unit}", fit.a_um),
+            format!("fit k = {:.3} {unit}/m", fit.k_um_per_m),
+            format!("fit d = {:.3} {unit}, φ = {:.3} rad", fit.d_um, fit.phi_rad),
+            format!("fit residual RMS = {:.3} {unit}", fit.residual_rms_um),
+        ] {
+            y += 26;
+            right.draw(&Text::new(line, (10, y), font.clone()))?;
+        }
+    }
+    Ok(())
 }
 
 /// Colour of the pitch fit.

@@ -217,160 +217,10 @@ impl Evaluation {
     /// ISO 230-2 and GB 10931 take their values from [`AxisFigures`]; VDI/DGQ 3441 adds the
     /// means over the positions, Ū = Σ|U_j|/m and P̄s = Σ Ps_j/m.
     pub fn figures(&self) -> Vec<Figure> {
-        let a = &self.axis;
-        let f = |symbol, name, definition, value| Figure {
-            symbol,
-            name,
-            definition,
-            value,
-        };
-        let t = &self.targets;
-        let m = t.len() as f64;
-        let mean_of = |pick: &dyn Fn(&TargetFigures) -> Option<f64>| {
-            t.iter().map(pick).sum::<Option<f64>>().map(|s| s / m)
-        };
         match self.standard {
-            Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => vec![
-                f(
-                    "A",
-                    "accuracy, bidirectional",
-                    "max(x̄_i↑ + 2s_i↑, x̄_i↓ + 2s_i↓) − min(x̄_i↑ − 2s_i↑, x̄_i↓ − 2s_i↓)",
-                    a.A,
-                ),
-                f(
-                    "A↑",
-                    "accuracy, unidirectional ↑",
-                    "max(x̄_i↑ + 2s_i↑) − min(x̄_i↑ − 2s_i↑)",
-                    a.A_up,
-                ),
-                f(
-                    "A↓",
-                    "accuracy, unidirectional ↓",
-                    "max(x̄_i↓ + 2s_i↓) − min(x̄_i↓ − 2s_i↓)",
-                    a.A_down,
-                ),
-                f(
-                    "R",
-                    "repeatability, bidirectional",
-                    "max R_i, R_i = max(2s_i↑ + 2s_i↓ + |B_i|, R_i↑, R_i↓)",
-                    a.R,
-                ),
-                f(
-                    "R↑",
-                    "repeatability, unidirectional ↑",
-                    "max R_i↑, R_i↑ = 4s_i↑",
-                    a.R_up,
-                ),
-                f(
-                    "R↓",
-                    "repeatability, unidirectional ↓",
-                    "max R_i↓, R_i↓ = 4s_i↓",
-                    a.R_down,
-                ),
-                f(
-                    "E",
-                    "systematic positioning error, bidirectional",
-                    "max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓)",
-                    a.E,
-                ),
-                f(
-                    "E↑",
-                    "systematic positioning error, unidirectional ↑",
-                    "max x̄_i↑ − min x̄_i↑",
-                    a.E_up,
-                ),
-                f(
-                    "E↓",
-                    "systematic positioning error, unidirectional ↓",
-                    "max x̄_i↓ − min x̄_i↓",
-                    a.E_down,
-                ),
-                f(
-                    "M",
-                    "mean bidirectional positioning error",
-                    "max x̄_i − min x̄_i, x̄_i = (x̄_i↑ + x̄_i↓)/2",
-                    a.M,
-                ),
-                f("B", "reversal value", "max |B_i|, B_i = x̄_i↑ − x̄_i↓", a.B),
-                f("B̄", "mean reversal value", "Σ B_i / m", a.B_mean),
-            ],
-            Standard::Gb10931_1989 => vec![
-                f(
-                    "A",
-                    "定位精度 positioning accuracy",
-                    "(X̄_j + 3S_j)max − (X̄_j − 3S_j)min over both directions",
-                    a.A,
-                ),
-                f(
-                    "A↑",
-                    "定位精度 positioning accuracy ↑",
-                    "(X̄_j↑ + 3S_j↑)max − (X̄_j↑ − 3S_j↑)min",
-                    a.A_up,
-                ),
-                f(
-                    "A↓",
-                    "定位精度 positioning accuracy ↓",
-                    "(X̄_j↓ + 3S_j↓)max − (X̄_j↓ − 3S_j↓)min",
-                    a.A_down,
-                ),
-                f("R", "重复定位精度 repeatability", "max(R↑, R↓)", a.R),
-                f(
-                    "R↑",
-                    "重复定位精度 repeatability ↑",
-                    "max R_j↑, R_j↑ = 6S_j↑",
-                    a.R_up,
-                ),
-                f(
-                    "R↓",
-                    "重复定位精度 repeatability ↓",
-                    "max R_j↓, R_j↓ = 6S_j↓",
-                    a.R_down,
-                ),
-                f(
-                    "B",
-                    "反向差值 reversal value",
-                    "max |B_j|, B_j = X̄_j↑ − X̄_j↓",
-                    a.B,
-                ),
-            ],
-            Standard::Vdi3441 => vec![
-                f(
-                    "P",
-                    "Positionsunsicherheit, position uncertainty",
-                    "max(x̄_j + (U_j + Ps_j)/2) − min(x̄_j − (U_j + Ps_j)/2)",
-                    a.A,
-                ),
-                f(
-                    "Pa",
-                    "Positionsabweichung, position deviation",
-                    "max x̄_j − min x̄_j, x̄_j = (x̄_j↑ + x̄_j↓)/2",
-                    a.M,
-                ),
-                f(
-                    "Ps max",
-                    "größte Positionsstreubreite, largest position scatter",
-                    "max Ps_j, Ps_j = 6·s̄_j, s̄_j = (s_j↑ + s_j↓)/2",
-                    a.R,
-                ),
-                f(
-                    "P̄s",
-                    "mittlere Positionsstreubreite, mean position scatter",
-                    "Σ Ps_j / m",
-                    mean_of(&|x| x.repeatability),
-                ),
-                f(
-                    "U max",
-                    "größte Umkehrspanne, largest reversal span",
-                    "max U_j, U_j = |x̄_j↑ − x̄_j↓|",
-                    a.B,
-                ),
-                f(
-                    "Ū",
-                    "mittlere Umkehrspanne, mean reversal span",
-                    "Σ U_j / m",
-                    mean_of(&|x| x.reversal.map(f64::abs)),
-                ),
-            ],
+            Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => iso_figures(&self.axis),
+            Standard::Gb10931_1989 => gb_figures(&self.axis),
+            Standard::Vdi3441 => vdi_figures(&self.axis, &self.targets),
         }
     }
 
@@ -381,6 +231,181 @@ impl Evaluation {
             .find(|f| f.symbol == symbol)
             .map(|f| f.value)
     }
+}
+
+/// A [`Figure`] from its parts.
+fn figure(
+    symbol: &'static str,
+    name: &'static str,
+    definition: &'static str,
+    value: Option<f64>,
+) -> Figure {
+    Figure {
+        symbol,
+        name,
+        definition,
+        value,
+    }
+}
+
+/// The axis figures of ISO 230-2 (2014 and 1997).
+fn iso_figures(a: &AxisFigures) -> Vec<Figure> {
+    let f = figure;
+    vec![
+        f(
+            "A",
+            "accuracy, bidirectional",
+            "max(x̄_i↑ + 2s_i↑, x̄_i↓ + 2s_i↓) − min(x̄_i↑ − 2s_i↑, x̄_i↓ − 2s_i↓)",
+            a.A,
+        ),
+        f(
+            "A↑",
+            "accuracy, unidirectional ↑",
+            "max(x̄_i↑ + 2s_i↑) − min(x̄_i↑ − 2s_i↑)",
+            a.A_up,
+        ),
+        f(
+            "A↓",
+            "accuracy, unidirectional ↓",
+            "max(x̄_i↓ + 2s_i↓) − min(x̄_i↓ − 2s_i↓)",
+            a.A_down,
+        ),
+        f(
+            "R",
+            "repeatability, bidirectional",
+            "max R_i, R_i = max(2s_i↑ + 2s_i↓ + |B_i|, R_i↑, R_i↓)",
+            a.R,
+        ),
+        f(
+            "R↑",
+            "repeatability, unidirectional ↑",
+            "max R_i↑, R_i↑ = 4s_i↑",
+            a.R_up,
+        ),
+        f(
+            "R↓",
+            "repeatability, unidirectional ↓",
+            "max R_i↓, R_i↓ = 4s_i↓",
+            a.R_down,
+        ),
+        f(
+            "E",
+            "systematic positioning error, bidirectional",
+            "max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓)",
+            a.E,
+        ),
+        f(
+            "E↑",
+            "systematic positioning error, unidirectional ↑",
+            "max x̄_i↑ − min x̄_i↑",
+            a.E_up,
+        ),
+        f(
+            "E↓",
+            "systematic positioning error, unidirectional ↓",
+            "max x̄_i↓ − min x̄_i↓",
+            a.E_down,
+        ),
+        f(
+            "M",
+            "mean bidirectional positioning error",
+            "max x̄_i − min x̄_i, x̄_i = (x̄_i↑ + x̄_i↓)/2",
+            a.M,
+        ),
+        f("B", "reversal value", "max |B_i|, B_i = x̄_i↑ − x̄_i↓", a.B),
+        f("B̄", "mean reversal value", "Σ B_i / m", a.B_mean),
+    ]
+}
+
+/// The axis figures of GB 10931-1989.
+fn gb_figures(a: &AxisFigures) -> Vec<Figure> {
+    let f = figure;
+    vec![
+        f(
+            "A",
+            "定位精度 positioning accuracy",
+            "(X̄_j + 3S_j)max − (X̄_j − 3S_j)min over both directions",
+            a.A,
+        ),
+        f(
+            "A↑",
+            "定位精度 positioning accuracy ↑",
+            "(X̄_j↑ + 3S_j↑)max − (X̄_j↑ − 3S_j↑)min",
+            a.A_up,
+        ),
+        f(
+            "A↓",
+            "定位精度 positioning accuracy ↓",
+            "(X̄_j↓ + 3S_j↓)max − (X̄_j↓ − 3S_j↓)min",
+            a.A_down,
+        ),
+        f("R", "重复定位精度 repeatability", "max(R↑, R↓)", a.R),
+        f(
+            "R↑",
+            "重复定位精度 repeatability ↑",
+            "max R_j↑, R_j↑ = 6S_j↑",
+            a.R_up,
+        ),
+        f(
+            "R↓",
+            "重复定位精度 repeatability ↓",
+            "max R_j↓, R_j↓ = 6S_j↓",
+            a.R_down,
+        ),
+        f(
+            "B",
+            "反向差值 reversal value",
+            "max |B_j|, B_j = X̄_j↑ − X̄_j↓",
+            a.B,
+        ),
+    ]
+}
+
+/// The axis figures of VDI/DGQ 3441, with the means over the positions Ū and P̄s.
+fn vdi_figures(a: &AxisFigures, t: &[TargetFigures]) -> Vec<Figure> {
+    let f = figure;
+    let m = t.len() as f64;
+    let mean_of = |pick: &dyn Fn(&TargetFigures) -> Option<f64>| {
+        t.iter().map(pick).sum::<Option<f64>>().map(|s| s / m)
+    };
+    vec![
+        f(
+            "P",
+            "Positionsunsicherheit, position uncertainty",
+            "max(x̄_j + (U_j + Ps_j)/2) − min(x̄_j − (U_j + Ps_j)/2)",
+            a.A,
+        ),
+        f(
+            "Pa",
+            "Positionsabweichung, position deviation",
+            "max x̄_j − min x̄_j, x̄_j = (x̄_j↑ + x̄_j↓)/2",
+            a.M,
+        ),
+        f(
+            "Ps max",
+            "größte Positionsstreubreite, largest position scatter",
+            "max Ps_j, Ps_j = 6·s̄_j, s̄_j = (s_j↑ + s_j↓)/2",
+            a.R,
+        ),
+        f(
+            "P̄s",
+            "mittlere Positionsstreubreite, mean position scatter",
+            "Σ Ps_j / m",
+            mean_of(&|x| x.repeatability),
+        ),
+        f(
+            "U max",
+            "größte Umkehrspanne, largest reversal span",
+            "max U_j, U_j = |x̄_j↑ − x̄_j↓|",
+            a.B,
+        ),
+        f(
+            "Ū",
+            "mittlere Umkehrspanne, mean reversal span",
+            "Σ U_j / m",
+            mean_of(&|x| x.reversal.map(f64::abs)),
+        ),
+    ]
 }
 
 /// Arithmetic mean; NaN for no values.
@@ -425,6 +450,28 @@ fn max_opt(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 /// and the bidirectional figures are `None`). Targets closer than
 /// 1e-6 (in the samples' target unit) are one target.
 pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
+    check_samples(samples)?;
+    let groups = group_by_direction(samples)?;
+    let unidirectional = which_test(&groups)?;
+    let k = standard.k();
+    let targets: Vec<TargetFigures> = groups
+        .positions
+        .iter()
+        .zip(groups.up.iter().zip(&groups.down))
+        .map(|(&target, (up, down))| target_figures(standard, target, up, down))
+        .collect();
+    let axis = axis_figures(standard, unidirectional.is_none(), &targets);
+    Ok(Evaluation {
+        standard,
+        k,
+        unidirectional,
+        targets,
+        axis,
+    })
+}
+
+/// Refuse an empty sample set and non-finite values.
+fn check_samples(samples: &[Sample]) -> Result<()> {
     if samples.is_empty() {
         return Err(Error::numeric(
             "no samples to evaluate",
@@ -444,6 +491,18 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             "remove NaN and infinite values",
         ));
     }
+    Ok(())
+}
+
+/// The deviations at each distinct target, by approach direction.
+struct Groups {
+    /// Targets ascending.
+    positions: Vec<f64>,
+    up: Vec<Vec<f64>>,
+    down: Vec<Vec<f64>>,
+}
+
+fn group_by_direction(samples: &[Sample]) -> Result<Groups> {
     let positions = distinct_targets(samples.iter().map(|s| s.target));
     let mut up: Vec<Vec<f64>> = vec![Vec::new(); positions.len()];
     let mut down: Vec<Vec<f64>> = vec![Vec::new(); positions.len()];
@@ -455,15 +514,25 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             Direction::Reverse => down[i].push(s.deviation),
         }
     }
-    // Bidirectional: every target from both sides; unidirectional: every target from one side.
+    Ok(Groups {
+        positions,
+        up,
+        down,
+    })
+}
+
+/// `None` for a bidirectional test (every target from both sides), the one direction of a
+/// unidirectional test (every target from the same side); a mix is an error.
+fn which_test(g: &Groups) -> Result<Option<Direction>> {
+    let (up, down) = (&g.up, &g.down);
     let all_up = up.iter().all(|v| !v.is_empty());
     let all_down = down.iter().all(|v| !v.is_empty());
-    let unidirectional = match (all_up, all_down) {
-        (true, true) => None,
-        (true, false) if down.iter().all(|v| v.is_empty()) => Some(Direction::Forward),
-        (false, true) if up.iter().all(|v| v.is_empty()) => Some(Direction::Reverse),
+    match (all_up, all_down) {
+        (true, true) => Ok(None),
+        (true, false) if down.iter().all(|v| v.is_empty()) => Ok(Some(Direction::Forward)),
+        (false, true) if up.iter().all(|v| v.is_empty()) => Ok(Some(Direction::Reverse)),
         _ => {
-            let i = (0..positions.len())
+            let i = (0..g.positions.len())
                 .find(|&i| up[i].is_empty() || down[i].is_empty())
                 .unwrap_or(0);
             let missing = if up.get(i).is_some_and(|v| v.is_empty()) {
@@ -471,72 +540,70 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             } else {
                 "-"
             };
-            let target = positions.get(i).copied().unwrap_or(f64::NAN);
-            return Err(Error::numeric(
+            let target = g.positions.get(i).copied().unwrap_or(f64::NAN);
+            Err(Error::numeric(
                 format!("target {target} has no approach in direction {missing} while other targets do (mixed uni/bidirectional samples)"),
                 "measure every target from both directions, or every target from the same one direction",
-            ));
+            ))
         }
-    };
-    let k = standard.k();
-    let mut targets = Vec::with_capacity(positions.len());
-    for (i, &target) in positions.iter().enumerate() {
-        let nonempty = |v: &Vec<f64>| (!v.is_empty()).then(|| mean(v));
-        let mean_up = nonempty(&up[i]);
-        let mean_down = nonempty(&down[i]);
-        let s_up = std_dev(&up[i]);
-        let s_down = std_dev(&down[i]);
-        let reversal = mean_up.zip(mean_down).map(|(u, d)| u - d);
-        // Unidirectional repeatability: 2k·s (ISO 4s, GB 6S, VDI 6s).
-        let repeatability_up = s_up.map(|s| 2.0 * k * s);
-        let repeatability_down = s_down.map(|s| 2.0 * k * s);
-        let repeatability = match (s_up, s_down, reversal) {
-            (Some(su), Some(sd), Some(b_i)) => Some(match standard {
-                // ISO 230-2:2014 3.15 (same in 1997): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
-                Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => {
-                    (2.0 * su + 2.0 * sd + b_i.abs())
-                        .max(4.0 * su)
-                        .max(4.0 * sd)
-                }
-                // GB 10931-1989: repeatability 6S of each direction; the larger at the target.
-                Standard::Gb10931_1989 => (6.0 * su).max(6.0 * sd),
-                // VDI/DGQ 3441: Ps_j = 6·s̄_j with s̄_j = (s_j↑ + s_j↓)/2.
-                Standard::Vdi3441 => 6.0 * (su + sd) / 2.0,
-            }),
-            _ => None,
-        };
-        targets.push(TargetFigures {
-            target,
-            n_up: up[i].len(),
-            n_down: down[i].len(),
-            mean_up,
-            mean_down,
-            mean: mean_up.zip(mean_down).map(|(u, d)| (u + d) / 2.0),
-            s_up,
-            s_down,
-            reversal,
-            repeatability_up,
-            repeatability_down,
-            repeatability,
-        });
     }
+}
 
-    let t = &targets;
-    let bidirectional = unidirectional.is_none();
+/// The figures at one target from its deviations approached ↑ (`up`) and ↓ (`down`).
+fn target_figures(standard: Standard, target: f64, up: &[f64], down: &[f64]) -> TargetFigures {
+    let k = standard.k();
+    let nonempty = |v: &[f64]| (!v.is_empty()).then(|| mean(v));
+    let mean_up = nonempty(up);
+    let mean_down = nonempty(down);
+    let s_up = std_dev(up);
+    let s_down = std_dev(down);
+    let reversal = mean_up.zip(mean_down).map(|(u, d)| u - d);
+    TargetFigures {
+        target,
+        n_up: up.len(),
+        n_down: down.len(),
+        mean_up,
+        mean_down,
+        mean: mean_up.zip(mean_down).map(|(u, d)| (u + d) / 2.0),
+        s_up,
+        s_down,
+        reversal,
+        // Unidirectional repeatability: 2k·s (ISO 4s, GB 6S, VDI 6s).
+        repeatability_up: s_up.map(|s| 2.0 * k * s),
+        repeatability_down: s_down.map(|s| 2.0 * k * s),
+        repeatability: repeatability_at(standard, s_up, s_down, reversal),
+    }
+}
+
+/// Bidirectional repeatability at a target from s↑, s↓ and B_i; `None` if any is missing.
+fn repeatability_at(
+    standard: Standard,
+    s_up: Option<f64>,
+    s_down: Option<f64>,
+    reversal: Option<f64>,
+) -> Option<f64> {
+    let (su, sd, b_i) = (s_up?, s_down?, reversal?);
+    Some(match standard {
+        // ISO 230-2:2014 3.15 (same in 1997): R_i = max(2s↑ + 2s↓ + |B_i|, R_i↑, R_i↓).
+        Standard::Iso230_2_2014 | Standard::Iso230_2_1997 => (2.0 * su + 2.0 * sd + b_i.abs())
+            .max(4.0 * su)
+            .max(4.0 * sd),
+        // GB 10931-1989: repeatability 6S of each direction; the larger at the target.
+        Standard::Gb10931_1989 => (6.0 * su).max(6.0 * sd),
+        // VDI/DGQ 3441: Ps_j = 6·s̄_j with s̄_j = (s_j↑ + s_j↓)/2.
+        Standard::Vdi3441 => 6.0 * (su + sd) / 2.0,
+    })
+}
+
+/// The axis figures from the per-target figures.
+fn axis_figures(standard: Standard, bidirectional: bool, t: &[TargetFigures]) -> AxisFigures {
+    let k = standard.k();
     // Range of a per-target figure: None when any target lacks it.
     let range = |pick: &dyn Fn(&TargetFigures) -> Option<f64>| -> Option<f64> {
         let hi = max_opt(t.iter().map(pick))?;
         let lo = max_opt(t.iter().map(|f| pick(f).map(|v| -v)))?;
         Some(hi + lo)
     };
-    let b = max_opt(t.iter().map(|f| f.reversal.map(f64::abs)));
-    let b_mean = t
-        .iter()
-        .map(|f| f.reversal)
-        .sum::<Option<f64>>()
-        .map(|sum| sum / t.len() as f64);
-    let e_up = range(&|f| f.mean_up);
-    let e_down = range(&|f| f.mean_down);
     // ISO 230-2:2014 3.19: E over both directions; not defined for a unidirectional test.
     let e = if bidirectional {
         let all = || t.iter().flat_map(|f| [f.mean_up, f.mean_down]).flatten();
@@ -544,23 +611,51 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
     } else {
         None
     };
-    let m = range(&|f| f.mean);
-    // Unidirectional accuracy: max(x̄ + k·s) − min(x̄ − k·s) over the targets of one direction.
-    let accuracy_one = |pick: &MeanAndS| -> Option<f64> {
-        let hi = max_opt(t.iter().map(|f| {
-            let (x, s) = pick(f);
-            x.zip(s).map(|(x, s)| x + k * s)
-        }))?;
-        let lo = max_opt(t.iter().map(|f| {
-            let (x, s) = pick(f);
-            x.zip(s).map(|(x, s)| -(x - k * s))
-        }))?;
-        Some(hi + lo)
-    };
-    let a_up = accuracy_one(&|f| (f.mean_up, f.s_up));
-    let a_down = accuracy_one(&|f| (f.mean_down, f.s_down));
-    let a = match standard {
-        _ if !bidirectional => None,
+    AxisFigures {
+        B: max_opt(t.iter().map(|f| f.reversal.map(f64::abs))),
+        B_mean: t
+            .iter()
+            .map(|f| f.reversal)
+            .sum::<Option<f64>>()
+            .map(|sum| sum / t.len() as f64),
+        R_up: max_opt(t.iter().map(|f| f.repeatability_up)),
+        R_down: max_opt(t.iter().map(|f| f.repeatability_down)),
+        R: if bidirectional {
+            max_opt(t.iter().map(|f| f.repeatability))
+        } else {
+            None
+        },
+        E_up: range(&|f| f.mean_up),
+        E_down: range(&|f| f.mean_down),
+        E: e,
+        M: range(&|f| f.mean),
+        A_up: accuracy_one(t, k, &|f| (f.mean_up, f.s_up)),
+        A_down: accuracy_one(t, k, &|f| (f.mean_down, f.s_down)),
+        A: if bidirectional {
+            accuracy_both(standard, t)
+        } else {
+            None
+        },
+    }
+}
+
+/// Unidirectional accuracy: max(x̄ + k·s) − min(x̄ − k·s) over the targets of one direction.
+fn accuracy_one(t: &[TargetFigures], k: f64, pick: &MeanAndS) -> Option<f64> {
+    let hi = max_opt(t.iter().map(|f| {
+        let (x, s) = pick(f);
+        x.zip(s).map(|(x, s)| x + k * s)
+    }))?;
+    let lo = max_opt(t.iter().map(|f| {
+        let (x, s) = pick(f);
+        x.zip(s).map(|(x, s)| -(x - k * s))
+    }))?;
+    Some(hi + lo)
+}
+
+/// Bidirectional accuracy A (VDI/DGQ 3441: position uncertainty P) of a bidirectional test.
+fn accuracy_both(standard: Standard, t: &[TargetFigures]) -> Option<f64> {
+    let k = standard.k();
+    match standard {
         // VDI/DGQ 3441: P = max(x̄_j + ½(|U_j| + Ps_j)) − min(x̄_j − ½(|U_j| + Ps_j)).
         Standard::Vdi3441 => {
             let half = |f: &TargetFigures| {
@@ -591,32 +686,7 @@ pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
             }));
             hi.zip(lo).map(|(h, l)| h + l)
         }
-    };
-    let axis = AxisFigures {
-        B: b,
-        B_mean: b_mean,
-        R_up: max_opt(t.iter().map(|f| f.repeatability_up)),
-        R_down: max_opt(t.iter().map(|f| f.repeatability_down)),
-        R: if bidirectional {
-            max_opt(t.iter().map(|f| f.repeatability))
-        } else {
-            None
-        },
-        E_up: e_up,
-        E_down: e_down,
-        E: e,
-        M: m,
-        A_up: a_up,
-        A_down: a_down,
-        A: a,
-    };
-    Ok(Evaluation {
-        standard,
-        k,
-        unidirectional,
-        targets,
-        axis,
-    })
+    }
 }
 
 #[cfg(test)]

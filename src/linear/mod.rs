@@ -1,18 +1,23 @@
 //! Linear axes measured by laser interferometer: run files, positioning evaluation by standard, air and material correction, error budget, pitch-error fit, compensation tables.
 
 mod air;
+mod analysis;
 mod budget;
 mod chart;
 mod columns;
 mod correct;
 mod eval;
 mod pitch;
+mod report_json;
 mod runs;
 mod table;
 
 pub use air::{
     refractive_index, saturation_vapour_pressure_pa, sensitivities, vapour_pressure_pa,
     AirConditions, AirFormula, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+};
+pub use analysis::{
+    analyze, plan_table, Analysis, AnalyzeRequest, Corrections, RunSource, TablePlan,
 };
 pub use budget::{
     compute_budget, read_budget_setup, AbbeSetup, AirSetup, AlignmentSetup, Budget, BudgetSetup,
@@ -26,6 +31,7 @@ pub use eval::{
     TargetFigures,
 };
 pub use pitch::{fit_pitch, PitchFit};
+pub use report_json::{targets_json, AfterJson, AirIndexJson, AnalyzeJson, TargetJson};
 pub use runs::{
     parse_runs, read_runs, read_runs_mapped, Direction, Env, RunFile, RunRow, Sample, RUN_COLUMNS,
     TARGET_TOLERANCE_MM,

@@ -2,7 +2,7 @@
 
 use super::columns::ColumnMap;
 use crate::error::{Error, Location, Result};
-use crate::io::CsvTable;
+use crate::io::{CsvRow, CsvTable};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -135,38 +135,7 @@ pub fn parse_runs(path: &Path, text: &str) -> Result<RunFile> {
 
 fn parse_table(table: &CsvTable) -> Result<RunFile> {
     let path = &table.path;
-    table.reject_unknown(RUN_COLUMNS)?;
-    let c_run = table.require("run")?;
-    let c_dir = table.require("direction")?;
-    let c_target = table.require("target_mm")?;
-    let c_actual = table.column("actual_mm");
-    let c_dev = table.column("deviation_um");
-    let had_actual = match (c_actual, c_dev) {
-        (Some(_), None) => true,
-        (None, Some(_)) => false,
-        (Some(_), Some(_)) => {
-            return Err(Error::input(
-                Location::cell(path, 1, "deviation_um"),
-                "the header has both actual_mm and deviation_um",
-                "keep one: actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
-            ))
-        }
-        (None, None) => {
-            return Err(Error::input(
-                Location::line(path, 1),
-                format!(
-                    "missing column 'actual_mm' or 'deviation_um' (header has: {})",
-                    table.headers.join(",")
-                ),
-                "add actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
-            ))
-        }
-    };
-    let c_air = table.column("air_temp_c");
-    let c_p = table.column("pressure_kpa");
-    let c_h = table.column("humidity_pct");
-    let c_mat = table.column("material_temp_c");
-    let c_time = table.column("time_s");
+    let cols = RunColumns::find(table)?;
     if table.rows.is_empty() {
         return Err(Error::input(
             Location::file(path),
@@ -174,77 +143,11 @@ fn parse_table(table: &CsvTable) -> Result<RunFile> {
             "add one row per reading",
         ));
     }
-
-    let opt = |row, c: Option<usize>| -> Result<Option<f64>> {
-        match c {
-            Some(c) => table.f64_opt(row, c),
-            None => Ok(None),
-        }
-    };
-    let mut rows = Vec::with_capacity(table.rows.len());
-    for row in &table.rows {
-        let run_text = table.text(row, c_run);
-        let run: u32 = run_text.parse().map_err(|_| {
-            table.error_at(
-                row,
-                Some(c_run),
-                format!("'{run_text}' is not a run number"),
-                "number runs 1, 2, 3 … (a non-negative integer)",
-            )
-        })?;
-        let dir_text = table.text(row, c_dir);
-        let direction = Direction::parse(dir_text).ok_or_else(|| {
-            table.error_at(
-                row,
-                Some(c_dir),
-                format!("'{dir_text}' is not a direction"),
-                "write + for the forward (increasing) approach or - for the reverse",
-            )
-        })?;
-        let target_mm = table.f64(row, c_target)?;
-        let deviation_um = if let Some(c) = c_actual {
-            (table.f64(row, c)? - target_mm) * 1e3
-        } else if let Some(c) = c_dev {
-            table.f64(row, c)?
-        } else {
-            return Err(Error::Internal("run file without a reading column".into()));
-        };
-        let env = Env {
-            air_temp_c: opt(row, c_air)?,
-            pressure_kpa: opt(row, c_p)?,
-            humidity_pct: opt(row, c_h)?,
-            material_temp_c: opt(row, c_mat)?,
-        };
-        if let (Some(p), Some(c)) = (env.pressure_kpa, c_p) {
-            if p <= 0.0 {
-                return Err(table.error_at(
-                    row,
-                    Some(c),
-                    format!("pressure {p} kPa is not positive"),
-                    "write the absolute air pressure in kPa, e.g. 101.325",
-                ));
-            }
-        }
-        if let (Some(h), Some(c)) = (env.humidity_pct, c_h) {
-            if !(0.0..=100.0).contains(&h) {
-                return Err(table.error_at(
-                    row,
-                    Some(c),
-                    format!("relative humidity {h} % is outside 0…100"),
-                    "write the relative humidity in percent",
-                ));
-            }
-        }
-        rows.push(RunRow {
-            run,
-            direction,
-            target_mm,
-            deviation_um,
-            env,
-            time_s: opt(row, c_time)?,
-            line: row.line,
-        });
-    }
+    let rows = table
+        .rows
+        .iter()
+        .map(|row| parse_row(table, &cols, row))
+        .collect::<Result<Vec<RunRow>>>()?;
     // Directions first: a target never measured in one direction is a mixed file, named at
     // that target's first line, rather than a pass "missing" it.
     check_directions(path, &rows)?;
@@ -252,8 +155,143 @@ fn parse_table(table: &CsvTable) -> Result<RunFile> {
     Ok(RunFile {
         path: path.to_path_buf(),
         rows,
-        had_actual,
+        had_actual: matches!(cols.reading, Reading::ActualMm(_)),
     })
+}
+
+/// The column of the reading: the laser's position (mm) or the deviation (µm).
+enum Reading {
+    ActualMm(usize),
+    DeviationUm(usize),
+}
+
+/// Where each field of a run file is.
+struct RunColumns {
+    run: usize,
+    direction: usize,
+    target_mm: usize,
+    reading: Reading,
+    air_temp_c: Option<usize>,
+    pressure_kpa: Option<usize>,
+    humidity_pct: Option<usize>,
+    material_temp_c: Option<usize>,
+    time_s: Option<usize>,
+}
+
+impl RunColumns {
+    /// Find the columns by name; unknown columns and a missing or doubled reading are errors.
+    fn find(table: &CsvTable) -> Result<RunColumns> {
+        let path = &table.path;
+        table.reject_unknown(RUN_COLUMNS)?;
+        let run = table.require("run")?;
+        let direction = table.require("direction")?;
+        let target_mm = table.require("target_mm")?;
+        let reading =
+            match (table.column("actual_mm"), table.column("deviation_um")) {
+                (Some(c), None) => Reading::ActualMm(c),
+                (None, Some(c)) => Reading::DeviationUm(c),
+                (Some(_), Some(_)) => return Err(Error::input(
+                    Location::cell(path, 1, "deviation_um"),
+                    "the header has both actual_mm and deviation_um",
+                    "keep one: actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
+                )),
+                (None, None) => {
+                    return Err(Error::input(
+                        Location::line(path, 1),
+                        format!(
+                            "missing column 'actual_mm' or 'deviation_um' (header has: {})",
+                            table.headers.join(",")
+                        ),
+                        "add actual_mm (laser reading, mm) or deviation_um (actual − target, µm)",
+                    ))
+                }
+            };
+        Ok(RunColumns {
+            run,
+            direction,
+            target_mm,
+            reading,
+            air_temp_c: table.column("air_temp_c"),
+            pressure_kpa: table.column("pressure_kpa"),
+            humidity_pct: table.column("humidity_pct"),
+            material_temp_c: table.column("material_temp_c"),
+            time_s: table.column("time_s"),
+        })
+    }
+}
+
+/// One reading of a run file, its fields checked.
+fn parse_row(table: &CsvTable, cols: &RunColumns, row: &CsvRow) -> Result<RunRow> {
+    let opt = |c: Option<usize>| -> Result<Option<f64>> {
+        match c {
+            Some(c) => table.f64_opt(row, c),
+            None => Ok(None),
+        }
+    };
+    let run_text = table.text(row, cols.run);
+    let run: u32 = run_text.parse().map_err(|_| {
+        table.error_at(
+            row,
+            Some(cols.run),
+            format!("'{run_text}' is not a run number"),
+            "number runs 1, 2, 3 … (a non-negative integer)",
+        )
+    })?;
+    let dir_text = table.text(row, cols.direction);
+    let direction = Direction::parse(dir_text).ok_or_else(|| {
+        table.error_at(
+            row,
+            Some(cols.direction),
+            format!("'{dir_text}' is not a direction"),
+            "write + for the forward (increasing) approach or - for the reverse",
+        )
+    })?;
+    let target_mm = table.f64(row, cols.target_mm)?;
+    let deviation_um = match cols.reading {
+        Reading::ActualMm(c) => (table.f64(row, c)? - target_mm) * 1e3,
+        Reading::DeviationUm(c) => table.f64(row, c)?,
+    };
+    let env = Env {
+        air_temp_c: opt(cols.air_temp_c)?,
+        pressure_kpa: opt(cols.pressure_kpa)?,
+        humidity_pct: opt(cols.humidity_pct)?,
+        material_temp_c: opt(cols.material_temp_c)?,
+    };
+    check_env(table, cols, row, &env)?;
+    Ok(RunRow {
+        run,
+        direction,
+        target_mm,
+        deviation_um,
+        env,
+        time_s: opt(cols.time_s)?,
+        line: row.line,
+    })
+}
+
+/// A row's air pressure must be positive and its humidity within 0…100 %.
+fn check_env(table: &CsvTable, cols: &RunColumns, row: &CsvRow, env: &Env) -> Result<()> {
+    if let (Some(p), Some(c)) = (env.pressure_kpa, cols.pressure_kpa) {
+        if p <= 0.0 {
+            return Err(table.error_at(
+                row,
+                Some(c),
+                format!("pressure {p} kPa is not positive"),
+                "write the absolute air pressure in kPa, e.g. 101.325",
+            ));
+        }
+    }
+    if let (Some(h), Some(c)) = (env.humidity_pct, cols.humidity_pct) {
+        if !(0.0..=100.0).contains(&h) {
+            return Err(table.error_at(
+                row,
+                Some(c),
+                format!("relative humidity {h} % is outside 0…100"),
+                "write the relative humidity in percent",
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Every pass (run, direction) must visit every target of the file exactly once.

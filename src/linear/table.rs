@@ -270,6 +270,36 @@ fn sinumerik_assign(line: &str) -> Option<(&str, Vec<&str>, &str)> {
 }
 
 fn read_sinumerik(path: &Path, text: &str) -> Result<CompTable> {
+    let (positions_mm, mean) = read_lec(path, text)?;
+    let (mut fwd, mut rev) = (mean.clone(), mean);
+    let cec_path = sinumerik_cec_path(path);
+    if cec_path.exists() {
+        let cec = crate::io::read_text(&cec_path)?;
+        for (_, (mut pts, dir)) in read_cec_tables(&cec_path, &cec)? {
+            pts.sort_by_key(|p| p.0);
+            let target = match dir {
+                1 => &mut fwd,
+                -1 => &mut rev,
+                _ => continue,
+            };
+            for (k, v) in pts {
+                if let Some(slot) = target.get_mut(k) {
+                    // CEC = −(e − mean)  ⇒  e = mean − CEC.
+                    *slot -= v;
+                }
+            }
+        }
+    }
+    Ok(CompTable {
+        positions_mm,
+        forward_um: fwd,
+        reverse_um: rev,
+        ..CompTable::default()
+    })
+}
+
+/// The LEC file: the table's positions (mm) and its values, the mean of both directions (µm).
+fn read_lec(path: &Path, text: &str) -> Result<(Vec<f64>, Vec<f64>)> {
     let mut values: Vec<(usize, f64)> = Vec::new();
     let (mut step, mut min) = (None, None);
     for (i, raw) in text.lines().enumerate() {
@@ -312,53 +342,92 @@ fn read_sinumerik(path: &Path, text: &str) -> Result<CompTable> {
     }
     let mean: Vec<f64> = values.iter().map(|v| v.1).collect();
     let positions_mm: Vec<f64> = (0..n).map(|k| min + k as f64 * step).collect();
-    let (mut fwd, mut rev) = (mean.clone(), mean.clone());
-    let cec_path = sinumerik_cec_path(path);
-    if cec_path.exists() {
-        let cec = crate::io::read_text(&cec_path)?;
-        let mut tables: std::collections::BTreeMap<u32, (Vec<(usize, f64)>, i32)> =
-            Default::default();
-        for (i, raw) in cec.lines().enumerate() {
-            let line = raw.split(';').next().unwrap_or("").trim();
-            let Some((name, idx, rhs)) = sinumerik_assign(line) else {
-                continue;
-            };
-            let t: u32 = match idx.first().and_then(|s| s.parse().ok()) {
-                Some(t) => t,
-                None => continue,
-            };
-            let entry = tables.entry(t).or_insert((Vec::new(), 0));
-            match name {
-                "$AN_CEC" => {
-                    let k: usize = idx.get(1).and_then(|s| s.parse().ok()).ok_or_else(|| {
-                        bad(
-                            &cec_path,
-                            i + 1,
-                            "bad $AN_CEC index",
-                            "write $AN_CEC[t,i]=value",
-                        )
-                    })?;
-                    entry.0.push((k, num(&cec_path, i + 1, rhs)? * 1e3));
-                }
-                "$AN_CEC_DIRECTION" => entry.1 = num(&cec_path, i + 1, rhs)? as i32,
-                _ => {}
+    Ok((positions_mm, mean))
+}
+
+/// The CEC tables of a Sinumerik CEC file: per table index, its (point, value µm) and its
+/// direction (`$AN_CEC_DIRECTION`: 1 forward, −1 reverse).
+type CecTables = std::collections::BTreeMap<u32, (Vec<(usize, f64)>, i32)>;
+
+fn read_cec_tables(cec_path: &Path, cec: &str) -> Result<CecTables> {
+    let mut tables = CecTables::default();
+    for (i, raw) in cec.lines().enumerate() {
+        let line = raw.split(';').next().unwrap_or("").trim();
+        let Some((name, idx, rhs)) = sinumerik_assign(line) else {
+            continue;
+        };
+        let t: u32 = match idx.first().and_then(|s| s.parse().ok()) {
+            Some(t) => t,
+            None => continue,
+        };
+        let entry = tables.entry(t).or_insert((Vec::new(), 0));
+        match name {
+            "$AN_CEC" => {
+                let k: usize = idx.get(1).and_then(|s| s.parse().ok()).ok_or_else(|| {
+                    bad(
+                        cec_path,
+                        i + 1,
+                        "bad $AN_CEC index",
+                        "write $AN_CEC[t,i]=value",
+                    )
+                })?;
+                entry.0.push((k, num(cec_path, i + 1, rhs)? * 1e3));
             }
-        }
-        for (_, (mut pts, dir)) in tables {
-            pts.sort_by_key(|p| p.0);
-            let target = match dir {
-                1 => &mut fwd,
-                -1 => &mut rev,
-                _ => continue,
-            };
-            for (k, v) in pts {
-                if let Some(slot) = target.get_mut(k) {
-                    // CEC = −(e − mean)  ⇒  e = mean − CEC.
-                    *slot -= v;
-                }
-            }
+            "$AN_CEC_DIRECTION" => entry.1 = num(cec_path, i + 1, rhs)? as i32,
+            _ => {}
         }
     }
+    Ok(tables)
+}
+
+fn read_fanuc(path: &Path, text: &str, opts: &TableOptions) -> Result<CompTable> {
+    let (params, points) = read_fanuc_data(path, text)?;
+    let get = |p: u32| {
+        params.get(&p).copied().ok_or_else(|| {
+            Error::input(
+                Location::file(path),
+                format!("parameter {p} missing"),
+                "the file must list 3620–3624, 3626 and 3627",
+            )
+        })
+    };
+    let (reference, first, last, mag, interval, first_rev, at_ref) = (
+        get(3620)?,
+        get(3621)?,
+        get(3622)?,
+        get(3623)?,
+        get(3624)?,
+        get(3626)?,
+        get(3627)?,
+    );
+    if last < first || reference < first || reference > last || interval <= 0 {
+        return Err(Error::input(
+            Location::file(path),
+            "inconsistent parameters 3620–3624",
+            "check the reference and end points",
+        ));
+    }
+    let n = (last - first + 1) as usize;
+    if n > FANUC_MAX_POINTS {
+        return Err(Error::input(
+            Location::file(path),
+            format!("parameters 3621/3622 span {n} points, more than Fanuc's {FANUC_MAX_POINTS}"),
+            "check parameters 3621 and 3622",
+        ));
+    }
+    let unit = opts.fanuc_unit_um * mag as f64;
+    let r = (reference - first) as usize;
+    let cumulative = |base: i64| fanuc_cumulative_um(path, &points, base, n, r, unit);
+    let fwd = cumulative(first)?;
+    let rev: Vec<f64> = cumulative(first_rev)?
+        .into_iter()
+        .map(|v| v - at_ref as f64 * unit)
+        .collect();
+    let step_mm = interval as f64 * opts.fanuc_unit_um * 1e-3;
+    let reference_mm = opts.reference_mm.unwrap_or(0.0);
+    let positions_mm = (0..n)
+        .map(|k| reference_mm + (k as f64 - r as f64) * step_mm)
+        .collect();
     Ok(CompTable {
         positions_mm,
         forward_um: fwd,
@@ -367,7 +436,14 @@ fn read_sinumerik(path: &Path, text: &str) -> Result<CompTable> {
     })
 }
 
-fn read_fanuc(path: &Path, text: &str, opts: &TableOptions) -> Result<CompTable> {
+/// Fanuc data by number: parameters (below 10000) and compensation points (10000 + point).
+type FanucData = (
+    std::collections::BTreeMap<u32, i64>,
+    std::collections::BTreeMap<usize, i64>,
+);
+
+/// The `N…P…` lines of a Fanuc parameter file.
+fn read_fanuc_data(path: &Path, text: &str) -> Result<FanucData> {
     let mut params: std::collections::BTreeMap<u32, i64> = Default::default();
     let mut points: std::collections::BTreeMap<usize, i64> = Default::default();
     for (i, raw) in text.lines().enumerate() {
@@ -408,78 +484,38 @@ fn read_fanuc(path: &Path, text: &str, opts: &TableOptions) -> Result<CompTable>
             params.insert(number, value);
         }
     }
-    let get = |p: u32| {
-        params.get(&p).copied().ok_or_else(|| {
-            Error::input(
-                Location::file(path),
-                format!("parameter {p} missing"),
-                "the file must list 3620–3624, 3626 and 3627",
-            )
-        })
-    };
-    let (reference, first, last, mag, interval, first_rev, at_ref) = (
-        get(3620)?,
-        get(3621)?,
-        get(3622)?,
-        get(3623)?,
-        get(3624)?,
-        get(3626)?,
-        get(3627)?,
-    );
-    if last < first || reference < first || reference > last || interval <= 0 {
-        return Err(Error::input(
-            Location::file(path),
-            "inconsistent parameters 3620–3624",
-            "check the reference and end points",
-        ));
+    Ok((params, points))
+}
+
+/// The error (µm) at each of the `n` points of a Fanuc table starting at point `base`: the
+/// increments summed, zero at the reference point `r`, in detection units of `unit_um`.
+fn fanuc_cumulative_um(
+    path: &Path,
+    points: &std::collections::BTreeMap<usize, i64>,
+    base: i64,
+    n: usize,
+    r: usize,
+    unit_um: f64,
+) -> Result<Vec<f64>> {
+    let mut c = vec![0i64; n];
+    for k in 1..n {
+        let v = points
+            .get(&((base + k as i64) as usize))
+            .copied()
+            .ok_or_else(|| {
+                Error::input(
+                    Location::file(path),
+                    format!("compensation point {} missing", base + k as i64),
+                    "give every point of the table",
+                )
+            })?;
+        c[k] = c[k - 1] + v;
     }
-    let n = (last - first + 1) as usize;
-    if n > FANUC_MAX_POINTS {
-        return Err(Error::input(
-            Location::file(path),
-            format!("parameters 3621/3622 span {n} points, more than Fanuc's {FANUC_MAX_POINTS}"),
-            "check parameters 3621 and 3622",
-        ));
-    }
-    let unit = opts.fanuc_unit_um * mag as f64;
-    let r = (reference - first) as usize;
-    let cumulative = |base: i64| -> Result<Vec<f64>> {
-        let mut c = vec![0i64; n];
-        for k in 1..n {
-            let v = points
-                .get(&((base + k as i64) as usize))
-                .copied()
-                .ok_or_else(|| {
-                    Error::input(
-                        Location::file(path),
-                        format!("compensation point {} missing", base + k as i64),
-                        "give every point of the table",
-                    )
-                })?;
-            c[k] = c[k - 1] + v;
-        }
-        let at_r = c[r];
-        Ok(c.into_iter()
-            .map(|v| v - at_r)
-            .map(|v| -(v as f64) * unit)
-            .collect())
-    };
-    let fwd = cumulative(first)?;
-    let rev: Vec<f64> = cumulative(first_rev)?
-        .into_iter()
-        .map(|v| v - at_ref as f64 * unit)
-        .collect();
-    let step_mm = interval as f64 * opts.fanuc_unit_um * 1e-3;
-    let reference_mm = opts.reference_mm.unwrap_or(0.0);
-    let positions_mm = (0..n)
-        .map(|k| reference_mm + (k as f64 - r as f64) * step_mm)
-        .collect();
-    Ok(CompTable {
-        positions_mm,
-        forward_um: fwd,
-        reverse_um: rev,
-        ..CompTable::default()
-    })
+    let at_r = c[r];
+    Ok(c.into_iter()
+        .map(|v| v - at_r)
+        .map(|v| -(v as f64) * unit_um)
+        .collect())
 }
 
 fn read_heidenhain(path: &Path, text: &str) -> Result<CompTable> {

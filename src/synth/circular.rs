@@ -9,7 +9,7 @@
 //! commanded angle; two-axis readings are the positions. Gaussian noise is added to each.
 
 use crate::circular::input::Form;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::io::{write_atomic, write_json};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -45,6 +45,34 @@ pub struct CircularSynthConfig {
     pub cyclic_um: [f64; 2],
     pub cyclic_period_mm: [f64; 2],
     pub cyclic_phase_deg: [f64; 2],
+}
+
+impl CircularSynthConfig {
+    /// The step must divide the turn into steps of 10° or less; radius and feed positive, the
+    /// noise finite and ≥ 0.
+    pub fn check(&self) -> Result<()> {
+        let steps = 360.0 / self.step_deg;
+        if !(self.step_deg.is_finite() && self.step_deg > 0.0 && self.step_deg <= 10.0)
+            || (steps - steps.round()).abs() > 1e-9
+        {
+            return Err(Error::usage(
+                format!(
+                    "step {}° does not divide the turn into steps of 10° or less",
+                    self.step_deg
+                ),
+                "choose a step that divides 360, e.g. 0.1, 0.5, 1",
+            ));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let noise_ok = self.noise_um.is_finite() && self.noise_um >= 0.0;
+        if !positive(self.radius_mm) || !positive(self.feed_mm_per_min) || !noise_ok {
+            return Err(Error::usage(
+                "synth circular needs a positive --radius and --feed and a finite --noise-um ≥ 0",
+                "e.g. --radius 100 --feed 1000 --noise-um 0.2",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for CircularSynthConfig {
