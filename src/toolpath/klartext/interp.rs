@@ -88,7 +88,8 @@ impl Kt<'_> {
         absolute_normal: bool,
     ) -> Result<()> {
         if self.offset != 0.0 && !absolute_normal {
-            self.return_step(term);
+            // Before a rapid the return is a rapid too (the original's rapid starts there).
+            self.return_step(term, b.head == "L" && b.has("FMAX"));
         }
         self.offset = if absolute_normal { 0.0 } else { self.offset };
         self.copy(content, term, b);

@@ -184,12 +184,13 @@ impl Kt<'_> {
         self.offset = emitted.last().and_then(|(_, e)| *e).map_or(0.0, |e| -e);
     }
 
-    /// `L Z…` back to the original normal coordinate after a cut that ended compensated.
-    pub(super) fn return_step(&mut self, term: &str) {
+    /// `L Z…` (`FMAX` before a rapid) back to the original normal coordinate after a cut that ended compensated.
+    pub(super) fn return_step(&mut self, term: &str, rapid: bool) {
         let Some(orig) = self.pos[self.normal] else {
             return;
         };
-        let body = format!(" L {}{}", AXES[self.normal], self.coord(orig));
+        let fmax = if rapid { " FMAX" } else { "" };
+        let body = format!(" L {}{}{fmax}", AXES[self.normal], self.coord(orig));
         self.push_block(body, term);
         self.offset = 0.0;
         self.report.returns_inserted += 1;
