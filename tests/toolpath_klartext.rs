@@ -231,7 +231,7 @@ fn inserted_blocks_renumber_the_program_and_labels_keep_their_numbers() {
     assert_eq!(lines[3], "3 L X+4.0000 Y+0.0000 Z-1.0140");
     assert_eq!(lines[4], "4 L X+8.0000 Y+0.0000 Z-1.0180");
     assert_eq!(lines[5], "5 L X+12.0000 Y+0.0000 Z-1.0220");
-    assert_eq!(lines[6], "6 L Z-1.0000");
+    assert_eq!(lines[6], "6 L Z-1.0000 FMAX");
     assert_eq!(lines[7], "7 L X+20 Y+0 FMAX");
     assert_eq!(lines[9], "9 LBL 1");
     assert_eq!(lines[11], "11 LBL 0");
