@@ -1,7 +1,7 @@
 //! The Klartext rewriter: a compensated cut written as `L` blocks to P' = P − E (points on the original line or arc, split at the zone and domain edges), and the return along the normal before a block that starts from the original position.
 
 use super::super::gcode::{dist, emit_curve, lerp, Breaks};
-use super::block::Block;
+use super::block::{Block, Word};
 use super::interp::{known, PathMove};
 use super::{Kt, OutLine};
 use crate::error::Result;
@@ -79,76 +79,8 @@ impl Kt<'_> {
         b: &Block,
         emitted: &[([f64; 3], Option<f64>)],
     ) {
-        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
-        out_pos[self.normal] += self.offset;
-        let written = |v: f64, d: usize| {
-            let p = 10f64.powi(d as i32);
-            (v * p).round() / p
-        };
-        let d = self.decimals;
-        let mut targets: Vec<[f64; 3]> = Vec::new();
-        let mut last = [0, 1, 2].map(|i| written(out_pos[i], d));
-        for (p, e) in emitted {
-            let mut q = *p;
-            if let Some(e) = e {
-                q[self.normal] -= e;
-                let e_mm = e.abs() * self.scale_mm();
-                self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
-                self.report.points_compensated += 1;
-            }
-            let w = q.map(|v| written(v, d));
-            if w != last {
-                targets.push(q);
-                last = w;
-            }
-        }
-        let keep = |w: &&super::block::Word| {
-            !matches!(w.addr.as_str(), "X" | "Y" | "Z" | "IX" | "IY" | "IZ" | "DR")
-                && !(b.head == "CR" && w.addr == "R")
-                && !(w.addr == "M" && w.num().is_some_and(|m| M_END.contains(&m)))
-        };
-        let first_words: Vec<&str> = b
-            .words
-            .iter()
-            .filter(keep)
-            .map(|w| w.text.as_str())
-            .collect();
-        let end_words: Vec<&str> = b
-            .words
-            .iter()
-            .filter(|w| w.addr == "M" && w.num().is_some_and(|m| M_END.contains(&m)))
-            .map(|w| w.text.as_str())
-            .collect();
-        let count = targets.len().max(1);
-        let mut bodies: Vec<String> = Vec::with_capacity(count);
-        for i in 0..count {
-            let mut body = String::from(" L");
-            if let Some(q) = targets.get(i) {
-                for (k, a) in AXES.iter().enumerate() {
-                    body.push(' ');
-                    body.push_str(a);
-                    body.push_str(&self.coord(q[k]));
-                }
-            }
-            if i == 0 {
-                for w in &first_words {
-                    body.push(' ');
-                    body.push_str(w);
-                }
-            }
-            if i + 1 == count {
-                for w in &end_words {
-                    body.push(' ');
-                    body.push_str(w);
-                }
-            }
-            bodies.push(body);
-        }
-        // Every point rounds onto the current position and nothing else is on the block: no
-        // block at all (no zero-length moves).
-        if targets.is_empty() && bodies[0] == " L" {
-            bodies.clear();
-        }
+        let targets = self.targets(emitted);
+        let bodies = self.bodies(b, &targets);
         let span = b.number_span.clone();
         let pieces = bodies.len();
         for (i, body) in bodies.into_iter().enumerate() {
@@ -182,6 +114,83 @@ impl Kt<'_> {
         }
         self.report.segments_emitted += targets.len() as u64;
         self.offset = emitted.last().and_then(|(_, e)| *e).map_or(0.0, |e| -e);
+    }
+
+    /// The targets P' = P − E of the emitted points, leaving out those that round onto the
+    /// position before them (no zero-length moves); counts the compensated points.
+    fn targets(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Vec<[f64; 3]> {
+        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
+        out_pos[self.normal] += self.offset;
+        let d = self.decimals;
+        let written = |v: f64| {
+            let p = 10f64.powi(d as i32);
+            (v * p).round() / p
+        };
+        let mut targets: Vec<[f64; 3]> = Vec::new();
+        let mut last = out_pos.map(written);
+        for (p, e) in emitted {
+            let mut q = *p;
+            if let Some(e) = e {
+                q[self.normal] -= e;
+                let e_mm = e.abs() * self.scale_mm();
+                self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
+                self.report.points_compensated += 1;
+            }
+            let w = q.map(written);
+            if w != last {
+                targets.push(q);
+                last = w;
+            }
+        }
+        targets
+    }
+
+    /// The text of each piece after its block number; none when every target rounds onto the
+    /// current position and the block has no other words.
+    fn bodies(&self, b: &Block, targets: &[[f64; 3]]) -> Vec<String> {
+        let end_m = |w: &Word| w.addr == "M" && w.num().is_some_and(|m| M_END.contains(&m));
+        let replaced = |w: &Word| {
+            let coordinate = matches!(w.addr.as_str(), "X" | "Y" | "Z" | "IX" | "IY" | "IZ" | "DR");
+            let radius = b.head == "CR" && w.addr == "R";
+            coordinate || radius || end_m(w)
+        };
+        let keep = |w: &&Word| !replaced(w);
+        let first_words: Vec<&str> = b
+            .words
+            .iter()
+            .filter(keep)
+            .map(|w| w.text.as_str())
+            .collect();
+        let end_words: Vec<&str> = b
+            .words
+            .iter()
+            .filter(|w| end_m(w))
+            .map(|w| w.text.as_str())
+            .collect();
+        let count = targets.len().max(1);
+        let mut bodies: Vec<String> = Vec::with_capacity(count);
+        for i in 0..count {
+            let mut body = String::from(" L");
+            if let Some(q) = targets.get(i) {
+                for (k, a) in AXES.iter().enumerate() {
+                    body.push(' ');
+                    body.push_str(a);
+                    body.push_str(&self.coord(q[k]));
+                }
+            }
+            let words = (if i == 0 { &first_words[..] } else { &[] })
+                .iter()
+                .chain(if i + 1 == count { &end_words[..] } else { &[] });
+            for w in words {
+                body.push(' ');
+                body.push_str(w);
+            }
+            bodies.push(body);
+        }
+        if targets.is_empty() && bodies[0] == " L" {
+            bodies.clear();
+        }
+        bodies
     }
 
     /// `L Z…` (`FMAX` before a rapid) back to the original normal coordinate after a cut that ended compensated.
