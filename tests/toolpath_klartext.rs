@@ -413,7 +413,9 @@ fn refused_constructs_far_from_the_zone_are_copied() {
 11 CT X+20 Y+10
 12 L X+0 Y+0 Z-1 R0 FMAX
 13 L X+5 F100
-14 END PGM T MM
+14 TOOL CALL 2 Z S2000
+15 L R0 F300 M3
+16 END PGM T MM
 ";
     let (out, rep) = run(text, &settings());
     assert_eq!(rep.moves_changed, 1, "{out}");

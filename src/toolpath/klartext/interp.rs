@@ -133,6 +133,15 @@ impl Kt<'_> {
     fn path(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.check_path_words(n, b)?;
         self.radius_words(n, b, b.head == "CR");
+        let coordinates = b.words.iter().any(|w| {
+            let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
+            matches!(a, "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W")
+        });
+        if b.head == "L" && !coordinates {
+            // `L R0 F200 M3`: no motion.
+            self.unchanged(n, content, term, b, false)?;
+            return self.after_path_m(n, b);
+        }
         let mv = self.path_move(n, b)?;
         let touch = self.may_touch(&self.touch_points(&mv));
         if let Some((l, col, word)) = self.corner.take() {
@@ -290,7 +299,8 @@ impl Kt<'_> {
                 "post the arc as L moves for this zone, or move the zone away",
             ))));
         }
-        if e[ax] != s[ax] {
+        let axis_word = b.has(AXES[ax]) || b.has(&format!("I{}", AXES[ax]));
+        if axis_word && e[ax] != s[ax] {
             return Ok((None, Some((
                 at(AXES[ax]),
                 format!("{} … {}", b.head, AXES[ax]),
