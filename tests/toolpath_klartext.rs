@@ -1,5 +1,7 @@
 //! Heidenhain Klartext in `compensate`: programs written from the TNC manual's examples checked point by point against P' = P − E (computed here), every refusal of the docs table triggered with its message, renumbering, units from BEGIN PGM, and byte-for-byte copies outside the zone.
 
+mod common;
+
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{
     compensate_gcode, trace_gcode, CompensationReport, CompensationSettings, Dialect, Units,
@@ -419,4 +421,50 @@ fn refused_constructs_far_from_the_zone_are_copied() {
 ";
     let (out, rep) = run(text, &settings());
     assert_eq!(rep.moves_changed, 1, "{out}");
+}
+
+/// A model.json whose network is all zeros: E = 20 µm everywhere in x, y ∈ [0, 100] mm, probed
+/// surface at z = −1 mm.
+const MODEL: &str = r#"{
+  "format": "errmap-map-model/1",
+  "name": "flat",
+  "normal": "z",
+  "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
+  "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
+                    "e_mean_um": 20.0, "e_std_um": 1.0},
+  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
+  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
+  "surface_mm": [-1.0, -1.0]
+}"#;
+
+#[test]
+fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("model.json"), MODEL).unwrap();
+    // Detected from BEGIN PGM, units from it, zone = the probed surface ± 0.5 mm.
+    let program = "0 BEGIN PGM P1 MM\n1 TOOL CALL 1 Z S4000\n2 L X+10 Y+10 Z+5 R0 FMAX\n3 L Z-1 F100\n4 L X+20\n5 L Z+5 R0 FMAX M2\n6 END PGM P1 MM\n";
+    std::fs::write(dir.join("in.h"), program).unwrap();
+    let out = common::errmap(
+        dir,
+        &["compensate", "--model", "model.json", "in.h", "-o", "out.h"],
+    );
+    out.expect_code(0);
+    let expected = "0 BEGIN PGM P1 MM\n1 TOOL CALL 1 Z S4000\n2 L X+10 Y+10 Z+5 R0 FMAX\n\
+        3 L X+10.0000 Y+10.0000 Z-0.5000 F100\n\
+        4 L X+10.0000 Y+10.0000 Z-0.5200\n\
+        5 L X+10.0000 Y+10.0000 Z-1.0200\n\
+        6 L X+15.0000 Y+10.0000 Z-1.0200\n\
+        7 L X+20.0000 Y+10.0000 Z-1.0200\n\
+        8 L Z+5 R0 FMAX M2\n9 END PGM P1 MM\n";
+    assert_eq!(std::fs::read_to_string(dir.join("out.h")).unwrap(), expected);
+    // Radius compensation on a cut in the zone: exit 2, file:line:column, nothing written.
+    std::fs::write(dir.join("rl.h"), program.replace("4 L X+20", "4 L X+20 RL")).unwrap();
+    let out = common::errmap(
+        dir,
+        &["compensate", "--model", "model.json", "rl.h", "-o", "bad.h"],
+    );
+    out.expect_code(2);
+    assert!(out.stderr.contains("rl.h:5") && out.stderr.contains("RL"), "{}", out.stderr);
+    assert!(!dir.join("bad.h").exists());
 }
