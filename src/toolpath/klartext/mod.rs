@@ -280,7 +280,9 @@ impl<'a> Kt<'a> {
     /// The output text: renumbered when blocks were inserted or removed.
     fn finish(mut self, text: &str) -> (String, CompensationReport) {
         let numbered_out = self.out.iter().filter(|l| l.number.is_some()).count();
-        let renumber = numbered_out != self.numbered_in;
+        // An inserted block has no number of its own; a removed one leaves a gap.
+        let inserted = self.out.iter().any(|l| l.number.as_deref() == Some(""));
+        let renumber = inserted || numbered_out != self.numbered_in;
         let first = text
             .lines()
             .find_map(|l| block::read(l).ok()?.number)
