@@ -457,7 +457,10 @@ fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
         6 L X+15.0000 Y+10.0000 Z-1.0200\n\
         7 L X+20.0000 Y+10.0000 Z-1.0200\n\
         8 L Z+5 R0 FMAX M2\n9 END PGM P1 MM\n";
-    assert_eq!(std::fs::read_to_string(dir.join("out.h")).unwrap(), expected);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("out.h")).unwrap(),
+        expected
+    );
     // Radius compensation on a cut in the zone: exit 2, file:line:column, nothing written.
     std::fs::write(dir.join("rl.h"), program.replace("4 L X+20", "4 L X+20 RL")).unwrap();
     let out = common::errmap(
@@ -465,6 +468,10 @@ fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
         &["compensate", "--model", "model.json", "rl.h", "-o", "bad.h"],
     );
     out.expect_code(2);
-    assert!(out.stderr.contains("rl.h:5") && out.stderr.contains("RL"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("rl.h:5") && out.stderr.contains("RL"),
+        "{}",
+        out.stderr
+    );
     assert!(!dir.join("bad.h").exists());
 }
