@@ -370,11 +370,12 @@ fn sinumerik_trans_is_followed_and_frames_calls_parameters_are_refused() {
 // ---- Heidenhain ------------------------------------------------------------------------------
 
 #[test]
-fn heidenhain_klartext_is_refused_and_iso_lines_are_followed() {
-    // Measured failure: Klartext went through with "0 moves changed", exit 0.
+fn heidenhain_klartext_is_followed_and_iso_lines_are_followed() {
+    // Measured failure: Klartext went through with "0 moves changed", exit 0. It is now read
+    // as Klartext (tests/toolpath_klartext.rs has the details): the cut gets P − E.
     let f = field();
     let klartext = "0 BEGIN PGM P1 MM\n1 BLK FORM 0.1 Z X+0 Y+0 Z-20\n2 L X+0 Y+0 Z+0 R0 FMAX\n3 L X+10 F100\n4 END PGM P1 MM\n";
-    let msg = refuse(
+    let (out, rep) = run(
         klartext,
         &f,
         &CompensationSettings {
@@ -382,7 +383,9 @@ fn heidenhain_klartext_is_refused_and_iso_lines_are_followed() {
             ..settings(Dialect::Heidenhain)
         },
     );
-    assert_msg(&msg, &["t.nc:1", "Klartext", "ISO"]);
+    assert_eq!(rep.moves_changed, 1, "{out}");
+    let end = out.lines().find(|l| l.contains("X+10.0000")).unwrap();
+    assert!((word(end, "Z").unwrap() + f.e(10.0)).abs() < 1e-9, "{out}");
     // TNC ISO: units in the % header, blocks end in `*`; errmap-inserted blocks too.
     let iso =
         "%P1 G71 *\nN10 G90 *\nN20 G00 X+0 Y+0 Z+0 *\nN30 G01 X+10 F100 *\nN99999 %P1 G71 *\n";

@@ -449,3 +449,124 @@ fn random_programs_with_arcs_units_and_modes_compensate_to_the_original_minus_e(
         assert!(rs274_runs > 0);
     }
 }
+
+/// A random Heidenhain Klartext program: straight lines (absolute and incremental, some
+/// rapid), circles around CC (the end on the circle) and CR arcs (R+ and R−, DR+ and DR−), Z
+/// changed on the lines only (a Klartext circle stays in its plane).
+fn random_klartext(rng: &mut impl Rng) -> String {
+    let mut blocks: Vec<String> = vec![
+        "BEGIN PGM P1 MM".into(),
+        "BLK FORM 0.1 Z X-20 Y-20 Z-5".into(),
+        "TOOL CALL 1 Z S4000".into(),
+        "L X+0 Y+0 Z+1 R0 FMAX".into(),
+    ];
+    let mut p = [0.0f64, 0.0, 1.0];
+    let signed = |v: f64| {
+        if v < 0.0 {
+            format!("{v:.3}")
+        } else {
+            format!("+{v:.3}")
+        }
+    };
+    for _ in 0..25 {
+        let r: f64 = rng.random();
+        if r < 0.5 {
+            let q = [
+                rng.random_range(-10.0..10.0f64),
+                rng.random_range(-10.0..10.0f64),
+                rng.random_range(-3.0..1.5f64),
+            ]
+            .map(|v| (v * 1000.0).round() / 1000.0);
+            let rapid = if rng.random_bool(0.1) {
+                " FMAX"
+            } else {
+                " F200"
+            };
+            let words = if rng.random_bool(0.3) {
+                let d = [0, 1, 2].map(|i| ((q[i] - p[i]) * 1000.0).round() / 1000.0);
+                format!("L IX{} IY{} IZ{}", signed(d[0]), signed(d[1]), signed(d[2]))
+            } else {
+                format!("L X{} Y{} Z{}", signed(q[0]), signed(q[1]), signed(q[2]))
+            };
+            blocks.push(format!("{words}{rapid}"));
+            p = q;
+        } else if r < 0.8 {
+            // CC, then C to a point on the circle through the current position.
+            let c = [
+                p[0] + rng.random_range(-5.0..5.0f64),
+                p[1] + rng.random_range(-5.0..5.0f64),
+            ]
+            .map(|v| (v * 1000.0).round() / 1000.0);
+            let rad = (p[0] - c[0]).hypot(p[1] - c[1]);
+            if rad < 0.5 {
+                continue;
+            }
+            let th: f64 = rng.random_range(0.0..2.0 * PI);
+            let q = [c[0] + rad * th.cos(), c[1] + rad * th.sin()]
+                .map(|v| (v * 1000.0).round() / 1000.0);
+            let dr = if rng.random_bool(0.5) { "DR+" } else { "DR-" };
+            blocks.push(format!("CC X{} Y{}", signed(c[0]), signed(c[1])));
+            blocks.push(format!("C X{} Y{} {dr}", signed(q[0]), signed(q[1])));
+            p[0] = q[0];
+            p[1] = q[1];
+        } else {
+            let q = [
+                rng.random_range(-10.0..10.0f64),
+                rng.random_range(-10.0..10.0f64),
+            ]
+            .map(|v| (v * 1000.0).round() / 1000.0);
+            let chord = (q[0] - p[0]).hypot(q[1] - p[1]);
+            if chord < 0.5 {
+                continue;
+            }
+            let rad = chord / 2.0 + rng.random_range(0.1..5.0f64);
+            let rw = if rng.random_bool(0.5) {
+                format!("R+{rad:.3}")
+            } else {
+                format!("R-{rad:.3}")
+            };
+            let dr = if rng.random_bool(0.5) { "DR+" } else { "DR-" };
+            blocks.push(format!("CR X{} Y{} {rw} {dr}", signed(q[0]), signed(q[1])));
+            p[0] = q[0];
+            p[1] = q[1];
+        }
+    }
+    blocks.push("L Z+10 R0 FMAX M2".into());
+    blocks.push("END PGM P1 MM".into());
+    blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| format!("{i} {b}\n"))
+        .collect()
+}
+
+#[test]
+fn random_klartext_programs_compensate_to_the_original_minus_e() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+    let s = CompensationSettings {
+        zone: Some(ZONE_MM),
+        dialect: None,
+        max_segment: 2.0,
+        chord_tol: CHORD_TOL_MM,
+        ..CompensationSettings::default()
+    };
+    let mut totals = (0, 0);
+    for case in 0..24 {
+        let text = random_klartext(&mut rng);
+        let what = format!("Klartext case {case}");
+        let (out, _) = compensate_gcode(&text, Path::new("p.h"), &F, &s)
+            .unwrap_or_else(|e| panic!("{what}: refused: {e}\n{text}"));
+        // Renumbered from 0 without gaps.
+        for (i, l) in out.lines().enumerate() {
+            assert!(l.starts_with(&format!("{i} ")), "{what}: `{l}`\n{out}");
+        }
+        let orig = trace_gcode(&text, Path::new("p.h"), &s).unwrap();
+        let comp = trace_gcode(&out, Path::new("out.h"), &s)
+            .unwrap_or_else(|e| panic!("{what}: output unreadable: {e}\n{out}"));
+        let (c, u) = check_against_original(&orig, &comp, &format!("{what}\n{text}\n{out}"));
+        totals.0 += c;
+        totals.1 += u;
+    }
+    println!("checked {totals:?} Klartext points (compensated, unchanged)");
+    assert!(totals.0 > 100 && totals.1 > 100, "{totals:?}");
+}

@@ -9,7 +9,7 @@ mod modal;
 mod moves;
 mod rewrite;
 
-pub(crate) use emit::{dist, emit_points, lerp};
+pub(crate) use emit::{dist, emit_curve, emit_points, lerp, Breaks};
 use format::{coordinate_decimals, decimal_units, push_units};
 pub use format::{format_coord, format_decimals};
 use modal::{first_jump, refuse_klartext};

@@ -16,6 +16,7 @@ mod csv_path;
 pub mod dialect;
 mod expr;
 mod gcode;
+mod klartext;
 pub mod lexer;
 pub mod zone_spec;
 
@@ -248,6 +249,9 @@ pub fn compensate_gcode(
     field: &dyn ErrorField,
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
+    if klartext::applies(text, source, settings.dialect) {
+        return klartext::compensate(text, source, field, settings);
+    }
     gcode::compensate(text, source, field, settings)
 }
 
@@ -273,6 +277,9 @@ pub fn trace_gcode(
     source: &Path,
     settings: &CompensationSettings,
 ) -> Result<Vec<TracedMove>> {
+    if klartext::applies(text, source, settings.dialect) {
+        return klartext::trace(text, source, settings);
+    }
     gcode::trace(text, source, settings)
 }
 

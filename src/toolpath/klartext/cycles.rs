@@ -1,0 +1,161 @@
+//! Coordinate-transformation cycles of Klartext: 7 datum shift (followed), 8 mirror image, 10 rotation, 11 scaling, 26 axis-specific scaling and 19 working plane (cuts refused in the zone while active), and cycle calls.
+
+use super::block::{Block, Value};
+use super::{Frame, Kt};
+use crate::error::Result;
+
+const AXES: [&str; 3] = ["X", "Y", "Z"];
+
+impl Kt<'_> {
+    /// `CYCL DEF n.m …` or `CYCL CALL …`.
+    pub(super) fn cycle_block(
+        &mut self,
+        n: u64,
+        content: &str,
+        term: &str,
+        b: &Block,
+    ) -> Result<()> {
+        let rest = b.rest.to_ascii_uppercase();
+        if rest.starts_with("CALL") {
+            self.unchanged(n, content, term, b, false)?;
+            let (col, word) = (b.head_col, format!("CYCL {}", b.rest).trim().to_string());
+            self.cycle_call(n, col, &word)?;
+            if rest.contains("PAT") || rest.contains("POS") {
+                self.lose_position(n, &[0, 1, 2]);
+            }
+            return Ok(());
+        }
+        let id = b
+            .words
+            .iter()
+            .find(|w| w.addr.is_empty())
+            .and_then(|w| w.num());
+        let (major, minor) = match id {
+            Some(v) => (v.trunc() as i64, ((v - v.trunc()) * 10.0).round() as i64),
+            None => (-1, 0),
+        };
+        let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26);
+        if let (true, Some((col, word, msg))) = (followed, b.bad.clone()) {
+            return Err(self.err(
+                n,
+                col,
+                &word,
+                msg,
+                "write the cycle's words as the TNC does (e.g. CYCL DEF 7.1 X+10)",
+            ));
+        }
+        // The cycle's own block (`7.0 DATUM SHIFT`) and machining-cycle definitions do nothing
+        // until called.
+        if !followed || minor == 0 {
+            if major == 247 {
+                self.frames.push(Frame {
+                    cycle: "247".into(),
+                    line: n,
+                    what: "CYCL DEF 247 DATUM SETTING".into(),
+                    normal: true,
+                });
+            }
+            return self.unchanged(n, content, term, b, false);
+        }
+        self.unchanged(n, content, term, b, false)?;
+        match major {
+            7 => self.datum_shift(n, b),
+            _ => {
+                self.transform(n, b, major);
+                Ok(())
+            }
+        }
+    }
+
+    /// Cycle 7: `X+10` shifts the datum to X = 10 of the preset (absolute), `IX+10` by 10 from
+    /// the current shift; `#5` takes a datum table line, which errmap cannot see.
+    fn datum_shift(&mut self, n: u64, b: &Block) -> Result<()> {
+        for w in b.words.iter().skip(2) {
+            let axis = AXES
+                .iter()
+                .position(|a| w.addr.trim_start_matches('I') == *a);
+            match (axis, w.num()) {
+                (Some(i), Some(v)) => {
+                    let new = if w.addr.starts_with('I') {
+                        self.shift[i] + v
+                    } else {
+                        v
+                    };
+                    let delta = new - self.shift[i];
+                    self.shift[i] = new;
+                    self.pos[i] = self.pos[i].map(|p| p - delta);
+                    self.centre[i] = self.centre[i].map(|p| p - delta);
+                }
+                _ => {
+                    self.frames.push(Frame {
+                        cycle: "7".into(),
+                        line: n,
+                        what: format!("CYCL DEF 7 DATUM SHIFT {}", w.text),
+                        normal: true,
+                    });
+                    self.lose_position(n, &[0, 1, 2]);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Cycles 8, 10, 11, 26 and 19: set (a frame) or reset (`8.1` with no axes, `ROT+0`,
+    /// `SCL 1`, all factors 1, all angles 0).
+    fn transform(&mut self, n: u64, b: &Block, major: i64) {
+        let params = || b.words.iter().skip(2);
+        let normal_letter = AXES[self.normal];
+        let (name, active, normal) = match major {
+            8 => {
+                let axes: Vec<&str> = params()
+                    .filter(|w| w.value == Value::None)
+                    .map(|w| w.addr.as_str())
+                    .collect();
+                (
+                    "MIRROR IMAGE",
+                    !axes.is_empty(),
+                    axes.contains(&normal_letter),
+                )
+            }
+            10 => {
+                let rot = params().find(|w| w.addr == "ROT").and_then(|w| w.num());
+                ("ROTATION", rot != Some(0.0), self.normal != self.tool_axis)
+            }
+            11 => {
+                let scl = params()
+                    .find(|w| w.addr.is_empty() || w.addr == "SCL")
+                    .and_then(|w| w.num());
+                let scl =
+                    scl.or_else(|| params().find(|w| w.addr.is_empty()).and_then(|w| w.num()));
+                ("SCALING", scl != Some(1.0), true)
+            }
+            26 => {
+                let factors: Vec<(&str, Option<f64>)> = params()
+                    .filter(|w| AXES.contains(&w.addr.as_str()))
+                    .map(|w| (w.addr.as_str(), w.num()))
+                    .collect();
+                let active = factors.iter().any(|(_, f)| *f != Some(1.0));
+                let normal = factors
+                    .iter()
+                    .any(|(a, f)| *a == normal_letter && *f != Some(1.0));
+                ("AXIS-SPECIFIC SCALING", active, normal)
+            }
+            _ => {
+                let angles = params()
+                    .filter(|w| w.addr.len() == 1)
+                    .all(|w| w.num() == Some(0.0));
+                ("WORKING PLANE", !angles, true)
+            }
+        };
+        let cycle = major.to_string();
+        self.frames.retain(|f| f.cycle != cycle);
+        if active {
+            self.frames.push(Frame {
+                cycle,
+                line: n,
+                what: format!("CYCL DEF {major} {name}"),
+                normal,
+            });
+        }
+    }
+}

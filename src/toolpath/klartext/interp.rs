@@ -1,0 +1,654 @@
+//! The Klartext interpreter: each block's meaning applied to the state (position, circle centre, tool axis, radius compensation, datum shift, transformation cycles, labels), and the refusals of what errmap does not follow in the zone.
+
+use super::super::arc::{Arc, Plane};
+use super::super::dialect::Motion;
+use super::super::TracedMove;
+use super::block::{Block, Value};
+use super::{Frame, Kt, Point};
+use crate::error::Result;
+
+const AXES: [&str; 3] = ["X", "Y", "Z"];
+
+/// M functions that act at the start of their block (TNC manual, "Overview of miscellaneous
+/// functions"): kept on the first piece of a split cut.
+const M_START: [f64; 6] = [3.0, 4.0, 7.0, 8.0, 13.0, 14.0];
+/// M functions that act at the end of their block: moved to the last piece.
+const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
+
+/// Why a block cannot be compensated when it may touch the zone: column, word, message, hint.
+pub(super) type Refusal = (usize, String, String, &'static str);
+
+/// A path block (`L`, `C`, `CR`, `CT`) read against the state.
+pub(super) struct PathMove {
+    pub start: Point,
+    pub end: Point,
+    pub arc: Option<Arc>,
+    pub cutting: bool,
+    /// The reason it cannot be compensated in the zone, if any.
+    pub refusal: Option<Refusal>,
+}
+
+impl Kt<'_> {
+    /// One line: dispatch on its function.
+    pub(super) fn line(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        match b.head.as_str() {
+            "" | ";" | "*" | "BEGIN" | "END" | "BLK" | "FPOL" | "FSELECT" | "SEL" => {
+                self.copy(content, term, b);
+                Ok(())
+            }
+            "L" | "C" | "CR" | "CT" => self.path(n, content, term, b),
+            "CC" => self.circle_centre(n, content, term, b),
+            "RND" | "CHF" => self.corner_block(n, content, term, b),
+            "LP" | "CP" | "FL" | "FLT" | "FC" | "FCT" | "APPR" | "DEP" => {
+                self.unfollowed_contour(n, content, term, b)
+            }
+            "LBL" => self.label_block(n, content, term, b),
+            "CALL" => self.call_block(n, content, term, b),
+            "CYCL" => self.cycle_block(n, content, term, b),
+            "TOOL" => self.tool_block(n, content, term, b),
+            "STOP" => self.unchanged(n, content, term, b, false),
+            "FN" if !b.rest.trim_start().starts_with("17") => {
+                self.copy(content, term, b);
+                Ok(())
+            }
+            h if is_m_block(h) => {
+                self.unchanged(n, content, term, b, false)?;
+                if matches!(h, "M99" | "M89") {
+                    self.cycle_call(n, b.head_col, h)?;
+                }
+                Ok(())
+            }
+            h if h.starts_with('Q') => {
+                self.copy(content, term, b);
+                Ok(())
+            }
+            _ => {
+                let what = format!("{} {}", b.head, b.rest).trim().to_string();
+                self.frames.push(Frame {
+                    cycle: "?".into(),
+                    line: n,
+                    what,
+                    normal: true,
+                });
+                self.lose_position(n, &[0, 1, 2]);
+                self.unchanged(n, content, term, b, false)
+            }
+        }
+    }
+
+    /// Copy a block that changes nothing errmap compensates, after a return along the normal
+    /// when the last cut ended compensated (unless the block itself moves the normal axis to
+    /// an absolute coordinate).
+    pub(super) fn unchanged(
+        &mut self,
+        _n: u64,
+        content: &str,
+        term: &str,
+        b: &Block,
+        absolute_normal: bool,
+    ) -> Result<()> {
+        if self.offset != 0.0 && !absolute_normal {
+            // Before a rapid the return is a rapid too (the original's rapid starts there).
+            self.return_step(term, b.head == "L" && b.has("FMAX"));
+        }
+        self.offset = if absolute_normal { 0.0 } else { self.offset };
+        self.copy(content, term, b);
+        Ok(())
+    }
+
+    /// The working plane of the tool axis (TOOL CALL … Z: XY).
+    fn plane(&self) -> Plane {
+        match self.tool_axis {
+            0 => Plane::G19,
+            1 => Plane::G18,
+            _ => Plane::G17,
+        }
+    }
+
+    /// End point of a block's coordinate words from `start` (`X` absolute, `IX` incremental;
+    /// a Q parameter gives an unknown value).
+    fn end_point(&self, b: &Block, start: Point) -> Point {
+        let mut end = start;
+        for (i, a) in AXES.iter().enumerate() {
+            if let Some(w) = b.word(a) {
+                end[i] = w.num();
+            } else if let Some(w) = b.word(&format!("I{a}")) {
+                end[i] = start[i].zip(w.num()).map(|(s, d)| s + d);
+            }
+        }
+        end
+    }
+
+    /// Radius compensation words of a path block: `R0` ends it, `RL`/`RR` start it.
+    fn radius_words(&mut self, n: u64, b: &Block, radius_is_r: bool) {
+        if b.has("RL") || b.has("RR") {
+            let w = if b.has("RL") { "RL" } else { "RR" };
+            self.radius_comp = Some((n, w.to_string()));
+        } else if !radius_is_r && b.word("R").and_then(|w| w.num()) == Some(0.0) {
+            self.radius_comp = None;
+        }
+    }
+
+    /// A straight line or a circle: followed, compensated in the zone, or refused there.
+    fn path(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        self.check_path_words(n, b)?;
+        self.radius_words(n, b, b.head == "CR");
+        let coordinates = b.words.iter().any(|w| {
+            let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
+            matches!(a, "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W")
+        });
+        if b.head == "L" && !coordinates {
+            // `L R0 F200 M3`: no motion.
+            self.unchanged(n, content, term, b, false)?;
+            return self.after_path_m(n, b);
+        }
+        let mv = self.path_move(n, b)?;
+        let touch = self.may_touch(&self.touch_points(&mv));
+        if let Some((l, col, word)) = self.corner.take() {
+            if touch {
+                return Err(self.err(
+                    l,
+                    col,
+                    &word,
+                    format!("`{word}` rounds or chamfers the corner before a contour element (line {n}) that may lie in the compensation zone: errmap does not follow RND and CHF there"),
+                    CORNER_HINT,
+                ));
+            }
+        }
+        if b.head == "CT" && self.prev_touch {
+            return Err(self.err(
+                n,
+                b.head_col,
+                "CT",
+                "tangential arc CT after a contour element that may lie in the compensation zone: its arc follows that element's direction, which compensation changes".into(),
+                CT_HINT,
+            ));
+        }
+        self.prev_touch = touch;
+        if mv.cutting && (touch || !self.units_known) {
+            if let Some((col, word, msg, hint)) = mv.refusal.clone() {
+                return Err(self.err(n, col, &word, msg, hint));
+            }
+        }
+        if self.trace.is_some() {
+            self.trace_move(b, &mv);
+        }
+        let absolute_normal = b.head == "L"
+            && b.word(AXES[self.normal]).is_some_and(|w| w.num().is_some())
+            && self.frames.is_empty()
+            && !b
+                .words
+                .iter()
+                .any(|w| w.addr == "M" && matches!(w.num(), Some(91.0 | 92.0)));
+        if mv.cutting && touch && mv.refusal.is_none() {
+            self.compensate_path(n, content, term, b, &mv)?;
+        } else {
+            self.unchanged(n, content, term, b, absolute_normal)?;
+        }
+        self.pos = mv.end;
+        self.after_path_m(n, b)
+    }
+
+    /// Words a path block may hold; anything else is an error (strict blocks).
+    fn check_path_words(&self, n: u64, b: &Block) -> Result<()> {
+        const COMMON: [&str; 26] = [
+            "X", "Y", "Z", "IX", "IY", "IZ", "A", "B", "C", "IA", "IB", "IC", "U", "V", "W", "R",
+            "RL", "RR", "F", "FMAX", "FAUTO", "FU", "FZ", "AUTO", "M", "DR",
+        ];
+        for w in &b.words {
+            let ok = COMMON.contains(&w.addr.as_str())
+                && (w.addr != "DR" || matches!(b.head.as_str(), "C" | "CR"));
+            let value_ok = match w.addr.as_str() {
+                "RL" | "RR" | "FMAX" | "FAUTO" | "AUTO" => w.value == Value::None,
+                "DR" => matches!(w.value, Value::Sign(_)),
+                _ => matches!(w.value, Value::Num(_) | Value::Param),
+            };
+            if !ok || !value_ok {
+                return Err(self.err(
+                    n,
+                    w.col,
+                    &w.text,
+                    format!("`{}` is not a word of a Klartext {} block errmap knows", w.text, b.head),
+                    "write the block as the TNC does (e.g. `L X+10 Y-5 R0 F200 M3`, `C X+0 Y+25 DR+`, `CR X+0 Y+25 R+20 DR-`)",
+                ));
+            }
+            let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
+            if w.addr.starts_with('I') && b.has(a) {
+                return Err(self.err(
+                    n,
+                    w.col,
+                    &w.text,
+                    format!("both {a} and {} in one block", w.addr),
+                    "give the coordinate once, absolute or incremental",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Start, end, arc and what forbids compensating a path block.
+    fn path_move(&self, n: u64, b: &Block) -> Result<PathMove> {
+        let start = self.pos;
+        let mut end = self.end_point(b, start);
+        let machine = b
+            .words
+            .iter()
+            .find(|w| w.addr == "M" && matches!(w.num(), Some(91.0 | 92.0)));
+        if machine.is_some() {
+            for (i, a) in AXES.iter().enumerate() {
+                if b.has(a) || b.has(&format!("I{a}")) {
+                    end[i] = None;
+                }
+            }
+        }
+        let cutting = !b.has("FMAX");
+        let (arc, arc_refusal) = match b.head.as_str() {
+            "C" | "CR" => self.arc(n, b, start, end)?,
+            _ => (None, None),
+        };
+        let refusal = self
+            .context_refusal(b)
+            .or(arc_refusal)
+            .or_else(|| self.word_refusal(b, &start));
+        Ok(PathMove {
+            start,
+            end,
+            arc,
+            cutting,
+            refusal,
+        })
+    }
+
+    /// The points a move may reach: its ends, and its arc sampled within the chord tolerance.
+    fn touch_points(&self, mv: &PathMove) -> Vec<Point> {
+        let mut pts = vec![mv.start, mv.end];
+        if let Some(a) = &mv.arc {
+            let k = a.chords(self.chord_tol(), self.step()).min(100_000);
+            pts = (0..=k)
+                .map(|i| a.point(i as f64 / k as f64).map(Some))
+                .collect();
+        }
+        pts
+    }
+
+    /// The arc of a C or CR block, or why it cannot be followed in the zone.
+    fn arc(&self, n: u64, b: &Block, s: Point, e: Point) -> Result<(Option<Arc>, Option<Refusal>)> {
+        let at = |w: &str| b.word(w).map_or(b.head_col, |w| w.col);
+        let Some(dr) = b.word("DR").and_then(|w| match w.value {
+            Value::Sign(ccw) => Some(ccw),
+            _ => None,
+        }) else {
+            return Err(self.err(
+                n,
+                b.head_col,
+                &b.head,
+                format!(
+                    "{} block without a direction of rotation DR+ or DR-",
+                    b.head
+                ),
+                "add DR+ (counterclockwise) or DR- (clockwise)",
+            ));
+        };
+        let plane = self.plane();
+        let (a1, a2, ax) = plane.axes();
+        if self.tool_axis != 2 {
+            return Ok((None, Some((
+                b.head_col,
+                b.head.clone(),
+                format!("a circle in the plane of tool axis {} (TOOL CALL): errmap follows circles in the XY plane (tool axis Z) only", AXES[self.tool_axis]),
+                "post the arc as L moves for this zone, or move the zone away",
+            ))));
+        }
+        let axis_word = b.has(AXES[ax]) || b.has(&format!("I{}", AXES[ax]));
+        if axis_word && e[ax] != s[ax] {
+            return Ok((None, Some((
+                at(AXES[ax]),
+                format!("{} … {}", b.head, AXES[ax]),
+                format!("{} with a tool-axis coordinate (a helix) in the compensation zone: errmap does not follow it", b.head),
+                "post helices as L moves for this zone, or move the zone away",
+            ))));
+        }
+        let (Some(s), Some(e)) = (known(s), known(e)) else {
+            return Ok((None, None));
+        };
+        let result = if b.head == "C" {
+            let (Some(c1), Some(c2)) = (self.centre[a1], self.centre[a2]) else {
+                return Ok((None, Some((
+                    b.head_col,
+                    "C".into(),
+                    "circle C with an unknown circle centre CC (none since the program start, a label or a block errmap does not follow)".into(),
+                    "program CC X… Y… before the circle",
+                ))));
+            };
+            Arc::from_centre(plane, s, e, (c1, c2), !dr, 1)
+        } else {
+            let Some(r) = b.word("R").and_then(|w| w.num()).filter(|r| *r != 0.0) else {
+                return Err(self.err(
+                    n,
+                    at("R"),
+                    "CR",
+                    "CR block without a radius R+… or R-…".into(),
+                    "give the radius: R+ for an arc up to 180°, R- for a larger one",
+                ));
+            };
+            Arc::from_radius(plane, s, e, r, !dr, 1)
+        };
+        result.map(|a| (Some(a), None)).map_err(|m| {
+            self.err(
+                n,
+                b.head_col,
+                &b.head,
+                m,
+                "fix the arc's end point, centre CC or radius",
+            )
+        })
+    }
+
+    /// The program's state forbids compensating a cut here.
+    fn context_refusal(&self, b: &Block) -> Option<Refusal> {
+        let col = b.head_col;
+        if !self.units_known {
+            return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), "begin the program with `0 BEGIN PGM name MM` (or INCH), or pass --units mm|inch"));
+        }
+        if let Some((l, w)) = &self.label {
+            return Some((col, w.clone(), format!("cut inside the label `{w}` (line {l}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone"), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
+        }
+        if let Some(f) = self.frames.last() {
+            let msg = if f.cycle == "?" {
+                format!("`{}` (line {}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what, f.line)
+            } else {
+                format!("`{}` (line {}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.line, f.cycle)
+            };
+            return Some((col, f.what.clone(), msg, "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"));
+        }
+        if let Some((l, w)) = &self.radius_comp {
+            let w = if b.has("RL") || b.has("RR") {
+                if b.has("RL") {
+                    "RL"
+                } else {
+                    "RR"
+                }
+            } else {
+                w.as_str()
+            };
+            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from line {l}) is active on a cut in the compensation zone"), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
+        }
+        if b.head == "CT" {
+            return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT));
+        }
+        None
+    }
+
+    /// A word of the block forbids compensating, or the start point is unknown.
+    fn word_refusal(&self, b: &Block, start: &Point) -> Option<Refusal> {
+        if let Some(w) = b.words.iter().find(|w| w.value == Value::Param) {
+            return Some((
+                w.col,
+                w.text.clone(),
+                "Q parameter in a cut in the compensation zone".into(),
+                "post the program with numbers instead of Q parameters (or move the zone away)",
+            ));
+        }
+        if let Some(w) = b.words.iter().find(|w| {
+            matches!(
+                w.addr.as_str(),
+                "A" | "B" | "C" | "IA" | "IB" | "IC" | "U" | "V" | "W"
+            )
+        }) {
+            return Some((
+                w.col,
+                w.text.clone(),
+                format!(
+                    "axis {} moves together with a cut in the compensation zone",
+                    w.addr.trim_start_matches('I')
+                ),
+                "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move",
+            ));
+        }
+        if let Some(w) = b.words.iter().find(|w| {
+            w.addr == "M"
+                && !w
+                    .num()
+                    .is_some_and(|m| M_START.contains(&m) || M_END.contains(&m))
+        }) {
+            return Some((w.col, w.text.clone(), format!("{} on a cut in the compensation zone: errmap does not follow this miscellaneous function on a cut it rewrites", w.text), "put the M function in a block of its own outside the zone (M91/M92 cuts: program them in workpiece coordinates)"));
+        }
+        if start.iter().any(Option::is_none) {
+            let since = self
+                .unknown_since
+                .map(|l| format!(" since line {l}"))
+                .unwrap_or_else(|| " (no X, Y and Z since the program start)".into());
+            return Some((b.head_col, b.head.clone(), format!("the start point of this cut is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"), "give absolute X, Y and Z (e.g. L X… Y… Z… R0 FMAX) before the cut"));
+        }
+        None
+    }
+
+    /// Record a move whose start and end are known, in mm and work coordinates.
+    fn trace_move(&mut self, b: &Block, mv: &PathMove) {
+        let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
+            return;
+        };
+        let k = self.scale_mm();
+        let shift = self.shift;
+        let mm = |p: [f64; 3]| [0, 1, 2].map(|i| (p[i] + shift[i]) * k);
+        let kind = match (&mv.arc, mv.cutting) {
+            (Some(a), _) if a.sweep < 0.0 => Motion::ArcCw,
+            (Some(_), _) => Motion::ArcCcw,
+            (None, false) => Motion::Rapid,
+            (None, true) => Motion::Linear,
+        };
+        if b.head != "L" && mv.arc.is_none() {
+            return;
+        }
+        let arc_mm = mv.arc.as_ref().map(|a| {
+            let (a1, a2, _) = a.plane.axes();
+            Arc {
+                start: mm(a.start),
+                end: mm(a.end),
+                centre: ((a.centre.0 + shift[a1]) * k, (a.centre.1 + shift[a2]) * k),
+                r_start: a.r_start * k,
+                r_end: a.r_end * k,
+                ..a.clone()
+            }
+        });
+        let line = self.report.lines_in;
+        if let Some(t) = self.trace.as_mut() {
+            t.push(TracedMove {
+                line,
+                kind,
+                start_mm: mm(s),
+                end_mm: mm(e),
+                arc_mm,
+            });
+        }
+    }
+
+    /// M99/M89 on a path block call the cycle defined last at the end point.
+    fn after_path_m(&mut self, n: u64, b: &Block) -> Result<()> {
+        if let Some(w) = b
+            .words
+            .iter()
+            .find(|w| w.addr == "M" && matches!(w.num(), Some(99.0 | 89.0)))
+        {
+            let (col, text) = (w.col, w.text.clone());
+            self.cycle_call(n, col, &text)?;
+        }
+        Ok(())
+    }
+
+    /// A machining cycle runs at the current position: refused if it may touch the zone; it
+    /// leaves the tool-axis coordinate unknown.
+    pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
+        let mut p = self.pos;
+        p[self.tool_axis] = None;
+        p[self.normal] = None;
+        if self.may_touch(&[self.pos, p]) {
+            return Err(self.err(
+                n,
+                col,
+                word,
+                format!("cycle call `{word}` in the compensation zone: errmap does not follow machining cycles"),
+                "expand the cycle into L moves with your CAM post (or move the zone away)",
+            ));
+        }
+        self.lose_position(n, &[self.tool_axis, self.normal]);
+        Ok(())
+    }
+
+    /// `CC X… Y…` (absolute), `CC IX… IY…` (from the last position), `CC` (the last position).
+    fn circle_centre(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let (a1, a2, _) = self.plane().axes();
+        for w in &b.words {
+            let plane_word = [a1, a2]
+                .iter()
+                .any(|&i| w.addr.trim_start_matches('I') == AXES[i]);
+            if !plane_word || w.value == Value::None {
+                return Err(self.err(
+                    n,
+                    w.col,
+                    &w.text,
+                    format!(
+                        "`{}` is not a coordinate of the working plane for CC",
+                        w.text
+                    ),
+                    "write CC with the plane's two coordinates, e.g. CC X+25 Y+25",
+                ));
+            }
+        }
+        if b.words.is_empty() {
+            self.centre = self.pos;
+        } else {
+            let c = self.end_point(b, self.pos);
+            let given = |i: usize| b.has(AXES[i]) || b.has(&format!("I{}", AXES[i]));
+            for i in [a1, a2] {
+                self.centre[i] = if given(i) { c[i] } else { None };
+            }
+        }
+        // A bare or incremental CC depends on the last position: the output's must be the
+        // original's. An absolute one does not.
+        if !b.words.is_empty() && b.words.iter().all(|w| !w.addr.starts_with('I')) {
+            self.copy(content, term, b);
+            return Ok(());
+        }
+        self.unchanged(n, content, term, b, false)
+    }
+
+    /// `RND R…` or `CHF …`: refused when the element before it may lie in the zone; the element
+    /// after it is checked when it comes.
+    fn corner_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let word = format!("{} {}", b.head, b.rest).trim().to_string();
+        if self.prev_touch {
+            return Err(self.err(n, b.head_col, &word, format!("`{word}` rounds or chamfers the corner after a contour element that may lie in the compensation zone: errmap does not follow RND and CHF there"), CORNER_HINT));
+        }
+        self.corner = Some((n, b.head_col, word));
+        self.unchanged(n, content, term, b, false)
+    }
+
+    /// Polar (`LP`, `CP`), FK (`FL`, `FC` …) and approach/departure blocks: not followed; refused
+    /// when they may touch the zone, and they leave the plane position unknown.
+    fn unfollowed_contour(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        self.radius_words(n, b, false);
+        let (what, hint) = match b.head.as_str() {
+            "LP" | "CP" => ("polar coordinates (LP/CP)", "post the program with Cartesian L and C/CR blocks for the zone (or move the zone away)"),
+            "APPR" | "DEP" => ("an approach/departure function (APPR/DEP)", "post the approach with explicit L and C blocks, R0, for the zone (or move the zone away)"),
+            _ => ("FK free contour programming", "post the contour as L and C/CR blocks for the zone (or move the zone away)"),
+        };
+        let start = self.pos;
+        let mut end = self.end_point(b, start);
+        let (a1, a2, ax) = self.plane().axes();
+        end[a1] = None;
+        end[a2] = None;
+        if !matches!(b.head.as_str(), "LP" | "CP") && b.rest.to_ascii_uppercase().contains(AXES[ax])
+        {
+            end[ax] = None;
+        }
+        let cutting = !b.has("FMAX");
+        self.prev_touch = self.may_touch(&[start, end]);
+        if cutting && self.prev_touch {
+            return Err(self.err(n, b.head_col, &b.head, format!("{what} on a cut that may lie in the compensation zone: errmap does not follow it"), hint));
+        }
+        self.corner = None;
+        self.unchanged(n, content, term, b, false)?;
+        self.pos = end;
+        self.lose_position(n, &[]);
+        Ok(())
+    }
+
+    /// `LBL n` starts a label body (entered by calls and jumps from anywhere); `LBL 0` ends it.
+    fn label_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let name = b.rest.trim().to_string();
+        if name == "0" {
+            self.label = None;
+        } else {
+            self.label = Some((n, format!("LBL {name}")));
+            self.enter_unknown(n, &format!("LBL {name}"));
+        }
+        self.unchanged(n, content, term, b, false)
+    }
+
+    /// After a label entry or a call: the position is unknown, and so are the frames and the
+    /// radius compensation when the program has any.
+    fn enter_unknown(&mut self, n: u64, what: &str) {
+        self.lose_position(n, &[0, 1, 2]);
+        self.centre = [None; 3];
+        self.prev_touch = true;
+        if self.program_transforms {
+            self.frames.push(Frame {
+                cycle: "?".into(),
+                line: n,
+                what: format!("{what} (datum and transformations unknown here)"),
+                normal: true,
+            });
+        }
+        if self.program_radius_comp {
+            self.radius_comp = Some((n, format!("{what} (radius compensation unknown here)")));
+        }
+    }
+
+    /// `CALL LBL n [REP m]` runs a label body; `CALL PGM` another program.
+    fn call_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let what = format!("CALL {}", b.rest).trim().to_string();
+        self.unchanged(n, content, term, b, false)?;
+        self.enter_unknown(n, &what);
+        if !b.rest.trim_start().to_ascii_uppercase().starts_with("LBL") {
+            self.frames.push(Frame {
+                cycle: "?".into(),
+                line: n,
+                what,
+                normal: true,
+            });
+        }
+        Ok(())
+    }
+
+    /// `TOOL CALL n Z …` sets the tool axis; the tool change leaves the position unknown.
+    fn tool_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let up = b.rest.to_ascii_uppercase();
+        if up.starts_with("CALL") {
+            for tok in up.split_whitespace().skip(1) {
+                if let Some(i) = AXES.iter().position(|a| *a == tok) {
+                    self.tool_axis = i;
+                }
+            }
+            self.unchanged(n, content, term, b, false)?;
+            self.lose_position(n, &[0, 1, 2]);
+            return Ok(());
+        }
+        self.copy(content, term, b);
+        Ok(())
+    }
+}
+
+const CT_HINT: &str = "post the arc as CC + C or as CR (or move the zone away)";
+
+const CORNER_HINT: &str = "post the rounding as an explicit arc (CR/C) and the chamfer as an L block, or move the zone away";
+
+/// A block of M functions only (`M30`).
+pub(super) fn is_m_block(head: &str) -> bool {
+    head.len() > 1 && head.starts_with('M') && head[1..].bytes().all(|b| b.is_ascii_digit())
+}
+
+/// All three coordinates, if known.
+pub(super) fn known(p: Point) -> Option<[f64; 3]> {
+    Some([p[0]?, p[1]?, p[2]?])
+}

@@ -1,0 +1,545 @@
+//! Heidenhain conversational (Klartext) programs: errmap's own reader, interpreter and rewriter of numbered TNC blocks (`L`, `CC`, `C`, `CR` …), which follows what it can vouch for and refuses the rest in the zone.
+//!
+//! The rules and the table of what is followed, rewritten and refused are in
+//! `docs/toolpath.md` (Heidenhain). Lines errmap does not change are copied byte for byte; when it
+//! inserts blocks (pieces of a cut, a return along the normal) every block is renumbered so the
+//! numbers stay sequential (labels are named by `LBL n`, never by block number).
+
+mod block;
+mod cycles;
+mod interp;
+mod rewrite;
+
+use super::dialect::{self, Dialect};
+use super::{CompensationReport, CompensationSettings, TracedMove, Units};
+use crate::error::{Error, Location, Result};
+use crate::geom::ErrorField;
+use block::Block;
+use std::cell::Cell;
+use std::path::Path;
+
+/// A point of the original program, some coordinates unknown.
+type Point = [Option<f64>; 3];
+
+/// Whether `text` is a Klartext program errmap should read as such: it begins with
+/// `0 BEGIN PGM` (unless another dialect is given), or it is Heidenhain and its first block is
+/// a numbered conversational block.
+pub(crate) fn applies(text: &str, source: &Path, given: Option<Dialect>) -> bool {
+    if !matches!(given, None | Some(Dialect::Heidenhain)) {
+        return false;
+    }
+    let Some(first) = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with(';'))
+    else {
+        return false;
+    };
+    let mut words = first.split_whitespace();
+    let number = words
+        .next()
+        .is_some_and(|w| w.bytes().all(|b| b.is_ascii_digit()));
+    let second = words.next().unwrap_or("");
+    if number && second.eq_ignore_ascii_case("BEGIN") {
+        return true;
+    }
+    number
+        && second.bytes().all(|b| b.is_ascii_uppercase())
+        && !second.is_empty()
+        && dialect::resolve(text, source, given).ok() == Some(Dialect::Heidenhain)
+}
+
+/// A line of the output: `before` + `number` + `after` + `term`; numbered lines are renumbered
+/// when the output has a different number of blocks than the input.
+#[derive(Debug)]
+struct OutLine {
+    before: String,
+    number: Option<String>,
+    after: String,
+    term: String,
+}
+
+/// A transformation (cycle 8, 10, 11, 26, 19, or a function errmap does not know) that is
+/// active: cuts that may lie in the zone are refused.
+#[derive(Debug, Clone)]
+struct Frame {
+    /// `8`, `10`, `11`, `26`, `19`, or `?` for a block errmap does not follow.
+    cycle: String,
+    line: u64,
+    what: String,
+    /// Whether it may move the normal coordinate too.
+    normal: bool,
+}
+
+/// The interpreter's state while reading the program, and the output it writes.
+struct Kt<'a> {
+    source: &'a Path,
+    field: &'a dyn ErrorField,
+    settings: &'a CompensationSettings,
+    normal: usize,
+    plane_uv: (usize, usize),
+    /// The original program's position (program coordinates, program units).
+    pos: Point,
+    /// Circle centre / pole (coordinates of the working plane).
+    centre: Point,
+    inches: bool,
+    units_known: bool,
+    /// The zone in program units and work coordinates.
+    zone: Option<(f64, f64)>,
+    /// Tool axis from `TOOL CALL` (index; Z by default).
+    tool_axis: usize,
+    radius_comp: Option<(u64, String)>,
+    /// Work coordinates = program coordinates + `shift` (cycle 7), program units.
+    shift: [f64; 3],
+    frames: Vec<Frame>,
+    /// The label body being read (`LBL n` … `LBL 0`).
+    label: Option<(u64, String)>,
+    /// A rounding or chamfer waiting for the element after it: line, column, word.
+    corner: Option<(u64, usize, String)>,
+    /// The program has blocks that transform coordinates or that errmap does not know, or
+    /// radius compensation: a label entered from elsewhere may find them active.
+    program_transforms: bool,
+    program_radius_comp: bool,
+    /// The previous contour element may lie in the zone.
+    prev_touch: bool,
+    /// Where the position became unknown, for messages.
+    unknown_since: Option<u64>,
+    /// Output offset along the normal: the output position differs from `pos` by it.
+    offset: f64,
+    decimals: usize,
+    extrapolated: Cell<bool>,
+    report: CompensationReport,
+    out: Vec<OutLine>,
+    out_bytes: usize,
+    numbered_in: usize,
+    trace: Option<Vec<TracedMove>>,
+}
+
+/// Compensate a Klartext program.
+pub(crate) fn compensate(
+    text: &str,
+    source: &Path,
+    field: &dyn ErrorField,
+    settings: &CompensationSettings,
+) -> Result<(String, CompensationReport)> {
+    let mut kt = Kt::start(text, source, field, settings)?;
+    kt.run(text)?;
+    Ok(kt.finish(text))
+}
+
+/// A map that compensates nothing: reading a program through it traces its moves.
+struct Nothing;
+
+impl ErrorField for Nothing {
+    fn normal(&self) -> crate::geom::Axis {
+        crate::geom::Axis::Z
+    }
+    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
+        None
+    }
+}
+
+/// The moves of a Klartext program as errmap reads them (mm, work coordinates).
+pub(crate) fn trace(
+    text: &str,
+    source: &Path,
+    settings: &CompensationSettings,
+) -> Result<Vec<TracedMove>> {
+    let settings = CompensationSettings {
+        zone: None,
+        everywhere: true,
+        extrapolate: true,
+        ..*settings
+    };
+    let mut kt = Kt::start(text, source, &Nothing, &settings)?;
+    kt.trace = Some(Vec::new());
+    kt.run(text)?;
+    Ok(kt.trace.take().unwrap_or_default())
+}
+
+impl<'a> Kt<'a> {
+    fn start(
+        text: &str,
+        source: &'a Path,
+        field: &'a dyn ErrorField,
+        settings: &'a CompensationSettings,
+    ) -> Result<Kt<'a>> {
+        settings.validate()?;
+        let header = header_units(text, source)?;
+        let units =
+            match (header, settings.units) {
+                (Some((h, line)), Some(u)) if h != u => return Err(Error::input(
+                    Location::line(source, line),
+                    format!(
+                        "the program says {} in BEGIN PGM, but --units says {}",
+                        units_word(h),
+                        units_word(u)
+                    ),
+                    "leave out --units (the BEGIN PGM block gives the units of a Klartext program)",
+                )),
+                (Some((h, _)), _) => Some(h),
+                (None, u) => u,
+            };
+        let zone_mm = super::default_zone_mm(source, field, settings)?;
+        let inches = units == Some(Units::Inch);
+        let s = if inches { 25.4 } else { 1.0 };
+        let zone = settings
+            .zone
+            .or_else(|| zone_mm.map(|(lo, hi)| (lo / s, hi / s)));
+        let normal = field.normal();
+        let (u, v) = normal.plane_axes();
+        let report = CompensationReport {
+            zone_mm: zone.map(|(lo, hi)| (lo * s, hi * s)),
+            dialect: Some(Dialect::Heidenhain),
+            ..CompensationReport::default()
+        };
+        Ok(Kt {
+            source,
+            field,
+            settings,
+            normal: normal.index(),
+            plane_uv: (u.index(), v.index()),
+            pos: [None; 3],
+            centre: [None; 3],
+            inches,
+            units_known: units.is_some(),
+            zone,
+            tool_axis: 2,
+            radius_comp: None,
+            shift: [0.0; 3],
+            frames: Vec::new(),
+            label: None,
+            corner: None,
+            program_transforms: false,
+            program_radius_comp: false,
+            prev_touch: false,
+            unknown_since: None,
+            offset: 0.0,
+            decimals: program_decimals(text).max(if inches { 5 } else { 4 }),
+            extrapolated: Cell::new(false),
+            report,
+            out: Vec::new(),
+            out_bytes: 0,
+            numbered_in: 0,
+            trace: None,
+        })
+    }
+
+    /// Read every line in order.
+    fn run(&mut self, text: &str) -> Result<()> {
+        self.prescan(text);
+        let mut number = 0u64;
+        for raw in text.split_inclusive('\n') {
+            number += 1;
+            let content = raw.trim_end_matches(['\n', '\r']);
+            let term = &raw[content.len()..];
+            self.report.lines_in += 1;
+            let block = block::read(content).map_err(|(col, word, msg)| {
+                Error::input(
+                    Location::cell(self.source, number, format!("{col} ({word})")),
+                    msg,
+                    "write each word once, with a number like +10 or -2.5 (a point, not a comma)",
+                )
+            })?;
+            if block.number.is_some() {
+                self.numbered_in += 1;
+            }
+            self.line(number, content, term, &block)?;
+            super::check_output_size(self.source, number, self.out_bytes)?;
+        }
+        Ok(())
+    }
+
+    /// Whether the program transforms coordinates (or has blocks errmap does not know) or uses
+    /// radius compensation anywhere: a label entered from elsewhere may find them active.
+    fn prescan(&mut self, text: &str) {
+        const KNOWN: [&str; 23] = [
+            "", ";", "*", "BEGIN", "END", "BLK", "FPOL", "FSELECT", "SEL", "L", "C", "CR", "CT",
+            "CC", "RND", "CHF", "LP", "CP", "FL", "FLT", "FC", "FCT", "LBL",
+        ];
+        for l in text.lines() {
+            let Ok(b) = block::read(l) else { continue };
+            let rest = b.rest.to_ascii_uppercase();
+            let harmless = KNOWN.contains(&b.head.as_str())
+                || b.head.starts_with('Q')
+                || interp::is_m_block(&b.head)
+                || matches!(b.head.as_str(), "STOP" | "APPR" | "DEP")
+                || (b.head == "FN" && !rest.starts_with("17"))
+                || (b.head == "TOOL")
+                || (b.head == "CALL" && rest.starts_with("LBL"))
+                || (b.head == "CYCL" && !is_transform_cycle(&b));
+            if !harmless {
+                self.program_transforms = true;
+            }
+            if b.has("RL") || b.has("RR") || rest.contains(" RL") || rest.contains(" RR") {
+                self.program_radius_comp = true;
+            }
+        }
+    }
+
+    /// The output text: renumbered when blocks were inserted or removed.
+    fn finish(mut self, text: &str) -> (String, CompensationReport) {
+        let numbered_out = self.out.iter().filter(|l| l.number.is_some()).count();
+        // An inserted block has no number of its own; a removed one leaves a gap.
+        let inserted = self.out.iter().any(|l| l.number.as_deref() == Some(""));
+        let renumber = inserted || numbered_out != self.numbered_in;
+        let first = text
+            .lines()
+            .find_map(|l| block::read(l).ok()?.number)
+            .unwrap_or(0);
+        let mut out = String::with_capacity(self.out_bytes + self.out.len() * 4);
+        let mut n = first;
+        for l in &self.out {
+            out.push_str(&l.before);
+            if let Some(num) = &l.number {
+                if renumber {
+                    out.push_str(&n.to_string());
+                } else {
+                    out.push_str(num);
+                }
+                n += 1;
+            }
+            out.push_str(&l.after);
+            out.push_str(&l.term);
+        }
+        self.report.lines_out = self.out.len() as u64;
+        (out, self.report)
+    }
+
+    /// Copy a line unchanged.
+    fn copy(&mut self, content: &str, term: &str, block: &Block) {
+        let span = block.number_span.clone();
+        let (before, number, after) = match block.number {
+            Some(_) => (
+                &content[..span.start],
+                Some(&content[span.clone()]),
+                &content[span.end..],
+            ),
+            None => ("", None, content),
+        };
+        self.push(OutLine {
+            before: before.to_string(),
+            number: number.map(str::to_string),
+            after: after.to_string(),
+            term: term.to_string(),
+        });
+    }
+
+    fn push(&mut self, line: OutLine) {
+        self.out_bytes += line.before.len()
+            + line.number.as_ref().map_or(2, String::len)
+            + line.after.len()
+            + line.term.len();
+        self.out.push(line);
+    }
+
+    /// An inserted block ` L X… Y… Z…` (its number given when the output is renumbered).
+    fn push_block(&mut self, body: String, term: &str) {
+        self.push(OutLine {
+            before: String::new(),
+            number: Some(String::new()),
+            after: body,
+            term: if term.is_empty() { "\n" } else { term }.to_string(),
+        });
+    }
+
+    /// An error at a column of a line, naming the word.
+    fn err(&self, line: u64, col: usize, word: &str, message: String, hint: &str) -> Error {
+        Error::input(
+            Location::cell(self.source, line, format!("{col} ({word})")),
+            message,
+            hint,
+        )
+    }
+
+    fn scale_mm(&self) -> f64 {
+        if self.inches {
+            25.4
+        } else {
+            1.0
+        }
+    }
+
+    /// The zone in current program coordinates (after the datum shift).
+    fn zone_now(&self) -> Option<(f64, f64)> {
+        let d = self.shift[self.normal];
+        self.zone.map(|(lo, hi)| (lo - d, hi - d))
+    }
+
+    /// Whether the map compensates at plane point (u, v) in program coordinates.
+    fn compensable(&self, u: f64, v: f64) -> bool {
+        let s = self.scale_mm();
+        let (iu, iv) = self.plane_uv;
+        let (u, v) = ((u + self.shift[iu]) * s, (v + self.shift[iv]) * s);
+        self.field.error_mm(u, v).is_some()
+            && (self.settings.extrapolate
+                || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
+    }
+
+    /// E in program units at a point, if the point is in the zone and the measured domain.
+    fn error_at(&self, p: &[f64; 3]) -> Option<f64> {
+        if let Some((lo, hi)) = self.zone_now() {
+            let n = p[self.normal];
+            if n < lo || n > hi {
+                return None;
+            }
+        }
+        let s = self.scale_mm();
+        let (iu, iv) = self.plane_uv;
+        let (u, v) = ((p[iu] + self.shift[iu]) * s, (p[iv] + self.shift[iv]) * s);
+        let e_mm = self.field.error_mm(u, v)?;
+        if !self.settings.extrapolate
+            && self.field.measured(u, v, self.settings.domain_margin_mm) != Some(true)
+        {
+            self.extrapolated.set(true);
+            return None;
+        }
+        e_mm.is_finite().then_some(e_mm / s)
+    }
+
+    /// Could a path through these points (some coordinates unknown) touch the zone and the
+    /// measured domain? Under an active frame the plane coordinates (and the normal one when
+    /// the frame may move it) are unknown.
+    fn may_touch(&self, points: &[Point]) -> bool {
+        let framed: Vec<Point> = if self.frames.is_empty() {
+            points.to_vec()
+        } else {
+            let normal_moves = self.frames.iter().any(|f| f.normal);
+            points
+                .iter()
+                .map(|p| {
+                    let mut q = [None; 3];
+                    if !normal_moves {
+                        q[self.normal] = p[self.normal];
+                    }
+                    q
+                })
+                .collect()
+        };
+        let (mut lo, mut hi, mut normal_known) = (f64::INFINITY, f64::NEG_INFINITY, true);
+        for p in &framed {
+            match p[self.normal] {
+                Some(n) => {
+                    lo = lo.min(n);
+                    hi = hi.max(n);
+                }
+                None => normal_known = false,
+            }
+        }
+        if let (Some((zlo, zhi)), true) = (self.zone_now(), normal_known) {
+            if hi < zlo || lo > zhi {
+                return false;
+            }
+        }
+        let (iu, iv) = self.plane_uv;
+        let known: Option<Vec<[f64; 3]>> =
+            framed.iter().map(|p| Some([p[iu]?, p[iv]?, 0.0])).collect();
+        let Some(known) = known.filter(|k| !k.is_empty()) else {
+            return true;
+        };
+        let step = self.step();
+        if self.compensable(known[0][0], known[0][1]) {
+            return true;
+        }
+        for w in known.windows(2) {
+            let len = super::gcode::dist(&w[0], &w[1]);
+            let k = (len / step).ceil().clamp(1.0, 1e6) as usize;
+            for i in 1..=k {
+                let p = super::gcode::lerp(&w[0], &w[1], i as f64 / k as f64);
+                if self.compensable(p[0], p[1]) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Longest segment in program units.
+    fn step(&self) -> f64 {
+        self.settings.max_segment / self.scale_mm()
+    }
+
+    fn chord_tol(&self) -> f64 {
+        self.settings.chord_tol / self.scale_mm()
+    }
+
+    /// Coordinate text with sign: `+10.0000`, `-2.5000`.
+    fn coord(&self, v: f64) -> String {
+        let t = super::gcode::format_decimals(v, self.decimals);
+        if t.starts_with('-') {
+            t
+        } else {
+            format!("+{t}")
+        }
+    }
+
+    /// Forget the position (a block errmap does not follow moved the tool somewhere).
+    fn lose_position(&mut self, line: u64, axes: &[usize]) {
+        for &i in axes {
+            if self.pos[i].is_some() {
+                self.pos[i] = None;
+                self.unknown_since = Some(line);
+            }
+        }
+        if self.unknown_since.is_none() {
+            self.unknown_since = Some(line);
+        }
+    }
+}
+
+/// `CYCL DEF` 7, 8, 10, 11, 19, 26 or 247: a cycle that moves the coordinate system.
+fn is_transform_cycle(b: &Block) -> bool {
+    let id = b
+        .words
+        .iter()
+        .find(|w| w.addr.is_empty())
+        .and_then(|w| w.num());
+    b.bad.is_some() || id.is_some_and(|v| [7, 8, 10, 11, 19, 26, 247].contains(&(v.trunc() as i64)))
+}
+
+/// The units of the `BEGIN PGM name MM|INCH` block, with its line, if the program has one.
+fn header_units(text: &str, source: &Path) -> Result<Option<(Units, u64)>> {
+    for (i, l) in text.lines().enumerate() {
+        let up = l.to_ascii_uppercase();
+        let words: Vec<&str> = up.split_whitespace().collect();
+        let Some(at) = words.windows(2).position(|w| w == ["BEGIN", "PGM"]) else {
+            continue;
+        };
+        let line = i as u64 + 1;
+        return match words.get(at + 3).copied() {
+            Some("MM") => Ok(Some((Units::Mm, line))),
+            Some("INCH") => Ok(Some((Units::Inch, line))),
+            other => Err(Error::input(
+                Location::cell(source, line, format!("1 ({})", l.trim())),
+                format!(
+                    "BEGIN PGM without MM or INCH after the program name (found {})",
+                    other.unwrap_or("nothing")
+                ),
+                "write the header as `0 BEGIN PGM name MM` or `0 BEGIN PGM name INCH`",
+            )),
+        };
+    }
+    Ok(None)
+}
+
+fn units_word(u: Units) -> &'static str {
+    match u {
+        Units::Mm => "MM",
+        Units::Inch => "INCH",
+    }
+}
+
+/// Most decimals in any number of the program (capped at 9), so unchanged end points are
+/// written back exactly.
+fn program_decimals(text: &str) -> usize {
+    let mut best = 0;
+    for tok in text.split(|c: char| c.is_whitespace()) {
+        if let Some((i, f)) = tok.split_once('.') {
+            let digits = f.bytes().take_while(u8::is_ascii_digit).count();
+            if digits == f.len() && i.bytes().last().is_some_and(|b| b.is_ascii_digit()) {
+                best = best.max(digits);
+            }
+        }
+    }
+    best.min(9)
+}

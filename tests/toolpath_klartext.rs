@@ -1,0 +1,477 @@
+//! Heidenhain Klartext in `compensate`: programs written from the TNC manual's examples checked point by point against P' = P − E (computed here), every refusal of the docs table triggered with its message, renumbering, units from BEGIN PGM, and byte-for-byte copies outside the zone.
+
+mod common;
+
+use errmap::geom::{Axis, ErrorField};
+use errmap::toolpath::{
+    compensate_gcode, trace_gcode, CompensationReport, CompensationSettings, Dialect, Units,
+};
+use std::path::Path;
+
+/// E = e0 + g·x mm along Z, defined for |x|, |y| ≤ 1000 mm, measured for x ≤ `x_meas`.
+struct F {
+    e0: f64,
+    g: f64,
+    x_meas: f64,
+}
+
+impl F {
+    fn e(&self, x_mm: f64) -> f64 {
+        self.e0 + self.g * x_mm
+    }
+}
+
+impl ErrorField for F {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, u: f64, v: f64) -> Option<f64> {
+        (u.abs() <= 1000.0 && v.abs() <= 1000.0).then(|| self.e(u))
+    }
+    fn measured(&self, u: f64, _v: f64, margin: f64) -> Option<bool> {
+        Some(u <= self.x_meas + margin)
+    }
+}
+
+const F1: F = F {
+    e0: 0.01,
+    g: 0.001,
+    x_meas: 1e9,
+};
+
+fn settings() -> CompensationSettings {
+    CompensationSettings {
+        zone: Some((-10.0, 0.0)),
+        dialect: None,
+        max_segment: 5.0,
+        ..CompensationSettings::default()
+    }
+}
+
+fn run(text: &str, s: &CompensationSettings) -> (String, CompensationReport) {
+    compensate_gcode(text, Path::new("k.h"), &F1, s)
+        .unwrap_or_else(|e| panic!("refused: {e}\n--- input ---\n{text}"))
+}
+
+fn refuse(text: &str) -> String {
+    refuse_with(text, &settings())
+}
+
+fn refuse_with(text: &str, s: &CompensationSettings) -> String {
+    match compensate_gcode(text, Path::new("k.h"), &F1, s) {
+        Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
+        Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
+    }
+}
+
+fn assert_msg(msg: &str, parts: &[&str]) {
+    for p in parts {
+        assert!(msg.contains(p), "`{p}` not in: {msg}");
+    }
+}
+
+/// The number after `addr` (`X`, `Z` …) in a block, if any.
+fn word(line: &str, addr: &str) -> Option<f64> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(addr))
+        .and_then(|v| v.parse().ok())
+}
+
+/// (x, y, z) of every `L` block with all three coordinates, in order.
+fn points(out: &str) -> Vec<[f64; 3]> {
+    out.lines()
+        .filter(|l| l.split_whitespace().nth(1) == Some("L"))
+        .filter_map(|l| Some([word(l, "X")?, word(l, "Y")?, word(l, "Z")?]))
+        .collect()
+}
+
+/// The block numbers are 0, 1, 2 … on every line.
+fn assert_sequential(out: &str) {
+    for (i, l) in out.lines().enumerate() {
+        let n: usize = l.split_whitespace().next().unwrap().parse().unwrap();
+        assert_eq!(n, i, "block numbers not sequential at `{l}`\n{out}");
+    }
+}
+
+/// Written after the TNC 640 manual's example "Circular movements" (Programming contours,
+/// path contours — Cartesian coordinates), posted as the tool-centre path (R0): lines, a CR
+/// arc, a CC + C arc and an incremental line at Z −5.
+const CIRCULAR: &str = "0 BEGIN PGM CIRCULAR MM
+1 BLK FORM 0.1 Z X+0 Y+0 Z-20
+2 BLK FORM 0.2 X+100 Y+100 Z+0
+3 TOOL CALL 1 Z S4000
+4 L Z+250 R0 FMAX
+5 L X-10 Y-10 R0 FMAX
+6 L Z-5 R0 F1000 M3
+7 L X+5 Y+5 R0 F300
+8 L X+5 Y+85
+9 L X+30 Y+85
+10 CR X+70 Y+95 R+30 DR-
+11 L X+95
+12 CC X+95 Y+70
+13 C X+95 Y+45 DR-
+14 L IX-90
+15 L Z+250 R0 FMAX M2
+16 END PGM CIRCULAR MM
+";
+
+/// The original contour at Z −5: which piece (x, y) lies on, if any.
+fn on_circular(p: [f64; 2]) -> bool {
+    let on_line = |a: [f64; 2], b: [f64; 2]| {
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let t = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy);
+        let (qx, qy) = (a[0] + t * dx, a[1] + t * dy);
+        (-1e-9..=1.0 + 1e-9).contains(&t) && (qx - p[0]).hypot(qy - p[1]) < 2e-4
+    };
+    // CR from (30, 85) to (70, 95), R 30, clockwise, ≤ 180°: the centre lies right of the
+    // chord, at h = √(R² − (c/2)²) from its midpoint.
+    let (ax, ay, bx, by) = (30.0f64, 85.0f64, 70.0f64, 95.0f64);
+    let c = (bx - ax).hypot(by - ay);
+    let h = (900.0 - c * c / 4.0).sqrt();
+    let (ux, uy) = ((bx - ax) / c, (by - ay) / c);
+    let centre = ((ax + bx) / 2.0 + h * uy, (ay + by) / 2.0 - h * ux);
+    let on_cr =
+        ((p[0] - centre.0).hypot(p[1] - centre.1) - 30.0).abs() < 2e-4 && (p[1] - ay) >= -1e-6;
+    // C around (95, 70) from (95, 95) to (95, 45) clockwise: the right half, x ≥ 95.
+    let on_c = ((p[0] - 95.0).hypot(p[1] - 70.0) - 25.0).abs() < 2e-4 && p[0] >= 95.0 - 1e-4;
+    on_line([-10.0, -10.0], [5.0, 5.0])
+        || on_line([5.0, 5.0], [5.0, 85.0])
+        || on_line([5.0, 85.0], [30.0, 85.0])
+        || on_cr
+        || on_line([70.0, 95.0], [95.0, 95.0])
+        || on_c
+        || on_line([95.0, 45.0], [5.0, 45.0])
+}
+
+#[test]
+fn the_manual_circular_example_is_compensated_point_by_point() {
+    let s = settings();
+    let (out, rep) = run(CIRCULAR, &s);
+    assert_eq!(rep.dialect, Some(Dialect::Heidenhain));
+    assert_sequential(&out);
+    let pts: Vec<[f64; 3]> = points(&out).into_iter().filter(|p| p[2] < 0.0).collect();
+    assert!(pts.len() > 60, "{out}");
+    for p in &pts {
+        // Every cutting point lies on the original contour, with z = −5 − E(x).
+        assert!(on_circular([p[0], p[1]]), "{p:?} is off the contour\n{out}");
+        let want = -5.0 - F1.e(p[0]);
+        assert!(
+            (p[2] - want).abs() < 1.5e-4,
+            "{p:?}: z should be {want}\n{out}"
+        );
+    }
+    // The chords of the arcs stay within the chord tolerance: their midpoints are within
+    // 0.005 mm of the circle (plus rounding).
+    for w in pts.windows(2) {
+        let mid = [(w[0][0] + w[1][0]) / 2.0, (w[0][1] + w[1][1]) / 2.0];
+        let r = (mid[0] - 95.0).hypot(mid[1] - 70.0);
+        if w[0][0] > 95.0 && w[1][0] > 95.0 {
+            assert!(r > 25.0 - 0.005 - 2e-4, "chord {w:?} sags {}", 25.0 - r);
+        }
+        // No piece is longer than --max-segment.
+        let len = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+        assert!(len <= 5.0 + 1e-3, "{w:?}");
+    }
+    // The arc end points are those of the program; the plunge is a cut too.
+    assert!(pts
+        .iter()
+        .any(|p| (p[0] - 70.0).abs() < 1e-9 && (p[1] - 95.0).abs() < 1e-9));
+    assert!(pts
+        .iter()
+        .any(|p| (p[0] - 95.0).abs() < 1e-9 && (p[1] - 45.0).abs() < 1e-9));
+    assert!(pts
+        .iter()
+        .any(|p| (p[0] - 5.0).abs() < 1e-9 && (p[1] - 45.0).abs() < 1e-9));
+    // F and M3 stay on the first piece of their block; M2 stays on the rapid; no C/CR/CC
+    // block is left in the rewritten contour (arcs are L chords on the arc).
+    assert!(out.contains("R0 F1000 M3"), "{out}");
+    assert!(out.contains("R0 FMAX M2"), "{out}");
+    assert!(
+        !out.lines()
+            .any(|l| l.contains(" CR ") || l.contains(" C X")),
+        "{out}"
+    );
+    assert!(out.lines().last().unwrap().ends_with("END PGM CIRCULAR MM"));
+    // The return to Z −5 is not needed: the block after the contour gives Z+250.
+    assert_eq!(rep.returns_inserted, 0);
+    assert_eq!(rep.moves_changed, 8, "{out}");
+}
+
+#[test]
+fn outside_the_zone_the_program_is_copied_byte_for_byte() {
+    let s = CompensationSettings {
+        zone: Some((-50.0, -40.0)),
+        ..settings()
+    };
+    let text = CIRCULAR.replace("7 L X+5 Y+5 R0 F300", "7  L  X+5 Y+5 R0 F300 ; start\r")
+        + "17 ; trailing";
+    let (out, rep) = run(&text, &s);
+    assert_eq!(out, text);
+    assert_eq!(rep.moves_changed, 0);
+}
+
+#[test]
+fn inserted_blocks_renumber_the_program_and_labels_keep_their_numbers() {
+    // A cut split in three, then a rapid without Z: a return to Z −1 comes before it.
+    let text = "0 BEGIN PGM R MM
+1 L X+0 Y+0 Z-1 R0 FMAX
+2 L X+12 F200
+3 L X+20 Y+0 FMAX
+4 M30
+5 LBL 1
+6 L Z+100 R0 FMAX
+7 LBL 0
+8 END PGM R MM
+";
+    let (out, rep) = run(text, &settings());
+    assert_sequential(&out);
+    assert_eq!(rep.returns_inserted, 1);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 13, "{out}");
+    // The start point gets its E too (a step of E along Z), then every 4 mm.
+    assert_eq!(lines[2], "2 L X+0.0000 Y+0.0000 Z-1.0100 F200", "{out}");
+    assert_eq!(lines[3], "3 L X+4.0000 Y+0.0000 Z-1.0140");
+    assert_eq!(lines[4], "4 L X+8.0000 Y+0.0000 Z-1.0180");
+    assert_eq!(lines[5], "5 L X+12.0000 Y+0.0000 Z-1.0220");
+    assert_eq!(lines[6], "6 L Z-1.0000 FMAX");
+    assert_eq!(lines[7], "7 L X+20 Y+0 FMAX");
+    assert_eq!(lines[9], "9 LBL 1");
+    assert_eq!(lines[11], "11 LBL 0");
+}
+
+#[test]
+fn begin_pgm_inch_gives_inches() {
+    let text = "0 BEGIN PGM P INCH
+1 L X+0 Y+0 Z-0.1 R0 FMAX
+2 L X+1 F10
+3 END PGM P INCH
+";
+    let s = CompensationSettings {
+        zone: Some((-1.0, 0.0)),
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, _) = run(text, &s);
+    let pts = points(&out);
+    // E at x = 1 in = 25.4 mm is 0.01 + 0.0254 mm = 0.0354 mm = 0.0013937 in.
+    let last = pts.last().unwrap();
+    let want = -0.1 - (0.01 + 0.001 * 25.4) / 25.4;
+    assert!((last[2] - want).abs() < 1e-5, "{out}");
+    assert!(
+        (last[2] - (-0.1 - 0.0354)).abs() > 0.01,
+        "millimetres applied as inches"
+    );
+    // --units agreeing is fine; disagreeing is refused.
+    let s_mm = CompensationSettings {
+        units: Some(Units::Mm),
+        ..s
+    };
+    let msg = refuse_with(text, &s_mm);
+    assert_msg(&msg, &["k.h:1", "INCH", "--units"]);
+}
+
+#[test]
+fn cycle_7_datum_shift_is_followed() {
+    // After CYCL DEF 7.1 X+10, program X 0…5 is work X 10…15: E is looked up there.
+    let text = "0 BEGIN PGM D MM
+1 CYCL DEF 7.0 DATUM SHIFT
+2 CYCL DEF 7.1 X+10
+3 L X+0 Y+0 Z-1 R0 FMAX
+4 L X+5 F100
+5 CYCL DEF 7.0 DATUM SHIFT
+6 CYCL DEF 7.1 IX+5
+7 L X+0 Y+0 Z-1 R0 FMAX
+8 L X+5 F100
+9 END PGM D MM
+";
+    let s = CompensationSettings {
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, _) = run(text, &s);
+    let ends: Vec<f64> = points(&out)
+        .iter()
+        .filter(|p| p[0] == 5.0)
+        .map(|p| p[2])
+        .collect();
+    assert_eq!(ends.len(), 2, "{out}");
+    assert!((ends[0] - (-1.0 - F1.e(15.0))).abs() < 1e-9, "{out}");
+    assert!((ends[1] - (-1.0 - F1.e(20.0))).abs() < 1e-9, "{out}");
+    // The tool returns to Z −1 before the datum moves.
+    assert!(out.contains("L Z-1.0000\n7 CYCL DEF 7.0"), "{out}");
+}
+
+#[test]
+fn rounding_chamfers_and_labels_far_from_the_zone_are_copied() {
+    let text = "0 BEGIN PGM F MM
+1 L X+0 Y+0 Z+20 R0 FMAX
+2 L X+10 F100
+3 RND R2
+4 L Y+10
+5 CHF 1
+6 L X+0
+7 CALL LBL 1 REP 2
+8 L X+0 Y+0 Z-1 R0 FMAX
+9 L X+5 F100
+10 M30
+11 LBL 1
+12 L X+0 Y+0 Z+30 R0 FMAX
+13 L IX+10 F100
+14 LBL 0
+15 END PGM F MM
+";
+    let (out, rep) = run(text, &settings());
+    assert_eq!(rep.moves_changed, 1, "{out}");
+    assert!(
+        out.contains("3 RND R2\n5 CHF 1\n") || out.contains("RND R2"),
+        "{out}"
+    );
+}
+
+#[test]
+fn trace_reads_klartext_moves_in_mm() {
+    let moves = trace_gcode(CIRCULAR, Path::new("k.h"), &settings()).unwrap();
+    let arcs: Vec<_> = moves.iter().filter(|m| m.arc_mm.is_some()).collect();
+    assert_eq!(arcs.len(), 2);
+    let c = arcs[1].arc_mm.as_ref().unwrap();
+    assert!((c.centre.0 - 95.0).abs() < 1e-12 && (c.centre.1 - 70.0).abs() < 1e-12);
+    assert!(
+        (c.sweep + std::f64::consts::PI).abs() < 1e-9,
+        "DR- is clockwise"
+    );
+}
+
+const HEAD: &str = "0 BEGIN PGM T MM\n1 L X+0 Y+0 Z-1 R0 FMAX\n";
+
+#[test]
+fn every_refusal_in_the_table_is_triggered_with_its_message() {
+    let cases: &[(&str, &[&str])] = &[
+        ("2 L X+10 RL F100\n", &["k.h:3", "RL", "radius compensation", "R0"]),
+        ("2 L X+1 RR F100\n3 L X+10\n", &["k.h:3", "RR"]),
+        ("2 CYCL DEF 10.0 ROTATION\n3 CYCL DEF 10.1 ROT+45\n4 L X+10 F100\n", &["k.h:5", "CYCL DEF 10 ROTATION", "ROT+0"]),
+        ("2 CYCL DEF 8.0 MIRROR IMAGE\n3 CYCL DEF 8.1 X\n4 L X+10 F100\n", &["k.h:5", "MIRROR"]),
+        ("2 CYCL DEF 11.0 SCALING\n3 CYCL DEF 11.1 SCL 0.5\n4 L X+10 F100\n", &["k.h:5", "SCALING"]),
+        ("2 CYCL DEF 26.0 AXIS-SPECIFIC SCALING\n3 CYCL DEF 26.1 X+2 Y+1\n4 L X+10 F100\n", &["k.h:5", "CYCL DEF 26"]),
+        ("2 CYCL DEF 7.0 DATUM SHIFT\n3 CYCL DEF 7.1 #5\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "#5"]),
+        ("2 L X+10 F100\n3 RND R2\n4 L Y+10\n", &["k.h:4", "RND R2", "CR/C"]),
+        ("2 L X+0 Y+0 Z+20 FMAX\n3 L X+10 F100\n4 CHF 2\n5 L Y+10 Z-1\n", &["k.h:5", "CHF 2", "line 6"]),
+        ("2 L X+10 F100\n3 CT X+20 Y+10\n", &["k.h:4", "CT", "CC + C"]),
+        ("2 L X+0 Y+0 Z+20 FMAX\n3 CT X+20 Y+10 Z-1\n", &["k.h:4", "CT"]),
+        ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "CALL LBL"]),
+        ("2 CALL LBL 1 REP 2\n3 L X+10 F100\n4 M30\n5 LBL 1\n6 L IX+1 F100\n7 LBL 0\n", &["k.h:4", "unknown since line 3"]),
+        ("2 L X+Q1 F100\n", &["k.h:3", "X+Q1", "Q parameter"]),
+        ("2 CC X+0 Y+10\n3 LP PR+10 PA+0 F100\n", &["k.h:4", "LP/CP"]),
+        ("2 FL X+10 Y+0 F100\n", &["k.h:3", "FK free contour"]),
+        ("2 APPR LT X+10 Y+0 LEN5 RL F100\n", &["k.h:3", "APPR"]),
+        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "does not follow"]),
+        ("2 TOOL CALL 2 Z S3000\n3 L X+10 F100\n", &["k.h:4", "unknown since line 3"]),
+        ("2 CYCL DEF 200 DRILLING\n3 CYCL CALL\n", &["k.h:4", "CYCL CALL", "cycle"]),
+        ("2 L X+10 F100 M99\n", &["k.h:3", "M99"]),
+        ("2 L X+10 F100 M91\n", &["k.h:3", "M91", "block of its own"]),
+        ("2 L X+10 B+10 F100\n", &["k.h:3", "B+10", "axis B"]),
+        ("2 CC X+0 Y+10\n3 C X+10 Y+10 DR+ Z-2\n", &["k.h:4", "helix"]),
+        ("2 C X+10 Y+0 DR+\n", &["k.h:3", "circle centre CC"]),
+        ("2 CC X+0 Y+10\n3 C X+10 Y+10\n", &["k.h:4", "DR+"]),
+        ("2 CR X+10 Y+0 DR+\n", &["k.h:3", "radius"]),
+        ("2 CC X+0 Y+10\n3 C X+20 Y+10 DR+\n", &["k.h:4", "radius differs"]),
+        ("2 TOOL CALL 1 Y\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 CC X+0 Z+5\n5 C X+0 Z-11 DR+\n", &["k.h:6", "tool axis Y"]),
+        ("2 L X+1.2.3 F100\n", &["k.h:3", "X+1.2.3", "malformed"]),
+        ("2 L X+1 X+2 F100\n", &["k.h:3", "twice"]),
+        ("2 L X+1 G01 F100\n", &["k.h:3", "G01"]),
+    ];
+    for (body, parts) in cases {
+        let text = format!("{HEAD}{body}");
+        let msg = refuse(&text);
+        assert_msg(&msg, parts);
+    }
+    // No BEGIN PGM and no --units: the first cut is refused, at any height.
+    let msg = refuse("1 L X+0 Y+0 Z+50 R0 FMAX\n2 L X+10 F100\n");
+    assert_msg(&msg, &["k.h:2", "BEGIN PGM", "--units"]);
+    let s = CompensationSettings {
+        units: Some(Units::Mm),
+        dialect: Some(Dialect::Heidenhain),
+        ..settings()
+    };
+    run("1 L X+0 Y+0 Z+50 R0 FMAX\n2 L X+10 F100\n", &s);
+    // BEGIN PGM without a unit.
+    let msg = refuse("0 BEGIN PGM X\n1 L X+0 Y+0 Z+50 R0 FMAX\n");
+    assert_msg(&msg, &["k.h:1", "MM or INCH"]);
+}
+
+#[test]
+fn refused_constructs_far_from_the_zone_are_copied() {
+    // The same constructs at Z+20, with the zone at −10…0: nothing to compensate, no refusal.
+    let text = "0 BEGIN PGM T MM
+1 L X+0 Y+0 Z+20 R0 FMAX
+2 L X+10 RL F100
+3 L Y+10 R0
+4 CYCL DEF 10.0 ROTATION
+5 CYCL DEF 10.1 ROT+45
+6 L X+0 F100
+7 CYCL DEF 10.1 ROT+0
+8 CC X+0 Y+0
+9 LP PR+10 PA+0 F100
+10 L X+0 Y+0 Z+20 R0 F100
+11 CT X+20 Y+10
+12 L X+0 Y+0 Z-1 R0 FMAX
+13 L X+5 F100
+14 TOOL CALL 2 Z S2000
+15 L R0 F300 M3
+16 END PGM T MM
+";
+    let (out, rep) = run(text, &settings());
+    assert_eq!(rep.moves_changed, 1, "{out}");
+}
+
+/// A model.json whose network is all zeros: E = 20 µm everywhere in x, y ∈ [0, 100] mm, probed
+/// surface at z = −1 mm.
+const MODEL: &str = r#"{
+  "format": "errmap-map-model/1",
+  "name": "flat",
+  "normal": "z",
+  "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
+  "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
+                    "e_mean_um": 20.0, "e_std_um": 1.0},
+  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
+  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
+  "surface_mm": [-1.0, -1.0]
+}"#;
+
+#[test]
+fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("model.json"), MODEL).unwrap();
+    // Detected from BEGIN PGM, units from it, zone = the probed surface ± 0.5 mm.
+    let program = "0 BEGIN PGM P1 MM\n1 TOOL CALL 1 Z S4000\n2 L X+10 Y+10 Z+5 R0 FMAX\n3 L Z-1 F100\n4 L X+20\n5 L Z+5 R0 FMAX M2\n6 END PGM P1 MM\n";
+    std::fs::write(dir.join("in.h"), program).unwrap();
+    let out = common::errmap(
+        dir,
+        &["compensate", "--model", "model.json", "in.h", "-o", "out.h"],
+    );
+    out.expect_code(0);
+    let expected = "0 BEGIN PGM P1 MM\n1 TOOL CALL 1 Z S4000\n2 L X+10 Y+10 Z+5 R0 FMAX\n\
+        3 L X+10.0000 Y+10.0000 Z-0.5000 F100\n\
+        4 L X+10.0000 Y+10.0000 Z-0.5200\n\
+        5 L X+10.0000 Y+10.0000 Z-1.0200\n\
+        6 L X+15.0000 Y+10.0000 Z-1.0200\n\
+        7 L X+20.0000 Y+10.0000 Z-1.0200\n\
+        8 L Z+5 R0 FMAX M2\n9 END PGM P1 MM\n";
+    assert_eq!(
+        std::fs::read_to_string(dir.join("out.h")).unwrap(),
+        expected
+    );
+    // Radius compensation on a cut in the zone: exit 2, file:line:column, nothing written.
+    std::fs::write(dir.join("rl.h"), program.replace("4 L X+20", "4 L X+20 RL")).unwrap();
+    let out = common::errmap(
+        dir,
+        &["compensate", "--model", "model.json", "rl.h", "-o", "bad.h"],
+    );
+    out.expect_code(2);
+    assert!(
+        out.stderr.contains("rl.h:5") && out.stderr.contains("RL"),
+        "{}",
+        out.stderr
+    );
+    assert!(!dir.join("bad.h").exists());
+}
