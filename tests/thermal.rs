@@ -462,19 +462,40 @@ fn compensate_streams_the_values_of_the_model() {
 }
 
 #[test]
-fn evaluate_shows_the_compensation_shrinking_the_error() {
+fn evaluate_on_a_held_out_campaign_shows_the_compensation_shrinking_the_error() {
     let tmp = tempfile::tempdir().unwrap();
+    // Campaigns 1 (coolant off) and 2 (on) fit the model; campaign 3 (off, larger rises, another
+    // room) is held out: the model never saw its readings.
     let syn = synth(
         tmp.path(),
-        &["--campaigns", "2", "--repeats", "2", "--every-s", "1800"],
+        &["--campaigns", "3", "--repeats", "2", "--every-s", "1800"],
     );
     let names = campaigns(&syn);
-    let c1 = format!("syn/{}", names[0]);
+    let [c1, c2, held_out] = [0, 1, 2].map(|i| format!("syn/{}", names[i]));
     run(
         tmp.path(),
-        &["thermal", "fit", "--order", "3", "-o", "model.json", &c1],
+        &[
+            "thermal",
+            "fit",
+            "--order",
+            "3",
+            "-o",
+            "model.json",
+            &c1,
+            &c2,
+        ],
         0,
     );
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("model.json")).unwrap())
+            .unwrap();
+    let fitted: Vec<&str> = model["campaigns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert!(!fitted.contains(&names[2].as_str()), "{fitted:?}");
     let report = json(&run(
         tmp.path(),
         &[
@@ -482,7 +503,7 @@ fn evaluate_shows_the_compensation_shrinking_the_error() {
             "evaluate",
             "--model",
             "model.json",
-            &c1,
+            &held_out,
             "--json",
         ],
         0,
@@ -490,17 +511,32 @@ fn evaluate_shows_the_compensation_shrinking_the_error() {
     assert_eq!(report["standard"], "iso230-2:2014");
     let times = report["times"].as_array().unwrap();
     assert!(times.len() >= 5);
+    let noise = 0.5; // the synthetic laser noise (µm, one sigma)
+    let mut largest_before = 0.0f64;
     for t in times {
+        assert_eq!(t["campaign"], names[2].as_str());
         let before = t["before"]["E"].as_f64().unwrap();
         let after = t["after"]["E"].as_f64().unwrap();
-        // The fitted campaign: what is left is noise (σ = 0.5 µm), far below the thermal error.
+        largest_before = largest_before.max(before);
+        // What is left after compensation is the laser noise: the RMS of the readings about
+        // the model within two sigma, and E far below the uncompensated error.
         assert!(
             after < 3.0 && after < before,
             "t = {}: E {before} → {after}",
             t["time_s"]
         );
-        assert!(t["rms_after_um"].as_f64().unwrap() < 0.8);
+        let rms_after = t["rms_after_um"].as_f64().unwrap();
+        assert!(
+            rms_after < 2.0 * noise,
+            "t = {}: RMS {rms_after}",
+            t["time_s"]
+        );
     }
+    // The campaign carries a real thermal error for the model to remove.
+    assert!(
+        largest_before > 10.0,
+        "E before at most {largest_before} µm"
+    );
     assert!(tmp.path().join("evaluate.png").exists());
     let csv = std::fs::read_to_string(tmp.path().join("evaluate.csv")).unwrap();
     assert_eq!(csv.lines().count(), times.len() + 1);

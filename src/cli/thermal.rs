@@ -294,7 +294,7 @@ fn run_ingest(a: IngestArgs, _g: Globals) -> Result<i32> {
     let report =
         commands::ingest_folders(&db, &a.campaigns, &mut ingest_one(a.replace), &mut each)?;
     if a.json {
-        print_json(&report)?;
+        print_json(&report.json()?)?;
     } else {
         info!("store: {}", db.display());
     }
@@ -367,7 +367,7 @@ fn run_fit(a: FitArgs, _g: Globals) -> Result<i32> {
 fn run_models(a: ModelsArgs) -> Result<i32> {
     let report = commands::list_models(a.db)?;
     if a.json {
-        print_json(&report)?;
+        print_json(&report.json()?)?;
     } else {
         out!("{}", text::models_table(&report));
     }

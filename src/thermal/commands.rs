@@ -93,11 +93,23 @@ impl DifferenceRun {
     }
 }
 
-/// The JSON document of `thermal ingest --json` (keys in alphabetical order, as printed).
+/// What `thermal ingest` added, and to which store.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct IngestReport {
     pub ingested: Vec<IngestSummary>,
     pub store: PathBuf,
+}
+
+impl IngestReport {
+    /// The `--json` document: keys in alphabetical order at every level.
+    pub fn json(&self) -> Result<serde_json::Value> {
+        sorted_json(self)
+    }
+}
+
+/// A document as a JSON value, whose objects keep their keys in alphabetical order.
+fn sorted_json(value: &impl Serialize) -> Result<serde_json::Value> {
+    serde_json::to_value(value).map_err(|e| Error::Internal(format!("JSON output: {e}")))
 }
 
 /// The store an ingest writes: `db`, else thermal.sqlite beside the first campaign.
@@ -229,13 +241,20 @@ fn parse_reference(text: &str) -> Result<Option<Reference>> {
     }
 }
 
-/// The JSON document of `thermal models --json` (keys in alphabetical order, as printed).
+/// What a store holds: campaign names, table counts and model versions.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModelsReport {
     pub campaigns: Vec<String>,
     pub counts: StoreCounts,
     pub models: Vec<ModelEntry>,
     pub store: PathBuf,
+}
+
+impl ModelsReport {
+    /// The `--json` document: keys in alphabetical order at every level.
+    pub fn json(&self) -> Result<serde_json::Value> {
+        sorted_json(self)
+    }
 }
 
 /// `thermal models`: what the store at `db` (default: thermal.sqlite here) holds; it must exist.
