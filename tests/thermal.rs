@@ -188,6 +188,21 @@ fn store_round_trip_versions_and_interrupted_ingests() {
             0,
         );
     }
+    // The text listing: the stored campaigns, then one row per version with its campaigns.
+    let table = run(tmp.path(), &["thermal", "models", "--db", &db_arg], 0).stdout;
+    let lines: Vec<&str> = table.lines().collect();
+    assert_eq!(lines[0], format!("campaigns: {}, {}", names[0], names[1]));
+    assert_eq!(
+        lines[1],
+        "name        version  created_unix  loco_rms_um  campaigns"
+    );
+    assert_eq!(lines.len(), 4, "{table}");
+    for (line, version) in lines[2..].iter().zip(["1", "2"]) {
+        let cells: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(cells[0], "X", "{line}");
+        assert_eq!(cells[1], version, "{line}");
+        assert_eq!(cells[4], format!("{},{}", names[0], names[1]), "{line}");
+    }
     let listed = json(&run(
         tmp.path(),
         &["thermal", "models", "--db", &db_arg, "--json"],
@@ -707,9 +722,27 @@ fn fits_from_the_store_and_from_folders_give_the_same_json() {
     std::fs::write(syn.join("sensors.csv"), lines.join("\n") + "\n").unwrap();
     let names = campaigns(&syn);
     let paths: Vec<String> = names.iter().map(|n| format!("syn/{n}")).collect();
-    let mut ingest = vec!["thermal", "ingest"];
+    let mut ingest = vec!["thermal", "ingest", "--json"];
     ingest.extend(paths.iter().map(String::as_str));
-    run(tmp.path(), &ingest, 0);
+    // The document of an ingest: the store it wrote and what each campaign added.
+    let added = json(&run(tmp.path(), &ingest, 0));
+    let store = added["store"].as_str().unwrap();
+    assert!(store.ends_with("syn/thermal.sqlite"), "{store}");
+    let ingested = added["ingested"].as_array().unwrap();
+    assert_eq!(ingested.len(), 2);
+    for (summary, name) in ingested.iter().zip(&names) {
+        let log = std::fs::read_to_string(syn.join(name).join("temperatures.csv")).unwrap();
+        let runs = std::fs::read_to_string(syn.join(name).join("runs.csv")).unwrap();
+        assert_eq!(summary["campaign"], name.as_str());
+        assert_eq!(summary["sensors"], 3);
+        // Three logged sensors (nut, bearing, room) at every row of the log.
+        assert_eq!(
+            summary["temperature_samples"],
+            3 * (log.lines().count() - 1)
+        );
+        assert_eq!(summary["laser_readings"], runs.lines().count() - 1);
+        assert_eq!(summary["replaced"], false);
+    }
     let db = syn.join("thermal.sqlite").to_string_lossy().into_owned();
     let from_store = [
         "thermal",
