@@ -321,6 +321,12 @@ impl CsvTable {
 }
 
 fn csv_error(path: &Path, e: csv::Error) -> Error {
+    csv_error_hinted(path, e, "save the file as plain comma-separated UTF-8 text")
+}
+
+/// A CSV reader's error: an io error when the file could not be read, else unreadable content
+/// at its line with `hint`.
+pub(crate) fn csv_error_hinted(path: &Path, e: csv::Error, hint: &str) -> Error {
     let line = e.position().map(|p| p.line());
     let message = format!("unreadable CSV: {e}");
     match e.into_kind() {
@@ -333,7 +339,7 @@ fn csv_error(path: &Path, e: csv::Error) -> Error {
                 column: None,
             },
             message,
-            "save the file as plain comma-separated UTF-8 text",
+            hint,
         ),
     }
 }

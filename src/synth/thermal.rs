@@ -191,8 +191,22 @@ impl ThermalTruth {
 /// The fixed truth of the generator (campaign settings depend on the seed only through noise,
 /// and through the machine start times of a warm start).
 pub fn truth(options: &SynthThermalOptions) -> ThermalTruth {
-    let forward_pitch = vec![1.0, 4.0, -2.5, 1.8];
-    let reverse_pitch = vec![4.0, 4.0, -1.9, 1.8];
+    ThermalTruth {
+        seed: options.seed,
+        travel_mm: options.travel_mm,
+        reference_point_mm: 0.0,
+        pitch_ambient_c: 20.0,
+        rho_um_per_m_k: 11.5,
+        laser_noise_um: options.laser_noise_um,
+        sensor_noise_c: options.sensor_noise_c,
+        directions: true_directions(),
+        sensors: true_sensors(),
+        campaigns: true_campaigns(options),
+    }
+}
+
+/// Both directions' pitch curves (with the reversal between them) and gains per coolant state.
+fn true_directions() -> Vec<TrueDirection> {
     let gains = |f: f64| {
         vec![
             TrueGains {
@@ -207,9 +221,40 @@ pub fn truth(options: &SynthThermalOptions) -> ThermalTruth {
             },
         ]
     };
+    vec![
+        TrueDirection {
+            direction: "forward".into(),
+            pitch_legendre_um: vec![1.0, 4.0, -2.5, 1.8],
+            gains: gains(1.0),
+        },
+        TrueDirection {
+            direction: "reverse".into(),
+            pitch_legendre_um: vec![4.0, 4.0, -1.9, 1.8],
+            gains: gains(0.95),
+        },
+    ]
+}
+
+/// The sensors' offsets and scales, in the order nut, bearing, room, reference.
+fn true_sensors() -> Vec<TrueSensor> {
+    let sensor = |name: &str, offset_c: f64, scale: f64| TrueSensor {
+        name: name.into(),
+        offset_c,
+        scale,
+    };
+    vec![
+        sensor("nut", 0.35, 1.004),
+        sensor("bearing", -0.2, 0.995),
+        sensor("room", 0.15, 1.0),
+        sensor("ref", 0.0, 1.0),
+    ]
+}
+
+/// Each campaign's coolant, room and rises; coolant alternates off, on, …
+fn true_campaigns(options: &SynthThermalOptions) -> Vec<TrueCampaign> {
     // A stream of its own, so the warm-start times do not change the noise of the campaigns.
     let mut start_rng = ChaCha8Rng::seed_from_u64(options.seed ^ 0x5741_524d);
-    let campaigns = (0..options.campaigns)
+    (0..options.campaigns)
         .map(|i| {
             let machine_on_s = if options.warm_start {
                 options.measurement_s * start_rng.random_range(0.2..0.4)
@@ -235,51 +280,7 @@ pub fn truth(options: &SynthThermalOptions) -> ThermalTruth {
                 machine_off_s: 0.6 * options.duration_s,
             }
         })
-        .collect();
-    ThermalTruth {
-        seed: options.seed,
-        travel_mm: options.travel_mm,
-        reference_point_mm: 0.0,
-        pitch_ambient_c: 20.0,
-        rho_um_per_m_k: 11.5,
-        laser_noise_um: options.laser_noise_um,
-        sensor_noise_c: options.sensor_noise_c,
-        directions: vec![
-            TrueDirection {
-                direction: "forward".into(),
-                pitch_legendre_um: forward_pitch,
-                gains: gains(1.0),
-            },
-            TrueDirection {
-                direction: "reverse".into(),
-                pitch_legendre_um: reverse_pitch,
-                gains: gains(0.95),
-            },
-        ],
-        sensors: vec![
-            TrueSensor {
-                name: "nut".into(),
-                offset_c: 0.35,
-                scale: 1.004,
-            },
-            TrueSensor {
-                name: "bearing".into(),
-                offset_c: -0.2,
-                scale: 0.995,
-            },
-            TrueSensor {
-                name: "room".into(),
-                offset_c: 0.15,
-                scale: 1.0,
-            },
-            TrueSensor {
-                name: "ref".into(),
-                offset_c: 0.0,
-                scale: 1.0,
-            },
-        ],
-        campaigns,
-    }
+        .collect()
 }
 
 fn reading(truth: &ThermalTruth, sensor: usize, t_c: f64, noise: f64) -> f64 {
@@ -287,105 +288,62 @@ fn reading(truth: &ThermalTruth, sensor: usize, t_c: f64, noise: f64) -> f64 {
     (t_c - s.offset_c) / s.scale + noise
 }
 
+/// The random streams of a generation: one generator and the two noise distributions.
+struct Noise {
+    rng: ChaCha8Rng,
+    sensor_c: Normal<f64>,
+    laser_um: Normal<f64>,
+}
+
+impl SynthThermalOptions {
+    /// Refuse settings that cannot make campaigns: no campaigns, repeats or time between
+    /// measurements, or a noise level that is not a number ≥ 0.
+    pub fn check(&self) -> Result<()> {
+        if self.campaigns == 0
+            || self.repeats == 0
+            || !(self.every_s.is_finite() && self.every_s > 0.0)
+        {
+            return Err(crate::Error::usage(
+                "campaigns, repeats and --every-s must be positive",
+                "e.g. --campaigns 4 --repeats 2 --every-s 900",
+            ));
+        }
+        if !(self.laser_noise_um.is_finite() && self.laser_noise_um >= 0.0) {
+            return Err(crate::Error::usage(
+                format!(
+                    "--laser-noise-um {} is not a noise level",
+                    self.laser_noise_um
+                ),
+                "give one sigma in µm, 0 or more, e.g. --laser-noise-um 0.5",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Write a set of campaigns with known truth into `dir`: `sensors.csv`, `calibration.csv`,
 /// one folder per campaign (`campaign.toml`, `runs.csv`, `temperatures.csv`) and `truth.json`.
 pub fn write_campaigns(dir: &Path, options: &SynthThermalOptions) -> Result<ThermalTruth> {
     let truth = truth(options);
-    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
-    let sensor_noise = Normal::new(0.0, options.sensor_noise_c.max(0.0))
-        .map_err(|e| crate::Error::usage(format!("sensor noise: {e}"), "give a noise ≥ 0"))?;
-    let laser_noise = Normal::new(0.0, options.laser_noise_um.max(0.0))
-        .map_err(|e| crate::Error::usage(format!("laser noise: {e}"), "give a noise ≥ 0"))?;
-
-    write_atomic(&dir.join("sensors.csv"), |w| {
-        writeln!(
-            w,
-            "name,role,unit,offset_c,scale,median_window,sg_window,sg_order"
-        )?;
-        writeln!(w, "nut,nut,ohm,,,5,11,2")?;
-        writeln!(w, "bearing,bearing,c,,,5,11,2")?;
-        writeln!(w, "room,ambient,c,,,5,11,2")?;
-        writeln!(w, "ref,reference,c,,,1,1,0")
-    })?;
-
-    // Calibration: every sensor in one block with the reference, ramped 15 → 35 °C in an hour.
-    let mut cal = String::from("time_s,ref,nut,bearing,room\n");
-    for i in 0..=360 {
-        let t_s = i as f64 * 10.0;
-        let t_c = 15.0 + 20.0 * t_s / 3600.0;
-        let nut_c = reading(&truth, 0, t_c, sensor_noise.sample(&mut rng));
-        cal.push_str(&format!(
-            "{},{:.4},{:.4},{:.4},{:.4}\n",
-            t_s,
-            reading(&truth, 3, t_c, sensor_noise.sample(&mut rng)),
-            pt100::resistance_ohm(nut_c),
-            reading(&truth, 1, t_c, sensor_noise.sample(&mut rng)),
-            reading(&truth, 2, t_c, sensor_noise.sample(&mut rng)),
-        ));
-    }
-    crate::io::write_atomic_bytes(&dir.join("calibration.csv"), cal.as_bytes())?;
-
-    let n_targets = (options.travel_mm / options.step_mm).round() as usize;
-    let targets: Vec<f64> = (0..=n_targets)
-        .map(|i| i as f64 * options.step_mm)
-        .collect();
-    let n_log = (options.duration_s / options.log_period_s).round() as usize;
+    let mut noise = Noise {
+        rng: ChaCha8Rng::seed_from_u64(options.seed),
+        sensor_c: Normal::new(0.0, options.sensor_noise_c.max(0.0))
+            .map_err(|e| crate::Error::usage(format!("sensor noise: {e}"), "give a noise ≥ 0"))?,
+        laser_um: Normal::new(0.0, options.laser_noise_um.max(0.0))
+            .map_err(|e| crate::Error::usage(format!("laser noise: {e}"), "give a noise ≥ 0"))?,
+    };
+    write_sensor_table(&dir.join("sensors.csv"))?;
+    write_calibration_log(&dir.join("calibration.csv"), &truth, &mut noise)?;
     for c in &truth.campaigns {
         let cdir = dir.join(&c.name);
-        // Temperature log with noise and two spikes on the nut.
-        let spikes: Vec<usize> = (0..2).map(|_| rng.random_range(1..n_log.max(2))).collect();
-        let mut log = String::from("time_s,nut,bearing,room\n");
-        for i in 0..=n_log {
-            let t_s = i as f64 * options.log_period_s;
-            let (amb, nut, bearing) = c.temperatures_c(t_s);
-            let spike = if spikes.contains(&i) { 3.0 } else { 0.0 };
-            let nut_c = reading(&truth, 0, nut, sensor_noise.sample(&mut rng)) + spike;
-            log.push_str(&format!(
-                "{},{:.4},{:.4},{:.4}\n",
-                t_s,
-                pt100::resistance_ohm(nut_c),
-                reading(&truth, 1, bearing, sensor_noise.sample(&mut rng)),
-                reading(&truth, 2, amb, sensor_noise.sample(&mut rng)),
-            ));
-        }
-        crate::io::write_atomic_bytes(&cdir.join("temperatures.csv"), log.as_bytes())?;
-
-        // Laser runs: each measurement's error uses the true temperatures averaged over the
-        // log samples inside the measurement, as the fit averages the logged ones.
-        let mut runs = String::from("run,direction,target_mm,deviation_um,time_s\n");
-        let n_meas =
-            ((options.duration_s - options.measurement_s) / options.every_s).floor() as usize + 1;
-        for k in 0..n_meas {
-            let t0 = k as f64 * options.every_s;
-            let (mut amb, mut nut, mut bearing, mut n) = (0.0, 0.0, 0.0, 0.0);
-            for i in 0..=n_log {
-                let t_s = i as f64 * options.log_period_s;
-                if t_s >= t0 && t_s <= t0 + options.measurement_s {
-                    let (a, nn, b) = c.temperatures_c(t_s);
-                    amb += a;
-                    nut += nn - a;
-                    bearing += b - a;
-                    n += 1.0;
-                }
-            }
-            let (amb, nut, bearing) = (amb / n, nut / n, bearing / n);
-            for r in 0..options.repeats {
-                let run = k as u32 * options.repeats + r + 1;
-                for (di, sign) in [(0usize, "+"), (1usize, "-")] {
-                    let order: Vec<f64> = if di == 0 {
-                        targets.clone()
-                    } else {
-                        targets.iter().rev().cloned().collect()
-                    };
-                    for x in order {
-                        let e = truth.error_um(di, &c.coolant, x, nut, bearing, amb)
-                            + laser_noise.sample(&mut rng);
-                        runs.push_str(&format!("{run},{sign},{x},{e:.4},{t0}\n"));
-                    }
-                }
-            }
-        }
-        crate::io::write_atomic_bytes(&cdir.join("runs.csv"), runs.as_bytes())?;
+        write_temperature_log(
+            &cdir.join("temperatures.csv"),
+            &truth,
+            c,
+            options,
+            &mut noise,
+        )?;
+        write_runs(&cdir.join("runs.csv"), &truth, c, options, &mut noise)?;
         let toml = format!(
             "name = \"{}\"\naxis = \"X\"\ncoolant = \"{}\"\nruns = \"runs.csv\"\n\
              temperatures = \"temperatures.csv\"\nsensors = \"../sensors.csv\"\n\
@@ -396,4 +354,130 @@ pub fn write_campaigns(dir: &Path, options: &SynthThermalOptions) -> Result<Ther
     }
     write_json(&dir.join("truth.json"), &truth)?;
     Ok(truth)
+}
+
+/// The sensor table: a Pt100 nut sensor (Ω), bearing and room in °C, and the reference.
+fn write_sensor_table(path: &Path) -> Result<()> {
+    write_atomic(path, |w| {
+        writeln!(
+            w,
+            "name,role,unit,offset_c,scale,median_window,sg_window,sg_order"
+        )?;
+        writeln!(w, "nut,nut,ohm,,,5,11,2")?;
+        writeln!(w, "bearing,bearing,c,,,5,11,2")?;
+        writeln!(w, "room,ambient,c,,,5,11,2")?;
+        writeln!(w, "ref,reference,c,,,1,1,0")
+    })
+}
+
+/// Calibration: every sensor in one block with the reference, ramped 15 → 35 °C in an hour.
+fn write_calibration_log(path: &Path, truth: &ThermalTruth, noise: &mut Noise) -> Result<()> {
+    let mut cal = String::from("time_s,ref,nut,bearing,room\n");
+    for i in 0..=360 {
+        let t_s = i as f64 * 10.0;
+        let t_c = 15.0 + 20.0 * t_s / 3600.0;
+        let nut_c = reading(truth, 0, t_c, noise.sensor_c.sample(&mut noise.rng));
+        cal.push_str(&format!(
+            "{},{:.4},{:.4},{:.4},{:.4}\n",
+            t_s,
+            reading(truth, 3, t_c, noise.sensor_c.sample(&mut noise.rng)),
+            pt100::resistance_ohm(nut_c),
+            reading(truth, 1, t_c, noise.sensor_c.sample(&mut noise.rng)),
+            reading(truth, 2, t_c, noise.sensor_c.sample(&mut noise.rng)),
+        ));
+    }
+    crate::io::write_atomic_bytes(path, cal.as_bytes())
+}
+
+/// Samples in a campaign's temperature log (the last one at `duration_s`).
+fn log_samples(options: &SynthThermalOptions) -> usize {
+    (options.duration_s / options.log_period_s).round() as usize
+}
+
+/// A campaign's temperature log, with sensor noise and two spikes on the nut.
+fn write_temperature_log(
+    path: &Path,
+    truth: &ThermalTruth,
+    c: &TrueCampaign,
+    options: &SynthThermalOptions,
+    noise: &mut Noise,
+) -> Result<()> {
+    let n_log = log_samples(options);
+    let spikes: Vec<usize> = (0..2)
+        .map(|_| noise.rng.random_range(1..n_log.max(2)))
+        .collect();
+    let mut log = String::from("time_s,nut,bearing,room\n");
+    for i in 0..=n_log {
+        let t_s = i as f64 * options.log_period_s;
+        let (amb, nut, bearing) = c.temperatures_c(t_s);
+        let spike = if spikes.contains(&i) { 3.0 } else { 0.0 };
+        let nut_c = reading(truth, 0, nut, noise.sensor_c.sample(&mut noise.rng)) + spike;
+        log.push_str(&format!(
+            "{},{:.4},{:.4},{:.4}\n",
+            t_s,
+            pt100::resistance_ohm(nut_c),
+            reading(truth, 1, bearing, noise.sensor_c.sample(&mut noise.rng)),
+            reading(truth, 2, amb, noise.sensor_c.sample(&mut noise.rng)),
+        ));
+    }
+    crate::io::write_atomic_bytes(path, log.as_bytes())
+}
+
+/// The true (ambient, nut rise, bearing rise) averaged over the log samples inside the
+/// measurement starting at `t0_s`, as the fit averages the logged ones.
+fn measurement_means(
+    c: &TrueCampaign,
+    options: &SynthThermalOptions,
+    t0_s: f64,
+) -> (f64, f64, f64) {
+    let (mut amb, mut nut, mut bearing, mut n) = (0.0, 0.0, 0.0, 0.0);
+    for i in 0..=log_samples(options) {
+        let t_s = i as f64 * options.log_period_s;
+        if t_s >= t0_s && t_s <= t0_s + options.measurement_s {
+            let (a, nn, b) = c.temperatures_c(t_s);
+            amb += a;
+            nut += nn - a;
+            bearing += b - a;
+            n += 1.0;
+        }
+    }
+    (amb / n, nut / n, bearing / n)
+}
+
+/// A campaign's laser runs: at every measurement, `repeats` runs each way over the targets,
+/// the true error of the mean temperatures plus laser noise.
+fn write_runs(
+    path: &Path,
+    truth: &ThermalTruth,
+    c: &TrueCampaign,
+    options: &SynthThermalOptions,
+    noise: &mut Noise,
+) -> Result<()> {
+    let n_targets = (options.travel_mm / options.step_mm).round() as usize;
+    let targets: Vec<f64> = (0..=n_targets)
+        .map(|i| i as f64 * options.step_mm)
+        .collect();
+    let mut runs = String::from("run,direction,target_mm,deviation_um,time_s\n");
+    let n_meas =
+        ((options.duration_s - options.measurement_s) / options.every_s).floor() as usize + 1;
+    for k in 0..n_meas {
+        let t0 = k as f64 * options.every_s;
+        let (amb, nut, bearing) = measurement_means(c, options, t0);
+        for r in 0..options.repeats {
+            let run = k as u32 * options.repeats + r + 1;
+            for (di, sign) in [(0usize, "+"), (1usize, "-")] {
+                let order: Vec<f64> = if di == 0 {
+                    targets.clone()
+                } else {
+                    targets.iter().rev().cloned().collect()
+                };
+                for x in order {
+                    let e = truth.error_um(di, &c.coolant, x, nut, bearing, amb)
+                        + noise.laser_um.sample(&mut noise.rng);
+                    runs.push_str(&format!("{run},{sign},{x},{e:.4},{t0}\n"));
+                }
+            }
+        }
+    }
+    crate::io::write_atomic_bytes(path, runs.as_bytes())
 }

@@ -14,6 +14,7 @@
 //! Every row of one measurement carries the same `time_s` (the measurement's start); rows with
 //! different `time_s` are different measurements. The earliest measurement is the cold one.
 
+pub use super::runs::LaserPoint;
 use super::sensors::{ProcessedLog, SensorTable, TemperatureLog};
 use crate::error::{Error, Location, Result};
 use serde::{Deserialize, Serialize};
@@ -31,18 +32,6 @@ pub fn direction_name(d: Direction) -> &'static str {
         Direction::Forward => "forward",
         Direction::Reverse => "reverse",
     }
-}
-
-/// One laser reading.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct LaserPoint {
-    pub run: u32,
-    pub direction: Direction,
-    pub target_mm: f64,
-    /// Measured minus target (µm).
-    pub deviation_um: f64,
-    /// Line in the run file (0 when not from a file).
-    pub line: u64,
 }
 
 /// All laser readings taken at one thermal state, with its temperatures.

@@ -1,6 +1,6 @@
 //! Charts of the thermal commands: the fan of thermal error lines (seed 000), coloured by time with a colour bar, and the positioning figures before/after compensation over time.
 
-use super::campaign::{direction_name, DIRECTIONS};
+use super::campaign::{direction_name, Direction, DIRECTIONS};
 use super::difference::Difference;
 use super::evaluate::EvaluationReport;
 use crate::error::Result;
@@ -34,11 +34,17 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// A drawing failure inside [`save_png`].
+type DrawResult = std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>;
+
+/// A drawing area of a chart being saved.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
 /// Et points and the fitted line of every time, one panel per direction, coloured (viridis) by
 /// the time since the cold measurement, with a colour bar saying so.
 pub fn fan_chart(path: &Path, d: &Difference) -> Result<()> {
-    let (x0, x1) = span(d.rows.iter().map(|r| r.target_mm));
-    let (y0, y1) = span(d.rows.iter().map(|r| r.et_um));
+    let x_mm = span(d.rows.iter().map(|r| r.target_mm));
+    let et_um = span(d.rows.iter().map(|r| r.et_um));
     let last_s = d
         .lines
         .iter()
@@ -53,69 +59,85 @@ pub fn fan_chart(path: &Path, d: &Difference) -> Result<()> {
         let (plots, bar) = root.split_horizontally(1160);
         let panels = plots.split_evenly((1, 2));
         for (area, dir) in panels.iter().zip(DIRECTIONS) {
-            let mut chart = ChartBuilder::on(area)
-                .caption(
-                    format!(
-                        "{} {}: Et = E − Es, one line per measurement",
-                        d.campaign,
-                        direction_name(dir)
-                    ),
-                    (FONT, 16),
-                )
-                .margin(12)
-                .x_label_area_size(40)
-                .y_label_area_size(56)
-                .build_cartesian_2d(x0..x1, y0..y1)?;
-            chart
-                .configure_mesh()
-                .x_desc("target (mm)")
-                .y_desc("thermal error Et (µm)")
-                .label_style((FONT, 13))
-                .axis_desc_style((FONT, 14))
-                .draw()?;
-            for line in d.lines.iter().filter(|l| l.direction == dir) {
-                let c = colour(line.time_s);
-                let at = |x: f64| line.offset_um + line.slope_um_per_m * x / 1000.0;
-                chart.draw_series(LineSeries::new(
-                    [(x0, at(x0)), (x1, at(x1))],
-                    c.stroke_width(2),
-                ))?;
-                chart.draw_series(
-                    d.rows
-                        .iter()
-                        .filter(|r| r.direction == dir && r.time_s == line.time_s)
-                        .map(|r| Circle::new((r.target_mm, r.et_um), 3, c.filled())),
-                )?;
-            }
+            fan_panel(area, d, dir, (x_mm, et_um), &colour)?;
         }
-        let small = (FONT, 13).into_font().color(&BLACK);
-        for (k, line) in [
-            "dots: measured Et",
-            "lines: fitted Et",
-            "",
-            "colour: time since",
-            "the cold (first)",
-            "measurement",
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            bar.draw(&Text::new(line, (4, 14 + 17 * k as i32), small.clone()))?;
-        }
-        draw_colour_bar(
-            &bar,
-            &ColourBar {
-                map: ColourMap::Viridis,
-                lo: 0.0,
-                hi: t_max,
-                label: &bar_label,
-                x_px: 20,
-                top_px: 150,
-                bottom_px: 500,
-            },
-        )?;
-        Ok(())
+        fan_legend(&bar, t_max, &bar_label)
     })
+}
+
+/// One direction's panel of the fan: each time's line over the travel and its Et points.
+fn fan_panel(
+    area: &Area,
+    d: &Difference,
+    dir: Direction,
+    ((x0, x1), (y0, y1)): ((f64, f64), (f64, f64)),
+    colour: &dyn Fn(f64) -> RGBColor,
+) -> DrawResult {
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!(
+                "{} {}: Et = E − Es, one line per measurement",
+                d.campaign,
+                direction_name(dir)
+            ),
+            (FONT, 16),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("target (mm)")
+        .y_desc("thermal error Et (µm)")
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .draw()?;
+    for line in d.lines.iter().filter(|l| l.direction == dir) {
+        let c = colour(line.time_s);
+        let at = |x: f64| line.offset_um + line.slope_um_per_m * x / 1000.0;
+        chart.draw_series(LineSeries::new(
+            [(x0, at(x0)), (x1, at(x1))],
+            c.stroke_width(2),
+        ))?;
+        chart.draw_series(
+            d.rows
+                .iter()
+                .filter(|r| r.direction == dir && r.time_s == line.time_s)
+                .map(|r| Circle::new((r.target_mm, r.et_um), 3, c.filled())),
+        )?;
+    }
+    Ok(())
+}
+
+/// The fan's key: what dots, lines and colours mean, and the colour bar of time.
+fn fan_legend(bar: &Area, t_max: f64, bar_label: &str) -> DrawResult {
+    let small = (FONT, 13).into_font().color(&BLACK);
+    for (k, line) in [
+        "dots: measured Et",
+        "lines: fitted Et",
+        "",
+        "colour: time since",
+        "the cold (first)",
+        "measurement",
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        bar.draw(&Text::new(line, (4, 14 + 17 * k as i32), small.clone()))?;
+    }
+    draw_colour_bar(
+        bar,
+        &ColourBar {
+            map: ColourMap::Viridis,
+            lo: 0.0,
+            hi: t_max,
+            label: bar_label,
+            x_px: 20,
+            top_px: 150,
+            bottom_px: 500,
+        },
+    )
 }
 
 /// Systematic deviation E and accuracy A (when defined) before and after, over time.

@@ -206,86 +206,25 @@ pub fn compensate_stream<R: Read, W: Write>(
         ambient_c: None,
         coolant: 0,
     };
+    let mut coolant = CoolantLookup::default();
     let mut summary = CompensateSummary::default();
     let (mut e_buf, mut c_buf) = ([0u8; FIXED4_BUF_LEN], [0u8; FIXED4_BUF_LEN]);
-    let mut last_coolant: Vec<u8> = Vec::new();
-    let mut last_coolant_index = 0usize;
-    loop {
-        let more = reader
-            .read_byte_record(&mut record)
-            .map_err(|e| csv_error(source, e))?;
-        if !more {
-            break;
-        }
+    while reader
+        .read_byte_record(&mut record)
+        .map_err(|e| csv_error(source, e))?
+    {
         let line = record.position().map(|p| p.line()).unwrap_or(0);
-        if record.len() != headers.len() {
-            return Err(Error::input(
-                Location::line(source, line),
-                format!(
-                    "{} fields, but the header names {}",
-                    record.len(),
-                    headers.len()
-                ),
-                "give every row one value per header column",
-            ));
-        }
-        number(&record, cols.time, line, "time_s", source)?;
-        let x_mm = number(&record, cols.position, line, "position_mm", source)?;
-        let dir_bytes = record.get(cols.direction).unwrap_or(b"").trim_ascii();
-        let direction = match dir_bytes {
-            b"+" => Direction::Forward,
-            b"-" => Direction::Reverse,
-            other => std::str::from_utf8(other)
-                .ok()
-                .and_then(Direction::parse)
-                .ok_or_else(|| {
-                    Error::input(
-                        Location::cell(source, line, "direction"),
-                        format!("'{}' is not a direction", String::from_utf8_lossy(other)),
-                        "write + (forward) or - (reverse)",
-                    )
-                })?,
+        let row = Row {
+            record: &record,
+            line,
+            source,
         };
-        for (k, (c, sensor)) in cols.sensors.iter().enumerate() {
-            let raw = number(&record, *c, line, &sensor.name, source)?;
-            let celsius = sensor.unit.to_celsius(raw).map_err(|e| {
-                Error::input(
-                    Location::cell(source, line, sensor.name.clone()),
-                    e.to_string(),
-                    "",
-                )
-            })?;
-            state.sensors_c[k] = sensor.calibration.apply(celsius);
-        }
-        if let Some((c, sensor)) = &cols.ambient {
-            let raw = number(&record, *c, line, "ambient_c", source)?;
-            let celsius = sensor.unit.to_celsius(raw).map_err(|e| {
-                Error::input(Location::cell(source, line, "ambient_c"), e.to_string(), "")
-            })?;
-            state.ambient_c = Some(sensor.calibration.apply(celsius));
-        }
-        if let Some(c) = cols.coolant {
-            let value = record.get(c).unwrap_or(b"").trim_ascii();
-            if value != last_coolant.as_slice() {
-                last_coolant_index = model
-                    .coolant_states
-                    .iter()
-                    .position(|s| s.as_bytes() == value)
-                    .ok_or_else(|| {
-                        Error::input(
-                            Location::cell(source, line, "coolant"),
-                            format!(
-                                "coolant state '{}' has no gains in the model",
-                                String::from_utf8_lossy(value)
-                            ),
-                            format!("the model knows: {}", model.coolant_states.join(", ")),
-                        )
-                    })?;
-                last_coolant.clear();
-                last_coolant.extend_from_slice(value);
-            }
-            state.coolant = last_coolant_index;
-        }
+        row.check_width(headers.len())?;
+        row.number(cols.time, "time_s")?;
+        let x_mm = row.number(cols.position, "position_mm")?;
+        let dir_bytes = row.field(cols.direction);
+        let direction = row.direction(dir_bytes)?;
+        row.read_state(model, &cols, &mut coolant, &mut state)?;
         if !(model.x_min_mm..=model.x_max_mm).contains(&x_mm) {
             summary.outside_travel += 1;
         }
@@ -298,8 +237,8 @@ pub fn compensate_stream<R: Read, W: Write>(
         let nc = format_fixed4(compensation_um, &mut c_buf);
         writer
             .write_record([
-                record.get(cols.time).unwrap_or(b"").trim_ascii(),
-                record.get(cols.position).unwrap_or(b"").trim_ascii(),
+                row.field(cols.time),
+                row.field(cols.position),
                 dir_bytes,
                 &e_buf[..ne],
                 &c_buf[..nc],
@@ -308,6 +247,123 @@ pub fn compensate_stream<R: Read, W: Write>(
     }
     writer.flush().map_err(write_failed)?;
     Ok(summary)
+}
+
+/// One row of the machine log being read, with its line for messages.
+struct Row<'a> {
+    record: &'a csv::ByteRecord,
+    line: u64,
+    source: &'a Path,
+}
+
+impl Row<'_> {
+    /// A field, trimmed (empty when missing).
+    fn field(&self, col: usize) -> &[u8] {
+        self.record.get(col).unwrap_or(b"").trim_ascii()
+    }
+
+    #[inline]
+    fn number(&self, col: usize, name: &str) -> Result<f64> {
+        number(self.record, col, self.line, name, self.source)
+    }
+
+    /// Every row has one value per header column.
+    fn check_width(&self, header_len: usize) -> Result<()> {
+        if self.record.len() == header_len {
+            return Ok(());
+        }
+        Err(Error::input(
+            Location::line(self.source, self.line),
+            format!(
+                "{} fields, but the header names {}",
+                self.record.len(),
+                header_len
+            ),
+            "give every row one value per header column",
+        ))
+    }
+
+    /// `+`/`-`, or a direction's name.
+    fn direction(&self, bytes: &[u8]) -> Result<Direction> {
+        match bytes {
+            b"+" => Ok(Direction::Forward),
+            b"-" => Ok(Direction::Reverse),
+            other => std::str::from_utf8(other)
+                .ok()
+                .and_then(Direction::parse)
+                .ok_or_else(|| {
+                    Error::input(
+                        Location::cell(self.source, self.line, "direction"),
+                        format!("'{}' is not a direction", String::from_utf8_lossy(other)),
+                        "write + (forward) or - (reverse)",
+                    )
+                }),
+        }
+    }
+
+    /// A raw sensor reading in column `col` converted to °C and calibrated.
+    fn celsius(&self, col: usize, name: &str, sensor: &Sensor) -> Result<f64> {
+        let raw = self.number(col, name)?;
+        let celsius = sensor.unit.to_celsius(raw).map_err(|e| {
+            Error::input(
+                Location::cell(self.source, self.line, name.to_string()),
+                e.to_string(),
+                "",
+            )
+        })?;
+        Ok(sensor.calibration.apply(celsius))
+    }
+
+    /// The row's sensor temperatures, ambient and coolant state into `state`.
+    fn read_state(
+        &self,
+        model: &ThermalModel,
+        cols: &Columns,
+        coolant: &mut CoolantLookup,
+        state: &mut ThermalState,
+    ) -> Result<()> {
+        for (k, (c, sensor)) in cols.sensors.iter().enumerate() {
+            state.sensors_c[k] = self.celsius(*c, &sensor.name, sensor)?;
+        }
+        if let Some((c, sensor)) = &cols.ambient {
+            state.ambient_c = Some(self.celsius(*c, "ambient_c", sensor)?);
+        }
+        if let Some(c) = cols.coolant {
+            state.coolant = coolant.index(model, self.field(c), self)?;
+        }
+        Ok(())
+    }
+}
+
+/// The model's index of a coolant state, looked up again only when the state changes.
+#[derive(Default)]
+struct CoolantLookup {
+    last: Vec<u8>,
+    index: usize,
+}
+
+impl CoolantLookup {
+    fn index(&mut self, model: &ThermalModel, value: &[u8], row: &Row) -> Result<usize> {
+        if value != self.last.as_slice() {
+            self.index = model
+                .coolant_states
+                .iter()
+                .position(|s| s.as_bytes() == value)
+                .ok_or_else(|| {
+                    Error::input(
+                        Location::cell(row.source, row.line, "coolant"),
+                        format!(
+                            "coolant state '{}' has no gains in the model",
+                            String::from_utf8_lossy(value)
+                        ),
+                        format!("the model knows: {}", model.coolant_states.join(", ")),
+                    )
+                })?;
+            self.last.clear();
+            self.last.extend_from_slice(value);
+        }
+        Ok(self.index)
+    }
 }
 
 /// Compensate a log file into `output` (written atomically).
@@ -356,21 +412,7 @@ fn write_failed(e: impl Into<std::io::Error>) -> Error {
 }
 
 fn csv_error(path: &Path, e: csv::Error) -> Error {
-    let line = e.position().map(|p| p.line());
-    let message = format!("unreadable CSV: {e}");
-    match e.into_kind() {
-        // The file itself could not be read (a folder, a device error): an io error, not content.
-        csv::ErrorKind::Io(source) => Error::read(path, source),
-        _ => Error::input(
-            Location {
-                file: path.to_path_buf(),
-                line,
-                column: None,
-            },
-            message,
-            "save the log as plain comma-separated UTF-8 text",
-        ),
-    }
+    crate::io::csv_error_hinted(path, e, "save the log as plain comma-separated UTF-8 text")
 }
 
 #[cfg(test)]

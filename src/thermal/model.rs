@@ -293,30 +293,8 @@ fn prepare(campaigns: &[Campaign], options: &FitOptions) -> Result<Prepared> {
         .sensors
         .with_role(Role::Ambient)
         .map(|s| s.name.clone());
-    let reference_point_mm = match options.reference_point_mm {
-        Some(p) => p,
-        None => {
-            let p = campaigns[0].reference_point_mm;
-            if let Some(c) = campaigns.iter().find(|c| c.reference_point_mm != p) {
-                return Err(Error::usage(
-                    format!(
-                        "campaigns '{}' and '{}' have different reference points ({} and {} mm)",
-                        campaigns[0].name, c.name, p, c.reference_point_mm
-                    ),
-                    "give one reference point with --reference-mm",
-                ));
-            }
-            p
-        }
-    };
-    let mut coolant_states: Vec<String> = Vec::new();
-    for c in campaigns {
-        if !coolant_states.contains(&c.coolant) {
-            coolant_states.push(c.coolant.clone());
-        }
-    }
-    coolant_states.sort();
-    let (mut x_min_mm, mut x_max_mm) = (f64::INFINITY, f64::NEG_INFINITY);
+    let reference_point_mm = common_reference_point(campaigns, options)?;
+    let coolant_states = coolant_states(campaigns);
     let mut rises = Vec::new();
     let mut obs = Vec::new();
     for (ci, c) in campaigns.iter().enumerate() {
@@ -333,30 +311,11 @@ fn prepare(campaigns: &[Campaign], options: &FitOptions) -> Result<Prepared> {
             .iter()
             .position(|s| s == &c.coolant)
             .unwrap_or(0);
-        let mut per_m = Vec::new();
-        for (mi, m) in c.measurements.iter().enumerate() {
-            per_m.push(measurement_rises(
-                c,
-                m,
-                &gain_sensors,
-                ambient.as_deref(),
-                coolant,
-            )?);
-            for p in &m.points {
-                x_min_mm = x_min_mm.min(p.target_mm);
-                x_max_mm = x_max_mm.max(p.target_mm);
-                obs.push(Obs {
-                    campaign: ci,
-                    measurement: mi,
-                    direction: p.direction,
-                    x_mm: p.target_mm,
-                    y_um: p.deviation_um,
-                    target_key: (p.target_mm * 1e6).round() as i64,
-                });
-            }
-        }
-        rises.push(per_m);
+        let inputs = (gain_sensors.as_slice(), ambient.as_deref(), coolant);
+        rises.push(campaign_observations(ci, c, inputs, &mut obs)?);
     }
+    let x_min_mm = obs.iter().map(|o| o.x_mm).fold(f64::INFINITY, f64::min);
+    let x_max_mm = obs.iter().map(|o| o.x_mm).fold(f64::NEG_INFINITY, f64::max);
     if x_max_mm - x_min_mm <= 0.0 {
         return Err(Error::usage(
             "all readings are at one target position",
@@ -373,6 +332,61 @@ fn prepare(campaigns: &[Campaign], options: &FitOptions) -> Result<Prepared> {
         rises,
         obs,
     })
+}
+
+/// Px: the option, else the one reference point every campaign shares.
+fn common_reference_point(campaigns: &[Campaign], options: &FitOptions) -> Result<f64> {
+    if let Some(p) = options.reference_point_mm {
+        return Ok(p);
+    }
+    let p = campaigns[0].reference_point_mm;
+    if let Some(c) = campaigns.iter().find(|c| c.reference_point_mm != p) {
+        return Err(Error::usage(
+            format!(
+                "campaigns '{}' and '{}' have different reference points ({} and {} mm)",
+                campaigns[0].name, c.name, p, c.reference_point_mm
+            ),
+            "give one reference point with --reference-mm",
+        ));
+    }
+    Ok(p)
+}
+
+/// The campaigns' coolant states, sorted, each once.
+fn coolant_states(campaigns: &[Campaign]) -> Vec<String> {
+    let mut states: Vec<String> = Vec::new();
+    for c in campaigns {
+        if !states.contains(&c.coolant) {
+            states.push(c.coolant.clone());
+        }
+    }
+    states.sort();
+    states
+}
+
+/// The rises of each measurement of campaign `ci`, whose readings are appended to `obs`.
+/// `inputs`: the gain sensors, the ambient sensor and the campaign's coolant index.
+fn campaign_observations(
+    ci: usize,
+    c: &Campaign,
+    (gain_sensors, ambient, coolant): (&[String], Option<&str>, usize),
+    obs: &mut Vec<Obs>,
+) -> Result<Vec<Rises>> {
+    let mut per_m = Vec::new();
+    for (mi, m) in c.measurements.iter().enumerate() {
+        per_m.push(measurement_rises(c, m, gain_sensors, ambient, coolant)?);
+        for p in &m.points {
+            obs.push(Obs {
+                campaign: ci,
+                measurement: mi,
+                direction: p.direction,
+                x_mm: p.target_mm,
+                y_um: p.deviation_um,
+                target_key: (p.target_mm * 1e6).round() as i64,
+            });
+        }
+    }
+    Ok(per_m)
 }
 
 fn measurement_rises(

@@ -1,8 +1,22 @@
 //! Laser readings of a campaign: the linear module's run file, whose rows must carry `time_s`.
+//! Below [`super::campaign`], which groups these readings into measurements.
 
-use super::campaign::LaserPoint;
 use crate::error::{Error, Location, Result};
+use crate::linear::Direction;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// One laser reading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LaserPoint {
+    pub run: u32,
+    pub direction: Direction,
+    pub target_mm: f64,
+    /// Measured minus target (µm).
+    pub deviation_um: f64,
+    /// Line in the run file (0 when not from a file).
+    pub line: u64,
+}
 
 /// Every reading of a run file with its measurement time (`time_s`, required on every row).
 pub fn read_timed_points(path: &Path) -> Result<Vec<(f64, LaserPoint)>> {

@@ -11,7 +11,7 @@
 use super::filter::FilterSpec;
 use super::pt100;
 use crate::error::{Error, Location, Result};
-use crate::io::{write_atomic, CsvTable};
+use crate::io::{write_atomic, CsvRow, CsvTable};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -140,116 +140,16 @@ impl SensorTable {
 
     /// Validate a sensor table already read as CSV (errors name `t.path`).
     pub fn from_csv(t: &CsvTable) -> Result<SensorTable> {
-        let path = t.path.as_path();
         t.reject_unknown(&TABLE_COLUMNS)?;
-        let c_name = t.require("name")?;
-        let c_role = t.require("role")?;
-        let c_unit = t.require("unit")?;
-        let c_offset = t.require("offset_c")?;
-        let c_scale = t.require("scale")?;
-        let c_med = t.column("median_window");
-        let c_sgw = t.column("sg_window");
-        let c_sgo = t.column("sg_order");
+        let cols = TableColumns::find(t)?;
         let mut sensors: Vec<Sensor> = Vec::new();
         for row in &t.rows {
-            let name = t.text(row, c_name).to_string();
-            if name.is_empty() || name == "time_s" || name.contains(',') {
-                return Err(t.error_at(
-                    row,
-                    Some(c_name),
-                    format!("'{name}' is not a usable sensor name"),
-                    "give each sensor a short unique name, used as its column in the temperature log",
-                ));
-            }
-            if sensors.iter().any(|s| s.name == name) {
-                return Err(t.error_at(
-                    row,
-                    Some(c_name),
-                    format!("sensor '{name}' is listed twice"),
-                    "keep one row per sensor",
-                ));
-            }
-            let role = Role::parse(t.text(row, c_role)).ok_or_else(|| {
-                t.error_at(
-                    row,
-                    Some(c_role),
-                    format!("unknown role '{}'", t.text(row, c_role)),
-                    "use one of nut, bearing, ambient, reference, other",
-                )
-            })?;
-            let unit = Unit::parse(t.text(row, c_unit)).ok_or_else(|| {
-                t.error_at(
-                    row,
-                    Some(c_unit),
-                    format!("unknown unit '{}'", t.text(row, c_unit)),
-                    "use c for °C or ohm for a Pt100 resistance",
-                )
-            })?;
-            let offset_c = t.f64_opt(row, c_offset)?.unwrap_or(0.0);
-            let scale = t.f64_opt(row, c_scale)?.unwrap_or(1.0);
-            if scale <= 0.0 {
-                return Err(t.error_at(
-                    row,
-                    Some(c_scale),
-                    format!("scale {scale} must be positive"),
-                    "a calibration scale is close to 1; leave the cell empty for 1",
-                ));
-            }
-            let mut filter = FilterSpec::default();
-            let int = |c: Option<usize>, default: usize| -> Result<usize> {
-                match c {
-                    None => Ok(default),
-                    Some(c) => match t.text(row, c) {
-                        "" => Ok(default),
-                        text => text.parse::<usize>().map_err(|_| {
-                            t.error_at(
-                                row,
-                                Some(c),
-                                format!("'{text}' is not a whole number of samples"),
-                                "write an odd count such as 5 (1 = off)",
-                            )
-                        }),
-                    },
-                }
-            };
-            filter.median_window = int(c_med, filter.median_window)?;
-            filter.sg_window = int(c_sgw, filter.sg_window)?;
-            filter.sg_order = int(c_sgo, filter.sg_order)?;
-            if let Err(message) = filter.validate() {
-                return Err(t.error_at(
-                    row,
-                    c_sgw.or(c_med),
-                    message,
-                    "windows are odd sample counts (1 = off), the order below the window",
-                ));
-            }
-            sensors.push(Sensor {
-                name,
-                role,
-                unit,
-                calibration: Calibration { offset_c, scale },
-                filter,
-            });
+            let sensor = sensor_row(t, &cols, row, &sensors)?;
+            sensors.push(sensor);
         }
-        if sensors.is_empty() {
-            return Err(Error::input(
-                Location::file(path),
-                "the sensor table lists no sensors",
-                "add one row per sensor: name,role,unit,offset_c,scale",
-            ));
-        }
-        for role in [Role::Reference, Role::Ambient] {
-            let n = sensors.iter().filter(|s| s.role == role).count();
-            if n > 1 {
-                return Err(Error::input(
-                    Location::file(path),
-                    format!("{n} sensors have the role {}", role.name()),
-                    format!("mark exactly one sensor as {}", role.name()),
-                ));
-            }
-        }
+        check_roles(&t.path, &sensors)?;
         Ok(SensorTable {
-            path: path.to_path_buf(),
+            path: t.path.clone(),
             sensors,
         })
     }
@@ -293,6 +193,147 @@ impl SensorTable {
     pub fn with_role(&self, role: Role) -> Option<&Sensor> {
         self.sensors.iter().find(|s| s.role == role)
     }
+}
+
+/// Column indices of a sensor table: five required, the filter settings optional.
+struct TableColumns {
+    name: usize,
+    role: usize,
+    unit: usize,
+    offset: usize,
+    scale: usize,
+    median_window: Option<usize>,
+    sg_window: Option<usize>,
+    sg_order: Option<usize>,
+}
+
+impl TableColumns {
+    fn find(t: &CsvTable) -> Result<TableColumns> {
+        Ok(TableColumns {
+            name: t.require("name")?,
+            role: t.require("role")?,
+            unit: t.require("unit")?,
+            offset: t.require("offset_c")?,
+            scale: t.require("scale")?,
+            median_window: t.column("median_window"),
+            sg_window: t.column("sg_window"),
+            sg_order: t.column("sg_order"),
+        })
+    }
+}
+
+/// One validated row of a sensor table; `before` holds the rows above it (names are unique).
+fn sensor_row(
+    t: &CsvTable,
+    cols: &TableColumns,
+    row: &CsvRow,
+    before: &[Sensor],
+) -> Result<Sensor> {
+    let name = t.text(row, cols.name).to_string();
+    if name.is_empty() || name == "time_s" || name.contains(',') {
+        return Err(t.error_at(
+            row,
+            Some(cols.name),
+            format!("'{name}' is not a usable sensor name"),
+            "give each sensor a short unique name, used as its column in the temperature log",
+        ));
+    }
+    if before.iter().any(|s| s.name == name) {
+        return Err(t.error_at(
+            row,
+            Some(cols.name),
+            format!("sensor '{name}' is listed twice"),
+            "keep one row per sensor",
+        ));
+    }
+    let role = Role::parse(t.text(row, cols.role)).ok_or_else(|| {
+        t.error_at(
+            row,
+            Some(cols.role),
+            format!("unknown role '{}'", t.text(row, cols.role)),
+            "use one of nut, bearing, ambient, reference, other",
+        )
+    })?;
+    let unit = Unit::parse(t.text(row, cols.unit)).ok_or_else(|| {
+        t.error_at(
+            row,
+            Some(cols.unit),
+            format!("unknown unit '{}'", t.text(row, cols.unit)),
+            "use c for °C or ohm for a Pt100 resistance",
+        )
+    })?;
+    let offset_c = t.f64_opt(row, cols.offset)?.unwrap_or(0.0);
+    let scale = t.f64_opt(row, cols.scale)?.unwrap_or(1.0);
+    if scale <= 0.0 {
+        return Err(t.error_at(
+            row,
+            Some(cols.scale),
+            format!("scale {scale} must be positive"),
+            "a calibration scale is close to 1; leave the cell empty for 1",
+        ));
+    }
+    Ok(Sensor {
+        name,
+        role,
+        unit,
+        calibration: Calibration { offset_c, scale },
+        filter: filter_row(t, cols, row)?,
+    })
+}
+
+/// The filter settings of a sensor-table row (empty cells and absent columns: the defaults).
+fn filter_row(t: &CsvTable, cols: &TableColumns, row: &CsvRow) -> Result<FilterSpec> {
+    let int = |c: Option<usize>, default: usize| -> Result<usize> {
+        match c {
+            None => Ok(default),
+            Some(c) => match t.text(row, c) {
+                "" => Ok(default),
+                text => text.parse::<usize>().map_err(|_| {
+                    t.error_at(
+                        row,
+                        Some(c),
+                        format!("'{text}' is not a whole number of samples"),
+                        "write an odd count such as 5 (1 = off)",
+                    )
+                }),
+            },
+        }
+    };
+    let mut filter = FilterSpec::default();
+    filter.median_window = int(cols.median_window, filter.median_window)?;
+    filter.sg_window = int(cols.sg_window, filter.sg_window)?;
+    filter.sg_order = int(cols.sg_order, filter.sg_order)?;
+    filter.validate().map_err(|message| {
+        t.error_at(
+            row,
+            cols.sg_window.or(cols.median_window),
+            message,
+            "windows are odd sample counts (1 = off), the order below the window",
+        )
+    })?;
+    Ok(filter)
+}
+
+/// A table lists at least one sensor, and at most one reference and one ambient sensor.
+fn check_roles(path: &Path, sensors: &[Sensor]) -> Result<()> {
+    if sensors.is_empty() {
+        return Err(Error::input(
+            Location::file(path),
+            "the sensor table lists no sensors",
+            "add one row per sensor: name,role,unit,offset_c,scale",
+        ));
+    }
+    for role in [Role::Reference, Role::Ambient] {
+        let n = sensors.iter().filter(|s| s.role == role).count();
+        if n > 1 {
+            return Err(Error::input(
+                Location::file(path),
+                format!("{n} sensors have the role {}", role.name()),
+                format!("mark exactly one sensor as {}", role.name()),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A temperature log as read: times and, per sensor, readings converted to °C (uncalibrated).
@@ -476,6 +517,30 @@ pub fn calibrate(
             "give --min-span-c as 0 or more degrees, e.g. 1",
         ));
     }
+    let (reference, k_ref) = reference_column(log, table)?;
+    let idx = period_samples(log, from_s, to_s)?;
+    let reference_c: Vec<f64> = idx
+        .iter()
+        .map(|&i| reference.calibration.apply(log.raw_c[k_ref][i]))
+        .collect();
+    let fits = log
+        .sensors
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| k != k_ref)
+        .map(|(k, name)| {
+            let raw: Vec<f64> = idx.iter().map(|&i| log.raw_c[k][i]).collect();
+            fit_against_reference(name, &raw, &reference_c, min_span_c)
+        })
+        .collect();
+    Ok(fits)
+}
+
+/// The reference sensor of the table and its column in the log.
+fn reference_column<'t>(
+    log: &TemperatureLog,
+    table: &'t SensorTable,
+) -> Result<(&'t Sensor, usize)> {
     let reference = table.with_role(Role::Reference).ok_or_else(|| {
         Error::input(
             Location::file(&table.path),
@@ -493,6 +558,11 @@ pub fn calibrate(
             "log the reference sensor during the calibration period",
         )
     })?;
+    Ok((reference, k_ref))
+}
+
+/// Indices of the log samples inside `[from_s, to_s]`; at least three.
+fn period_samples(log: &TemperatureLog, from_s: f64, to_s: f64) -> Result<Vec<usize>> {
     let idx: Vec<usize> = (0..log.time_s.len())
         .filter(|&i| log.time_s[i] >= from_s && log.time_s[i] <= to_s)
         .collect();
@@ -505,47 +575,46 @@ pub fn calibrate(
             "give a period that covers at least three samples of the log",
         ));
     }
-    let reference_c: Vec<f64> = idx
+    Ok(idx)
+}
+
+/// The straight line reference_c ≈ scale·raw + offset_c by least squares; the offset alone
+/// (scale 1) when the readings span less than `min_span_c`.
+fn fit_against_reference(
+    sensor: &str,
+    raw: &[f64],
+    reference_c: &[f64],
+    min_span_c: f64,
+) -> CalibrationFit {
+    let n = raw.len() as f64;
+    let mean_x = raw.iter().sum::<f64>() / n;
+    let mean_y = reference_c.iter().sum::<f64>() / n;
+    let sxx: f64 = raw.iter().map(|x| (x - mean_x).powi(2)).sum();
+    let sxy: f64 = raw
         .iter()
-        .map(|&i| reference.calibration.apply(log.raw_c[k_ref][i]))
-        .collect();
-    let mut fits = Vec::new();
-    for (k, name) in log.sensors.iter().enumerate() {
-        if k == k_ref {
-            continue;
-        }
-        let raw: Vec<f64> = idx.iter().map(|&i| log.raw_c[k][i]).collect();
-        let n = raw.len() as f64;
-        let mean_x = raw.iter().sum::<f64>() / n;
-        let mean_y = reference_c.iter().sum::<f64>() / n;
-        let sxx: f64 = raw.iter().map(|x| (x - mean_x).powi(2)).sum();
-        let sxy: f64 = raw
-            .iter()
-            .zip(&reference_c)
-            .map(|(x, y)| (x - mean_x) * (y - mean_y))
-            .sum();
-        let span = raw.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
-            - raw.iter().cloned().fold(f64::INFINITY, f64::min);
-        let scale_fitted = span >= min_span_c && sxx > 0.0;
-        let scale = if scale_fitted { sxy / sxx } else { 1.0 };
-        let offset_c = mean_y - scale * mean_x;
-        let calibration = Calibration { offset_c, scale };
-        let residual_rms_c = (raw
-            .iter()
-            .zip(&reference_c)
-            .map(|(x, y)| (y - calibration.apply(*x)).powi(2))
-            .sum::<f64>()
-            / n)
-            .sqrt();
-        fits.push(CalibrationFit {
-            sensor: name.clone(),
-            calibration,
-            residual_rms_c,
-            samples: idx.len(),
-            scale_fitted,
-        });
+        .zip(reference_c)
+        .map(|(x, y)| (x - mean_x) * (y - mean_y))
+        .sum();
+    let span = raw.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - raw.iter().cloned().fold(f64::INFINITY, f64::min);
+    let scale_fitted = span >= min_span_c && sxx > 0.0;
+    let scale = if scale_fitted { sxy / sxx } else { 1.0 };
+    let offset_c = mean_y - scale * mean_x;
+    let calibration = Calibration { offset_c, scale };
+    let residual_rms_c = (raw
+        .iter()
+        .zip(reference_c)
+        .map(|(x, y)| (y - calibration.apply(*x)).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    CalibrationFit {
+        sensor: sensor.to_string(),
+        calibration,
+        residual_rms_c,
+        samples: raw.len(),
+        scale_fitted,
     }
-    Ok(fits)
 }
 
 #[cfg(test)]

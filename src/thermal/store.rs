@@ -19,6 +19,24 @@ use std::path::{Path, PathBuf};
 /// File name of the default store, placed beside the campaigns.
 pub const DEFAULT_STORE: &str = "thermal.sqlite";
 
+/// thermal.sqlite in the parent folder of a campaign folder (beside the campaign), however
+/// the folder is spelled (`x`, `./x`, `/abs/x`, `.`): the folder is made absolute first.
+pub fn store_beside(campaign: &Path) -> PathBuf {
+    let file = super::campaign::campaign_file_path(campaign);
+    let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+    let dir = if dir.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        dir
+    };
+    let dir = std::fs::canonicalize(&dir)
+        .or_else(|_| std::path::absolute(&dir))
+        .unwrap_or(dir);
+    dir.parent()
+        .map(|p| p.join(DEFAULT_STORE))
+        .unwrap_or_else(|| dir.join(DEFAULT_STORE))
+}
+
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS sensors (
     id INTEGER PRIMARY KEY,
@@ -89,12 +107,17 @@ pub struct Store {
     conn: Connection,
 }
 
-/// Test hooks of an ingest (hidden CLI flags): fail, or pause waiting on stdin, after this many
-/// temperature samples have been written inside the transaction.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct IngestHooks {
+/// Fault injection inside an ingest's open transaction, for the tests of its atomicity. Debug
+/// builds only: a release build has no way to inject a fault.
+#[cfg(any(test, debug_assertions))]
+#[doc(hidden)]
+pub struct IngestFaults<'a> {
+    /// Fail with an internal error after this many temperature samples.
     pub fail_after_samples: Option<u64>,
+    /// After this many samples call `pause` with the count, inside the open transaction (the
+    /// caller may block there, e.g. to be killed by a test).
     pub pause_after_samples: Option<u64>,
+    pub pause: &'a mut dyn FnMut(u64),
 }
 
 /// What an ingest added.
@@ -177,15 +200,43 @@ impl Store {
 
     /// Add a campaign in one transaction. A campaign of the same name is an error unless
     /// `replace`, which swaps it inside the same transaction.
-    pub fn ingest(
+    pub fn ingest(&mut self, campaign: &Campaign, replace: bool) -> Result<IngestSummary> {
+        self.ingest_observed(campaign, replace, &mut |_| Ok(()))
+    }
+
+    /// [`Store::ingest`] with faults injected inside the transaction (debug builds only).
+    #[cfg(any(test, debug_assertions))]
+    #[doc(hidden)]
+    pub fn ingest_with_faults(
         &mut self,
         campaign: &Campaign,
         replace: bool,
-        hooks: IngestHooks,
+        faults: IngestFaults,
+    ) -> Result<IngestSummary> {
+        let mut after_sample = |samples: u64| {
+            if faults.fail_after_samples == Some(samples) {
+                return Err(Error::Internal(format!(
+                    "ingest stopped after {samples} samples (injected failure)"
+                )));
+            }
+            if faults.pause_after_samples == Some(samples) {
+                (faults.pause)(samples);
+            }
+            Ok(())
+        };
+        self.ingest_observed(campaign, replace, &mut after_sample)
+    }
+
+    /// The ingest transaction; `after_sample` sees the count of samples written so far.
+    fn ingest_observed(
+        &mut self,
+        campaign: &Campaign,
+        replace: bool,
+        after_sample: &mut dyn FnMut(u64) -> Result<()>,
     ) -> Result<IngestSummary> {
         let path = self.path.clone();
         let tx = self.conn.transaction().map_err(|e| write_err(&path, e))?;
-        let summary = ingest_in(&tx, &path, campaign, replace, hooks)?;
+        let summary = ingest_in(&tx, &path, campaign, replace, after_sample)?;
         tx.commit().map_err(|e| write_err(&path, e))?;
         Ok(summary)
     }
@@ -206,176 +257,25 @@ impl Store {
     /// Rebuild a stored campaign (temperatures re-filtered with the stored filter settings).
     pub fn load_campaign(&self, name: &str) -> Result<Campaign> {
         let p = &self.path;
-        let row = self
-            .conn
-            .query_row(
-                "SELECT id, axis, coolant, reference_point_mm, measurement_s, source
-                 FROM campaigns WHERE name = ?1",
-                params![name],
-                |r| {
-                    Ok((
-                        r.get::<_, i64>(0)?,
-                        r.get::<_, String>(1)?,
-                        r.get::<_, String>(2)?,
-                        r.get::<_, f64>(3)?,
-                        r.get::<_, f64>(4)?,
-                        r.get::<_, String>(5)?,
-                    ))
-                },
-            )
-            .optional()
-            .map_err(|e| read_err(p, e))?
-            .ok_or_else(|| {
-                Error::usage(
-                    format!("no campaign '{name}' in {}", p.display()),
-                    "list the stored campaigns with `errmap thermal models`",
-                )
-            })?;
-        let (id, axis, coolant, reference_point_mm, measurement_s, source) = row;
-        // Sensors in log column order, with the calibration the campaign was ingested with.
-        let mut stmt = self
-            .conn
-            .prepare(
-                "SELECT s.id, s.name, s.role, s.unit, s.median_window, s.sg_window, s.sg_order,
-                        c.offset_c, c.scale
-                 FROM campaign_sensors cs JOIN sensors s ON s.id = cs.sensor_id
-                 JOIN calibrations c ON c.id = cs.calibration_id
-                 WHERE cs.campaign_id = ?1 ORDER BY cs.column_index",
-            )
-            .map_err(|e| read_err(p, e))?;
-        let rows = stmt
-            .query_map(params![id], |r| {
-                Ok((
-                    r.get::<_, i64>(0)?,
-                    r.get::<_, String>(1)?,
-                    r.get::<_, String>(2)?,
-                    r.get::<_, String>(3)?,
-                    r.get::<_, i64>(4)?,
-                    r.get::<_, i64>(5)?,
-                    r.get::<_, i64>(6)?,
-                    r.get::<_, f64>(7)?,
-                    r.get::<_, f64>(8)?,
-                ))
-            })
-            .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
-            .map_err(|e| read_err(p, e))?;
-        let mut sensors = Vec::new();
-        let mut ids = Vec::new();
-        for (sid, sname, role, unit, mw, sw, so, offset_c, scale) in rows {
-            let bad = || {
-                Error::input(
-                    Location::file(p),
-                    format!("sensor '{sname}' has an unknown role or unit in the store"),
-                    "the store was written by another program; ingest the campaign again",
-                )
-            };
-            sensors.push(Sensor {
-                name: sname.clone(),
-                role: Role::parse(&role).ok_or_else(bad)?,
-                unit: Unit::parse(&unit).ok_or_else(bad)?,
-                calibration: Calibration { offset_c, scale },
-                filter: FilterSpec {
-                    median_window: mw.max(1) as usize,
-                    sg_window: sw.max(1) as usize,
-                    sg_order: so.max(0) as usize,
-                },
-            });
-            ids.push(sid);
-        }
-        let table = SensorTable {
-            path: p.clone(),
-            sensors,
-        };
+        let row = campaign_row(&self.conn, p, name)?;
+        let (table, sensor_ids) = campaign_sensors(&self.conn, p, row.id)?;
+        let raw_log = stored_log(&self.conn, p, name, row.id, &sensor_ids, &table)?;
         // Stored samples are already calibrated: filter them with identity calibrations.
-        let mut time_s: Vec<f64> = Vec::new();
-        let mut channels: Vec<Vec<f64>> = Vec::new();
-        for (k, sid) in ids.iter().enumerate() {
-            let mut stmt = self
-                .conn
-                .prepare_cached(
-                    "SELECT time_s, temperature_c FROM temperature_samples
-                     WHERE campaign_id = ?1 AND sensor_id = ?2 ORDER BY time_s",
-                )
-                .map_err(|e| read_err(p, e))?;
-            let samples = stmt
-                .query_map(params![id, sid], |r| {
-                    Ok((r.get::<_, f64>(0)?, r.get::<_, f64>(1)?))
-                })
-                .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
-                .map_err(|e| read_err(p, e))?;
-            if k == 0 {
-                time_s = samples.iter().map(|s| s.0).collect();
-            } else if samples.len() != time_s.len()
-                || samples.iter().zip(&time_s).any(|(s, t)| s.0 != *t)
-            {
-                return Err(Error::input(
-                    Location::file(p),
-                    format!("campaign '{name}': sensors have different sample times in the store"),
-                    "ingest the campaign again with --replace",
-                ));
-            }
-            channels.push(samples.into_iter().map(|s| s.1).collect());
-        }
-        let raw_log = TemperatureLog {
-            path: p.clone(),
-            time_s,
-            sensors: table.sensors.iter().map(|s| s.name.clone()).collect(),
-            raw_c: channels,
-        };
         let mut identity = table.clone();
         for s in &mut identity.sensors {
             s.calibration = Calibration::default();
         }
         let log = raw_log.process(&identity)?;
-        let mut stmt = self
-            .conn
-            .prepare(
-                "SELECT time_s, run, direction, target_mm, deviation_um, line
-                 FROM laser_readings WHERE campaign_id = ?1 ORDER BY rowid",
-            )
-            .map_err(|e| read_err(p, e))?;
-        let readings = stmt
-            .query_map(params![id], |r| {
-                Ok((
-                    r.get::<_, f64>(0)?,
-                    r.get::<_, i64>(1)?,
-                    r.get::<_, String>(2)?,
-                    r.get::<_, f64>(3)?,
-                    r.get::<_, f64>(4)?,
-                    r.get::<_, i64>(5)?,
-                ))
-            })
-            .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
-            .map_err(|e| read_err(p, e))?;
-        let mut timed = Vec::with_capacity(readings.len());
-        for (t, run, dir, x, e, line) in readings {
-            let direction = Direction::parse(&dir).ok_or_else(|| {
-                Error::input(
-                    Location::file(p),
-                    format!("campaign '{name}': direction '{dir}' in the store"),
-                    "ingest the campaign again with --replace",
-                )
-            })?;
-            timed.push((
-                t,
-                LaserPoint {
-                    run: run.max(0) as u32,
-                    direction,
-                    target_mm: x,
-                    deviation_um: e,
-                    line: line.max(0) as u64,
-                },
-            ));
-        }
+        let timed = stored_readings(&self.conn, p, name, row.id)?;
         let settings = CampaignFile {
             name: Some(name.to_string()),
-            axis,
-            coolant,
-            runs: PathBuf::from(&source),
-            temperatures: PathBuf::from(&source),
-            sensors: PathBuf::from(&source),
-            measurement_s,
-            reference_point_mm,
+            axis: row.axis,
+            coolant: row.coolant,
+            runs: PathBuf::from(&row.source),
+            temperatures: PathBuf::from(&row.source),
+            sensors: PathBuf::from(&row.source),
+            measurement_s: row.measurement_s,
+            reference_point_mm: row.reference_point_mm,
         };
         let dir = p
             .parent()
@@ -389,9 +289,9 @@ impl Store {
             raw_log,
             log,
             timed,
-            Path::new(&source),
+            Path::new(&row.source),
         )?;
-        campaign.runs_path = PathBuf::from(source);
+        campaign.runs_path = PathBuf::from(row.source);
         Ok(campaign)
     }
 
@@ -519,39 +419,63 @@ impl Store {
     }
 }
 
+/// The stages of an ingest, inside its transaction.
 fn ingest_in(
     tx: &Transaction,
     p: &Path,
     campaign: &Campaign,
     replace: bool,
-    hooks: IngestHooks,
+    after_sample: &mut dyn FnMut(u64) -> Result<()>,
 ) -> Result<IngestSummary> {
+    let replaced = remove_existing(tx, p, &campaign.name, replace)?;
+    let campaign_id = insert_campaign(tx, p, campaign)?;
+    let sensor_ids = insert_campaign_sensors(tx, p, campaign, campaign_id)?;
+    let samples = insert_samples(tx, p, campaign, campaign_id, &sensor_ids, after_sample)?;
+    let readings = insert_readings(tx, p, campaign, campaign_id)?;
+    Ok(IngestSummary {
+        campaign: campaign.name.clone(),
+        campaign_id,
+        sensors: sensor_ids.len(),
+        temperature_samples: samples,
+        laser_readings: readings,
+        replaced,
+    })
+}
+
+/// Refuse a campaign name already stored, or with `replace` delete its rows. True if replaced.
+fn remove_existing(tx: &Connection, p: &Path, name: &str, replace: bool) -> Result<bool> {
     let w = |e| write_err(p, e);
     let existing: Option<i64> = tx
         .query_row(
             "SELECT id FROM campaigns WHERE name = ?1",
-            params![campaign.name],
+            params![name],
             |r| r.get(0),
         )
         .optional()
         .map_err(w)?;
-    if let Some(id) = existing {
-        if !replace {
-            return Err(Error::usage(
-                format!("campaign '{}' is already in {}", campaign.name, p.display()),
-                "give the campaign another name in campaign.toml, or pass --replace",
-            ));
-        }
-        for table in ["temperature_samples", "laser_readings", "campaign_sensors"] {
-            tx.execute(
-                &format!("DELETE FROM {table} WHERE campaign_id = ?1"),
-                params![id],
-            )
-            .map_err(w)?;
-        }
-        tx.execute("DELETE FROM campaigns WHERE id = ?1", params![id])
-            .map_err(w)?;
+    let Some(id) = existing else {
+        return Ok(false);
+    };
+    if !replace {
+        return Err(Error::usage(
+            format!("campaign '{name}' is already in {}", p.display()),
+            "give the campaign another name in campaign.toml, or pass --replace",
+        ));
     }
+    for table in ["temperature_samples", "laser_readings", "campaign_sensors"] {
+        tx.execute(
+            &format!("DELETE FROM {table} WHERE campaign_id = ?1"),
+            params![id],
+        )
+        .map_err(w)?;
+    }
+    tx.execute("DELETE FROM campaigns WHERE id = ?1", params![id])
+        .map_err(w)?;
+    Ok(true)
+}
+
+/// The campaign's row (with the ambient temperature of its cold measurement); returns its id.
+fn insert_campaign(tx: &Connection, p: &Path, campaign: &Campaign) -> Result<i64> {
     let ambient_c = campaign.sensors.with_role(Role::Ambient).and_then(|a| {
         campaign
             .measurements
@@ -575,163 +499,374 @@ fn ingest_in(
             now_unix()
         ],
     )
-    .map_err(w)?;
-    let campaign_id = tx.last_insert_rowid();
+    .map_err(|e| write_err(p, e))?;
+    Ok(tx.last_insert_rowid())
+}
 
-    // Sensors: the same name must keep its role and unit; a changed calibration gets a new row.
+/// Link every logged sensor (in log column order) to the campaign with its calibration.
+/// Returns each column's sensor id and calibration.
+fn insert_campaign_sensors(
+    tx: &Connection,
+    p: &Path,
+    campaign: &Campaign,
+    campaign_id: i64,
+) -> Result<Vec<(i64, Calibration)>> {
     let mut sensor_ids = Vec::new();
     for (column, name) in campaign.raw_log.sensors.iter().enumerate() {
         let s = campaign.sensors.get(name).ok_or_else(|| {
             Error::Internal(format!("log sensor '{name}' missing from the sensor table"))
         })?;
-        let found: Option<(i64, String, String)> = tx
-            .query_row(
-                "SELECT id, role, unit FROM sensors WHERE name = ?1",
-                params![s.name],
-                |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
-            )
-            .optional()
-            .map_err(w)?;
-        let sid = match found {
-            Some((id, role, unit)) => {
-                if role != s.role.name() || unit != s.unit.name() {
-                    return Err(Error::input(
-                        Location::file(&campaign.sensors.path),
-                        format!(
-                            "sensor '{}' is stored as {role}/{unit}, this table says {}/{}",
-                            s.name,
-                            s.role.name(),
-                            s.unit.name()
-                        ),
-                        "keep a sensor's role and unit, or give a new sensor a new name",
-                    ));
-                }
-                tx.execute(
-                    "UPDATE sensors SET median_window = ?2, sg_window = ?3, sg_order = ?4
-                     WHERE id = ?1",
-                    params![
-                        id,
-                        s.filter.median_window as i64,
-                        s.filter.sg_window as i64,
-                        s.filter.sg_order as i64
-                    ],
-                )
-                .map_err(w)?;
-                id
-            }
-            None => {
-                tx.execute(
-                    "INSERT INTO sensors (name, role, unit, median_window, sg_window, sg_order)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-                    params![
-                        s.name,
-                        s.role.name(),
-                        s.unit.name(),
-                        s.filter.median_window as i64,
-                        s.filter.sg_window as i64,
-                        s.filter.sg_order as i64
-                    ],
-                )
-                .map_err(w)?;
-                tx.last_insert_rowid()
-            }
-        };
-        let latest: Option<(i64, f64, f64)> = tx
-            .query_row(
-                "SELECT id, offset_c, scale FROM calibrations WHERE sensor_id = ?1
-                 ORDER BY id DESC LIMIT 1",
-                params![sid],
-                |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
-            )
-            .optional()
-            .map_err(w)?;
-        let cal_id = match latest {
-            Some((id, o, k)) if o == s.calibration.offset_c && k == s.calibration.scale => id,
-            _ => {
-                tx.execute(
-                    "INSERT INTO calibrations (sensor_id, offset_c, scale, created_unix)
-                     VALUES (?1, ?2, ?3, ?4)",
-                    params![sid, s.calibration.offset_c, s.calibration.scale, now_unix()],
-                )
-                .map_err(w)?;
-                tx.last_insert_rowid()
-            }
-        };
+        let sid = upsert_sensor(tx, p, &campaign.sensors.path, s)?;
+        let cal_id = calibration_id(tx, p, sid, s.calibration)?;
         tx.execute(
             "INSERT INTO campaign_sensors (campaign_id, sensor_id, calibration_id, column_index)
              VALUES (?1, ?2, ?3, ?4)",
             params![campaign_id, sid, cal_id, column as i64],
         )
-        .map_err(w)?;
+        .map_err(|e| write_err(p, e))?;
         sensor_ids.push((sid, s.calibration));
     }
+    Ok(sensor_ids)
+}
 
-    let mut samples = 0u64;
-    {
-        let mut insert = tx
-            .prepare_cached(
-                "INSERT INTO temperature_samples (campaign_id, sensor_id, time_s, temperature_c)
+/// The id of a sensor, added if new. The same name must keep its role and unit; its filter
+/// settings are updated. `table` (the sensor table) names the input in messages.
+fn upsert_sensor(tx: &Connection, p: &Path, table: &Path, s: &Sensor) -> Result<i64> {
+    let w = |e| write_err(p, e);
+    let found: Option<(i64, String, String)> = tx
+        .query_row(
+            "SELECT id, role, unit FROM sensors WHERE name = ?1",
+            params![s.name],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+        )
+        .optional()
+        .map_err(w)?;
+    let filter = [
+        s.filter.median_window as i64,
+        s.filter.sg_window as i64,
+        s.filter.sg_order as i64,
+    ];
+    let Some((id, role, unit)) = found else {
+        tx.execute(
+            "INSERT INTO sensors (name, role, unit, median_window, sg_window, sg_order)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            params![
+                s.name,
+                s.role.name(),
+                s.unit.name(),
+                filter[0],
+                filter[1],
+                filter[2]
+            ],
+        )
+        .map_err(w)?;
+        return Ok(tx.last_insert_rowid());
+    };
+    if role != s.role.name() || unit != s.unit.name() {
+        return Err(Error::input(
+            Location::file(table),
+            format!(
+                "sensor '{}' is stored as {role}/{unit}, this table says {}/{}",
+                s.name,
+                s.role.name(),
+                s.unit.name()
+            ),
+            "keep a sensor's role and unit, or give a new sensor a new name",
+        ));
+    }
+    tx.execute(
+        "UPDATE sensors SET median_window = ?2, sg_window = ?3, sg_order = ?4
+         WHERE id = ?1",
+        params![id, filter[0], filter[1], filter[2]],
+    )
+    .map_err(w)?;
+    Ok(id)
+}
+
+/// The id of the sensor's latest calibration if it equals `cal`, else of a new row for `cal`.
+fn calibration_id(tx: &Connection, p: &Path, sensor_id: i64, cal: Calibration) -> Result<i64> {
+    let w = |e| write_err(p, e);
+    let latest: Option<(i64, f64, f64)> = tx
+        .query_row(
+            "SELECT id, offset_c, scale FROM calibrations WHERE sensor_id = ?1
+             ORDER BY id DESC LIMIT 1",
+            params![sensor_id],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+        )
+        .optional()
+        .map_err(w)?;
+    match latest {
+        Some((id, o, k)) if o == cal.offset_c && k == cal.scale => Ok(id),
+        _ => {
+            tx.execute(
+                "INSERT INTO calibrations (sensor_id, offset_c, scale, created_unix)
                  VALUES (?1, ?2, ?3, ?4)",
+                params![sensor_id, cal.offset_c, cal.scale, now_unix()],
             )
             .map_err(w)?;
-        for (k, (sid, cal)) in sensor_ids.iter().enumerate() {
-            for (t, raw) in campaign
-                .raw_log
-                .time_s
-                .iter()
-                .zip(&campaign.raw_log.raw_c[k])
-            {
-                insert
-                    .execute(params![campaign_id, sid, t, cal.apply(*raw)])
-                    .map_err(w)?;
-                samples += 1;
-                if hooks.fail_after_samples == Some(samples) {
-                    return Err(Error::Internal(format!(
-                        "ingest stopped after {samples} samples (injected failure)"
-                    )));
-                }
-                if hooks.pause_after_samples == Some(samples) {
-                    eprintln!("errmap: ingest paused after {samples} samples");
-                    let mut line = String::new();
-                    let _ = std::io::stdin().read_line(&mut line);
-                }
-            }
+            Ok(tx.last_insert_rowid())
         }
     }
+}
+
+/// Every logged sample, calibrated; `after_sample` sees the running count. Returns the count.
+fn insert_samples(
+    tx: &Connection,
+    p: &Path,
+    campaign: &Campaign,
+    campaign_id: i64,
+    sensor_ids: &[(i64, Calibration)],
+    after_sample: &mut dyn FnMut(u64) -> Result<()>,
+) -> Result<u64> {
+    let w = |e| write_err(p, e);
+    let mut insert = tx
+        .prepare_cached(
+            "INSERT INTO temperature_samples (campaign_id, sensor_id, time_s, temperature_c)
+             VALUES (?1, ?2, ?3, ?4)",
+        )
+        .map_err(w)?;
+    let mut samples = 0u64;
+    for (k, (sid, cal)) in sensor_ids.iter().enumerate() {
+        let log = &campaign.raw_log;
+        for (t, raw) in log.time_s.iter().zip(&log.raw_c[k]) {
+            insert
+                .execute(params![campaign_id, sid, t, cal.apply(*raw)])
+                .map_err(w)?;
+            samples += 1;
+            after_sample(samples)?;
+        }
+    }
+    Ok(samples)
+}
+
+/// Every laser reading with its measurement time. Returns the count.
+fn insert_readings(
+    tx: &Connection,
+    p: &Path,
+    campaign: &Campaign,
+    campaign_id: i64,
+) -> Result<u64> {
+    let w = |e| write_err(p, e);
+    let mut insert = tx
+        .prepare_cached(
+            "INSERT INTO laser_readings (campaign_id, time_s, run, direction, target_mm,
+                                         deviation_um, line)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        )
+        .map_err(w)?;
     let mut readings = 0u64;
-    {
-        let mut insert = tx
-            .prepare_cached(
-                "INSERT INTO laser_readings (campaign_id, time_s, run, direction, target_mm,
-                                             deviation_um, line)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-            )
-            .map_err(w)?;
-        for m in &campaign.measurements {
-            for pt in &m.points {
-                insert
-                    .execute(params![
-                        campaign_id,
-                        m.time_s,
-                        pt.run as i64,
-                        pt.direction.symbol(),
-                        pt.target_mm,
-                        pt.deviation_um,
-                        pt.line as i64
-                    ])
-                    .map_err(w)?;
-                readings += 1;
-            }
+    for m in &campaign.measurements {
+        for pt in &m.points {
+            insert
+                .execute(params![
+                    campaign_id,
+                    m.time_s,
+                    pt.run as i64,
+                    pt.direction.symbol(),
+                    pt.target_mm,
+                    pt.deviation_um,
+                    pt.line as i64
+                ])
+                .map_err(w)?;
+            readings += 1;
         }
     }
-    Ok(IngestSummary {
-        campaign: campaign.name.clone(),
-        campaign_id,
-        sensors: sensor_ids.len(),
-        temperature_samples: samples,
-        laser_readings: readings,
-        replaced: existing.is_some(),
+    Ok(readings)
+}
+
+/// A stored campaign's own row.
+struct CampaignRow {
+    id: i64,
+    axis: String,
+    coolant: String,
+    reference_point_mm: f64,
+    measurement_s: f64,
+    /// The run file it was ingested from.
+    source: String,
+}
+
+/// The row of campaign `name`; a usage error when there is none.
+fn campaign_row(conn: &Connection, p: &Path, name: &str) -> Result<CampaignRow> {
+    conn.query_row(
+        "SELECT id, axis, coolant, reference_point_mm, measurement_s, source
+         FROM campaigns WHERE name = ?1",
+        params![name],
+        |r| {
+            Ok(CampaignRow {
+                id: r.get(0)?,
+                axis: r.get(1)?,
+                coolant: r.get(2)?,
+                reference_point_mm: r.get(3)?,
+                measurement_s: r.get(4)?,
+                source: r.get(5)?,
+            })
+        },
+    )
+    .optional()
+    .map_err(|e| read_err(p, e))?
+    .ok_or_else(|| {
+        Error::usage(
+            format!("no campaign '{name}' in {}", p.display()),
+            "list the stored campaigns with `errmap thermal models`",
+        )
     })
+}
+
+/// The campaign's sensors in log column order, with the calibration it was ingested with,
+/// and their ids.
+fn campaign_sensors(conn: &Connection, p: &Path, id: i64) -> Result<(SensorTable, Vec<i64>)> {
+    let mut stmt = conn
+        .prepare(
+            "SELECT s.id, s.name, s.role, s.unit, s.median_window, s.sg_window, s.sg_order,
+                    c.offset_c, c.scale
+             FROM campaign_sensors cs JOIN sensors s ON s.id = cs.sensor_id
+             JOIN calibrations c ON c.id = cs.calibration_id
+             WHERE cs.campaign_id = ?1 ORDER BY cs.column_index",
+        )
+        .map_err(|e| read_err(p, e))?;
+    let rows = stmt
+        .query_map(params![id], |r| {
+            Ok((
+                r.get::<_, i64>(0)?,
+                r.get::<_, String>(1)?,
+                r.get::<_, String>(2)?,
+                r.get::<_, String>(3)?,
+                [
+                    r.get::<_, i64>(4)?,
+                    r.get::<_, i64>(5)?,
+                    r.get::<_, i64>(6)?,
+                ],
+                Calibration {
+                    offset_c: r.get(7)?,
+                    scale: r.get(8)?,
+                },
+            ))
+        })
+        .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
+        .map_err(|e| read_err(p, e))?;
+    let mut sensors = Vec::new();
+    let mut ids = Vec::new();
+    for (sid, sname, role, unit, [mw, sw, so], calibration) in rows {
+        let bad = || {
+            Error::input(
+                Location::file(p),
+                format!("sensor '{sname}' has an unknown role or unit in the store"),
+                "the store was written by another program; ingest the campaign again",
+            )
+        };
+        sensors.push(Sensor {
+            name: sname.clone(),
+            role: Role::parse(&role).ok_or_else(bad)?,
+            unit: Unit::parse(&unit).ok_or_else(bad)?,
+            calibration,
+            filter: FilterSpec {
+                median_window: mw.max(1) as usize,
+                sg_window: sw.max(1) as usize,
+                sg_order: so.max(0) as usize,
+            },
+        });
+        ids.push(sid);
+    }
+    let table = SensorTable {
+        path: p.to_path_buf(),
+        sensors,
+    };
+    Ok((table, ids))
+}
+
+/// The stored (calibrated) samples of campaign `id` as a log, one channel per sensor id;
+/// every sensor must have the same sample times.
+fn stored_log(
+    conn: &Connection,
+    p: &Path,
+    name: &str,
+    id: i64,
+    sensor_ids: &[i64],
+    table: &SensorTable,
+) -> Result<TemperatureLog> {
+    let mut time_s: Vec<f64> = Vec::new();
+    let mut channels: Vec<Vec<f64>> = Vec::new();
+    for (k, sid) in sensor_ids.iter().enumerate() {
+        let mut stmt = conn
+            .prepare_cached(
+                "SELECT time_s, temperature_c FROM temperature_samples
+                 WHERE campaign_id = ?1 AND sensor_id = ?2 ORDER BY time_s",
+            )
+            .map_err(|e| read_err(p, e))?;
+        let samples = stmt
+            .query_map(params![id, sid], |r| {
+                Ok((r.get::<_, f64>(0)?, r.get::<_, f64>(1)?))
+            })
+            .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
+            .map_err(|e| read_err(p, e))?;
+        if k == 0 {
+            time_s = samples.iter().map(|s| s.0).collect();
+        } else if samples.len() != time_s.len()
+            || samples.iter().zip(&time_s).any(|(s, t)| s.0 != *t)
+        {
+            return Err(Error::input(
+                Location::file(p),
+                format!("campaign '{name}': sensors have different sample times in the store"),
+                "ingest the campaign again with --replace",
+            ));
+        }
+        channels.push(samples.into_iter().map(|s| s.1).collect());
+    }
+    Ok(TemperatureLog {
+        path: p.to_path_buf(),
+        time_s,
+        sensors: table.sensors.iter().map(|s| s.name.clone()).collect(),
+        raw_c: channels,
+    })
+}
+
+/// The stored laser readings of campaign `id` with their measurement times, in ingest order.
+fn stored_readings(
+    conn: &Connection,
+    p: &Path,
+    name: &str,
+    id: i64,
+) -> Result<Vec<(f64, LaserPoint)>> {
+    let mut stmt = conn
+        .prepare(
+            "SELECT time_s, run, direction, target_mm, deviation_um, line
+             FROM laser_readings WHERE campaign_id = ?1 ORDER BY rowid",
+        )
+        .map_err(|e| read_err(p, e))?;
+    let readings = stmt
+        .query_map(params![id], |r| {
+            Ok((
+                r.get::<_, f64>(0)?,
+                r.get::<_, i64>(1)?,
+                r.get::<_, String>(2)?,
+                r.get::<_, f64>(3)?,
+                r.get::<_, f64>(4)?,
+                r.get::<_, i64>(5)?,
+            ))
+        })
+        .and_then(|rows| rows.collect::<rusqlite::Result<Vec<_>>>())
+        .map_err(|e| read_err(p, e))?;
+    let mut timed = Vec::with_capacity(readings.len());
+    for (t, run, dir, x, e, line) in readings {
+        let direction = Direction::parse(&dir).ok_or_else(|| {
+            Error::input(
+                Location::file(p),
+                format!("campaign '{name}': direction '{dir}' in the store"),
+                "ingest the campaign again with --replace",
+            )
+        })?;
+        timed.push((
+            t,
+            LaserPoint {
+                run: run.max(0) as u32,
+                direction,
+                target_mm: x,
+                deviation_um: e,
+                line: line.max(0) as u64,
+            },
+        ));
+    }
+    Ok(timed)
 }
 
 fn read_err(path: &Path, e: rusqlite::Error) -> Error {
@@ -758,34 +893,37 @@ mod tests {
         }
     }
 
-    #[test]
-    fn ingest_load_round_trip_and_model_versions() {
-        let dir = tempfile::tempdir().unwrap();
-        let truth = write_campaigns(dir.path(), &small()).unwrap();
-        let db = dir.path().join(DEFAULT_STORE);
-        let mut store = Store::open(&db).unwrap();
-        let mode: String = Connection::open(&db)
-            .unwrap()
-            .query_row("PRAGMA journal_mode", [], |r| r.get(0))
-            .unwrap();
-        assert_eq!(mode.to_ascii_lowercase(), "wal");
-        // A non-trivial calibration must survive the round trip.
-        let table_path = dir.path().join("sensors.csv");
+    /// A store in `dir` holding the first synthetic campaign, whose second sensor has a
+    /// non-trivial calibration; returns the store and the campaign as read from its folder.
+    fn store_with_one_campaign(dir: &Path) -> (Store, Campaign) {
+        let truth = write_campaigns(dir, &small()).unwrap();
+        let mut store = Store::open(&dir.join(DEFAULT_STORE)).unwrap();
+        let table_path = dir.join("sensors.csv");
         let mut table = SensorTable::read(&table_path).unwrap();
         table.sensors[1].calibration = Calibration {
             offset_c: 0.3,
             scale: 1.01,
         };
         table.write(&table_path).unwrap();
-        let original = Campaign::read(&dir.path().join(&truth.campaigns[0].name)).unwrap();
-        let summary = store
-            .ingest(&original, false, IngestHooks::default())
-            .unwrap();
+        let original = Campaign::read(&dir.join(&truth.campaigns[0].name)).unwrap();
+        let summary = store.ingest(&original, false).unwrap();
         assert_eq!(summary.sensors, 3);
         assert_eq!(
             summary.temperature_samples,
             3 * original.raw_log.time_s.len() as u64
         );
+        (store, original)
+    }
+
+    #[test]
+    fn ingest_load_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (store, original) = store_with_one_campaign(dir.path());
+        let mode: String = Connection::open(&store.path)
+            .unwrap()
+            .query_row("PRAGMA journal_mode", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(mode.to_ascii_lowercase(), "wal");
         let back = store.load_campaign(&original.name).unwrap();
         assert_eq!(back.coolant, original.coolant);
         assert_eq!(back.measurements.len(), original.measurements.len());
@@ -805,21 +943,28 @@ mod tests {
         // The logged sensors come back with their calibrations (the reference is not logged).
         assert_eq!(back.sensors.sensors[..], original.sensors.sensors[..3]);
         assert_eq!(back.sensors.sensors[1].calibration.scale, 1.01);
-        // The same name again is refused without --replace and leaves the store as it was.
-        let before = store.counts().unwrap();
-        assert!(store
-            .ingest(&original, false, IngestHooks::default())
-            .is_err());
-        assert_eq!(store.counts().unwrap(), before);
-        let again = store
-            .ingest(&original, true, IngestHooks::default())
-            .unwrap();
-        assert!(again.replaced);
-        assert_eq!(
-            store.counts().unwrap().temperature_samples,
-            before.temperature_samples
-        );
+    }
 
+    #[test]
+    fn the_same_name_is_refused_unless_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut store, original) = store_with_one_campaign(dir.path());
+        // Refused without --replace, and the store is left as it was.
+        let before = store.counts().unwrap();
+        let err = store.ingest(&original, false).unwrap_err();
+        assert!(matches!(err, Error::Usage { .. }), "{err:?}");
+        assert!(err.to_string().contains("is already in"), "{err}");
+        assert_eq!(store.counts().unwrap(), before);
+        let again = store.ingest(&original, true).unwrap();
+        assert!(again.replaced);
+        assert_eq!(store.counts().unwrap(), before);
+    }
+
+    #[test]
+    fn saved_models_get_versions_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut store, original) = store_with_one_campaign(dir.path());
+        let back = store.load_campaign(&original.name).unwrap();
         let model = crate::thermal::fit(
             &[back],
             &crate::thermal::FitOptions {
@@ -854,14 +999,17 @@ mod tests {
         let db = dir.path().join(DEFAULT_STORE);
         let mut store = Store::open(&db).unwrap();
         let first = Campaign::read(&dir.path().join(&truth.campaigns[0].name)).unwrap();
-        store.ingest(&first, false, IngestHooks::default()).unwrap();
+        store.ingest(&first, false).unwrap();
         let before = store.counts().unwrap();
         let second = Campaign::read(&dir.path().join(&truth.campaigns[1].name)).unwrap();
-        let hooks = IngestHooks {
+        let faults = IngestFaults {
             fail_after_samples: Some(100),
-            ..Default::default()
+            pause_after_samples: None,
+            pause: &mut |_| unreachable!("no pause asked for"),
         };
-        let err = store.ingest(&second, false, hooks).unwrap_err();
+        let err = store
+            .ingest_with_faults(&second, false, faults)
+            .unwrap_err();
         assert!(err.to_string().contains("injected"), "{err}");
         assert_eq!(store.counts().unwrap(), before);
         assert_eq!(
