@@ -14,6 +14,7 @@ pub mod backend;
 pub mod batch;
 pub mod circular;
 pub mod controller;
+pub mod direction;
 pub mod error;
 pub mod geom;
 pub mod gpu;

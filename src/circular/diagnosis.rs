@@ -223,7 +223,7 @@ struct Ranges {
 
 fn ranges(c: &Centred, radius_mm: f64) -> Ranges {
     let mut steps = Vec::new();
-    for d in [super::Direction::Ccw, super::Direction::Cw] {
+    for d in [super::Rotation::Ccw, super::Rotation::Cw] {
         let mut a: Vec<f64> = c.of(d).iter().map(|&i| c.nominal_angle_rad[i]).collect();
         a.sort_by(f64::total_cmp);
         steps.extend(a.windows(2).map(|w| w[1] - w[0]));

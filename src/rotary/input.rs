@@ -69,39 +69,7 @@ impl fmt::Display for RotaryAxis {
     }
 }
 
-/// Direction of approach to a target angle: `+` (increasing angle) or `-`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub enum Direction {
-    #[serde(rename = "+")]
-    Forward,
-    #[serde(rename = "-")]
-    Reverse,
-}
-
-impl Direction {
-    /// Parse `+` or `-`.
-    pub fn parse(text: &str) -> Option<Direction> {
-        match text.trim() {
-            "+" => Some(Direction::Forward),
-            "-" => Some(Direction::Reverse),
-            _ => None,
-        }
-    }
-
-    /// The file symbol, `+` or `-`.
-    pub fn symbol(self) -> &'static str {
-        match self {
-            Direction::Forward => "+",
-            Direction::Reverse => "-",
-        }
-    }
-}
-
-impl fmt::Display for Direction {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.symbol())
-    }
-}
+pub use crate::direction::Direction;
 
 /// The measured points of one sphere at one position: one centre, or the touch points.
 #[derive(Debug, Clone, Default)]
@@ -205,7 +173,7 @@ pub fn parse_measurement(table: CsvTable) -> Result<Measurement> {
             Some(_) => {}
         }
         let text = table.text(row, c_dir);
-        let direction = Direction::parse(text).ok_or_else(|| {
+        let direction = Direction::parse_symbol(text).ok_or_else(|| {
             table.error_at(
                 row,
                 Some(c_dir),

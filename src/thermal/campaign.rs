@@ -27,10 +27,7 @@ pub const DIRECTIONS: [Direction; 2] = [Direction::Forward, Direction::Reverse];
 
 /// "forward" or "reverse".
 pub fn direction_name(d: Direction) -> &'static str {
-    match d {
-        Direction::Forward => "forward",
-        Direction::Reverse => "reverse",
-    }
+    d.name()
 }
 
 /// One laser reading.
