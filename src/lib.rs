@@ -23,6 +23,7 @@ pub mod io;
 pub mod linear;
 pub mod map;
 pub mod nn;
+pub mod numeric;
 pub mod probe;
 pub mod progress;
 pub mod report;

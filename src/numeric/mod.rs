@@ -1,0 +1,3 @@
+//! Shared numerics: linear least squares with its conditioning, and the number formatting of written files.
+
+pub mod lsq;
