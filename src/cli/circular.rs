@@ -156,7 +156,7 @@ fn print_stdout(text: &str) -> Result<()> {
 }
 
 fn num(v: Option<f64>, digits: usize) -> String {
-    v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
+    errmap::numeric::format::opt(v, digits, "-")
 }
 
 /// The text report of `errmap circular`.

@@ -260,7 +260,7 @@ fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
 }
 
 fn opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into())
+    errmap::numeric::format::opt(v, 3, "n/a")
 }
 
 fn run_calibrate(a: CalibrateArgs, _g: Globals) -> Result<i32> {
