@@ -774,6 +774,11 @@ fn bad_labels_headers_and_outputs_are_refused() {
         &["circular", "run.csv", "--radius", "100", "-o", "run.csv"],
     );
     run.expect_code(2);
+    assert!(
+        run.stderr.contains("would overwrite the run file"),
+        "{}",
+        run.report()
+    );
     assert!(std::fs::read_to_string(dir.path().join("run.csv"))
         .unwrap()
         .starts_with("direction"));
