@@ -102,18 +102,18 @@ impl Lstsq {
     }
 }
 
-/// Solve `a·β ≈ y` by Householder QR of `a` with its columns scaled to unit norm (so that
-/// the rank test does not depend on units). A diagonal element of R at or below
-/// `rank_tolerance` times the largest is a rank deficiency: refused, never split arbitrarily.
-pub fn solve(a: &DMatrix<f64>, y: &[f64], rank_tolerance: f64) -> Result<Lstsq, Refusal> {
+/// The QR factorization of a design with unit-norm columns, checked for rank.
+struct Factored {
+    norms: Vec<f64>,
+    q: DMatrix<f64>,
+    r: DMatrix<f64>,
+    condition: f64,
+}
+
+/// Factor `a` (n ≥ p, no zero column) with its columns scaled to unit norm, refusing a rank
+/// deficiency: a diagonal element of R at or below `rank_tolerance` times the largest.
+fn factor(a: &DMatrix<f64>, rank_tolerance: f64) -> Result<Factored, Refusal> {
     let (n, p) = a.shape();
-    if p == 0 || y.len() != n {
-        return Err(Refusal::Shape {
-            values: y.len(),
-            rows: n,
-            columns: p,
-        });
-    }
     if n < p {
         return Err(Refusal::TooFew {
             rows: n,
@@ -144,26 +144,70 @@ pub fn solve(a: &DMatrix<f64>, y: &[f64], rank_tolerance: f64) -> Result<Lstsq, 
             condition,
         });
     }
-    let yv = DVector::from_column_slice(y);
-    let singular = Refusal::RankDeficient {
+    Ok(Factored {
+        norms,
+        q: qr.q(),
+        r,
+        condition,
+    })
+}
+
+/// The refusal of a triangular solve or inverse that failed after the rank test passed.
+fn singular(p: usize) -> Refusal {
+    Refusal::RankDeficient {
         column: p - 1,
         rank: p - 1,
         condition: f64::INFINITY,
-    };
-    let z = r
-        .solve_upper_triangular(&(qr.q().transpose() * &yv))
-        .ok_or(singular)?;
-    let beta: Vec<f64> = (0..p).map(|j| z[j] / norms[j]).collect();
+    }
+}
+
+/// Solve `a·β ≈ y` by Householder QR of `a` with its columns scaled to unit norm (so that
+/// the rank test does not depend on units). A diagonal element of R at or below
+/// `rank_tolerance` times the largest is a rank deficiency: refused, never split arbitrarily.
+pub fn solve(a: &DMatrix<f64>, y: &[f64], rank_tolerance: f64) -> Result<Lstsq, Refusal> {
+    let (n, p) = a.shape();
+    if p == 0 || y.len() != n {
+        return Err(Refusal::Shape {
+            values: y.len(),
+            rows: n,
+            columns: p,
+        });
+    }
+    let f = factor(a, rank_tolerance)?;
+    let yv = DVector::from_column_slice(y);
+    let z =
+        f.r.solve_upper_triangular(&(f.q.transpose() * &yv))
+            .ok_or(singular(p))?;
+    let beta: Vec<f64> = (0..p).map(|j| z[j] / f.norms[j]).collect();
     let rss = (&yv - a * DVector::from_column_slice(&beta)).norm_squared();
-    let r_inv = r.try_inverse().ok_or(singular)?;
+    let r_inv = f.r.try_inverse().ok_or(singular(p))?;
     Ok(Lstsq {
         beta,
         rss,
         n,
-        condition,
-        norms,
+        condition: f.condition,
+        norms: f.norms,
         r_inv,
     })
+}
+
+/// The least-squares projection A⁺ = (AᵀA)⁻¹Aᵀ (p × n), so that β = A⁺·y for every y
+/// (fixed-design filters such as Savitzky–Golay); by the same QR and rank test as [`solve`].
+pub fn projection(a: &DMatrix<f64>, rank_tolerance: f64) -> Result<DMatrix<f64>, Refusal> {
+    let p = a.ncols();
+    if p == 0 {
+        return Err(Refusal::Shape {
+            values: 0,
+            rows: a.nrows(),
+            columns: 0,
+        });
+    }
+    let f = factor(a, rank_tolerance)?;
+    let mut pinv = f.r.try_inverse().ok_or(singular(p))? * f.q.transpose();
+    for (j, norm) in f.norms.iter().enumerate() {
+        pinv.row_mut(j).scale_mut(1.0 / norm);
+    }
+    Ok(pinv)
 }
 
 /// Solve with the design given row by row: `rows` holds `p` regressors per observation.
@@ -339,6 +383,26 @@ mod tests {
             err.to_string().contains("depends on the others (rank 2"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn projection_gives_the_savitzky_golay_weights() {
+        // Quadratic through 5 equally spaced samples: the smoothed centre value has the
+        // published weights (−3, 12, 17, 12, −3)/35 (Savitzky & Golay 1964, table I).
+        let a = DMatrix::from_fn(5, 3, |i, j| (i as f64 - 2.0).powi(j as i32));
+        let p = projection(&a, DEFAULT_RANK_TOLERANCE).unwrap();
+        for (w, want) in p.row(0).iter().zip([-3.0, 12.0, 17.0, 12.0, -3.0]) {
+            assert!((w - want / 35.0).abs() < 1e-15, "{w} vs {want}/35");
+        }
+        // The slope row: (−2, −1, 0, 1, 2)/10.
+        for (w, want) in p.row(1).iter().zip([-2.0, -1.0, 0.0, 1.0, 2.0]) {
+            assert!((w - want / 10.0).abs() < 1e-15, "{w} vs {want}/10");
+        }
+        let dependent = DMatrix::from_fn(4, 2, |i, _| i as f64 + 1.0);
+        assert!(matches!(
+            projection(&dependent, DEFAULT_RANK_TOLERANCE),
+            Err(Refusal::RankDeficient { rank: 1, .. })
+        ));
     }
 
     #[test]
