@@ -310,7 +310,8 @@ fn old_output_folder_of_thermal_difference_and_evaluate_works_or_is_refused_when
         d,
         &["thermal", "difference", campaign, "--out-dir", "dd", "-q"],
     );
-    assert!(d.join("dd/fan.png").exists());
+    let fan = image::open(d.join("dd/fan.png")).unwrap();
+    assert_eq!((fan.width(), fan.height()), (1300, 560));
 
     let fit = [
         "thermal",

@@ -807,9 +807,12 @@ mod tests {
         assert_eq!(back.sensors.sensors[1].calibration.scale, 1.01);
         // The same name again is refused without --replace and leaves the store as it was.
         let before = store.counts().unwrap();
-        assert!(store
+        let err = store
             .ingest(&original, false, IngestHooks::default())
-            .is_err());
+            .unwrap_err();
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(err.to_string().contains("is already in"), "{err}");
+        assert!(err.to_string().contains("--replace"), "{err}");
         assert_eq!(store.counts().unwrap(), before);
         let again = store
             .ingest(&original, true, IngestHooks::default())
