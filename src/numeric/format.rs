@@ -139,7 +139,7 @@ mod tests {
         assert_eq!(fixed(2.5, 0), "2"); // format! rounds the exact binary value half to even
         assert_eq!(opt(Some(-1.005), 1, "n/a"), "-1.0");
         assert_eq!(opt(None, 2, "–"), "–");
-        assert_eq!(format!("{:>9}", opt(Some(3.14159), 3, "n/a")), "    3.142");
+        assert_eq!(format!("{:>9}", opt(Some(12.3456), 3, "n/a")), "   12.346");
     }
 
     #[test]
