@@ -112,7 +112,7 @@ fn backlash_on_one_axis_gives_the_step_b_at_the_reversal_angles() {
     let run = parse_run(Path::new("bl.csv"), &text, &opts(r)).unwrap();
     let (e, c, _) = analyze(&run, Plane::Xy, None).unwrap();
     // Deviation at the readings 0.3° after and before each reversal, in travel order.
-    let dev_at = |dir: errmap::circular::Direction, deg: f64| {
+    let dev_at = |dir: errmap::circular::Rotation, deg: f64| {
         let target = deg.to_radians().rem_euclid(TAU);
         let i = c
             .of(dir)
@@ -125,7 +125,7 @@ fn backlash_on_one_axis_gives_the_step_b_at_the_reversal_angles() {
             .unwrap();
         c.dev_um[i]
     };
-    use errmap::circular::Direction::{Ccw, Cw};
+    use errmap::circular::Rotation::{Ccw, Cw};
     for (dir, sigma) in [(Ccw, 1.0), (Cw, -1.0)] {
         for rev in [0.0, 180.0] {
             let after = dev_at(dir, rev + sigma * 0.3);
@@ -774,6 +774,11 @@ fn bad_labels_headers_and_outputs_are_refused() {
         &["circular", "run.csv", "--radius", "100", "-o", "run.csv"],
     );
     run.expect_code(2);
+    assert!(
+        run.stderr.contains("would overwrite the run file"),
+        "{}",
+        run.report()
+    );
     assert!(std::fs::read_to_string(dir.path().join("run.csv"))
         .unwrap()
         .starts_with("direction"));

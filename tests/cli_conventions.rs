@@ -173,6 +173,11 @@ fn old_out_of_every_synth_command_still_works_with_a_note() {
     // Both spellings at once is a usage error, not a guess.
     let run = errmap(d, &["synth", "linear", "--out", "a", "--out-dir", "b"]);
     run.expect_code(2);
+    assert!(
+        run.stderr.contains("--out") && run.stderr.contains("cannot be used with"),
+        "{}",
+        run.report()
+    );
     assert!(!d.join("a").exists() && !d.join("b").exists());
     // Without either, the new spelling is the one asked for.
     let run = errmap(d, &["synth", "linear"]);
@@ -305,7 +310,8 @@ fn old_output_folder_of_thermal_difference_and_evaluate_works_or_is_refused_when
         d,
         &["thermal", "difference", campaign, "--out-dir", "dd", "-q"],
     );
-    assert!(d.join("dd/fan.png").exists());
+    let fan = image::open(d.join("dd/fan.png")).unwrap();
+    assert_eq!((fan.width(), fan.height()), (1300, 560));
 
     let fit = [
         "thermal",
@@ -352,6 +358,7 @@ fn old_output_folder_of_thermal_difference_and_evaluate_works_or_is_refused_when
         ],
     );
     run.expect_code(2);
+    assert!(run.stderr.contains("ev.png"), "{}", run.report());
     assert!(!d.join("ev.png").exists());
 }
 
@@ -414,7 +421,13 @@ fn quiet_runs_print_nothing_and_errors_still_show() {
     run.expect_code(2);
     assert!(run.stderr.contains("missing.csv"), "{}", run.report());
     // -q and -v contradict each other.
-    errmap(d, &["synth", "linear", "--out-dir", "l3", "-q", "-v"]).expect_code(2);
+    let run = errmap(d, &["synth", "linear", "--out-dir", "l3", "-q", "-v"]);
+    run.expect_code(2);
+    assert!(
+        run.stderr.contains("cannot be used with"),
+        "{}",
+        run.report()
+    );
 }
 
 #[test]

@@ -276,7 +276,9 @@ fn gpu_rejects_shapes_it_cannot_hold() {
     assert!(err.to_string().contains("width"), "{err}");
     let mut broken = Mlp::init(&[2, 4, 1], Activation::Tanh, 1);
     broken.params.pop();
-    assert!(gpu.evaluate_batch(&[broken], &[[0.0, 0.0]]).is_err());
+    let err = gpu.evaluate_batch(&[broken], &[[0.0, 0.0]]).unwrap_err();
+    assert_eq!(err.kind(), "input", "{err}");
+    assert!(err.to_string().contains("parameters, it has"), "{err}");
 }
 
 /// Struct layouts of the host mirrors against the WGSL declarations, as naga lays them out.

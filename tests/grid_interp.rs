@@ -250,7 +250,13 @@ fn grid_covering_counts_nodes_and_refuses_bad_steps() {
         u_max_mm: 5.0,
         ..flipped
     };
-    assert!(Grid::covering(&flipped, 1.0).is_err());
+    let err = Grid::covering(&flipped, 1.0).unwrap_err();
+    assert_eq!(err.exit_code(), 2, "{err}");
+    assert!(
+        err.to_string()
+            .contains("is not a rectangle with min ≤ max"),
+        "{err}"
+    );
 }
 
 #[test]

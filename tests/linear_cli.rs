@@ -164,7 +164,14 @@ fn single_run_reports_null_not_zero() {
             "one.png",
         ],
     ));
-    assert!(dir.path().join("one.png").exists());
+    // Both directions are drawn: the forward (blue) and reverse (red) means and bands.
+    let img = image::open(dir.path().join("one.png")).unwrap().to_rgb8();
+    let (blue, red) = (pixels(&img, FORWARD_RGB), pixels(&img, REVERSE_RGB));
+    println!("one.png: {blue} forward, {red} reverse pixels");
+    assert!(
+        blue > 100 && red > 100,
+        "{blue} forward, {red} reverse pixels"
+    );
     for key in ["R_up", "R_down", "R", "A_up", "A_down", "A"] {
         assert!(doc["axis"][key].is_null(), "{key} = {}", doc["axis"][key]);
     }
@@ -213,6 +220,11 @@ fn bad_input_exits_2_naming_file_line_and_target() {
         &["linear", "analyze", "bad.csv", "--standard", "iso9000"],
     );
     out.expect_code(2);
+    assert!(
+        out.stderr.contains("invalid value 'iso9000'"),
+        "{}",
+        out.stderr
+    );
 }
 
 #[test]
@@ -271,6 +283,11 @@ fn air_index_command_prints_nist_values() {
         ],
     );
     out.expect_code(2);
+    assert!(
+        out.stderr.contains("air temperature -60 °C is outside"),
+        "{}",
+        out.stderr
+    );
 }
 
 #[test]
@@ -665,6 +682,12 @@ fn fanuc_reference_point_elsewhere_than_the_first_target() {
         ],
     );
     out.expect_code(2);
+    assert!(
+        out.stderr
+            .contains("reference position 75 mm is not a table point"),
+        "{}",
+        out.stderr
+    );
 }
 
 /// Forward-only hand data (figures worked out in tests/linear_eval.rs):
@@ -719,8 +742,15 @@ fn unidirectional_runs_analyze_to_json_nulls_text_chart_and_table() {
             out.stdout
         );
     }
-    let png = std::fs::read(dir.path().join("fwd.png")).unwrap();
-    assert!(png.starts_with(b"\x89PNG"), "chart is not a PNG");
+    // Only the forward direction is drawn: its blue line and bands, nothing in reverse red.
+    let img = image::open(dir.path().join("fwd.png")).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (1280, 720));
+    let (blue, red) = (pixels(&img, FORWARD_RGB), pixels(&img, REVERSE_RGB));
+    println!("fwd.png: {blue} forward, {red} reverse pixels");
+    assert!(
+        blue > 300 && red == 0,
+        "{blue} forward, {red} reverse pixels"
+    );
 
     // Human text: the measured figures and n/a for the rest.
     let text = ok(
@@ -915,4 +945,13 @@ fn air_index_json_has_its_keys_in_order_and_the_air_wavelength() {
     close(&doc["humidity_pct"], 50.0, "humidity_pct");
     close(&doc["wavelength_nm"], 633.0, "wavelength_nm");
     close(&doc["co2_ppm"], 450.0, "co2_ppm");
+}
+
+/// Colours of the forward and reverse series of the linear chart (src/linear/chart.rs).
+const FORWARD_RGB: [u8; 3] = [31, 90, 200];
+const REVERSE_RGB: [u8; 3] = [200, 40, 40];
+
+/// How many pixels of `img` are exactly `rgb`.
+fn pixels(img: &image::RgbImage, rgb: [u8; 3]) -> usize {
+    img.pixels().filter(|p| p.0 == rgb).count()
 }

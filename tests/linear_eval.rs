@@ -233,8 +233,15 @@ fn mixed_uni_and_bidirectional_targets_are_an_error() {
         sample(Direction::Forward, 0.0),
         sample(Direction::Reverse, 10.0),
     ];
-    assert!(evaluate(&samples, Standard::Iso230_2_2014).is_err());
-    assert!(evaluate(&[], Standard::Vdi3441).is_err());
+    let err = evaluate(&samples, Standard::Iso230_2_2014).unwrap_err();
+    assert_eq!(err.kind(), "input", "{err}");
+    assert!(
+        err.to_string().contains("mixed uni/bidirectional samples"),
+        "{err}"
+    );
+    let err = evaluate(&[], Standard::Vdi3441).unwrap_err();
+    assert_eq!(err.kind(), "input", "{err}");
+    assert!(err.to_string().contains("no samples to evaluate"), "{err}");
 }
 
 /// Unidirectional hand data: 3 targets × 3 runs, one direction only.
@@ -458,9 +465,14 @@ fn malformed_tables_are_errors_not_panics() {
         let path = dir.path().join(format!("t{i}.txt"));
         std::fs::write(&path, text).unwrap();
         let result = read_table(&path, *format, &TableOptions::default());
+        let Err(err) = result else {
+            panic!("case {i} {text:?} was accepted: {result:?}");
+        };
+        // Refused as bad input, naming the file.
+        assert_eq!(err.exit_code(), 2, "case {i}: {err}");
         assert!(
-            result.is_err(),
-            "case {i} {text:?} was accepted: {result:?}"
+            err.to_string().contains(&format!("t{i}.txt")),
+            "case {i}: {err}"
         );
     }
 }

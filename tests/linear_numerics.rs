@@ -122,27 +122,37 @@ fn index_trends_and_range_checks() {
     let c = refractive_index(&base, AirFormula::Ciddor).unwrap();
     let e = refractive_index(&base, AirFormula::Edlen).unwrap();
     assert!((c - e).abs() < 2e-8, "{c} {e}");
-    assert!(refractive_index(
-        &AirConditions {
-            humidity_pct: 120.0,
-            ..base
-        },
-        AirFormula::Ciddor
-    )
-    .is_err());
-    assert!(refractive_index(
-        &AirConditions {
-            wavelength_nm: 200.0,
-            ..base
-        },
-        AirFormula::Edlen
-    )
-    .is_err());
+    assert_refused(
+        refractive_index(
+            &AirConditions {
+                humidity_pct: 120.0,
+                ..base
+            },
+            AirFormula::Ciddor,
+        ),
+        "input",
+        "relative humidity 120 % is outside 0…100 %",
+    );
+    assert_refused(
+        refractive_index(
+            &AirConditions {
+                wavelength_nm: 200.0,
+                ..base
+            },
+            AirFormula::Edlen,
+        ),
+        "input",
+        "wavelength 200 nm is outside 300…1700 nm",
+    );
     let co2 = AirConditions {
         co2_ppm: 600.0,
         ..base
     };
-    assert!(refractive_index(&co2, AirFormula::Edlen).is_err());
+    assert_refused(
+        refractive_index(&co2, AirFormula::Edlen),
+        "input",
+        "Edlén equation assumes 450 µmol/mol CO2",
+    );
     // More CO2 raises Ciddor's index: raxs·(1 + 5.34e-7·150) and a heavier Ma.
     assert!(refractive_index(&co2, AirFormula::Ciddor).unwrap() > c);
 }
@@ -249,7 +259,11 @@ fn pitch_fit_recovers_planted_values_exactly() {
     let es: Vec<f64> = xs.iter().map(|x| 1.0 + x * 0.01).collect();
     let err = fit_pitch(&xs, &es, 5.0).unwrap_err().to_string();
     assert!(err.contains("multiples of the lead"), "{err}");
-    assert!(fit_pitch(&xs[..4], &es[..4], 7.0).is_err());
+    assert_refused(
+        fit_pitch(&xs[..4], &es[..4], 7.0),
+        "input",
+        "needs at least 5 targets, got 4",
+    );
 }
 
 #[test]
@@ -419,4 +433,11 @@ fn air_index_refuses_conditions_outside_the_valid_range() {
             .to_string();
         assert!(err.contains(message), "expected '{message}' in: {err}");
     }
+}
+
+/// Assert that `result` is refused with an error of `kind` whose message holds `words`.
+fn assert_refused<T: std::fmt::Debug>(result: errmap::Result<T>, kind: &str, words: &str) {
+    let err = result.expect_err(words);
+    assert_eq!(err.kind(), kind, "{err}");
+    assert!(err.to_string().contains(words), "{err}");
 }

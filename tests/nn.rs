@@ -372,13 +372,27 @@ fn bad_batches_are_errors_not_panics() {
     let mut broken = initial_networks(1, &config);
     broken[0].params.pop();
     assert!(broken[0].forward([0.0, 0.0]).is_nan());
-    assert!(loss_gradient(&broken[0], &small_set()).is_err());
-    assert!(CpuTrainer::reference()
-        .evaluate_batch(&broken, &[[0.0, 0.0]])
-        .is_err());
-    assert!(CpuTrainer::reference()
-        .train_from(broken, &[small_set()], &config)
-        .is_err());
+    // A network whose sizes and parameters disagree is refused as bad input, saying so.
+    let refused = |err: errmap::Error, words: &str| {
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(err.to_string().contains(words), "{err}");
+    };
+    refused(
+        loss_gradient(&broken[0], &small_set()).unwrap_err(),
+        "parameters, it has",
+    );
+    refused(
+        CpuTrainer::reference()
+            .evaluate_batch(&broken, &[[0.0, 0.0]])
+            .unwrap_err(),
+        "parameters, it has",
+    );
+    refused(
+        CpuTrainer::reference()
+            .train_from(broken, &[small_set()], &config)
+            .unwrap_err(),
+        "network 0",
+    );
     assert!(CpuTrainer::reference()
         .train_batch(&[], &config)
         .unwrap()

@@ -430,6 +430,11 @@ fn report_refuses_an_input_as_output_and_a_missing_browser() {
         &["report", run.to_str().unwrap(), "-o", png.to_str().unwrap()],
     );
     r.expect_code(2);
+    assert!(
+        r.stderr.contains("map.png") && r.stderr.contains("input"),
+        "{}",
+        r.report()
+    );
     // --pdf with no browser anywhere: exit 2 naming what to install.
     let empty = tmp.path().join("empty-path");
     std::fs::create_dir(&empty).unwrap();
@@ -458,6 +463,7 @@ fn report_refuses_an_input_as_output_and_a_missing_browser() {
     // A folder that holds neither a run nor a result.
     let r = common::errmap(tmp.path(), &["report", empty.to_str().unwrap()]);
     r.expect_code(2);
+    assert!(r.stderr.contains("holds no errmap run"), "{}", r.report());
 }
 
 #[test]

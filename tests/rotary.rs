@@ -495,7 +495,10 @@ fn golden_tables_in_every_format() {
         }
     }
     // NaN passes every comparison: it is refused by name, and no set is written.
-    let run = errmap(d, &["synth", "rotary", "--out-dir", "s", "--step-deg", "nan"]);
+    let run = errmap(
+        d,
+        &["synth", "rotary", "--out-dir", "s", "--step-deg", "nan"],
+    );
     run.expect_code(2);
     assert!(run.stderr.contains("--step-deg NaN"), "{}", run.stderr);
     assert!(!d.join("x.csv").exists() && !d.join("s").exists());

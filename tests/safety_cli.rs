@@ -654,6 +654,11 @@ fn unit_slips_are_refused_with_the_likely_cause() {
         ],
     );
     run.expect_code(2);
+    assert!(
+        run.stderr.contains("far.csv:2") && run.stderr.contains("plausibility bound of 1 mm"),
+        "{}",
+        run.report()
+    );
     assert!(!d.join("g.csv").exists());
     // The bound is a setting: a part that really is 15 mm off can be mapped on purpose.
     ok(

@@ -431,6 +431,26 @@ fn resume_redoes_exactly_the_parts_that_did_not_finish_or_changed() {
     std::fs::write(&p03, "x_mm,y_mm,z_mm\n1,2,not-a-number\n").unwrap();
     // First run: p03 fails, the rest finish.
     batch(d, "out", &[]).expect_code(1);
+    // The summary says which part failed, and why.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/summary.json")).unwrap())
+            .unwrap();
+    let failed: Vec<&serde_json::Value> = summary["parts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["ok"] == false)
+        .collect();
+    assert_eq!(failed.len(), 1, "{summary}");
+    assert_eq!(failed[0]["part"], "p03", "{summary}");
+    assert_eq!(failed[0]["error"]["kind"], "input", "{summary}");
+    assert!(
+        failed[0]["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("'not-a-number' is not a number"),
+        "{summary}"
+    );
     std::fs::write(&p03, good).unwrap();
     // p02's map edited since; p04's probe file changed (one point 1 µm higher).
     let map02 = d.join("out/p02/map.csv");
@@ -532,6 +552,7 @@ fn a_folder_of_other_files_is_not_replaced_and_sharding_needs_a_domain() {
         ],
     );
     r.expect_code(2);
+    assert!(r.stderr.contains("holds no input"), "{}", r.report());
     let job = std::fs::read_to_string(d.join("data/job.toml")).unwrap();
     let no_domain: String = job
         .lines()

@@ -303,7 +303,27 @@ fn difference_gives_et_and_the_line_of_each_time() {
     assert_eq!(line("forward", 0.0)["slope_um_per_m"].as_f64(), Some(0.0));
     let csv = std::fs::read_to_string(tmp.path().join("hand/difference/difference.csv")).unwrap();
     assert!(csv.contains("600,+,200,5.0000,3.0000,2.0000"), "{csv}");
-    assert!(tmp.path().join("hand/difference/fan.png").exists());
+    // The fan: per direction panel (forward left, reverse right of the colour bar at 1160 px),
+    // the cold line and dots in viridis' first colour and the warm ones in its last
+    // (matplotlib's published table: (68, 1, 84) and (253, 231, 37)).
+    let img = image::open(tmp.path().join("hand/difference/fan.png"))
+        .unwrap()
+        .to_rgb8();
+    assert_eq!(img.dimensions(), (1300, 560));
+    let near =
+        |p: &image::Rgb<u8>, rgb: [i32; 3]| (0..3).all(|k| (p.0[k] as i32 - rgb[k]).abs() <= 2);
+    for (panel, xs) in [("forward", 0..580), ("reverse", 580..1160)] {
+        let count = |rgb: [i32; 3]| {
+            img.enumerate_pixels()
+                .filter(|(x, _, p)| xs.contains(x) && near(p, rgb))
+                .count()
+        };
+        let (cold, warm) = (count([68, 1, 84]), count([253, 231, 37]));
+        assert!(
+            cold > 50 && warm > 50,
+            "{panel}: {cold} cold, {warm} warm pixels"
+        );
+    }
     assert!(tmp.path().join("hand/difference/lines.csv").exists());
 }
 

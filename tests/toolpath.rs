@@ -89,19 +89,28 @@ fn xyz(line: &str) -> [f64; 3] {
 }
 
 /// The LinuxCNC corpus: `../shared/corpus/gcode` beside the repo, or `$ERRMAP_GCODE_CORPUS`.
+/// Absent, the corpus tests say that they skip; they fail instead when the corpus was asked
+/// for (`ERRMAP_GCODE_CORPUS` given, or `ERRMAP_REQUIRE_RS274=1` as CI sets beside the corpus).
 fn corpus() -> Option<PathBuf> {
-    let dir = std::env::var_os("ERRMAP_GCODE_CORPUS")
+    let given = std::env::var_os("ERRMAP_GCODE_CORPUS");
+    let dir = given
+        .clone()
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/gcode"));
     if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "skipping: {} is absent (CI clones shared/ beside the repo)",
-            dir.display()
-        );
-        None
+        return Some(dir);
     }
+    let required = std::env::var("ERRMAP_REQUIRE_RS274").is_ok_and(|v| v == "1");
+    assert!(
+        given.is_none() && !required,
+        "the G-code corpus {} is absent but was required (ERRMAP_GCODE_CORPUS or ERRMAP_REQUIRE_RS274=1)",
+        dir.display()
+    );
+    eprintln!(
+        "SKIPPED: {} is absent (CI clones shared/ beside the repo)",
+        dir.display()
+    );
+    None
 }
 
 const PLAIN: [&str; 7] = [

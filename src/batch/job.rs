@@ -594,7 +594,9 @@ map = "part"
         assert!(err.starts_with("j.toml:4, column 8:"), "{err}");
         assert!(err.contains("metadata.axes"), "{err}");
         let text = "[metadata]\nwhen = 2026-01-01\n";
-        assert!(Job::parse(Path::new("j.toml"), text).is_err());
+        let err = Job::parse(Path::new("j.toml"), text).unwrap_err();
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(err.to_string().starts_with("j.toml:2"), "{err}");
     }
 
     #[test]

@@ -262,8 +262,14 @@ mod tests {
         let s = Shard::parse("1/3").unwrap();
         let taken: Vec<usize> = (0..8).filter(|&i| s.takes(i)).collect();
         assert_eq!(taken, vec![1, 4, 7]);
-        assert!(Shard::parse("3/3").is_err());
-        assert!(Shard::parse("a/3").is_err());
+        for (bad, words) in [
+            ("3/3", "--shard 3/3 is out of range"),
+            ("a/3", "--shard index 'a' is not a number"),
+        ] {
+            let err = Shard::parse(bad).unwrap_err();
+            assert_eq!(err.kind(), "input", "{err}");
+            assert!(err.to_string().contains(words), "{err}");
+        }
         let env = |k: &str| match k {
             "SLURM_ARRAY_TASK_ID" => Some("2".to_string()),
             "SLURM_ARRAY_TASK_COUNT" => Some("4".to_string()),
@@ -272,7 +278,13 @@ mod tests {
         assert_eq!(Shard::from_env(None, env).unwrap(), Shard::new(2, 4));
         let k8s = |k: &str| (k == "JOB_COMPLETION_INDEX").then(|| "5".to_string());
         assert_eq!(Shard::from_env(Some(6), k8s).unwrap(), Shard::new(5, 6));
-        assert!(Shard::from_env(None, k8s).is_err());
+        let err = Shard::from_env(None, k8s).unwrap_err();
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(
+            err.to_string()
+                .contains("JOB_COMPLETION_INDEX is set but the number of shards is not known"),
+            "{err}"
+        );
         assert_eq!(Shard::from_env(None, |_| None).unwrap(), None);
     }
 

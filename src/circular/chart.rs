@@ -1,7 +1,7 @@
 //! Polar chart of a circular test: magnified deviation on a ring for both directions, the minimum-zone band of G, and the figures with the largest contributors named.
 
 use super::figures::{Centred, ZoneReport};
-use super::input::Direction;
+use super::input::Rotation;
 use super::Evaluation;
 use crate::error::Result;
 use crate::report::chart::{save_png, FONT};
@@ -25,7 +25,7 @@ fn nice_span(v: f64) -> f64 {
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
-    v.map_or_else(|| "–".to_string(), |v| format!("{v:.2}"))
+    crate::numeric::format::opt(v, 2, "–")
 }
 
 /// Magnified polar position of a deviation: the nominal circle at radius 1, ±span µm at ±DEV_UNITS.
@@ -203,7 +203,7 @@ fn draw_axis_labels(chart: &mut Plot<'_, '_>, axes: [&str; 2], polar: Polar) -> 
 
 /// Each direction's path, closed, sorted by angle about the least-squares centre.
 fn draw_paths(chart: &mut Plot<'_, '_>, c: &Centred, polar: Polar) -> Drawn {
-    for (d, colour) in [(Direction::Ccw, BLUE), (Direction::Cw, RED)] {
+    for (d, colour) in [(Rotation::Ccw, BLUE), (Rotation::Cw, RED)] {
         let mut pts: Vec<(f64, f64)> = c
             .of(d)
             .iter()

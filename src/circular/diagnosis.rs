@@ -119,36 +119,18 @@ fn design(data: &Data, shape: &Shape, cols: &[Column]) -> DMatrix<f64> {
     })
 }
 
-/// Least squares by QR on unit-norm columns; `None` when the design is rank deficient.
+/// Least squares by the shared QR solver; `None` when the design is rank deficient or
+/// leaves no degree of freedom.
 fn lstsq(a: &DMatrix<f64>, y: &[f64]) -> Option<Fit> {
-    let (n, p) = a.shape();
-    if n <= p {
+    if a.nrows() <= a.ncols() {
         return None;
     }
-    let norms: Vec<f64> = (0..p).map(|j| a.column(j).norm()).collect();
-    if norms.iter().any(|&v| v == 0.0 || !v.is_finite()) {
-        return None;
-    }
-    let mut scaled = a.clone();
-    for (j, norm) in norms.iter().enumerate() {
-        scaled.column_mut(j).scale_mut(1.0 / norm);
-    }
-    let qr = scaled.qr();
-    let r = qr.r();
-    let max = (0..p).map(|i| r[(i, i)].abs()).fold(0.0, f64::max);
-    if (0..p).any(|i| r[(i, i)].abs() <= 1e-9 * max) {
-        return None;
-    }
-    let yv = DVector::from_column_slice(y);
-    let z = r.solve_upper_triangular(&(qr.q().transpose() * &yv))?;
-    let beta: Vec<f64> = (0..p).map(|j| z[j] / norms[j]).collect();
-    let rss = (&yv - a * DVector::from_column_slice(&beta)).norm_squared();
-    let rinv = r.try_inverse()?;
-    let sigma2 = rss / (n - p) as f64;
-    let cov = DMatrix::from_fn(p, p, |i, j| {
-        (0..p).map(|k| rinv[(i, k)] * rinv[(j, k)]).sum::<f64>() * sigma2 / (norms[i] * norms[j])
-    });
-    Some(Fit { beta, cov, rss })
+    let fit = crate::numeric::lsq::solve(a, y, 1e-9).ok()?;
+    Some(Fit {
+        cov: fit.covariance()?,
+        beta: fit.beta,
+        rss: fit.rss,
+    })
 }
 
 /// The model with some columns left out, factored once, so that the residual sum of squares
@@ -223,7 +205,7 @@ struct Ranges {
 
 fn ranges(c: &Centred, radius_mm: f64) -> Ranges {
     let mut steps = Vec::new();
-    for d in [super::Direction::Ccw, super::Direction::Cw] {
+    for d in [super::Rotation::Ccw, super::Rotation::Cw] {
         let mut a: Vec<f64> = c.of(d).iter().map(|&i| c.nominal_angle_rad[i]).collect();
         a.sort_by(f64::total_cmp);
         steps.extend(a.windows(2).map(|w| w[1] - w[0]));

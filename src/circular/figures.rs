@@ -1,7 +1,7 @@
 //! ISO 230-4 figures of a run: least-squares centre (set-up offset), circular deviation G by the exact minimum zone, radial deviation F, circular hysteresis H.
 
 use super::circle::fit_circle;
-use super::input::{CircularRun, Direction, Form};
+use super::input::{CircularRun, Form, Rotation};
 use super::zone::min_zone;
 use crate::error::{Error, Result};
 use serde::Serialize;
@@ -70,7 +70,7 @@ impl Figures {
 /// Readings about the run's least-squares centre: the input of the diagnosis and the chart.
 #[derive(Debug, Clone)]
 pub struct Centred {
-    pub direction: Vec<Direction>,
+    pub direction: Vec<Rotation>,
     /// Angle about the least-squares centre, [0, 2π).
     pub angle_rad: Vec<f64>,
     /// Angle about the nominal centre, [0, 2π): the machine's (commanded) angle, at which
@@ -89,7 +89,7 @@ impl Centred {
         self.dev_um.is_empty()
     }
     /// Indices of one direction's readings.
-    pub fn of(&self, d: Direction) -> Vec<usize> {
+    pub fn of(&self, d: Rotation) -> Vec<usize> {
         (0..self.len())
             .filter(|&i| self.direction[i] == d)
             .collect()
@@ -189,8 +189,8 @@ pub fn evaluate(run: &CircularRun) -> Result<(Figures, Centred)> {
         radius_mm: r_mm,
         form: run.form,
         readings: ReadingCounts {
-            ccw: run.direction(Direction::Ccw).len(),
-            cw: run.direction(Direction::Cw).len(),
+            ccw: run.direction(Rotation::Ccw).len(),
+            cw: run.direction(Rotation::Cw).len(),
             overshoot: run.overshoot_rows,
         },
         g_um: g,
@@ -217,8 +217,8 @@ fn per_direction(run: &CircularRun) -> Result<[PerDirection; 3]> {
         let (hi, lo, centre) = f_of(&pts, run.radius_mm)?;
         let gd = g_of(&pts, centre, run.radius_mm);
         match d {
-            Direction::Ccw => (g.ccw, fmax.ccw, fmin.ccw) = (Some(gd), Some(hi), Some(lo)),
-            Direction::Cw => (g.cw, fmax.cw, fmin.cw) = (Some(gd), Some(hi), Some(lo)),
+            Rotation::Ccw => (g.ccw, fmax.ccw, fmin.ccw) = (Some(gd), Some(hi), Some(lo)),
+            Rotation::Cw => (g.cw, fmax.cw, fmin.cw) = (Some(gd), Some(hi), Some(lo)),
         }
     }
     Ok([g, fmax, fmin])
@@ -265,7 +265,7 @@ pub fn interpolate_periodic(sorted: &[(f64, f64)], angle_rad: f64) -> f64 {
 
 /// H: the largest |ccw − cw| radial difference, each path interpolated at the other's angles.
 fn hysteresis_um(c: &Centred) -> f64 {
-    let curve = |d: Direction| {
+    let curve = |d: Rotation| {
         let mut v: Vec<(f64, f64)> = c
             .of(d)
             .iter()
@@ -274,7 +274,7 @@ fn hysteresis_um(c: &Centred) -> f64 {
         v.sort_by(|a, b| a.0.total_cmp(&b.0));
         v
     };
-    let (ccw, cw) = (curve(Direction::Ccw), curve(Direction::Cw));
+    let (ccw, cw) = (curve(Rotation::Ccw), curve(Rotation::Cw));
     let mut h = 0.0_f64;
     for &(a, v) in &ccw {
         h = h.max((v - interpolate_periodic(&cw, a)).abs());

@@ -20,27 +20,27 @@ pub const OFF_CIRCLE_FRACTION: f64 = 0.01;
 /// Two angles of one direction closer than this (degrees) are the same angle.
 const SAME_ANGLE_DEG: f64 = 1e-9;
 
-/// Direction of contouring, seen with the plane's first axis to the right and the second up
+/// Sense of rotation of the contouring, seen with the plane's first axis to the right and the second up
 /// (G3 is counter-clockwise, G2 clockwise, in G17, G18 and G19 alike).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Direction {
+pub enum Rotation {
     Ccw,
     Cw,
 }
 
-impl Direction {
+impl Rotation {
     /// +1 when the angle grows with time (ccw), −1 when it shrinks (cw).
     pub fn sense(self) -> f64 {
         match self {
-            Direction::Ccw => 1.0,
-            Direction::Cw => -1.0,
+            Rotation::Ccw => 1.0,
+            Rotation::Cw => -1.0,
         }
     }
     pub fn name(self) -> &'static str {
         match self {
-            Direction::Ccw => "ccw",
-            Direction::Cw => "cw",
+            Rotation::Ccw => "ccw",
+            Rotation::Cw => "cw",
         }
     }
 }
@@ -90,7 +90,7 @@ pub struct ReadOptions {
 pub struct Reading {
     /// 1-based line in the file.
     pub line: u64,
-    pub direction: Direction,
+    pub direction: Rotation,
     /// Angle about the nominal centre in [0, 2π): as read (radial form) or of the point (two-axis).
     pub angle_rad: f64,
     /// Position relative to the nominal centre (first, second axis).
@@ -110,12 +110,12 @@ pub struct CircularRun {
 
 impl CircularRun {
     /// The readings of one direction (sorted by angle); empty when the run lacks it.
-    pub fn direction(&self, d: Direction) -> Vec<&Reading> {
+    pub fn direction(&self, d: Rotation) -> Vec<&Reading> {
         self.readings.iter().filter(|r| r.direction == d).collect()
     }
     /// Directions present, ccw first.
-    pub fn directions(&self) -> Vec<Direction> {
-        [Direction::Ccw, Direction::Cw]
+    pub fn directions(&self) -> Vec<Rotation> {
+        [Rotation::Ccw, Rotation::Cw]
             .into_iter()
             .filter(|d| self.readings.iter().any(|r| r.direction == *d))
             .collect()
@@ -177,7 +177,7 @@ fn from_table(t: &CsvTable, opts: &ReadOptions) -> Result<CircularRun> {
             .cmp(&b.direction)
             .then(a.angle_rad.total_cmp(&b.angle_rad))
     });
-    for d in [Direction::Ccw, Direction::Cw] {
+    for d in [Rotation::Ccw, Rotation::Cw] {
         let of_dir: Vec<&Reading> = readings.iter().filter(|r| r.direction == d).collect();
         if !of_dir.is_empty() {
             check_direction(&t.path, d, &of_dir)?;
@@ -225,10 +225,10 @@ fn detect_form(t: &CsvTable) -> Result<Form> {
 }
 
 /// `Some(direction)`, or `None` for an overshoot row.
-fn parse_direction(t: &CsvTable, row: &CsvRow, col: usize) -> Result<Option<Direction>> {
+fn parse_direction(t: &CsvTable, row: &CsvRow, col: usize) -> Result<Option<Rotation>> {
     match t.text(row, col).to_ascii_lowercase().as_str() {
-        "ccw" => Ok(Some(Direction::Ccw)),
-        "cw" => Ok(Some(Direction::Cw)),
+        "ccw" => Ok(Some(Rotation::Ccw)),
+        "cw" => Ok(Some(Rotation::Cw)),
         "overshoot" => Ok(None),
         other => Err(t.error_at(
             row,
@@ -293,7 +293,7 @@ fn read_point(
 }
 
 /// Enough readings, no repeated angle, no gap over 10°, a full turn.
-fn check_direction(path: &Path, d: Direction, rs: &[&Reading]) -> Result<()> {
+fn check_direction(path: &Path, d: Rotation, rs: &[&Reading]) -> Result<()> {
     let name = d.name();
     if rs.len() < MIN_READINGS {
         return Err(Error::input(

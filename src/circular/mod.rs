@@ -17,7 +17,7 @@ pub mod zone;
 pub use circle::{fit_circle, CircleFit};
 pub use diagnosis::{diagnose, Diagnosis, Term, Terms};
 pub use figures::{evaluate, Centred, Figures, PerDirection};
-pub use input::{parse_run, read_run, CircularRun, Direction, Form, Plane, ReadOptions, Reading};
+pub use input::{parse_run, read_run, CircularRun, Form, Plane, ReadOptions, Reading, Rotation};
 pub use report::{human_report, parse_centre_mm, run_test, TestRequest};
 pub use zone::{min_zone, Zone};
 

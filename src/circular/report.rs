@@ -87,7 +87,7 @@ pub fn parse_centre_mm(s: &str) -> std::result::Result<[f64; 2], String> {
 }
 
 fn num(v: Option<f64>, digits: usize) -> String {
-    v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
+    crate::numeric::format::opt(v, digits, "-")
 }
 
 /// The text report of `errmap circular`: the ISO 230-4 figures, then the diagnosis.

@@ -259,8 +259,7 @@ fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:9.3}"))
-        .unwrap_or_else(|| format!("{:>9}", "n/a"))
+    format!("{:>9}", errmap::numeric::format::opt(v, 3, "n/a"))
 }
 
 fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {

@@ -244,19 +244,7 @@ pub(crate) fn min_spacing(span: f64, entries: usize) -> String {
     fixed(((s * 1e4) - 1e-6).ceil() / 1e4, 4)
 }
 
-/// Fixed-point text with `digits` decimals and no "-0.000".
-pub fn fixed(v: f64, digits: usize) -> String {
-    let text = format!("{v:.digits$}");
-    if text
-        .trim_start_matches('-')
-        .chars()
-        .all(|c| c == '0' || c == '.')
-    {
-        text.trim_start_matches('-').to_string()
-    } else {
-        text
-    }
-}
+pub use crate::numeric::format::fixed;
 
 fn csv(t: &ControllerTable) -> String {
     let mut out = String::new();

@@ -257,8 +257,22 @@ mod tests {
 
     #[test]
     fn too_few_or_bad_sites_are_errors() {
-        assert!(Kriging::fit(&[[0.0, 0.0, 1.0], [1.0, 0.0, 2.0]]).is_err());
-        assert!(Kriging::fit(&[[0.0, 0.0, 1.0], [1.0, 0.0, f64::NAN], [0.0, 1.0, 0.0]]).is_err());
-        assert!(Kriging::fit(&[[1.0, 1.0, 1.0], [1.0, 1.0, 2.0], [1.0, 1.0, 0.0]]).is_err());
+        let refused = |sites: &[[f64; 3]], words: &str| {
+            let err = Kriging::fit(sites).unwrap_err();
+            assert_eq!(err.kind(), "input", "{err}");
+            assert!(err.to_string().contains(words), "{err}");
+        };
+        refused(
+            &[[0.0, 0.0, 1.0], [1.0, 0.0, 2.0]],
+            "at least 3 points, got 2",
+        );
+        refused(
+            &[[0.0, 0.0, 1.0], [1.0, 0.0, f64::NAN], [0.0, 1.0, 0.0]],
+            "non-finite coordinate or value",
+        );
+        refused(
+            &[[1.0, 1.0, 1.0], [1.0, 1.0, 2.0], [1.0, 1.0, 0.0]],
+            "all kriging sites are at one position",
+        );
     }
 }

@@ -21,7 +21,7 @@ pub struct ChartInput<'a> {
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:.2}")).unwrap_or_else(|| "n/a".into())
+    crate::numeric::format::opt(v, 2, "n/a")
 }
 
 /// The figures of the side table: (label, before, after).

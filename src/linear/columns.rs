@@ -359,7 +359,12 @@ mod tests {
             "target=0,deviation=E,direction=D",
             "target=P,target=Q,deviation=E,direction=D",
         ] {
-            assert!(ColumnMap::parse(bad).is_err(), "{bad}");
+            let err = ColumnMap::parse(bad).expect_err(bad);
+            assert_eq!(err.kind(), "input", "{bad}: {err}");
+            assert!(
+                err.to_string().contains("--columns target=COLUMN"),
+                "{bad}: {err}"
+            );
         }
     }
 }

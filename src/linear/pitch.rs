@@ -2,11 +2,12 @@
 //!
 //! Linear least squares on the basis {1, x, sin(2πx/P), cos(2πx/P)}: with
 //! c_s = d·cos φ and c_c = d·sin φ, d·sin(θ + φ) = c_s·sin θ + c_c·cos θ, so
-//! d = √(c_s² + c_c²), φ = atan2(c_c, c_s). Solved by SVD (nalgebra), which also detects
-//! targets that cannot see the periodic term (all at multiples of the lead: sin θ, cos θ constant).
+//! d = √(c_s² + c_c²), φ = atan2(c_c, c_s). Solved by the shared QR solver (`crate::numeric::lsq`), whose rank
+//! test refuses targets that cannot see the periodic term (all at multiples of the lead: sin θ, cos θ constant).
 
 use crate::error::{Error, Result};
-use nalgebra::{DMatrix, DVector};
+use crate::numeric::lsq::Refusal;
+use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
 /// The fitted pitch-error curve. Lengths in mm, errors in the input's unit (µm).
@@ -59,21 +60,15 @@ pub fn fit_pitch(x_mm: &[f64], e_um: &[f64], lead_mm: f64) -> Result<PitchFit> {
             _ => theta.cos(),
         }
     });
-    let rhs = DVector::from_column_slice(e_um);
-    let svd = design.clone().svd(true, true);
-    let s_max = svd.singular_values.max();
-    let s_min = svd.singular_values.min();
-    if s_min <= 1e-9 * s_max.max(1.0) {
-        return Err(Error::numeric(
+    let fit = crate::numeric::lsq::solve(&design, e_um, 1e-9).map_err(|refusal| match refusal {
+        Refusal::RankDeficient { .. } | Refusal::ZeroColumn { .. } => Error::numeric(
             "the targets cannot separate the periodic term from the line (are they all at multiples of the lead?)",
             "place targets at irregular positions (ISO 230-2 recommends it) or off multiples of the lead",
-        ));
-    }
-    let c = svd
-        .solve(&rhs, 1e-12)
-        .map_err(|e| Error::numeric(format!("pitch fit failed: {e}"), "check the targets"))?;
-    let residual = &design * &c - &rhs;
-    let rms = (residual.norm_squared() / n as f64).sqrt();
+        ),
+        other => Error::numeric(format!("pitch fit failed: {other}"), "check the targets"),
+    })?;
+    let c = &fit.beta;
+    let rms = (fit.rss / n as f64).sqrt();
     Ok(PitchFit {
         lead_mm,
         a_um: c[0],

@@ -6,37 +6,7 @@ use crate::io::{CsvRow, CsvTable};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// Direction of approach to a target: `+` (forward, increasing coordinate) or `-` (reverse).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum Direction {
-    Forward,
-    Reverse,
-}
-
-impl Direction {
-    /// The file symbol: `+` or `-`.
-    pub fn symbol(self) -> &'static str {
-        match self {
-            Direction::Forward => "+",
-            Direction::Reverse => "-",
-        }
-    }
-
-    /// Parse `+`/`-` (also `up`/`down`, `forward`/`reverse`/`backward`, `fwd`/`rev`/`bwd`,
-    /// `pos`/`neg`, any case).
-    pub fn parse(text: &str) -> Option<Direction> {
-        match text.trim().to_ascii_lowercase().as_str() {
-            "+" | "up" | "forward" | "fwd" | "pos" | "positive" => Some(Direction::Forward),
-            "-" | "down" | "reverse" | "rev" | "backward" | "bwd" | "neg" | "negative" => {
-                Some(Direction::Reverse)
-            }
-            _ => None,
-        }
-    }
-}
+pub use crate::direction::Direction;
 
 /// One measured deviation: the `run`-th approach from `direction` to `target`.
 ///

@@ -42,6 +42,7 @@ impl Default for AnalyzeOptions {
 /// One sphere fitted at one position (touch-point files only).
 #[derive(Debug, Clone, Serialize)]
 pub struct SphereReport {
+    #[serde(with = "crate::direction::symbol")]
     pub direction: Direction,
     pub repeat: u32,
     pub angle_deg: f64,
@@ -57,6 +58,7 @@ pub struct SphereReport {
 /// The angular error of one position in one repeat.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Observation {
+    #[serde(with = "crate::direction::symbol")]
     pub direction: Direction,
     pub repeat: u32,
     pub angle_deg: f64,
@@ -70,6 +72,7 @@ pub struct Observation {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TableRow {
     pub angle_deg: f64,
+    #[serde(with = "crate::direction::symbol")]
     pub direction: Direction,
     pub error_arcsec: f64,
     /// Sample standard deviation over the repeats (n − 1); `null` for a single repeat.
@@ -83,6 +86,7 @@ pub struct TableRow {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Reference {
     pub angle_deg: f64,
+    #[serde(with = "crate::direction::symbol")]
     pub direction: Direction,
     /// Repeats averaged into a.
     pub n: usize,
@@ -597,10 +601,7 @@ fn iso_figures(observations: &[Observation]) -> (Option<Evaluation>, Option<Stri
         .iter()
         .map(|o| Sample {
             run: o.repeat,
-            direction: match o.direction {
-                Direction::Forward => linear::Direction::Forward,
-                Direction::Reverse => linear::Direction::Reverse,
-            },
+            direction: o.direction,
             target: o.angle_deg,
             // ISO 230-2 deviation x = actual − target = β − α = −err.
             deviation: -o.error_arcsec,

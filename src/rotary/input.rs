@@ -78,39 +78,7 @@ impl fmt::Display for RotaryAxis {
     }
 }
 
-/// Direction of approach to a target angle: `+` (increasing angle) or `-`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-pub enum Direction {
-    #[serde(rename = "+")]
-    Forward,
-    #[serde(rename = "-")]
-    Reverse,
-}
-
-impl Direction {
-    /// Parse `+` or `-`.
-    pub fn parse(text: &str) -> Option<Direction> {
-        match text.trim() {
-            "+" => Some(Direction::Forward),
-            "-" => Some(Direction::Reverse),
-            _ => None,
-        }
-    }
-
-    /// The file symbol, `+` or `-`.
-    pub fn symbol(self) -> &'static str {
-        match self {
-            Direction::Forward => "+",
-            Direction::Reverse => "-",
-        }
-    }
-}
-
-impl fmt::Display for Direction {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.symbol())
-    }
-}
+pub use crate::direction::Direction;
 
 /// The measured points of one sphere at one position: one centre, or the touch points.
 #[derive(Debug, Clone, Default)]
@@ -258,7 +226,13 @@ fn read_row(
         }
         Some(_) => {}
     }
-    let direction = cell(table, row, cols.direction, Direction::parse, DIRECTION)?;
+    let direction = cell(
+        table,
+        row,
+        cols.direction,
+        Direction::parse_symbol,
+        DIRECTION,
+    )?;
     let repeat = cell(table, row, cols.repeat, |t| t.parse::<u32>().ok(), REPEAT)?;
     let angle_deg = read_angle(table, cols, row)?;
     let sphere = read_sphere(table, cols, row)?;

@@ -426,7 +426,12 @@ mod tests {
             "{}",
             t.grid_note
         );
-        assert!(table_from_rows("C", &rows, Some(7.0), None).is_err());
+        let err = table_from_rows("C", &rows, Some(7.0), None).unwrap_err();
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(
+            err.to_string().contains("step 7° does not divide the turn"),
+            "{err}"
+        );
         // A start off the measured angles is the user's grid, and the note says so.
         let t = table_from_rows("C", &rows, None, Some(0.0)).unwrap();
         assert!(t.grid_note.contains("as given"), "{}", t.grid_note);

@@ -81,6 +81,7 @@ impl Default for RotarySynthConfig {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TruthRow {
     pub angle_deg: f64,
+    #[serde(with = "crate::direction::symbol")]
     pub direction: Direction,
     pub error_arcsec: f64,
 }

@@ -28,10 +28,7 @@ pub const DIRECTIONS: [Direction; 2] = [Direction::Forward, Direction::Reverse];
 
 /// "forward" or "reverse".
 pub fn direction_name(d: Direction) -> &'static str {
-    match d {
-        Direction::Forward => "forward",
-        Direction::Reverse => "reverse",
-    }
+    d.name()
 }
 
 /// All laser readings taken at one thermal state, with its temperatures.

@@ -131,53 +131,7 @@ fn number(
     })
 }
 
-/// Bytes that hold any finite f64 at 4 decimals: sign, 309 integer digits, point, 4 decimals.
-pub const FIXED4_BUF_LEN: usize = 320;
-
-/// Write `value` rounded to 4 decimals into `buf`, returning the used bytes (fast fixed-point;
-/// values beyond ±9e14 fall back to the standard formatter).
-#[inline]
-pub fn format_fixed4(value: f64, buf: &mut [u8; FIXED4_BUF_LEN]) -> usize {
-    let scaled = (value * 1e4).round();
-    if scaled.is_nan() || scaled.abs() >= 9e18 {
-        let mut cursor = std::io::Cursor::new(&mut buf[..]);
-        let _ = write!(cursor, "{value:.4}");
-        return cursor.position() as usize;
-    }
-    let mut n = scaled as i64;
-    let negative = n < 0;
-    if negative {
-        n = -n;
-    }
-    let mut digits = [0u8; 24];
-    let mut len = 0;
-    while n > 0 || len < 5 {
-        digits[len] = b'0' + (n % 10) as u8;
-        n /= 10;
-        len += 1;
-    }
-    let mut out = 0;
-    if negative {
-        buf[out] = b'-';
-        out += 1;
-    }
-    for &d in digits[4..len].iter().rev() {
-        buf[out] = d;
-        out += 1;
-    }
-    buf[out] = b'.';
-    out += 1;
-    for &d in digits[..4].iter().rev() {
-        buf[out] = d;
-        out += 1;
-    }
-    // "-0.0000" reads as negative zero: write zero plainly.
-    if negative && buf[1..out].iter().all(|&b| b == b'0' || b == b'.') {
-        buf.copy_within(1..out, 0);
-        out -= 1;
-    }
-    out
-}
+pub use crate::numeric::format::{format_fixed4, FIXED4_BUF_LEN};
 
 /// Stream a machine log through the model. `source` names the input in messages.
 pub fn compensate_stream<R: Read, W: Write>(

@@ -65,27 +65,7 @@ fn means(points: &[super::campaign::LaserPoint], d: Direction) -> Vec<(f64, f64,
 
 /// Least-squares line y = a + b·x; returns (a, b, rms).
 pub fn fit_line(xs: &[f64], ys: &[f64]) -> Option<(f64, f64, f64)> {
-    let n = xs.len() as f64;
-    if xs.len() < 2 {
-        return None;
-    }
-    let mx = xs.iter().sum::<f64>() / n;
-    let my = ys.iter().sum::<f64>() / n;
-    let sxx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
-    if sxx <= 0.0 {
-        return None;
-    }
-    let sxy: f64 = xs.iter().zip(ys).map(|(x, y)| (x - mx) * (y - my)).sum();
-    let b = sxy / sxx;
-    let a = my - b * mx;
-    let rms = (xs
-        .iter()
-        .zip(ys)
-        .map(|(x, y)| (y - a - b * x).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    Some((a, b, rms))
+    crate::numeric::lsq::fit_line(xs, ys).map(|l| (l.intercept, l.slope, l.rms))
 }
 
 /// Et = E − Es for every time, target and direction of a campaign, and the line of each time.

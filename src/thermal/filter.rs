@@ -9,6 +9,7 @@
 //! everywhere.
 
 use crate::error::{Error, Result};
+use crate::numeric::lsq;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -104,8 +105,8 @@ pub fn running_median(samples: &[f64], window: usize) -> Vec<f64> {
 pub const MAX_SG_ORDER: usize = 10;
 
 /// The least-squares projection of a `window`-sample polynomial fit of `order`:
-/// `(JᵀJ)⁻¹Jᵀ` with positions scaled to about [-1, 1] (which keeps the normal equations well
-/// conditioned), and the scaled position of each sample.
+/// `(JᵀJ)⁻¹Jᵀ` by QR (`numeric::lsq::projection`) with positions scaled to about [-1, 1], and
+/// the scaled position of each sample.
 struct SgProjection {
     p: DMatrix<f64>,
     centre: f64,
@@ -124,17 +125,13 @@ impl SgProjection {
         let scale = centre.max(1.0);
         let z = |i: usize| (i as f64 - centre) / scale;
         let j = DMatrix::from_fn(window, order + 1, |r, c| z(r).powi(c as i32));
-        let inv = (j.transpose() * &j).try_inverse().ok_or_else(|| {
+        let p = lsq::projection(&j, lsq::DEFAULT_RANK_TOLERANCE).map_err(|refusal| {
             Error::numeric(
-                "Savitzky–Golay normal equations are singular",
+                format!("the Savitzky–Golay polynomial fit is not determined: {refusal}"),
                 "use a smaller order",
             )
         })?;
-        Ok(SgProjection {
-            p: inv * j.transpose(),
-            centre,
-            scale,
-        })
+        Ok(SgProjection { p, centre, scale })
     }
 
     /// Weights of the fitted polynomial's value at sample `at` of the window.
@@ -340,13 +337,18 @@ mod tests {
             median_window: 4,
             ..FilterSpec::default()
         };
-        assert!(even.validate().is_err());
+        let err = even.validate().unwrap_err();
+        assert!(
+            err.contains("median window 4 must be an odd number"),
+            "{err}"
+        );
         let high = FilterSpec {
             median_window: 1,
             sg_window: 5,
             sg_order: 5,
         };
-        assert!(high.validate().is_err());
+        let err = high.validate().unwrap_err();
+        assert!(err.contains("order 5 must be below the window 5"), "{err}");
         assert!(FilterSpec::NONE.validate().is_ok());
     }
 }

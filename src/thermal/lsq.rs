@@ -1,7 +1,7 @@
-//! Linear least squares by QR with coefficient standard errors (nalgebra), and Legendre polynomials.
+//! Thermal least squares (the shared QR solver with thermal's messages and standard errors), and Legendre polynomials.
 
 use crate::error::{Error, Result};
-use nalgebra::{DMatrix, DVector};
+use crate::numeric::lsq::{self, Refusal};
 
 /// A least-squares solution of `A·β ≈ y`.
 #[derive(Debug, Clone)]
@@ -14,70 +14,42 @@ pub struct LstsqFit {
     pub n: usize,
 }
 
-/// Solve `rows·β ≈ y` (one row of `p` regressors per observation) by Householder QR.
-/// A rank-deficient design (a column that is a combination of others) is an error naming
-/// `what`, so that e.g. two sensors that always read the same are reported, not silently split.
+/// Solve `rows·β ≈ y` (one row of `p` regressors per observation) with
+/// [`crate::numeric::lsq`]. A rank-deficient design (a column that is a combination of
+/// others) is an error naming `what`, so that e.g. two sensors that always read the same are
+/// reported, not silently split.
 pub fn lstsq(rows: &[f64], p: usize, y: &[f64], what: &str) -> Result<LstsqFit> {
-    let n = y.len();
-    if p == 0 || rows.len() != n * p {
-        return Err(Error::Internal(format!(
-            "least squares for {what}: {} values for {n}×{p}",
-            rows.len()
-        )));
-    }
-    if n < p {
-        return Err(Error::numeric(
-            format!("{what}: {n} observations for {p} unknowns"),
+    let fit =
+        lsq::solve_rows(rows, p, y, lsq::DEFAULT_RANK_TOLERANCE).map_err(|r| {
+            match r {
+        Refusal::Shape { values, rows, columns } => Error::Internal(format!(
+            "least squares for {what}: {values} values for {rows}×{columns}"
+        )),
+        Refusal::TooFew { rows, columns } => Error::numeric(
+            format!("{what}: {rows} observations for {columns} unknowns"),
             "measure more points or times, or fit fewer terms (lower order, fewer sensors)",
-        ));
-    }
-    let a = DMatrix::from_row_slice(n, p, rows);
-    let yv = DVector::from_column_slice(y);
-    // Scale columns to unit norm so the rank test is independent of units.
-    let norms: Vec<f64> = (0..p).map(|j| a.column(j).norm()).collect();
-    if let Some(j) = norms.iter().position(|&v| v == 0.0) {
-        return Err(Error::numeric(
-            format!("{what}: regressor {j} is zero for every observation"),
+        ),
+        Refusal::ZeroColumn { column } => Error::numeric(
+            format!("{what}: regressor {column} is zero for every observation"),
             "a sensor whose temperature never changes cannot be fitted; leave it out",
-        ));
-    }
-    let mut scaled = a.clone();
-    for (j, norm) in norms.iter().enumerate() {
-        scaled.column_mut(j).scale_mut(1.0 / norm);
-    }
-    let qr = scaled.qr();
-    let r = qr.r();
-    let diag: Vec<f64> = (0..p).map(|i| r[(i, i)].abs()).collect();
-    let max = diag.iter().cloned().fold(0.0, f64::max);
-    if diag.iter().any(|&d| d <= 1e-10 * max) {
-        return Err(Error::numeric(
+        ),
+        Refusal::NotFinite { column } => Error::numeric(
+            format!("{what}: regressor {column} is not a finite number for some observation"),
+            "check the temperatures and positions of the campaign for missing values",
+        ),
+        Refusal::RankDeficient { .. } => Error::numeric(
             format!("{what}: the regressors are linearly dependent (the fit is not determined)"),
             "use sensors whose temperatures rise differently, campaigns with different ambient \
              temperatures (to fit ρ), or give ρ with --rho",
-        ));
+        ),
     }
-    let qty = qr.q().transpose() * &yv;
-    let z = r
-        .solve_upper_triangular(&qty)
-        .ok_or_else(|| Error::numeric(format!("{what}: singular system"), "fit fewer terms"))?;
-    let beta: Vec<f64> = (0..p).map(|j| z[j] / norms[j]).collect();
-    let resid = &yv - &a * DVector::from_column_slice(&beta);
-    let rss = resid.norm_squared();
-    let se = if n > p {
-        let sigma2 = rss / (n - p) as f64;
-        let rinv = r
-            .try_inverse()
-            .ok_or_else(|| Error::numeric(format!("{what}: singular system"), "fit fewer terms"))?;
-        let cov = &rinv * rinv.transpose();
-        Some(
-            (0..p)
-                .map(|j| (sigma2 * cov[(j, j)]).sqrt() / norms[j])
-                .collect(),
-        )
-    } else {
-        None
-    };
-    Ok(LstsqFit { beta, se, rss, n })
+        })?;
+    Ok(LstsqFit {
+        se: fit.standard_errors(),
+        beta: fit.beta,
+        rss: fit.rss,
+        n: fit.n,
+    })
 }
 
 /// Legendre polynomials P_0 … P_order at `s` into `out` (Bonnet's recursion

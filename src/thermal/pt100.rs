@@ -132,8 +132,14 @@ mod tests {
 
     #[test]
     fn out_of_range_resistance_is_an_error() {
-        assert!(temperature_c(5.0).is_err());
-        assert!(temperature_c(500.0).is_err());
-        assert!(temperature_c(f64::NAN).is_err());
+        for r_ohm in [5.0, 500.0, f64::NAN] {
+            let err = temperature_c(r_ohm).unwrap_err();
+            assert_eq!(err.kind(), "input", "{err}");
+            assert!(
+                err.to_string()
+                    .contains(&format!("{r_ohm} Ω is outside the Pt100 range")),
+                "{err}"
+            );
+        }
     }
 }

@@ -587,20 +587,22 @@ fn fit_against_reference(
     min_span_c: f64,
 ) -> CalibrationFit {
     let n = raw.len() as f64;
-    let mean_x = raw.iter().sum::<f64>() / n;
-    let mean_y = reference_c.iter().sum::<f64>() / n;
-    let sxx: f64 = raw.iter().map(|x| (x - mean_x).powi(2)).sum();
-    let sxy: f64 = raw
-        .iter()
-        .zip(reference_c)
-        .map(|(x, y)| (x - mean_x) * (y - mean_y))
-        .sum();
     let span = raw.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
         - raw.iter().cloned().fold(f64::INFINITY, f64::min);
-    let scale_fitted = span >= min_span_c && sxx > 0.0;
-    let scale = if scale_fitted { sxy / sxx } else { 1.0 };
-    let offset_c = mean_y - scale * mean_x;
-    let calibration = Calibration { offset_c, scale };
+    // reference = offset + scale·raw by least squares when the span can tell the scale, else
+    // the offset alone (scale 1: the mean difference).
+    let line = crate::numeric::lsq::fit_line(raw, reference_c).filter(|_| span >= min_span_c);
+    let scale_fitted = line.is_some();
+    let calibration = match line {
+        Some(l) => Calibration {
+            offset_c: l.intercept,
+            scale: l.slope,
+        },
+        None => Calibration {
+            offset_c: reference_c.iter().sum::<f64>() / n - raw.iter().sum::<f64>() / n,
+            scale: 1.0,
+        },
+    };
     let residual_rms_c = (raw
         .iter()
         .zip(reference_c)
@@ -727,7 +729,12 @@ mod tests {
         assert!((room.calibration.offset_c + 0.25).abs() < 1e-9);
         // A minimum span that is not a span is refused rather than read as "offset only".
         for bad in [f64::NAN, -1.0] {
-            assert!(calibrate(&log, &table, 0.0, 1000.0, bad).is_err());
+            let err = calibrate(&log, &table, 0.0, 1000.0, bad).unwrap_err();
+            assert_eq!(err.kind(), "input", "{err}");
+            assert!(
+                err.to_string().contains("is not a temperature span"),
+                "{err}"
+            );
         }
     }
 

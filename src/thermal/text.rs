@@ -13,7 +13,7 @@ use std::fmt::Write;
 
 /// A figure at 3 decimals, or `n/a`.
 fn opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into())
+    crate::numeric::format::opt(v, 3, "n/a")
 }
 
 /// `thermal calibrate`: one row per sensor.

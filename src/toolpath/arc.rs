@@ -231,12 +231,17 @@ mod tests {
 
     #[test]
     fn bad_arcs_are_reported() {
-        assert!(Arc::from_radius(Plane::G17, [0.0; 3], [10.0, 0.0, 0.0], 4.0, true, 1).is_err());
+        let err =
+            Arc::from_radius(Plane::G17, [0.0; 3], [10.0, 0.0, 0.0], 4.0, true, 1).unwrap_err();
+        assert!(
+            err.contains("arc radius 4 is smaller than half the distance"),
+            "{err}"
+        );
         assert!(
             Arc::from_centre(Plane::G17, [0.0; 3], [10.0, 0.0, 0.0], (5.0, 1.0), true, 1).is_ok()
         );
-        assert!(
-            Arc::from_centre(Plane::G17, [0.0; 3], [10.0, 0.0, 0.0], (4.0, 0.0), true, 1).is_err()
-        );
+        let err = Arc::from_centre(Plane::G17, [0.0; 3], [10.0, 0.0, 0.0], (4.0, 0.0), true, 1)
+            .unwrap_err();
+        assert!(err.contains("arc radius differs between start"), "{err}");
     }
 }

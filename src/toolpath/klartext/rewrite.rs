@@ -8,6 +8,10 @@ use crate::error::Result;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
+/// The fewest bytes a written piece takes: `L X0.0000 Y0.0000 Z0.0000` and a newline (every
+/// piece writes the three axes with at least four decimals).
+const MIN_PIECE_BYTES: u64 = 26;
+
 /// M functions that act at the end of their block: they go with the last piece.
 const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
 
@@ -49,15 +53,32 @@ impl Kt<'_> {
                 Some(a) => a.point(t),
             };
             let error_at = |p: &[f64; 3]| self.error_at(p);
-            emit_curve(
+            // Each piece is an `L X… Y… Z…` block of at least MIN_PIECE_BYTES: stop as soon as
+            // the pieces outnumber what the output limit has room for.
+            let limit = crate::io::safety::max_output_bytes();
+            let room = limit.saturating_sub(self.out_bytes as u64) / MIN_PIECE_BYTES;
+            let complete = emit_curve(
                 Breaks::Fractions(chords),
                 &curve,
                 step,
                 self.zone_now(),
                 self.normal,
                 &error_at,
+                usize::try_from(room).unwrap_or(usize::MAX),
                 &mut emitted,
             );
+            if !complete {
+                return Err(self.err(
+                    n,
+                    b.head_col,
+                    &b.head,
+                    format!(
+                        "this move is cut into more pieces than the output limit of {} MB has room for (at least {MIN_PIECE_BYTES} bytes each)",
+                        limit / 1_000_000
+                    ),
+                    "check the move's length, raise --max-segment / --chord-tol, or raise --max-output-mb",
+                ));
+            }
         }
         if self.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
