@@ -377,48 +377,14 @@ impl<'a> Rewriter<'a> {
 
     /// Could a path through these points (some coordinates unknown) touch the zone and domain?
     fn may_touch(&self, points: &[[Option<f64>; 3]]) -> bool {
-        let mut lo = f64::INFINITY;
-        let mut hi = f64::NEG_INFINITY;
-        let mut normal_known = true;
-        for p in points {
-            match p[self.normal] {
-                Some(n) => {
-                    lo = lo.min(n);
-                    hi = hi.max(n);
-                }
-                None => normal_known = false,
-            }
-        }
-        if let (Some((zlo, zhi)), true) = (self.zone_now(), normal_known) {
-            if hi < zlo || lo > zhi {
-                return false;
-            }
-        }
-        // The domain only needs the two plane coordinates; unknown ones may be anywhere.
-        let (ui, vi) = self.plane_uv;
-        let known: Option<Vec<[f64; 3]>> =
-            points.iter().map(|p| Some([p[ui]?, p[vi]?, 0.0])).collect();
-        let Some(known) = known else {
-            return true;
-        };
-        if known.is_empty() {
-            return true;
-        }
-        let step = self.settings.max_segment_in(self.inches);
-        let inside = |p: &[f64; 3]| self.compensable(p[0], p[1]);
-        if inside(&known[0]) {
-            return true;
-        }
-        for w in known.windows(2) {
-            let len = dist(&w[0], &w[1]);
-            let k = (len / step).ceil().clamp(1.0, 1e6) as usize;
-            for i in 1..=k {
-                if inside(&lerp(&w[0], &w[1], i as f64 / k as f64)) {
-                    return true;
-                }
-            }
-        }
-        false
+        super::reach::may_touch(
+            points,
+            self.normal,
+            self.plane_uv,
+            self.zone_now(),
+            self.settings.max_segment_in(self.inches),
+            |u, v| self.compensable(u, v),
+        )
     }
 
     /// One line: strict checks, then a dialect statement, an O-word, a subroutine body line

@@ -18,6 +18,7 @@ mod expr;
 mod gcode;
 mod klartext;
 pub mod lexer;
+mod reach;
 pub mod zone_spec;
 
 pub use arc::{Arc, Plane};

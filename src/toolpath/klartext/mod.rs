@@ -416,42 +416,14 @@ impl<'a> Kt<'a> {
                 })
                 .collect()
         };
-        let (mut lo, mut hi, mut normal_known) = (f64::INFINITY, f64::NEG_INFINITY, true);
-        for p in &framed {
-            match p[self.normal] {
-                Some(n) => {
-                    lo = lo.min(n);
-                    hi = hi.max(n);
-                }
-                None => normal_known = false,
-            }
-        }
-        if let (Some((zlo, zhi)), true) = (self.zone_now(), normal_known) {
-            if hi < zlo || lo > zhi {
-                return false;
-            }
-        }
-        let (iu, iv) = self.plane_uv;
-        let known: Option<Vec<[f64; 3]>> =
-            framed.iter().map(|p| Some([p[iu]?, p[iv]?, 0.0])).collect();
-        let Some(known) = known.filter(|k| !k.is_empty()) else {
-            return true;
-        };
-        let step = self.step();
-        if self.compensable(known[0][0], known[0][1]) {
-            return true;
-        }
-        for w in known.windows(2) {
-            let len = super::gcode::dist(&w[0], &w[1]);
-            let k = (len / step).ceil().clamp(1.0, 1e6) as usize;
-            for i in 1..=k {
-                let p = super::gcode::lerp(&w[0], &w[1], i as f64 / k as f64);
-                if self.compensable(p[0], p[1]) {
-                    return true;
-                }
-            }
-        }
-        false
+        super::reach::may_touch(
+            &framed,
+            self.normal,
+            self.plane_uv,
+            self.zone_now(),
+            self.step(),
+            |u, v| self.compensable(u, v),
+        )
     }
 
     /// Longest segment in program units.
