@@ -17,7 +17,7 @@ use modal::{first_jump, refuse_klartext};
 use super::arc::Plane;
 use super::dialect::{self, Dialect, Frame, GCode, Motion, G};
 use super::expr::{eval, Params};
-use super::lexer::{lex_dialect, Line, TokenKind, WordValue};
+use super::lexer::{self, Line, TokenKind, WordValue};
 use super::{CompensationReport, CompensationSettings, TracedMove};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
@@ -252,15 +252,26 @@ impl<'a> Rewriter<'a> {
 
     /// Read every line, rewriting the moves to compensate.
     fn run(&mut self) -> Result<()> {
-        let lines = lex_dialect(self.text, self.dialect);
-        self.flow = first_jump(self.text, &lines, self.dialect);
-        self.program_decimals = coordinate_decimals(self.text, &lines);
-        self.report.lines_in = lines.len() as u64;
-        for line in &lines {
+        let (text, dialect) = (self.text, self.dialect);
+        // What the whole program decides before its first line is rewritten: where control
+        // first jumps, and how many decimals its coordinates are written with. The lines are
+        // lexed twice rather than kept, so memory is that of one line.
+        let (mut flow, mut decimals, mut lines) = (None, 0, 0);
+        let _ = lexer::for_each_line(text, dialect, |line| {
+            if flow.is_none() {
+                flow = first_jump(text, line, dialect);
+            }
+            decimals = decimals.max(coordinate_decimals(text, line));
+            lines = line.number;
+            Ok::<(), std::convert::Infallible>(())
+        });
+        self.flow = flow;
+        self.program_decimals = decimals;
+        self.report.lines_in = lines;
+        lexer::for_each_line(text, dialect, |line| {
             self.line(line)?;
-            super::check_output_size(self.source, line.number, self.out.len())?;
-        }
-        Ok(())
+            super::check_output_size(self.source, line.number, self.out.len())
+        })
     }
 
     /// The output and its report; a subprogram whose moves changed is refused.

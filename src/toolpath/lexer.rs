@@ -87,10 +87,29 @@ pub fn lex(text: &str) -> Vec<Line> {
 
 /// [`lex`] with the lexing rules of `dialect`.
 pub fn lex_dialect(text: &str, dialect: Dialect) -> Vec<Line> {
-    let bytes = text.as_bytes();
     let mut lines = Vec::new();
+    let _ = for_each_line(text, dialect, |line| {
+        lines.push(line.clone());
+        Ok::<(), std::convert::Infallible>(())
+    });
+    lines
+}
+
+/// Lex `text` line by line into one reused [`Line`] and hand each to `f`, stopping at its
+/// first error: memory stays that of one line, however long the program.
+pub fn for_each_line<E>(
+    text: &str,
+    dialect: Dialect,
+    mut f: impl FnMut(&Line) -> Result<(), E>,
+) -> Result<(), E> {
+    let bytes = text.as_bytes();
+    let mut line = Line {
+        number: 0,
+        span: 0..0,
+        end: 0,
+        tokens: Vec::new(),
+    };
     let mut start = 0usize;
-    let mut number = 1u64;
     while start < bytes.len() {
         let nl = bytes[start..]
             .iter()
@@ -107,16 +126,15 @@ pub fn lex_dialect(text: &str, dialect: Dialect) -> Vec<Line> {
             }
             None => (bytes.len(), bytes.len()),
         };
-        lines.push(Line {
-            number,
-            span: start..content_end,
-            end,
-            tokens: lex_line(bytes, start, content_end, dialect),
-        });
-        number += 1;
+        line.number += 1;
+        line.span = start..content_end;
+        line.end = end;
+        line.tokens.clear();
+        lex_line_into(bytes, start, content_end, dialect, &mut line.tokens);
+        f(&line)?;
         start = end;
     }
-    lines
+    Ok(())
 }
 
 fn is_space(b: u8) -> bool {
@@ -149,9 +167,7 @@ fn keyword(b: &[u8], i: usize, name_end: usize, end: usize) -> (TokenKind, usize
     (TokenKind::Keyword { name }, m)
 }
 
-fn lex_line(b: &[u8], start: usize, end: usize, dialect: Dialect) -> Vec<Token> {
-    // Room for a token every three bytes (`X1 ` …) in one allocation, rather than regrowing.
-    let mut tokens = Vec::with_capacity(((end - start) / 3 + 1).min(32));
+fn lex_line_into(b: &[u8], start: usize, end: usize, dialect: Dialect, tokens: &mut Vec<Token>) {
     let mut i = start;
     while i < end {
         let c = b[i];
@@ -214,7 +230,6 @@ fn lex_line(b: &[u8], start: usize, end: usize, dialect: Dialect) -> Vec<Token> 
         });
         i = next;
     }
-    tokens
 }
 
 fn skip_spaces(b: &[u8], mut i: usize, end: usize) -> usize {

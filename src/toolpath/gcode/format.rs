@@ -6,23 +6,21 @@ pub(super) use crate::numeric::format::{decimal_units, fixed as format_decimals_
 pub use crate::numeric::format::{format_coord, format_decimals};
 
 /// Most decimals written in an X/Y/Z/I/J/K/R number of the program, capped at 9.
-pub(super) fn coordinate_decimals(text: &str, lines: &[Line]) -> usize {
+pub(super) fn coordinate_decimals(text: &str, line: &Line) -> usize {
     let mut most = 0;
-    for line in lines {
-        for t in &line.tokens {
-            if let TokenKind::Word {
-                letter: b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R',
-                value: WordValue::Number(_),
-            } = t.kind
-            {
-                let w = text.get(t.span.clone()).unwrap_or("");
-                if let Some(dot) = w.find('.') {
-                    let d = w[dot + 1..]
-                        .chars()
-                        .take_while(|c| c.is_ascii_digit())
-                        .count();
-                    most = most.max(d);
-                }
+    for t in &line.tokens {
+        if let TokenKind::Word {
+            letter: b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R',
+            value: WordValue::Number(_),
+        } = t.kind
+        {
+            let w = text.get(t.span.clone()).unwrap_or("");
+            if let Some(dot) = w.find('.') {
+                let d = w[dot + 1..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_digit())
+                    .count();
+                most = most.max(d);
             }
         }
     }

@@ -37,7 +37,7 @@ pub(super) fn refuse_klartext(text: &str, source: &Path, dialect: Dialect) -> Re
 
 /// The first jump of the program (Fanuc `GOTO`, Sinumerik `GOTOF`/`GOTOB`/`GOTO`/loops): after
 /// one, a block may run any number of times, so no cut in the zone can be vouched for.
-pub(super) fn first_jump(text: &str, lines: &[Line], dialect: Dialect) -> Option<(u64, String)> {
+pub(super) fn first_jump(text: &str, line: &Line, dialect: Dialect) -> Option<(u64, String)> {
     const JUMPS: [&str; 13] = [
         "GOTO", "GOTOF", "GOTOB", "GOTOC", "WHILE", "FOR", "LOOP", "REPEAT", "REPEATB", "UNTIL",
         "CASE", "IF", "ELSE",
@@ -45,17 +45,15 @@ pub(super) fn first_jump(text: &str, lines: &[Line], dialect: Dialect) -> Option
     if dialect == Dialect::Linuxcnc {
         return None;
     }
-    for l in lines {
-        for t in &l.tokens {
-            if let TokenKind::Keyword { name } = &t.kind {
-                let body = text.get(t.span.clone()).unwrap_or("").to_ascii_uppercase();
-                let jump = match dialect {
-                    Dialect::Fanuc => body.contains("GOTO"),
-                    _ => JUMPS.contains(&name.as_str()),
-                };
-                if jump {
-                    return Some((l.number, name.clone()));
-                }
+    for t in &line.tokens {
+        if let TokenKind::Keyword { name } = &t.kind {
+            let body = text.get(t.span.clone()).unwrap_or("").to_ascii_uppercase();
+            let jump = match dialect {
+                Dialect::Fanuc => body.contains("GOTO"),
+                _ => JUMPS.contains(&name.as_str()),
+            };
+            if jump {
+                return Some((line.number, name.clone()));
             }
         }
     }
