@@ -3,9 +3,9 @@
 use super::Globals;
 use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
 use errmap::linear::{
-    compute_budget, read_budget_setup, render_table, target_symbols, AirConditions, AirCorrection,
-    AirFormula, AirIndexJson, AnalyzeRequest, Corrections, Evaluation, RunSource, Standard,
-    TableFormat, TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
+    compute_budget, read_budget_setup, render_table, AirConditions, AirCorrection, AirFormula,
+    AirIndexJson, AnalyzeRequest, Corrections, Evaluation, RunSource, Standard, TableFormat,
+    TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -258,74 +258,8 @@ fn print_json<T: serde::Serialize>(value: &T) -> Result<()> {
     Ok(())
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    format!("{:>9}", errmap::numeric::format::opt(v, 3, "n/a"))
-}
-
 fn print_evaluation(title: &str, ev: &Evaluation) -> Result<()> {
-    outln!("{title} — {} (k = {}), µm", ev.standard, ev.k);
-    // Per-target columns in the standard's own symbols; a figure it does not define is left out.
-    let symbols = target_symbols(ev.standard);
-    let mut head = format!("{:>10}", "target_mm");
-    for s in symbols.iter().filter(|s| !s.is_empty()) {
-        head.push_str(&format!(" {s:>9}"));
-    }
-    outln!("{head}");
-    for t in &ev.targets {
-        let reversal = match ev.standard {
-            // VDI/DGQ 3441's reversal span U_j is a span: |x̄_j↑ − x̄_j↓|.
-            Standard::Vdi3441 => t.reversal.map(f64::abs),
-            _ => t.reversal,
-        };
-        let values = [
-            t.mean_up,
-            t.mean_down,
-            t.s_up,
-            t.s_down,
-            reversal,
-            t.repeatability_up,
-            t.repeatability_down,
-            t.repeatability,
-        ];
-        let mut line = format!("{:>10.3}", t.target);
-        for (s, v) in symbols.iter().zip(values) {
-            if !s.is_empty() {
-                line.push(' ');
-                line.push_str(&fmt_opt(v));
-            }
-        }
-        outln!("{line}");
-    }
-    // Columns on screen: combining marks (the bar of B̄, P̄s, Ū) take none.
-    let columns = |s: &str| {
-        s.chars()
-            .filter(|c| !('\u{300}'..='\u{36f}').contains(c))
-            .count()
-    };
-    let width = ev
-        .figures()
-        .iter()
-        .map(|f| columns(f.symbol))
-        .max()
-        .unwrap_or(1);
-    for (i, f) in ev.figures().iter().enumerate() {
-        let pad = width - columns(f.symbol);
-        outln!(
-            "{} {}{} = {}  {}: {}",
-            if i == 0 { "axis:" } else { "     " },
-            f.symbol,
-            " ".repeat(pad),
-            fmt_opt(f.value).trim(),
-            f.name,
-            f.definition
-        );
-    }
-    if let Some(d) = ev.unidirectional {
-        outln!(
-            "      unidirectional test (direction {} only): bidirectional figures are n/a",
-            d.symbol()
-        );
-    }
+    out!("{}", errmap::linear::text::evaluation_report(title, ev));
     Ok(())
 }
 
@@ -390,11 +324,7 @@ fn budget(args: BudgetArgs) -> Result<i32> {
     if args.json {
         print_json(&b)?;
     } else {
-        outln!("error budget over {} mm (µm):", b.length_mm);
-        for t in &b.terms {
-            outln!("  {:<22} {:10.4}   {}", t.name, t.value_um, t.formula);
-        }
-        outln!("  {:<22} {:10.4}   √(Σ δ²)", "total (RSS)", b.total_um);
+        out!("{}", errmap::linear::text::budget_report(&b));
     }
     Ok(0)
 }

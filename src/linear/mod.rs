@@ -11,6 +11,7 @@ mod pitch;
 mod report_json;
 mod runs;
 mod table;
+pub mod text;
 
 pub use air::{
     refractive_index, saturation_vapour_pressure_pa, sensitivities, vapour_pressure_pa,

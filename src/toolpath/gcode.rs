@@ -158,18 +158,6 @@ pub fn compensate(
     rw.finish()
 }
 
-/// A map that compensates nothing: reading a program through it traces its moves.
-struct Nothing;
-
-impl ErrorField for Nothing {
-    fn normal(&self) -> crate::geom::Axis {
-        crate::geom::Axis::Z
-    }
-    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
-        None
-    }
-}
-
 /// The moves of a G-code program as errmap's interpreter reads them (see
 /// [`crate::toolpath::trace_gcode`]).
 pub fn trace(
@@ -177,12 +165,8 @@ pub fn trace(
     source: &Path,
     settings: &CompensationSettings,
 ) -> Result<Vec<TracedMove>> {
-    let settings = CompensationSettings {
-        zone: None,
-        everywhere: true,
-        ..*settings
-    };
-    let mut rw = Rewriter::start(text, source, &Nothing, &settings)?;
+    let settings = super::trace_settings(settings);
+    let mut rw = Rewriter::start(text, source, &super::Nothing, &settings)?;
     rw.trace = Some(Vec::new());
     rw.run()?;
     Ok(rw.trace.take().unwrap_or_default())

@@ -243,6 +243,29 @@ impl CompensationReport {
     }
 }
 
+/// A map that compensates nothing: reading a program through it traces its moves.
+struct Nothing;
+
+impl ErrorField for Nothing {
+    fn normal(&self) -> crate::geom::Axis {
+        crate::geom::Axis::Z
+    }
+    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
+        None
+    }
+}
+
+/// The settings a trace reads a program with: every move followed (no zone, no domain), none
+/// compensated.
+fn trace_settings(settings: &CompensationSettings) -> CompensationSettings {
+    CompensationSettings {
+        zone: None,
+        everywhere: true,
+        extrapolate: true,
+        ..*settings
+    }
+}
+
 /// Compensate a G-code program (RS274/NGC, LinuxCNC dialect). `source` names the file in errors.
 pub fn compensate_gcode(
     text: &str,

@@ -127,31 +127,14 @@ pub(crate) fn compensate(
     Ok(kt.finish(text))
 }
 
-/// A map that compensates nothing: reading a program through it traces its moves.
-struct Nothing;
-
-impl ErrorField for Nothing {
-    fn normal(&self) -> crate::geom::Axis {
-        crate::geom::Axis::Z
-    }
-    fn error_mm(&self, _u_mm: f64, _v_mm: f64) -> Option<f64> {
-        None
-    }
-}
-
 /// The moves of a Klartext program as errmap reads them (mm, work coordinates).
 pub(crate) fn trace(
     text: &str,
     source: &Path,
     settings: &CompensationSettings,
 ) -> Result<Vec<TracedMove>> {
-    let settings = CompensationSettings {
-        zone: None,
-        everywhere: true,
-        extrapolate: true,
-        ..*settings
-    };
-    let mut kt = Kt::start(text, source, &Nothing, &settings)?;
+    let settings = super::trace_settings(settings);
+    let mut kt = Kt::start(text, source, &super::Nothing, &settings)?;
     kt.trace = Some(Vec::new());
     kt.run(text)?;
     Ok(kt.trace.take().unwrap_or_default())
