@@ -77,6 +77,22 @@ fn compensate_writes_the_program_and_reports() {
     let doc = common::json(&out);
     assert_eq!(doc["report"]["moves_changed"], 2);
     assert!((doc["report"]["max_abs_error_mm"].as_f64().unwrap() - 0.02).abs() < 1e-9);
+    assert!(doc["input"].as_str().unwrap().ends_with("in.ngc"), "{doc}");
+    // Keys in alphabetical order at every level, as scripts have read them.
+    let text = out.stdout.trim();
+    let at = |key: &str| text.find(&format!("\"{key}\"")).unwrap_or(usize::MAX);
+    let keys = [
+        "dialect",
+        "lines_in",
+        "max_abs_error_mm",
+        "moves_changed",
+        "zone_mm",
+    ];
+    assert!(keys.windows(2).all(|w| at(w[0]) < at(w[1])), "{text}");
+    assert!(
+        at("input") < at("output") && at("output") < at("report"),
+        "{text}"
+    );
 
     // A refusal names file:line and exits 2; nothing is written.
     std::fs::write(

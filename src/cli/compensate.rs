@@ -95,12 +95,12 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
     errmap::io::safety::protect(&args.input);
     let report = compensate_file(&args.input, &args.output, &model, &settings)?;
     if args.json {
-        let doc = serde_json::json!({
-            "input": args.input,
-            "output": args.output,
-            "report": report,
-        });
-        outln!("{doc}");
+        let doc = errmap::toolpath::CompensationDocument {
+            input: &args.input,
+            output: &args.output,
+            report: &report,
+        };
+        outln!("{}", doc.to_json()?);
     } else {
         outln!("{}: {}", args.output.display(), report.summary_line());
     }

@@ -318,6 +318,25 @@ pub fn compensate_csv(
     csv_path::compensate(text, source, field, settings)
 }
 
+/// The JSON document `errmap compensate --json` prints: which file became which, and what was
+/// done.
+#[derive(Debug, Serialize)]
+pub struct CompensationDocument<'a> {
+    pub input: &'a Path,
+    pub output: &'a Path,
+    pub report: &'a CompensationReport,
+}
+
+impl CompensationDocument<'_> {
+    /// The document on one line, its keys in alphabetical order at every level (the order
+    /// scripts have read since the first release).
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_value(self)
+            .and_then(|v| serde_json::to_string(&v))
+            .map_err(|e| Error::Internal(e.to_string()))
+    }
+}
+
 /// Compensate `input` into `output` (written atomically): `.csv` as a CSV toolpath, anything
 /// else (`.ngc`, `.nc`, `.gcode`, `.tap` …) as G-code.
 pub fn compensate_file(
