@@ -118,13 +118,7 @@ impl<'f> ErrorLookup<'f> {
             }
         }
         let (u, v) = (p[self.plane.0], p[self.plane.1]);
-        let e = self.field.error_mm(u, v).filter(|e| e.is_finite())?;
-        let measured = self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true);
-        if !self.settings.extrapolate && !measured {
-            self.extrapolated.set(true);
-            return None;
-        }
-        Some(e)
+        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
     }
 }
 

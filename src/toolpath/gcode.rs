@@ -287,9 +287,7 @@ impl<'a> Rewriter<'a> {
             (u + self.shift[self.plane_uv.0]) * s,
             (v + self.shift[self.plane_uv.1]) * s,
         );
-        self.field.error_mm(u, v).is_some()
-            && (self.settings.extrapolate
-                || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
+        super::reach::compensable_mm(self.field, self.settings, u, v)
     }
 
     /// Append a coordinate: at least 4 decimals in mm and 5 in inches, and as many as the
@@ -360,14 +358,8 @@ impl<'a> Rewriter<'a> {
             (p[self.plane_uv.0] + self.shift[self.plane_uv.0]) * s,
             (p[self.plane_uv.1] + self.shift[self.plane_uv.1]) * s,
         );
-        let e_mm = self.field.error_mm(u, v)?;
-        if !self.settings.extrapolate
-            && self.field.measured(u, v, self.settings.domain_margin_mm) != Some(true)
-        {
-            self.extrapolated.set(true);
-            return None;
-        }
-        e_mm.is_finite().then_some(e_mm / s)
+        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
+            .map(|e_mm| e_mm / s)
     }
 
     /// Could a path through these points (some coordinates unknown) touch the zone and domain?

@@ -1,6 +1,41 @@
-//! Whether a path through partly known points can reach the zone and the measured domain: the test the G-code and Klartext rewriters make before they copy a move they cannot follow.
+//! Where the map may be applied, for every toolpath reader: E inside the measured domain (or anywhere the map reaches, with `--extrapolate`), and whether a path through partly known points can reach the zone and that domain.
 
 use super::gcode::{dist, lerp};
+use super::CompensationSettings;
+use crate::geom::ErrorField;
+use std::cell::Cell;
+
+/// Whether the map compensates at plane point (u, v), mm: it reaches the point, and the point
+/// is in the measured domain (within the job's margin) or `--extrapolate` is given.
+pub(crate) fn compensable_mm(
+    field: &dyn ErrorField,
+    settings: &CompensationSettings,
+    u_mm: f64,
+    v_mm: f64,
+) -> bool {
+    field.error_mm(u_mm, v_mm).is_some()
+        && (settings.extrapolate
+            || field.measured(u_mm, v_mm, settings.domain_margin_mm) == Some(true))
+}
+
+/// E (mm) at plane point (u, v) where the map may be applied, as [`compensable_mm`]; a point the
+/// map reaches only by extrapolating gives `None` and sets `extrapolated`, so the report can
+/// count the moves left nominal there.
+pub(crate) fn domain_error_mm(
+    field: &dyn ErrorField,
+    settings: &CompensationSettings,
+    u_mm: f64,
+    v_mm: f64,
+    extrapolated: &Cell<bool>,
+) -> Option<f64> {
+    let e_mm = field.error_mm(u_mm, v_mm)?;
+    if !settings.extrapolate && field.measured(u_mm, v_mm, settings.domain_margin_mm) != Some(true)
+    {
+        extrapolated.set(true);
+        return None;
+    }
+    e_mm.is_finite().then_some(e_mm)
+}
 
 /// A point with each coordinate known or not (program units).
 pub(crate) type MaybePoint = [Option<f64>; 3];

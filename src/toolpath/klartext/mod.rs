@@ -354,9 +354,7 @@ impl<'a> Kt<'a> {
         let s = self.scale_mm();
         let (iu, iv) = self.plane_uv;
         let (u, v) = ((u + self.shift[iu]) * s, (v + self.shift[iv]) * s);
-        self.field.error_mm(u, v).is_some()
-            && (self.settings.extrapolate
-                || self.field.measured(u, v, self.settings.domain_margin_mm) == Some(true))
+        super::reach::compensable_mm(self.field, self.settings, u, v)
     }
 
     /// E in program units at a point, if the point is in the zone and the measured domain.
@@ -370,14 +368,8 @@ impl<'a> Kt<'a> {
         let s = self.scale_mm();
         let (iu, iv) = self.plane_uv;
         let (u, v) = ((p[iu] + self.shift[iu]) * s, (p[iv] + self.shift[iv]) * s);
-        let e_mm = self.field.error_mm(u, v)?;
-        if !self.settings.extrapolate
-            && self.field.measured(u, v, self.settings.domain_margin_mm) != Some(true)
-        {
-            self.extrapolated.set(true);
-            return None;
-        }
-        e_mm.is_finite().then_some(e_mm / s)
+        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
+            .map(|e_mm| e_mm / s)
     }
 
     /// Could a path through these points (some coordinates unknown) touch the zone and the
