@@ -4,24 +4,11 @@ mod common;
 
 use common::errmap;
 
-/// A model.json whose network is all zeros: E = e_mean_um = 20 µm everywhere in x, y ∈ [0, 100] mm.
-const MODEL: &str = r#"{
-  "format": "errmap-map-model/1",
-  "name": "flat",
-  "normal": "z",
-  "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
-  "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
-                    "e_mean_um": 20.0, "e_std_um": 1.0},
-  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
-  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
-  "surface_mm": [-1.0, -1.0]
-}"#;
-
 #[test]
 fn compensate_writes_the_program_and_reports() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    std::fs::write(dir.join("model.json"), MODEL).unwrap();
+    std::fs::write(dir.join("model.json"), common::FLAT_MODEL_20UM).unwrap();
     let program = "%\nG21 G90\nG0 X10 Y10 Z5\nG1 Z-1 F100 (plunge)\nG1 X20\nG0 Z5\nM2\n%\n";
     std::fs::write(dir.join("in.ngc"), program).unwrap();
     let out = errmap(
@@ -126,7 +113,7 @@ fn compensate_writes_the_program_and_reports() {
 fn bad_options_exit_2_with_a_hint() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    std::fs::write(dir.join("model.json"), MODEL).unwrap();
+    std::fs::write(dir.join("model.json"), common::FLAT_MODEL_20UM).unwrap();
     std::fs::write(dir.join("in.ngc"), "G0 X0 Y0 Z0\nM2\n").unwrap();
     for (args, what) in [
         (vec!["--zone", "1"], "is not MIN,MAX"),

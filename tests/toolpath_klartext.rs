@@ -423,25 +423,11 @@ fn refused_constructs_far_from_the_zone_are_copied() {
     assert_eq!(rep.moves_changed, 1, "{out}");
 }
 
-/// A model.json whose network is all zeros: E = 20 µm everywhere in x, y ∈ [0, 100] mm, probed
-/// surface at z = −1 mm.
-const MODEL: &str = r#"{
-  "format": "errmap-map-model/1",
-  "name": "flat",
-  "normal": "z",
-  "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
-  "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
-                    "e_mean_um": 20.0, "e_std_um": 1.0},
-  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
-  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
-  "surface_mm": [-1.0, -1.0]
-}"#;
-
 #[test]
 fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    std::fs::write(dir.join("model.json"), MODEL).unwrap();
+    std::fs::write(dir.join("model.json"), common::FLAT_MODEL_20UM).unwrap();
     // Detected from BEGIN PGM, units from it, zone = the probed surface ± 0.5 mm.
     let program = "0 BEGIN PGM P1 MM\n1 TOOL CALL 1 Z S4000\n2 L X+10 Y+10 Z+5 R0 FMAX\n3 L Z-1 F100\n4 L X+20\n5 L Z+5 R0 FMAX M2\n6 END PGM P1 MM\n";
     std::fs::write(dir.join("in.h"), program).unwrap();

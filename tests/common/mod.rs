@@ -140,3 +140,17 @@ pub fn listing(dir: &Path) -> Vec<String> {
     out.sort();
     out
 }
+
+/// A model.json whose network is all zeros: E = e_mean_um = 20 µm everywhere in x, y ∈ [0, 100]
+/// mm, measured over that square, probed surface at z = −1 mm.
+pub const FLAT_MODEL_20UM: &str = r#"{
+  "format": "errmap-map-model/1",
+  "name": "flat",
+  "normal": "z",
+  "domain": {"u_min_mm": 0.0, "v_min_mm": 0.0, "u_max_mm": 100.0, "v_max_mm": 100.0},
+  "normalisation": {"u_min_mm": 0.0, "u_max_mm": 100.0, "v_min_mm": 0.0, "v_max_mm": 100.0,
+                    "e_mean_um": 20.0, "e_std_um": 1.0},
+  "network": {"layer_sizes": [2, 1], "activation": "tanh", "params": [0.0, 0.0, 0.0]},
+  "hull_mm": [[0.0, 0.0], [100.0, 0.0], [100.0, 100.0], [0.0, 100.0]],
+  "surface_mm": [-1.0, -1.0]
+}"#;
