@@ -130,6 +130,15 @@ pub struct ToolpathConfig {
     pub extrapolate: bool,
     /// Margin around the probes' hull that still counts as measured, mm.
     pub domain_margin_mm: f64,
+    /// The motion mode the controller powers on in (`g0` or `g1`), for blocks with axis
+    /// words before any motion word.
+    pub power_on_motion: Option<crate::toolpath::PowerOnMotion>,
+    /// Execute subprograms and loops and write the flattened, compensated program.
+    pub expand: bool,
+    /// Move canned-cycle holes whose bottom lies in the zone by −E.
+    pub compensate_holes: bool,
+    /// Apply the map in each work offset's coordinates.
+    pub same_part_per_offset: bool,
     /// Longest segment after splitting, mm (converted to inches for G20 programs).
     pub max_segment_mm: f64,
     /// Chord tolerance when arcs are linearised, mm.
@@ -150,6 +159,10 @@ impl Default for ToolpathConfig {
             fanuc_numbers: None,
             extrapolate: false,
             domain_margin_mm: 0.0,
+            power_on_motion: None,
+            expand: false,
+            compensate_holes: false,
+            same_part_per_offset: false,
             max_segment_mm: 5.0,
             chord_tol_mm: 0.005,
             map: MapChoice::Family,

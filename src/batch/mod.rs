@@ -219,6 +219,10 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
             fanuc_numbers: job.toolpaths.fanuc_numbers,
             extrapolate: job.toolpaths.extrapolate,
             domain_margin_mm: job.toolpaths.domain_margin_mm,
+            power_on_motion: job.toolpaths.power_on_motion,
+            expand: job.toolpaths.expand,
+            compensate_holes: job.toolpaths.compensate_holes,
+            same_part_per_offset: job.toolpaths.same_part_per_offset,
         },
         per_part: job.toolpaths.map == MapChoice::Part,
     });

@@ -35,6 +35,20 @@ pub struct CompensateArgs {
     /// increment system is-a, is-b (0.001 mm) or is-c.
     #[arg(long, value_name = "MODE")]
     pub fanuc_numbers: Option<String>,
+    /// The motion mode the controller powers on in (Fanuc parameter 3402#0, Sinumerik
+    /// MD20150): g0 or g1. Needed for blocks with axis words before any motion word.
+    #[arg(long, value_name = "g0|g1")]
+    pub power_on_motion: Option<String>,
+    /// Execute subprograms, loops and parameters whose values are all in the program and write
+    /// the flattened, compensated program.
+    #[arg(long)]
+    pub expand: bool,
+    /// Move the depth and reference of canned-cycle holes whose bottom lies in the zone by −E.
+    #[arg(long)]
+    pub compensate_holes: bool,
+    /// Apply the map in each work offset's own coordinates (identical parts on a fixture plate).
+    #[arg(long)]
+    pub same_part_per_offset: bool,
     /// Also compensate outside the measured domain (the probes' hull), where the map extrapolates.
     #[arg(long)]
     pub extrapolate: bool,
@@ -87,6 +101,10 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
         fanuc_numbers: args.fanuc_numbers.as_deref(),
         extrapolate: args.extrapolate,
         domain_margin_mm: args.domain_margin,
+        power_on_motion: args.power_on_motion.as_deref(),
+        expand: args.expand,
+        compensate_holes: args.compensate_holes,
+        same_part_per_offset: args.same_part_per_offset,
     }
     .settings()?;
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;

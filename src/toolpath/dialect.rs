@@ -86,6 +86,28 @@ impl FanucNumbers {
     }
 }
 
+/// The motion mode a controller powers on in (Fanuc parameter 3402#0 G01, Sinumerik MD20150
+/// `$MC_GCODE_RESET_VALUES[0]`): what a block with axis words and no motion word yet does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PowerOnMotion {
+    /// G0, rapid traverse (Fanuc 3402#0 = 0).
+    #[serde(rename = "g0")]
+    Rapid,
+    /// G1, linear interpolation (Fanuc 3402#0 = 1; the Sinumerik default).
+    #[serde(rename = "g1")]
+    Linear,
+}
+
+impl PowerOnMotion {
+    pub fn parse(text: &str) -> Option<PowerOnMotion> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "g0" | "g00" => Some(PowerOnMotion::Rapid),
+            "g1" | "g01" => Some(PowerOnMotion::Linear),
+            _ => None,
+        }
+    }
+}
+
 /// Program units.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -69,6 +69,18 @@ impl MotionMode {
     };
 }
 
+/// The modes in force where a line errmap inserts before the current line stands (those of the
+/// previous line, before the current line's own codes apply): a return step is written in
+/// them, so it runs as written whatever the current line switches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Standing {
+    absolute: bool,
+    inches: bool,
+    /// The original's normal coordinate and the output's offset from it, in `inches` units.
+    normal_pos: Option<f64>,
+    offset: f64,
+}
+
 /// What a subroutine body does, collected while reading its definition.
 #[derive(Debug, Default, Clone)]
 struct SubInfo {
@@ -105,6 +117,8 @@ struct Rewriter<'a> {
     params: Params,
     // Output state: the output position differs from `pos` only along the normal, by `offset`.
     offset: f64,
+    /// The modes at the start of the current line, for lines inserted before it.
+    standing: Standing,
     out_motion: Option<MotionMode>,
     // Flow control.
     blocks: Vec<Block>,
@@ -203,6 +217,12 @@ impl<'a> Rewriter<'a> {
             cutter_comp: None,
             params: Params::new(),
             offset: 0.0,
+            standing: Standing {
+                absolute: true,
+                inches: units == Some(super::Units::Inch),
+                normal_pos: None,
+                offset: 0.0,
+            },
             out_motion: None,
             blocks: Vec::new(),
             sub: None,
@@ -293,7 +313,12 @@ impl<'a> Rewriter<'a> {
     /// Append a coordinate: at least 4 decimals in mm and 5 in inches, and as many as the
     /// program itself uses (so unchanged end points are written back exactly).
     fn push_coord(&self, buf: &mut String, v: f64) {
-        let d = self.decimals();
+        self.push_coord_in(buf, v, self.inches);
+    }
+
+    /// [`Self::push_coord`] for a line in the given units.
+    fn push_coord_in(&self, buf: &mut String, v: f64, inches: bool) {
+        let d = self.decimals_in(inches);
         match decimal_units(v, d) {
             Some(u) => push_units(buf, u, d),
             None => buf.push_str(&format_decimals(v, d)),
@@ -301,7 +326,11 @@ impl<'a> Rewriter<'a> {
     }
 
     fn decimals(&self) -> usize {
-        let d = if self.inches { 5 } else { 4 };
+        self.decimals_in(self.inches)
+    }
+
+    fn decimals_in(&self, inches: bool) -> usize {
+        let d = if inches { 5 } else { 4 };
         d.max(self.program_decimals)
     }
 
@@ -378,12 +407,25 @@ impl<'a> Rewriter<'a> {
     /// or a block of words.
     fn line(&mut self, line: &Line) -> Result<()> {
         self.check_block(line)?;
+        self.standing = Standing {
+            absolute: self.absolute,
+            inches: self.inches,
+            normal_pos: self.pos[self.normal],
+            offset: self.offset,
+        };
         let keyword = line.tokens.iter().find_map(|t| match &t.kind {
             TokenKind::Keyword { name } => Some((name.as_str(), t.span.clone())),
             _ => None,
         });
         if let Some((name, span)) = keyword {
             if !self.keyword(line, name, span)? {
+                // A statement errmap follows without moving (a label, a jump, a loop, a frame):
+                // the output returns to the original first, so what follows (perhaps many
+                // times) starts where the original does. The `%` of a program's start or end
+                // runs nothing after it.
+                if name != "%" {
+                    self.return_if_needed(line, &[], true)?;
+                }
                 self.copy_line(line);
                 return Ok(());
             }
@@ -412,6 +454,7 @@ impl<'a> Rewriter<'a> {
             } else {
                 self.oword(line, name, keyword, otext)?;
             }
+            self.return_if_needed(line, &[], true)?;
             self.copy_line(line);
             return Ok(());
         }

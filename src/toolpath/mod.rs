@@ -22,7 +22,7 @@ mod reach;
 pub mod zone_spec;
 
 pub use arc::{Arc, Plane};
-pub use dialect::{Dialect, FanucNumbers, Units};
+pub use dialect::{Dialect, FanucNumbers, PowerOnMotion, Units};
 pub use gcode::format_coord;
 
 use crate::error::{Error, Location, Result};
@@ -56,6 +56,18 @@ pub struct CompensationSettings {
     pub extrapolate: bool,
     /// Margin around the probes' hull that still counts as measured, mm.
     pub domain_margin_mm: f64,
+    /// The motion mode the controller powers on in, for blocks with axis words before any
+    /// motion word (Fanuc, Sinumerik, Heidenhain ISO); `None` = refuse such a block.
+    pub power_on_motion: Option<PowerOnMotion>,
+    /// Execute subprograms, loops and parameters whose every value is in the program, and
+    /// write the flattened, compensated program (`--expand`); `false` = refuse them in the zone.
+    pub expand: bool,
+    /// Move a canned cycle's depth and reference by −E at a hole whose bottom lies in the zone
+    /// (`--compensate-holes`); `false` = refuse such a hole.
+    pub compensate_holes: bool,
+    /// Apply the map in each work offset's coordinates (identical parts on a fixture plate,
+    /// `--same-part-per-offset`); `false` = refuse cuts in the zone under a second offset.
+    pub same_part_per_offset: bool,
 }
 
 impl Default for CompensationSettings {
@@ -71,6 +83,10 @@ impl Default for CompensationSettings {
             fanuc_numbers: None,
             extrapolate: false,
             domain_margin_mm: 0.0,
+            power_on_motion: None,
+            expand: false,
+            compensate_holes: false,
+            same_part_per_offset: false,
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The compensation settings as `errmap compensate` takes them, in words: the zone
 //! (`MIN,MAX`, `all`, or the map's surface band) and the controller choices by name.
 
-use super::{CompensationSettings, Dialect, FanucNumbers, Units};
+use super::{CompensationSettings, Dialect, FanucNumbers, PowerOnMotion, Units};
 use crate::error::{Error, Result};
 
 /// Where moves are compensated, as given on the command line.
@@ -70,6 +70,10 @@ pub struct SettingsText<'a> {
     pub fanuc_numbers: Option<&'a str>,
     pub extrapolate: bool,
     pub domain_margin_mm: f64,
+    pub power_on_motion: Option<&'a str>,
+    pub expand: bool,
+    pub compensate_holes: bool,
+    pub same_part_per_offset: bool,
 }
 
 impl SettingsText<'_> {
@@ -100,6 +104,15 @@ impl SettingsText<'_> {
             )?,
             extrapolate: self.extrapolate,
             domain_margin_mm: self.domain_margin_mm,
+            power_on_motion: choice(
+                "power-on-motion",
+                self.power_on_motion,
+                PowerOnMotion::parse,
+                "g0, g1",
+            )?,
+            expand: self.expand,
+            compensate_holes: self.compensate_holes,
+            same_part_per_offset: self.same_part_per_offset,
         };
         settings.validate()?;
         Ok(settings)

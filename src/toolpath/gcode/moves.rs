@@ -1,7 +1,7 @@
 //! One block's move: its G codes applied to the modal state, its start and end, what forbids compensating it (refusals in the zone), and the hand-off to the rewriter or to a byte-for-byte copy.
 
 use super::super::arc::Arc;
-use super::super::dialect::{Dialect, Motion, G};
+use super::super::dialect::{Dialect, Motion, PowerOnMotion, G};
 use super::super::lexer::{Line, TokenKind};
 use super::super::TracedMove;
 use super::emit::{emit_curve, Breaks};
@@ -84,6 +84,9 @@ impl<'a> Rewriter<'a> {
             .is_some_and(|m| matches!(m.kind, Motion::ArcCw | Motion::ArcCcw));
         let moves = words.iter().any(|w| is_axis(w.letter))
             || (motion_word.is_some() && arc_words && arc_mode);
+        if moves && self.motion.is_none() {
+            self.motion = Some(self.power_on_motion(line, words)?);
+        }
         let Some(motion) = self.motion.filter(|_| moves) else {
             self.sync_out_motion(words);
             self.copy_line(line);
@@ -103,6 +106,38 @@ impl<'a> Rewriter<'a> {
             return self.finish_unchanged(line, words, end);
         }
         self.compensate_move(line, words, &mv)
+    }
+
+    /// The motion of a block with axis words before any motion word: LinuxCNC refuses such a
+    /// block; a Fanuc, a Sinumerik or a TNC in ISO runs it in the motion mode it powers on in,
+    /// which errmap takes from `--power-on-motion`, or refuses.
+    fn power_on_motion(&self, line: &Line, words: &[W]) -> Result<MotionMode> {
+        let at = words
+            .iter()
+            .find(|w| is_axis(w.letter))
+            .map(|w| self.wtext(w).to_string())
+            .unwrap_or_else(|| "X".into());
+        let (message, hint) = match (self.dialect, self.settings.power_on_motion) {
+            (Dialect::Linuxcnc, _) => (
+                format!("`{at}`: axis words with no motion mode in force (no G0, G1, G2, G3 before them); LinuxCNC stops here: \"Cannot use axis values without a g code that uses them\""),
+                "add G0 or G1 to this block (or to one before it)",
+            ),
+            (_, Some(PowerOnMotion::Rapid)) => return Ok(MotionMode::RAPID),
+            (_, Some(PowerOnMotion::Linear)) => return Ok(MotionMode::LINEAR),
+            (Dialect::Fanuc, None) => (
+                format!("`{at}`: axis words before any motion word; a Fanuc moves them in the motion mode it powers on in (parameter 3402#0: G00 or G01), which the program does not show"),
+                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G0/G1 to this block",
+            ),
+            (Dialect::Sinumerik, None) => (
+                format!("`{at}`: axis words before any motion word; a Sinumerik moves them in its reset motion mode (MD20150 $MC_GCODE_RESET_VALUES[0]), which the program does not show"),
+                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G0/G1 to this block",
+            ),
+            (Dialect::Heidenhain, None) => (
+                format!("`{at}`: axis words before any motion word; the control moves them in the motion mode it starts in, which the program does not show"),
+                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G00/G01 to this block",
+            ),
+        };
+        Err(self.err(line, &at, message, hint))
     }
 
     /// Start, end and the words of a move that bear on whether it can be compensated.
@@ -551,6 +586,11 @@ impl<'a> Rewriter<'a> {
 
     /// Emit a return along the normal to the original position before an unchanged line that
     /// depends on the current position, when the last cut ended compensated.
+    ///
+    /// The return stands before the line, so it runs under the modes in force before the line
+    /// (`self.standing`: distance mode and units), not those the line itself switches to: it
+    /// is written in them. It changes only the modal motion (G1, or G0 after a rapid), which
+    /// the next moving line gets back explicitly (`copy_with_motion`).
     pub(super) fn return_if_needed(
         &mut self,
         line: &Line,
@@ -562,36 +602,43 @@ impl<'a> Rewriter<'a> {
         }
         let n = AXES[self.normal];
         // A canned cycle's Z word is the hole bottom, and it retracts to its start: not a move
-        // to an absolute normal coordinate.
+        // to an absolute normal coordinate. The line's own distance mode decides here.
         let absolute_normal = !group0
-            && self.absolute
             && !self.motion.is_some_and(|m| m.kind == Motion::Canned)
-            && words.iter().any(|w| w.letter == n && w.value.is_some())
+            && words
+                .iter()
+                .any(|w| w.letter == n && w.value.is_some() && w.abs.unwrap_or(self.absolute))
             && !words.iter().any(|w| w.g() == Some(G::Machine));
         if absolute_normal {
             self.offset = 0.0;
             return Ok(());
         }
-        let Some(orig) = self.pos[self.normal] else {
+        let standing = self.standing;
+        let Some(orig) = standing.normal_pos else {
             return Err(Error::Internal(format!(
                 "{}:{}: compensated position with unknown normal coordinate",
                 self.source.display(),
                 line.number
             )));
         };
-        let value = if self.absolute { orig } else { -self.offset };
+        let value = if standing.absolute {
+            orig
+        } else {
+            -standing.offset
+        };
         let mode = if self.out_motion.is_some_and(|m| m.kind == Motion::Rapid) {
             MotionMode::RAPID
         } else {
             MotionMode::LINEAR
         };
         let mut text = format!("{} {}", mode.code, n as char);
-        self.push_coord(&mut text, value);
+        self.push_coord_in(&mut text, value, standing.inches);
         text.push_str(self.eob());
         self.out.push_str(&text);
         self.out.push_str(super::line_terminator(self.text, line));
         self.out_motion = Some(mode);
         self.offset = 0.0;
+        self.standing.offset = 0.0;
         self.report.returns_inserted += 1;
         Ok(())
     }
