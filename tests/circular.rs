@@ -699,12 +699,51 @@ fn a_direction_with_too_few_readings_is_refused() {
 
 #[test]
 fn a_repeated_angle_is_refused_naming_both_lines() {
+    // A second reading at 180° inside the turn (line 182 repeats line 182's angle at 183).
     let mut rows: Vec<_> = turn(1.0).collect();
-    rows.push(("ccw".to_string(), 360.0, 0.1)); // 360° is 0° again
+    rows.insert(181, ("ccw".to_string(), 180.0, 0.1));
     let err = rejected(&radial(rows.into_iter()), "100");
     assert!(
-        err.contains("run.csv:362") && err.contains("repeated") && err.contains("line 2"),
+        err.contains("run.csv:183") && err.contains("repeated") && err.contains("line 182"),
         "{err}"
+    );
+}
+
+#[test]
+fn readings_past_one_turn_are_overshoot_and_counted() {
+    // A ballbar records on: ccw 0°..359° then 360°..400° (the overrun), and cw 359°..0°
+    // then on to −30°. The turn is one turn from each direction's first reading.
+    let mut rows: Vec<(String, f64, f64)> = turn(1.0).collect();
+    for a in 0..=40 {
+        rows.push(("ccw".to_string(), 360.0 + a as f64, 99.0));
+    }
+    for a in (0..360).rev() {
+        rows.push((
+            "cw".to_string(),
+            a as f64,
+            0.5 * (a as f64).to_radians().sin(),
+        ));
+    }
+    for a in 1..=30 {
+        rows.push(("cw".to_string(), -(a as f64), 99.0));
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("run.csv"), radial(rows.into_iter())).unwrap();
+    let doc = json(&ok(
+        dir.path(),
+        &["circular", "run.csv", "--radius", "100", "--json"],
+    ));
+    assert_eq!(doc["readings"]["ccw"], 360, "{doc}");
+    assert_eq!(doc["readings"]["cw"], 360, "{doc}");
+    assert_eq!(doc["readings"]["overshoot"], 41 + 30, "{doc}");
+    assert_eq!(doc["readings"]["overrun"], 41 + 30, "{doc}");
+    // The overrun's 99 µm readings are not evaluated: F stays that of the turn.
+    let f_max = doc["f_max_um"]["ccw"].as_f64().unwrap();
+    assert!(f_max < 5.0, "{doc}");
+    let text = ok(dir.path(), &["circular", "run.csv", "--radius", "100"]).stdout;
+    assert!(
+        text.contains("(71 overshoot rows ignored, 71 of them readings past one turn)"),
+        "{text}"
     );
 }
 

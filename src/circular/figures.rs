@@ -53,7 +53,10 @@ pub struct Figures {
 pub struct ReadingCounts {
     pub ccw: usize,
     pub cw: usize,
+    /// Rows not evaluated: marked `overshoot`, or past one turn.
     pub overshoot: usize,
+    /// Of `overshoot`, the readings past one turn of their direction (an instrument's overrun).
+    pub overrun: usize,
 }
 
 impl Figures {
@@ -192,6 +195,7 @@ pub fn evaluate(run: &CircularRun) -> Result<(Figures, Centred)> {
             ccw: run.direction(Rotation::Ccw).len(),
             cw: run.direction(Rotation::Cw).len(),
             overshoot: run.overshoot_rows,
+            overrun: run.overrun_rows,
         },
         g_um: g,
         h_um,

@@ -4,7 +4,7 @@ use super::circle::fit_circle;
 use crate::error::{Error, Location, Result};
 use crate::io::{CsvRow, CsvTable};
 use serde::Serialize;
-use std::f64::consts::TAU;
+use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
 
 /// Largest allowed angle between neighbouring readings of one direction.
@@ -105,7 +105,10 @@ pub struct CircularRun {
     pub radius_mm: f64,
     /// ccw readings first, then cw, each sorted by angle.
     pub readings: Vec<Reading>,
+    /// Rows not evaluated: marked `overshoot`, or past one turn of their direction.
     pub overshoot_rows: usize,
+    /// Of those, the readings past one turn (taken as overshoot by errmap, not marked).
+    pub overrun_rows: usize,
 }
 
 impl CircularRun {
@@ -165,6 +168,8 @@ fn from_table(t: &CsvTable, opts: &ReadOptions) -> Result<CircularRun> {
             point_mm,
         });
     }
+    let overrun = split_overrun(&mut readings);
+    overshoot_rows += overrun;
     if readings.is_empty() {
         return Err(Error::input(
             Location::file(&t.path),
@@ -190,7 +195,47 @@ fn from_table(t: &CsvTable, opts: &ReadOptions) -> Result<CircularRun> {
         radius_mm: r_mm,
         readings,
         overshoot_rows,
+        overrun_rows: overrun,
     })
+}
+
+/// Readings past one turn: an instrument records on while the machine runs out of the circle
+/// (a ballbar's or grid encoder's overrun). For each direction whose rows come in time order
+/// (or sorted by angle: every step between neighbouring rows turns the same way), the angle is
+/// followed from the first reading; from the reading that completes 360° on, the rest are
+/// overshoot. Rows in no order are left as they are (a repeat is then refused as before).
+/// Removes the overrun from `readings` and returns how many readings it held. A reading at
+/// 360° after rows sorted from 0° is the overrun's first.
+fn split_overrun(readings: &mut Vec<Reading>) -> usize {
+    let full_turn_rad = TAU - SAME_ANGLE_DEG.to_radians();
+    let mut past = vec![false; readings.len()];
+    for d in [Rotation::Ccw, Rotation::Cw] {
+        let of_dir: Vec<usize> = (0..readings.len())
+            .filter(|&i| readings[i].direction == d)
+            .collect();
+        // The step between neighbours, the short way round.
+        let steps: Vec<f64> = of_dir
+            .windows(2)
+            .map(|w| {
+                (readings[w[1]].angle_rad - readings[w[0]].angle_rad + PI).rem_euclid(TAU) - PI
+            })
+            .collect();
+        let one_way = steps.iter().all(|s| *s > 0.0) || steps.iter().all(|s| *s < 0.0);
+        if !one_way {
+            continue;
+        }
+        let mut travelled_rad = 0.0_f64;
+        for (k, &i) in of_dir.iter().enumerate() {
+            if k > 0 {
+                travelled_rad += steps[k - 1];
+            }
+            past[i] = travelled_rad.abs() >= full_turn_rad;
+        }
+    }
+    let n = past.iter().filter(|p| **p).count();
+    let mut flags = past.into_iter();
+    readings.retain(|_| !flags.next().unwrap_or(false));
+    n
 }
 
 fn detect_form(t: &CsvTable) -> Result<Form> {

@@ -102,9 +102,13 @@ fn figures_text(e: &Evaluation) -> String {
     let f = &e.figures;
     let [first, second] = e.axes;
     let mut s = String::new();
+    let overrun = match f.readings.overrun {
+        0 => String::new(),
+        n => format!(", {n} of them readings past one turn"),
+    };
     let _ = writeln!(
         s,
-        "circular test, R {} mm, plane {first}{second}: {} ccw, {} cw readings ({} overshoot rows ignored)",
+        "circular test, R {} mm, plane {first}{second}: {} ccw, {} cw readings ({} overshoot rows ignored{overrun})",
         f.radius_mm, f.readings.ccw, f.readings.cw, f.readings.overshoot
     );
     let _ = writeln!(s, "\nISO 230-4 (µm)        ccw       cw    both");
