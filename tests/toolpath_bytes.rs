@@ -69,7 +69,9 @@ fn klartext_gbk_comment_blocks_are_copied_byte_for_byte() {
     assert_eq!(code, 0, "{stderr}");
     let (inp, got) = (lines(program), lines(&out));
     assert_eq!(&got[..4], &inp[..4]);
-    assert!(got.iter().any(|l| l.ends_with(b"Z-1.0200 F100 ; \xe9\r\n") || l.ends_with(b"F100 ; \xe9\r\n")));
+    assert!(got
+        .iter()
+        .any(|l| l.ends_with(b"Z-1.0200 F100 ; \xe9\r\n") || l.ends_with(b"F100 ; \xe9\r\n")));
     assert_eq!(
         out.iter().filter(|&&c| c >= 0x80).count(),
         program.iter().filter(|&&c| c >= 0x80).count()
