@@ -621,3 +621,104 @@ fn every_real_program_is_followed_exactly_or_refused_for_a_documented_reason() {
         "the flag table lists every corpus program:\n{tally}"
     );
 }
+
+/// The judges themselves, on programs whose moves are known by hand: a judge that passed a
+/// wrong output would make the corpus test worthless.
+mod judges {
+    use super::{fanuc_trace, klartext_trace, path_judge, E_MM};
+    use std::f64::consts::PI;
+
+    fn fanuc(text: &str) -> Vec<path_judge::Seg> {
+        fanuc_in(text, None)
+    }
+
+    fn fanuc_in(text: &str, increment_mm: Option<f64>) -> Vec<path_judge::Seg> {
+        let setup = fanuc_trace::FanucSetup {
+            inch: None,
+            increment_mm,
+            power_on_g1: None,
+        };
+        fanuc_trace::trace(text, setup).unwrap()
+    }
+
+    const ORIGINAL: &str = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X20 Y0 I10 J0\nG1 X30\nG0 Z5\nM30\n";
+    /// ORIGINAL lowered by 0.02 mm on its cuts, with the return step a rewriter writes.
+    const LOWERED: &str = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1.02 F100\nG2 X20 Y0 Z-1.02 I10 J0\nG1 X25 Z-1.02\nX30\nG1 Z-1\nG0 Z5\nM30\n";
+
+    #[test]
+    fn the_judge_accepts_the_path_lowered_by_e() {
+        let v = path_judge::judge(&fanuc(ORIGINAL), &fanuc(LOWERED), E_MM).unwrap();
+        // Plunge end, arc end and midpoint, two line ends.
+        assert_eq!(v.points_checked, 5);
+    }
+
+    #[test]
+    fn the_judge_rejects_every_wrong_rewrite() {
+        let orig = fanuc(ORIGINAL);
+        for (what, wrong) in [
+            ("not lowered", LOWERED.replace("Z-1.02", "Z-1.")),
+            ("lowered twice", LOWERED.replace("Z-1.02", "Z-1.04")),
+            ("raised", LOWERED.replace("Z-1.02", "Z-0.98")),
+            ("arc reversed", LOWERED.replace("G2 X20", "G3 X20")),
+            ("arc dropped", LOWERED.replace("G2 X20 Y0 Z-1.02 I10 J0\n", "")),
+            ("cut shortened", LOWERED.replace("X30\n", "X29.99\n")),
+            ("rapid moved", LOWERED.replace("G0 Z5\nM30", "G0 Z4.9\nM30")),
+            ("no return step", LOWERED.replace("G1 Z-1\nG0 Z5", "G0 X30")),
+        ] {
+            assert!(
+                path_judge::judge(&orig, &fanuc(&wrong), E_MM).is_err(),
+                "{what}: accepted\n{wrong}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_fanuc_tracer_reads_arcs_units_and_increments_as_the_manual_says() {
+        // R arc: from (0,0) to (10,0), R10 clockwise, the shorter arc: centre below the chord
+        // at (5, −√75).
+        let s = fanuc("G21 G90 G17\nG0 X0 Y0 Z0\nG2 X10. R10.\n");
+        let a = s[1].arc.unwrap();
+        assert!((a.centre.0 - 5.0).abs() < 1e-9 && (a.centre.1 + 75f64.sqrt()).abs() < 1e-9);
+        assert!((a.sweep_rad + 2.0 * (5.0f64 / 10.0).asin()).abs() < 1e-9);
+        // R−10: the longer arc, centre above.
+        let s = fanuc("G21 G90 G17\nG0 X0 Y0 Z0\nG2 X10. R-10.\n");
+        let a = s[1].arc.unwrap();
+        assert!((a.centre.1 - 75f64.sqrt()).abs() < 1e-9);
+        assert!((a.sweep_rad + 2.0 * PI - 2.0 * (0.5f64).asin()).abs() < 1e-9);
+        // G20 inch, G91 incremental, decimal-less is-b (0.0001 in), G18 full circle.
+        let s = fanuc_in("G20 G90 G18\nG0 X1. Y0 Z0\nG91 G1 X10000\nG3 I-1. K0\n", Some(0.001));
+        assert!((s[1].end[0] - 2.0 * 25.4).abs() < 1e-9);
+        let a = s[2].arc.unwrap();
+        assert_eq!(a.axes, (2, 0, 1));
+        assert!((a.centre.1 - 25.4).abs() < 1e-9);
+        assert!((a.sweep_rad - 2.0 * PI).abs() < 1e-9);
+        // A point a quarter turn on: Z = −R (counter-clockwise seen from +Y takes X to −Z).
+        let q = s[2].at(0.25);
+        assert!((q[0] - 25.4).abs() < 1e-9 && (q[2] + 25.4).abs() < 1e-9, "{q:?}");
+    }
+
+    #[test]
+    fn the_klartext_tracer_reads_cc_c_cr_and_cp_as_the_manual_says() {
+        let s = klartext_trace::trace(
+            "0 BEGIN PGM T MM\n1 TOOL CALL 1 Z S1000\n2 L X+10 Y+0 Z+0 R0 FMAX\n3 CC X+0 Y+0\n4 C X+0 Y+10 DR+\n5 CP IPA-450 IZ-2 DR-\n6 L IX+5 F100\n7 CR X+10 Y+0 R+5 DR-\n8 END PGM T MM\n",
+        )
+        .unwrap();
+        assert!(!s[0].cut);
+        // C: a quarter turn counter-clockwise.
+        assert!((s[1].arc.unwrap().sweep_rad - PI / 2.0).abs() < 1e-9);
+        // CP IPA−450 from 90°: ends at −360° ≡ 0° → (10, 0), Z down by 2.
+        let cp = &s[2];
+        assert!((cp.end[0] - 10.0).abs() < 1e-9 && cp.end[1].abs() < 1e-9);
+        assert!((cp.end[2] + 2.0).abs() < 1e-9);
+        assert!((cp.arc.unwrap().sweep_rad + 2.5 * PI).abs() < 1e-9);
+        // L IX+5 from (10, 0).
+        assert!((s[3].end[0] - 15.0).abs() < 1e-9);
+        // CR from (15,0) to (10,0), R+5 clockwise: the shorter arc, centre (12.5, +√18.75).
+        let a = s[4].arc.unwrap();
+        assert!((a.centre.0 - 12.5).abs() < 1e-9 && (a.centre.1 - 18.75f64.sqrt()).abs() < 1e-9);
+        assert!(a.sweep_rad < 0.0 && a.sweep_rad > -PI);
+        // What the tracer cannot vouch for is refused.
+        assert!(klartext_trace::trace("1 CYCL DEF 7.0 DATUM SHIFT\n").is_err());
+        assert!(klartext_trace::trace("1 L X+Q1 F100\n").is_err());
+    }
+}

@@ -123,11 +123,15 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
         if let Some(m) = block_motion {
             motion = Some(m);
         }
+        let arc_block = block_motion.is_some_and(|m| m >= 2);
         if axes.iter().all(Option::is_none) {
-            if block_motion.is_some_and(|m| m >= 2) {
-                return Err(format!("line {line}: an arc with no end point"));
+            // An arc with I/J/K and no end point is a full circle; with R it is nothing.
+            if !arc_block || ijk.iter().all(Option::is_none) {
+                if arc_block {
+                    return Err(format!("line {line}: an arc with no end point"));
+                }
+                continue;
             }
-            continue;
         }
         let Some(m) = motion else {
             return Err(format!("line {line}: axis words before any motion code"));
