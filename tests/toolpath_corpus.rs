@@ -641,7 +641,8 @@ mod judges {
         fanuc_trace::trace(text, setup).unwrap()
     }
 
-    const ORIGINAL: &str = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X20 Y0 I10 J0\nG1 X30\nG0 Z5\nM30\n";
+    const ORIGINAL: &str =
+        "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X20 Y0 I10 J0\nG1 X30\nG0 Z5\nM30\n";
     /// ORIGINAL lowered by 0.02 mm on its cuts, with the return step a rewriter writes.
     const LOWERED: &str = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1.02 F100\nG2 X20 Y0 Z-1.02 I10 J0\nG1 X25 Z-1.02\nX30\nG1 Z-1\nG0 Z5\nM30\n";
 
@@ -660,7 +661,10 @@ mod judges {
             ("lowered twice", LOWERED.replace("Z-1.02", "Z-1.04")),
             ("raised", LOWERED.replace("Z-1.02", "Z-0.98")),
             ("arc reversed", LOWERED.replace("G2 X20", "G3 X20")),
-            ("arc dropped", LOWERED.replace("G2 X20 Y0 Z-1.02 I10 J0\n", "")),
+            (
+                "arc dropped",
+                LOWERED.replace("G2 X20 Y0 Z-1.02 I10 J0\n", ""),
+            ),
             ("cut shortened", LOWERED.replace("X30\n", "X29.99\n")),
             ("rapid moved", LOWERED.replace("G0 Z5\nM30", "G0 Z4.9\nM30")),
             ("no return step", LOWERED.replace("G1 Z-1\nG0 Z5", "G0 X30")),
@@ -686,7 +690,10 @@ mod judges {
         assert!((a.centre.1 - 75f64.sqrt()).abs() < 1e-9);
         assert!((a.sweep_rad + 2.0 * PI - 2.0 * (0.5f64).asin()).abs() < 1e-9);
         // G20 inch, G91 incremental, decimal-less is-b (0.0001 in), G18 full circle.
-        let s = fanuc_in("G20 G90 G18\nG0 X1. Y0 Z0\nG91 G1 X10000\nG3 I-1. K0\n", Some(0.001));
+        let s = fanuc_in(
+            "G20 G90 G18\nG0 X1. Y0 Z0\nG91 G1 X10000\nG3 I-1. K0\n",
+            Some(0.001),
+        );
         assert!((s[1].end[0] - 2.0 * 25.4).abs() < 1e-9);
         let a = s[2].arc.unwrap();
         assert_eq!(a.axes, (2, 0, 1));
@@ -694,7 +701,10 @@ mod judges {
         assert!((a.sweep_rad - 2.0 * PI).abs() < 1e-9);
         // A point a quarter turn on: Z = −R (counter-clockwise seen from +Y takes X to −Z).
         let q = s[2].at(0.25);
-        assert!((q[0] - 25.4).abs() < 1e-9 && (q[2] + 25.4).abs() < 1e-9, "{q:?}");
+        assert!(
+            (q[0] - 25.4).abs() < 1e-9 && (q[2] + 25.4).abs() < 1e-9,
+            "{q:?}"
+        );
     }
 
     #[test]
@@ -721,4 +731,40 @@ mod judges {
         assert!(klartext_trace::trace("1 CYCL DEF 7.0 DATUM SHIFT\n").is_err());
         assert!(klartext_trace::trace("1 L X+Q1 F100\n").is_err());
     }
+}
+
+/// The Sinumerik executor on a program whose moves are known by hand.
+#[test]
+fn the_sinumerik_executor_reads_variables_and_ic() {
+    if !sinumerik_nci::available() {
+        assert!(
+            !sinumerik_nci::required(),
+            "nc-gcode-interpreter is missing and ERRMAP_REQUIRE_NCI=1"
+        );
+        println!(
+            "SKIPPED: nc-gcode-interpreter is not installed in {}",
+            sinumerik_nci::venv().display()
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // (nc-gcode-interpreter 0.1.9 reads R parameters as R[1], not R1.)
+    let text =
+        "G71 G90 G17\nDEF REAL ZS\nZS=5\nG0 X0 Y0 Z=ZS\nG1 Z-1 F100\nG1 X=IC(10)\nG0 Z=ZS*2\nM30\n";
+    let path = dir.path().join("p.mpf");
+    std::fs::write(&path, text).unwrap();
+    let s = sinumerik_nci::trace(&path, text).unwrap();
+    let ends: Vec<(bool, [f64; 3])> = s.iter().map(|m| (m.cut, m.end)).collect();
+    assert_eq!(
+        ends,
+        vec![
+            (false, [0.0, 0.0, 5.0]),
+            (true, [0.0, 0.0, -1.0]),
+            (true, [10.0, 0.0, -1.0]),
+            (false, [10.0, 0.0, 10.0]),
+        ]
+    );
+    // Arcs and G91 are declined: the interpreter reports no centres and no G91 sums.
+    assert!(sinumerik_nci::trace(&path, "G91 G1 X1\n").is_err());
+    assert!(sinumerik_nci::trace(&path, "G2 X1 Y1 CR=1\n").is_err());
 }
