@@ -444,7 +444,10 @@ fn one(dir: &Path, dialect: &str, path: &Path, flags: &[&str]) -> Outcome {
                 .iter()
                 .find(|r| r.phrases.iter().any(|p| reason_text.contains(p)))
             {
-                Some(reason) => Outcome::Refused { reason, message },
+                Some(reason) => Outcome::Refused {
+                    reason,
+                    message: message.replace(&input, &format!("{dialect}/{name}")),
+                },
                 None => Outcome::Wrong(format!(
                     "refused for a reason not in the Refusal reasons table: {message}"
                 )),
