@@ -583,11 +583,7 @@ fn every_real_program_is_followed_exactly_or_refused_for_a_documented_reason() {
             } => {
                 refused += 1;
                 if !suggests_given.is_empty() {
-                    writeln!(
-                        again,
-                        "  {file}: suggests {suggests_given}, already given"
-                    )
-                    .unwrap();
+                    writeln!(again, "  {file}: suggests {suggests_given}, already given").unwrap();
                 }
                 if reason.cannot_vouch {
                     vouchless += 1;

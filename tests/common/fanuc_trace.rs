@@ -32,7 +32,7 @@ pub struct FanucSetup {
 /// The moves of `text`, mm.
 pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
     let mut pos: [Option<f64>; 3] = [None; 3];
-    let mut motion: Option<u32> = setup.power_on_g1.map(|g1| u32::from(g1));
+    let mut motion: Option<u32> = setup.power_on_g1.map(u32::from);
     let mut inch = setup.inch;
     let mut absolute = true;
     let mut plane = (0usize, 1usize, 2usize);
@@ -56,26 +56,20 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
             match letter {
                 'G' => {
                     let g: f64 = num.parse().map_err(|_| format!("line {line}: G{num}"))?;
-                    match g {
-                        g if g == 0.0 || g == 1.0 || g == 2.0 || g == 3.0 => {
-                            block_motion = Some(g as u32)
-                        }
-                        g if g == 17.0 => plane = (0, 1, 2),
-                        g if g == 18.0 => plane = (2, 0, 1),
-                        g if g == 19.0 => plane = (1, 2, 0),
-                        g if g == 20.0 => inch = Some(true),
-                        g if g == 21.0 => inch = Some(false),
-                        g if g == 90.0 => absolute = true,
-                        g if g == 91.0 => absolute = false,
-                        g if g == 4.0 || g == 10.0 || g == 28.0 || g == 30.0 || g == 53.0 => {
-                            non_modal = Some(g as u32)
-                        }
-                        g if [
-                            8.0, 9.0, 15.0, 40.0, 43.0, 44.0, 49.0, 61.0, 64.0, 80.0, 94.0, 98.0,
-                            99.0,
-                        ]
-                        .contains(&g)
-                            || (54.0..=59.0).contains(&g) => {}
+                    if g.fract() != 0.0 || g < 0.0 {
+                        return Err(format!("line {line}: G{num} is not followed"));
+                    }
+                    match g as u32 {
+                        m @ 0..=3 => block_motion = Some(m),
+                        17 => plane = (0, 1, 2),
+                        18 => plane = (2, 0, 1),
+                        19 => plane = (1, 2, 0),
+                        20 => inch = Some(true),
+                        21 => inch = Some(false),
+                        90 => absolute = true,
+                        91 => absolute = false,
+                        m @ (4 | 10 | 28 | 30 | 53) => non_modal = Some(m),
+                        8 | 9 | 15 | 40 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 80 | 94 | 98 | 99 => {}
                         _ => return Err(format!("line {line}: G{num} is not followed")),
                     }
                 }

@@ -114,7 +114,7 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
             for k in 0..3 {
                 if abs[k].is_some()
                     || inc[k].is_some()
-                    || (head == "L" && k == 2 && words.iter().any(|w| *w == "M140"))
+                    || (head == "L" && k == 2 && words.contains(&"M140"))
                 {
                     pos[k] = None;
                 }

@@ -44,7 +44,7 @@ pub fn run(work: &Path, name: &str, program: &[u8]) -> Option<Result<Vec<Seg>, S
     }
 }
 
-/// `M101` … `M199` words replaced by spaces of the same length (outside comments too, which is
+/// `M100` … `M199` words replaced by spaces of the same length (outside comments too, which is
 /// harmless: the original and the output get the same treatment).
 fn blank_user_m_codes(text: &str) -> String {
     let b = text.as_bytes();
@@ -59,7 +59,7 @@ fn blank_user_m_codes(text: &str) -> String {
             && b[i + 3].is_ascii_digit()
         {
             let after = b.get(i + 4).copied().unwrap_or(b' ');
-            if !after.is_ascii_digit() && !(b[i + 2] == b'0' && b[i + 3] == b'0') {
+            if !after.is_ascii_digit() {
                 out[i..i + 4].copy_from_slice(b"    ");
             }
         }
