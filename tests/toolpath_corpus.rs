@@ -736,6 +736,9 @@ mod judges {
             (q[0] - 25.4).abs() < 1e-9 && (q[2] + 25.4).abs() < 1e-9,
             "{q:?}"
         );
+        // G92 names the position (10, 0) as 0; G52 shifts X by 5 more: X1. is 16.
+        let s = fanuc("G21 G90 G17\nG0 X10. Y0 Z0\nG92 X0 Y0\nG52 X5.\nG1 X1.\n");
+        assert!((s[1].end[0] - 16.0).abs() < 1e-9, "{:?}", s[1].end);
     }
 
     #[test]
@@ -758,8 +761,14 @@ mod judges {
         let a = s[4].arc.unwrap();
         assert!((a.centre.0 - 12.5).abs() < 1e-9 && (a.centre.1 - 18.75f64.sqrt()).abs() < 1e-9);
         assert!(a.sweep_rad < 0.0 && a.sweep_rad > -PI);
+        // Cycle 7: X+10 from a datum shifted by 5, then by 2 more (IX), is 17 from the original.
+        let s = klartext_trace::trace(
+            "0 BEGIN PGM T MM\n1 L X+0 Y+0 Z+0 FMAX\n2 CYCL DEF 7.0 DATUM SHIFT\n3 CYCL DEF 7.1 X+5\n4 CYCL DEF 7.1 IX+2\n5 L X+10 F100\n",
+        )
+        .unwrap();
+        assert!((s[1].end[0] - 17.0).abs() < 1e-9);
         // What the tracer cannot vouch for is refused.
-        assert!(klartext_trace::trace("1 CYCL DEF 7.0 DATUM SHIFT\n").is_err());
+        assert!(klartext_trace::trace("1 CYCL DEF 10.0 ROTATION\n").is_err());
         assert!(klartext_trace::trace("1 L X+Q1 F100\n").is_err());
     }
 }

@@ -10,8 +10,9 @@
 //! G10 sets data; G8 (look-ahead), G9 (exact stop), G40, G43/G44/G49 H, G54–G59, G61, G64,
 //! G80, G94, G98/G99, G15 move nothing here
 //! (the same in the original and the output). G28, G53 and G30 go to machine positions: the
-//! axes they name become unknown. Anything else that moves (canned cycles, G41/G42, G52, G68,
-//! G92, macros, M98, Fadal L) is refused: the judge cannot vouch for it.
+//! axes they name become unknown. G52 shifts the named axes, G92 names the current position.
+//! Anything else that moves (canned cycles, G41/G42, G68, G51, macros, M98, Fadal L) is
+//! refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
 
@@ -36,6 +37,8 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
     let mut inch = setup.inch;
     let mut absolute = true;
     let mut plane = (0usize, 1usize, 2usize);
+    // G52 local shift and G92 setting, mm: positions are kept in the work coordinates.
+    let (mut local, mut set) = ([0.0f64; 3], [0.0f64; 3]);
     let mut out = Vec::new();
     for (n, raw) in text.lines().enumerate() {
         let line = n as u64 + 1;
@@ -68,7 +71,7 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
                         21 => inch = Some(false),
                         90 => absolute = true,
                         91 => absolute = false,
-                        m @ (4 | 10 | 28 | 30 | 53) => non_modal = Some(m),
+                        m @ (4 | 10 | 28 | 30 | 52 | 53 | 92) => non_modal = Some(m),
                         8 | 9 | 15 | 40 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 80 | 94 | 98 | 99 => {}
                         _ => return Err(format!("line {line}: G{num} is not followed")),
                     }
@@ -96,6 +99,24 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
         if let Some(g) = non_modal {
             match g {
                 4 | 10 => continue,
+                52 | 92 => {
+                    // G52: a local shift of the named axes; G92: the current position is named
+                    // the given coordinates (Series 0i-MF manual, "Local coordinate system" and
+                    // "Setting a workpiece coordinate system").
+                    for k in 0..3 {
+                        if let Some((v, _)) = axes[k] {
+                            if g == 52 {
+                                local[k] = v;
+                            } else {
+                                let p = pos[k].ok_or_else(|| {
+                                    format!("line {line}: G92 at an unknown position")
+                                })?;
+                                set[k] = p - v - local[k];
+                            }
+                        }
+                    }
+                    continue;
+                }
                 _ => {
                     // To a machine position: the named axes leave the work coordinates known here.
                     for k in 0..3 {
@@ -139,7 +160,7 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
         let mut start = [f64::NAN; 3];
         for k in 0..3 {
             end[k] = match (axes[k], pos[k]) {
-                (Some((v, true)), _) => v,
+                (Some((v, true)), _) => v + local[k] + set[k],
                 (Some((v, false)), Some(p)) => p + v,
                 (None, Some(p)) => p,
                 _ => f64::NAN,

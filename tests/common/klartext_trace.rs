@@ -7,7 +7,8 @@
 //! CC to its end, `DR+` counter-clockwise, `DR-` clockwise; `CR` arcs with radius `R` (`R+`
 //! up to 180°, `R-` more), `CP` arcs about CC by the polar angle `PA` / `IPA` (more than a turn
 //! allowed) with `Z`/`IZ` moving linearly (helix). The working plane is XY (tool axis Z);
-//! `M91`/`M92` and `M140` go to machine positions: the axes they move become unknown. What
+//! `M91`/`M92` and `M140` go to machine positions: the axes they move become unknown; cycle 7
+//! shifts the datum (`7.1 X+a`, `IX` adds). What
 //! moves otherwise (cycles and their calls, labels, Q parameters, PLANE, RL/RR, APPR/DEP, RND,
 //! CT, rotary axes) is refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
@@ -19,6 +20,8 @@ use super::path_judge::{sweep, ArcSeg, Seg};
 pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
     let mut pos: [Option<f64>; 3] = [None; 3];
     let mut cc: Option<(f64, f64)> = None;
+    // Datum shift of cycle 7, mm: positions are kept from the original datum.
+    let mut shift = [0.0f64; 3];
     let mut scale = 1.0;
     let mut out = Vec::new();
     let plane = (0usize, 1usize, 2usize);
@@ -57,6 +60,31 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
                 if words.first() == Some(&"DEF") && (number == "32" || number == "9") {
                     continue;
                 }
+                // Cycle 7, datum shift: `7.0` heads it, `7.1 X+a` / `7.2 IY+b` … set the shift
+                // (absolute, or added with I); later coordinates are read from the shifted datum.
+                if words.first() == Some(&"DEF") && number == "7" {
+                    for w in &words[2..] {
+                        let (incremental, w) = match w.strip_prefix('I') {
+                            Some(rest) => (true, rest),
+                            None => (false, *w),
+                        };
+                        let k = match w.as_bytes().first() {
+                            Some(b'X') => 0,
+                            Some(b'Y') => 1,
+                            Some(b'Z') => 2,
+                            _ => continue, // NULLPUNKT / DATUM SHIFT
+                        };
+                        let v: f64 = w[1..]
+                            .parse()
+                            .map_err(|_| format!("line {line}: cycle 7 `{w}`"))?;
+                        shift[k] = if incremental {
+                            shift[k] + v * scale
+                        } else {
+                            v * scale
+                        };
+                    }
+                    continue;
+                }
                 return err(&format!("`{code}`"));
             }
             "L" | "CC" | "C" | "CR" | "CP" => {}
@@ -73,7 +101,7 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
             let axis = |c: char| (c as u8 - b'X') as usize;
             match *w {
                 "FMAX" | "F" | "MAX" => rapid |= *w != "F",
-                "R0" | "AUTO" => {}
+                "R0" | "AUTO" | "MB" => {}
                 "RL" | "RR" | "R+" | "R-" => return err(&format!("`{w}` (radius compensation)")),
                 "DR+" => ccw = true,
                 "DR-" => cw = true,
@@ -125,7 +153,7 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
             let mut e = [f64::NAN; 3];
             for k in 0..3 {
                 e[k] = match (abs[k], inc[k], pos[k]) {
-                    (Some(v), _, _) => v,
+                    (Some(v), _, _) => v + shift[k],
                     (None, Some(d), Some(p)) => p + d,
                     (None, None, Some(p)) => p,
                     _ => f64::NAN,
