@@ -808,3 +808,78 @@ fn the_sinumerik_executor_reads_variables_and_ic() {
     assert!(sinumerik_nci::trace(&path, "G91 G1 X1\n").is_err());
     assert!(sinumerik_nci::trace(&path, "G2 X1 Y1 CR=1\n").is_err());
 }
+
+/// The Fanuc tracer and rs274 read the cuts of the corpus's plain LinuxCNC programs (G1–G3,
+/// I/J/K arcs in G17 and G18, G20, work offsets) alike: a check of the tracer by an executor
+/// that shares no code with it.
+#[test]
+fn the_fanuc_tracer_agrees_with_rs274_on_plain_programs() {
+    let Some(root) = corpus() else {
+        println!("SKIPPED: ../shared/corpus/programs is missing");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for name in [
+        "lagun-HEMA-P016-M.250.ngc",
+        "lagun-HEMA-P030.ngc",
+        "lagun-HEQJ-P008.ngc",
+    ] {
+        let bytes = std::fs::read(root.join("linuxcnc").join(name)).unwrap();
+        let Some(canon) = rs274_canon::run(dir.path(), name, &bytes) else {
+            assert!(
+                !rs274_canon::required(),
+                "rs274 is missing and ERRMAP_REQUIRE_RS274=1"
+            );
+            println!("SKIPPED: rs274 is not installed");
+            return;
+        };
+        let canon = canon.unwrap();
+        let setup = fanuc_trace::FanucSetup {
+            inch: None,
+            increment_mm: None,
+            power_on_g1: None,
+        };
+        // M101 runs a script (no motion); G91.1 is LinuxCNC's default incremental I/J/K, the
+        // Fanuc's only reading.
+        let text = String::from_utf8_lossy(&bytes)
+            .replace("M101", "    ")
+            .replace("G91.1", "     ");
+        let traced = fanuc_trace::trace(&text, setup).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // The cuts, in order (rapids differ by G53, whose machine position only rs274 knows).
+        let known: Vec<&Seg> = traced.iter().filter(|s| s.cut).collect();
+        let canon: Vec<&Seg> = canon.iter().filter(|s| s.cut).collect();
+        assert_eq!(known.len(), canon.len(), "{name}: cut counts");
+        for (a, b) in known.iter().zip(&canon) {
+            assert_eq!(a.cut, b.cut, "{name}: line {}", a.line);
+            for k in 0..3 {
+                assert!(
+                    (a.end[k] - b.end[k]).abs() < 0.002,
+                    "{name}: line {}: {:?} vs rs274 {:?}",
+                    a.line,
+                    a.end,
+                    b.end
+                );
+            }
+            match (&a.arc, &b.arc) {
+                (None, None) => {}
+                (Some(x), Some(y)) => {
+                    assert_eq!(x.axes, y.axes, "{name}: line {}", a.line);
+                    assert!(
+                        (x.centre.0 - y.centre.0).abs() < 0.002
+                            && (x.centre.1 - y.centre.1).abs() < 0.002,
+                        "{name}: line {}",
+                        a.line
+                    );
+                    assert!(
+                        (x.sweep_rad - y.sweep_rad).abs() < 1e-3,
+                        "{name}: line {}: sweep {} vs rs274 {}",
+                        a.line,
+                        x.sweep_rad,
+                        y.sweep_rad
+                    );
+                }
+                _ => panic!("{name}: line {}: arc vs line", a.line),
+            }
+        }
+    }
+}
