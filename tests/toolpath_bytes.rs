@@ -101,3 +101,29 @@ fn a_byte_above_0x7f_in_a_word_is_refused_at_its_line_and_column() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("bad.h:3, column 8 (\\xE9)"), "{stderr}");
 }
+
+#[test]
+fn each_dialect_has_its_own_comments() {
+    let dir = tempfile::tempdir().unwrap();
+    // Sinumerik: `;` is a comment, its bytes are copied.
+    let program: &[u8] =
+        b"; \xc1\xa2\nG71 G90 G17\nG0 X0 Y0 Z5 ; d\xe9part\nG1 Z-1 F100\nG1 X10\nG0 Z5\nM30\n";
+    let (code, out, stderr) = compensate(dir.path(), "s.mpf", program, "sinumerik");
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(&lines(&out)[..3], &lines(program)[..3]);
+    // … but parentheses are not (they group expressions): refused at the byte.
+    let (code, _, stderr) = compensate(
+        dir.path(),
+        "p.mpf",
+        b"G71 G90 G17\nG0 X0 Y0 Z5 (d\xe9part)\nM30\n",
+        "sinumerik",
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("p.mpf:2, column 15 (\\xE9)"), "{stderr}");
+    // Fanuc: `( … )` is a comment on an O line and on a cut.
+    let program: &[u8] = b"%\nO1000 (\xc1\xa2)\nG21 G90 G17\nG0 X0. Y0. Z5.\nG1 Z-1. F100.\nG1 X10. (d\xe9part)\nG0 Z5.\nM30\n%\n";
+    let (code, out, stderr) = compensate(dir.path(), "f.nc", program, "fanuc");
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(&lines(&out)[..4], &lines(program)[..4]);
+    assert!(out.windows(8).any(|w| w == b"(d\xe9part)"));
+}
