@@ -309,7 +309,7 @@ static REASONS: &[Reason] = &[
         cannot_vouch: false,
     },
     Reason {
-        name: "Klartext program not followed",
+        name: "Klartext program without block numbers",
         phrases: &["errmap follows Heidenhain ISO programs only"],
         cannot_vouch: false,
     },
