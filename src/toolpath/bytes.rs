@@ -124,7 +124,11 @@ pub(crate) fn check_comments(text: &str, source: &Path, given: Option<Dialect>) 
 /// The refusal of a byte ≥ 0x80 at byte `at` of `content`, outside a comment.
 fn refusal(source: &Path, line: u64, content: &str, at: usize) -> Error {
     let column = content.get(..at).map_or(at, |s| s.chars().count()) + 1;
-    let byte = content[at..].chars().next().and_then(byte_of).unwrap_or(0);
+    let byte = content
+        .get(at..)
+        .and_then(|s| s.chars().next())
+        .and_then(byte_of)
+        .unwrap_or(0);
     Error::input(
         Location::cell(source, line, format!("{column} (\\x{byte:02X})")),
         format!(
@@ -144,6 +148,42 @@ mod tests {
         let (text, mapped) = decode(raw.clone());
         assert!(mapped);
         assert_eq!(encode(&text), raw);
+    }
+
+    #[test]
+    fn random_bytes_never_panic_and_refusals_name_a_line() {
+        // A small LCG: random lines of ASCII words, comments and high bytes in every dialect.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 33) as u8
+        };
+        let alphabet = b"G01XYZ.-+ ()*;/%\n\r\x80\xc1\xe9\xff0123456789LCCPBEGINPGMMM";
+        for _ in 0..400 {
+            let len = usize::from(next()) % 80;
+            let raw: Vec<u8> = (0..len)
+                .map(|_| alphabet[usize::from(next()) % alphabet.len()])
+                .collect();
+            let (text, mapped) = decode(raw.clone());
+            if mapped {
+                assert_eq!(encode(&text), raw);
+            }
+            for given in [
+                None,
+                Some(Dialect::Linuxcnc),
+                Some(Dialect::Fanuc),
+                Some(Dialect::Sinumerik),
+                Some(Dialect::Heidenhain),
+            ] {
+                if let Err(Error::Input { location, .. }) =
+                    check_comments(&text, Path::new("p.nc"), given)
+                {
+                    assert!(location.line.is_some() || given.is_none());
+                }
+            }
+        }
     }
 
     #[test]
