@@ -883,3 +883,70 @@ fn the_fanuc_tracer_agrees_with_rs274_on_plain_programs() {
         }
     }
 }
+
+/// The LinuxCNC judge (rs274's canonical output in inches, read in mm) rejects a real output
+/// with one horizontal cut's vertex left unlowered (Z raised back by E = 0.00079 in).
+#[test]
+fn the_rs274_judge_rejects_one_unlowered_vertex_in_a_real_program() {
+    let Some(root) = corpus() else {
+        println!("SKIPPED: ../shared/corpus/programs is missing");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("model.json"), FLAT_MODEL_WIDE).unwrap();
+    let input = root.join("linuxcnc/lagun-HEMA-P030.ngc");
+    let output = dir.path().join("out.ngc");
+    common::ok(
+        dir.path(),
+        &[
+            "compensate",
+            "--model",
+            "model.json",
+            "--zone",
+            "all",
+            "--dialect",
+            "linuxcnc",
+            input.to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+        ],
+    );
+    let original = std::fs::read(&input).unwrap();
+    let good = std::fs::read_to_string(&output).unwrap();
+    let z_of = |l: &str| -> Option<f64> {
+        let at = l.find(" Z")?;
+        l[at + 2..].split_whitespace().next()?.parse().ok()
+    };
+    // A G1 line between two G1 lines at the same Z: a vertex of a horizontal cut.
+    let lines: Vec<&str> = good.lines().collect();
+    let i = (1..lines.len() - 1)
+        .find(|&i| {
+            (i - 1..=i + 1).all(|j| lines[j].contains("G1 ") && z_of(lines[j]).is_some())
+                && z_of(lines[i - 1]) == z_of(lines[i])
+                && z_of(lines[i + 1]) == z_of(lines[i])
+        })
+        .expect("a horizontal cut in the output");
+    let z = z_of(lines[i]).unwrap();
+    let mut bad_lines: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    bad_lines[i] = lines[i].replace(&format!("Z{z:.5}"), &format!("Z{:.5}", z + 0.00079));
+    assert_ne!(bad_lines[i], lines[i], "the Z word is rewritten");
+    let bad = bad_lines.join("\n") + "\n";
+    let Some(orig) = rs274_canon::run(dir.path(), "orig", &original) else {
+        assert!(
+            !rs274_canon::required(),
+            "rs274 is missing and ERRMAP_REQUIRE_RS274=1"
+        );
+        println!("SKIPPED: rs274 is not installed");
+        return;
+    };
+    let orig = orig.unwrap();
+    let good = rs274_canon::run(dir.path(), "good", good.as_bytes())
+        .unwrap()
+        .unwrap();
+    let bad = rs274_canon::run(dir.path(), "bad", bad.as_bytes())
+        .unwrap()
+        .unwrap();
+    assert!(path_judge::judge(&orig, &good, E_MM).is_ok());
+    let err = path_judge::judge(&orig, &bad, E_MM).unwrap_err();
+    assert!(err.contains("from the original path"), "{err}");
+}

@@ -125,6 +125,7 @@ pub fn sweep(
 }
 
 /// What the judge found: cutting points checked, or why the output is wrong.
+#[derive(Debug)]
 pub struct Verdict {
     pub points_checked: usize,
 }
