@@ -769,6 +769,10 @@ mod judges {
         assert!((s[1].end[0] - 17.0).abs() < 1e-9);
         // What the tracer cannot vouch for is refused.
         assert!(klartext_trace::trace("1 CYCL DEF 10.0 ROTATION\n").is_err());
+        assert!(klartext_trace::trace("1 M5 M9\n2 M30\n")
+            .unwrap()
+            .is_empty());
+        assert!(klartext_trace::trace("1 M99\n").is_err());
         assert!(klartext_trace::trace("1 L X+Q1 F100\n").is_err());
     }
 }

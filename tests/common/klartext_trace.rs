@@ -88,6 +88,18 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
                 return err(&format!("`{code}`"));
             }
             "L" | "CC" | "C" | "CR" | "CP" => {}
+            // A block of M functions alone (`M30`, `M5 M9`): no move unless it goes to a machine
+            // position or calls a cycle.
+            m if m.starts_with('M')
+                && upper.split_whitespace().all(|w| {
+                    w.starts_with('M')
+                        && w[1..]
+                            .parse::<u32>()
+                            .is_ok_and(|n| !matches!(n, 89 | 91 | 92 | 99 | 140))
+                }) =>
+            {
+                continue
+            }
             _ => return err(&format!("`{code}`")),
         }
         // Words of a path block.
