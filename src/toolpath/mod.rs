@@ -12,6 +12,7 @@
 //! `docs/toolpath.md` has the details and a worked example.
 
 mod arc;
+mod bytes;
 mod csv_path;
 pub mod dialect;
 mod expr;
@@ -370,16 +371,29 @@ pub fn compensate_file(
             "write the compensated toolpath to another file (-o)",
         ));
     }
-    let text = crate::io::read_text(input)?;
     let is_csv = input
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
-    let (out, report) = if is_csv {
-        compensate_csv(&text, input, field, settings)?
-    } else {
-        compensate_gcode(&text, input, field, settings)?
-    };
-    crate::io::write_atomic_bytes(output, out.as_bytes())?;
+    if is_csv {
+        let text = crate::io::read_text(input)?;
+        let (out, report) = compensate_csv(&text, input, field, settings)?;
+        crate::io::write_atomic_bytes(output, out.as_bytes())?;
+        return Ok(report);
+    }
+    // A program that is not UTF-8 (GBK or Latin-1 comments) is read with its bytes ≥ 0x80 as
+    // private-use characters, allowed in comments only, and written back byte for byte.
+    crate::io::safety::protect(input);
+    let raw = std::fs::read(input).map_err(|e| Error::read(input, e))?;
+    let (text, mapped) = bytes::decode(raw);
+    if !mapped {
+        let (out, report) = compensate_gcode(&text, input, field, settings)?;
+        crate::io::write_atomic_bytes(output, out.as_bytes())?;
+        return Ok(report);
+    }
+    bytes::check_comments(&text, input, settings.dialect)?;
+    let (out, report) =
+        compensate_gcode(&text, input, field, settings).map_err(bytes::show_error)?;
+    crate::io::write_atomic_bytes(output, &bytes::encode(&out))?;
     Ok(report)
 }
