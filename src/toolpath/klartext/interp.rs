@@ -31,15 +31,18 @@ pub(super) struct PathMove {
 impl Kt<'_> {
     /// One line: dispatch on its function.
     pub(super) fn line(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        if b.skip {
+            return self.skipped_block(n, content, term, b);
+        }
         match b.head.as_str() {
             "" | ";" | "*" | "BEGIN" | "END" | "BLK" | "FPOL" | "FSELECT" | "SEL" => {
                 self.copy(content, term, b);
                 Ok(())
             }
-            "L" | "C" | "CR" | "CT" => self.path(n, content, term, b),
+            "L" | "C" | "CR" | "CT" | "LP" | "CP" => self.path(n, content, term, b),
             "CC" => self.circle_centre(n, content, term, b),
             "RND" | "CHF" => self.corner_block(n, content, term, b),
-            "LP" | "CP" | "FL" | "FLT" | "FC" | "FCT" | "APPR" | "DEP" => {
+            "FL" | "FLT" | "FC" | "FCT" | "APPR" | "DEP" => {
                 self.unfollowed_contour(n, content, term, b)
             }
             "LBL" => self.label_block(n, content, term, b),
@@ -53,10 +56,7 @@ impl Kt<'_> {
             }
             h if is_m_block(h) => {
                 self.unchanged(n, content, term, b, false)?;
-                if matches!(h, "M99" | "M89") {
-                    self.cycle_call(n, b.head_col, h)?;
-                }
-                Ok(())
+                self.after_path_m(n, b)
             }
             h if h.starts_with('Q') => {
                 self.copy(content, term, b);
@@ -97,7 +97,7 @@ impl Kt<'_> {
     }
 
     /// The working plane of the tool axis (TOOL CALL … Z: XY).
-    fn plane(&self) -> Plane {
+    pub(super) fn plane(&self) -> Plane {
         match self.tool_axis {
             0 => Plane::G19,
             1 => Plane::G18,
@@ -133,10 +133,7 @@ impl Kt<'_> {
     fn path(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.check_path_words(n, b)?;
         self.radius_words(n, b, b.head == "CR");
-        let coordinates = b.words.iter().any(|w| {
-            let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
-            matches!(a, "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W")
-        });
+        let coordinates = has_coordinates(b);
         if b.head == "L" && !coordinates {
             // `L R0 F200 M3`: no motion.
             self.unchanged(n, content, term, b, false)?;
@@ -150,7 +147,7 @@ impl Kt<'_> {
                     l,
                     col,
                     &word,
-                    format!("`{word}` rounds or chamfers the corner before a contour element (line {n}) that may lie in the compensation zone: errmap does not follow RND and CHF there"),
+                    format!("`{word}` rounds or chamfers the corner before a contour element ({}) that may lie in the compensation zone: errmap does not follow RND and CHF there", self.at(n)),
                     CORNER_HINT,
                 ));
             }
@@ -185,21 +182,36 @@ impl Kt<'_> {
         } else {
             self.unchanged(n, content, term, b, absolute_normal)?;
         }
+        let lost: Vec<usize> = (0..3)
+            .filter(|&i| mv.end[i].is_none() && self.pos[i].is_some())
+            .collect();
+        if !lost.is_empty() {
+            self.lose_position(n, &lost);
+        }
         self.pos = mv.end;
         self.after_path_m(n, b)
     }
 
     /// Words a path block may hold; anything else is an error (strict blocks).
     fn check_path_words(&self, n: u64, b: &Block) -> Result<()> {
-        const COMMON: [&str; 26] = [
+        const COMMON: [&str; 31] = [
             "X", "Y", "Z", "IX", "IY", "IZ", "A", "B", "C", "IA", "IB", "IC", "U", "V", "W", "R",
-            "RL", "RR", "F", "FMAX", "FAUTO", "FU", "FZ", "AUTO", "M", "DR",
+            "RL", "RR", "F", "FMAX", "FAUTO", "FU", "FZ", "AUTO", "M", "DR", "MB", "PA", "IPA",
+            "PR", "IPR",
         ];
         for w in &b.words {
             let ok = COMMON.contains(&w.addr.as_str())
-                && (w.addr != "DR" || matches!(b.head.as_str(), "C" | "CR"));
+                && (w.addr != "DR" || matches!(b.head.as_str(), "C" | "CR" | "CP"))
+                && (!matches!(w.addr.as_str(), "PA" | "IPA")
+                    || matches!(b.head.as_str(), "LP" | "CP"))
+                && (!matches!(w.addr.as_str(), "PR" | "IPR") || b.head == "LP")
+                && (w.addr != "MB"
+                    || b.words
+                        .iter()
+                        .any(|m| m.addr == "M" && m.num() == Some(140.0)));
             let value_ok = match w.addr.as_str() {
                 "RL" | "RR" | "FMAX" | "FAUTO" | "AUTO" => w.value == Value::None,
+                "MB" => matches!(w.value, Value::None | Value::Num(_)),
                 "DR" => matches!(w.value, Value::Sign(_)),
                 _ => matches!(w.value, Value::Num(_) | Value::Param),
             };
@@ -241,9 +253,16 @@ impl Kt<'_> {
                 }
             }
         }
-        let cutting = !b.has("FMAX");
+        // An M91/M92 block ends at machine coordinates, outside the map's frame: errmap never
+        // compensates it (it is copied) and treats it as leaving the zone.
+        let cutting = !b.has("FMAX") && machine.is_none();
         let (arc, arc_refusal) = match b.head.as_str() {
             "C" | "CR" => self.arc(n, b, start, end)?,
+            "LP" | "CP" => {
+                let (e, arc, refusal) = self.polar_move(n, b, start)?;
+                end = e;
+                (arc, refusal)
+            }
             _ => (None, None),
         };
         let refusal = self
@@ -289,7 +308,11 @@ impl Kt<'_> {
                 "add DR+ (counterclockwise) or DR- (clockwise)",
             ));
         };
-        let plane = self.plane();
+        let plane = if b.head == "C" {
+            self.circle_plane()
+        } else {
+            self.plane()
+        };
         let (a1, a2, ax) = plane.axes();
         if self.tool_axis != 2 {
             return Ok((None, Some((
@@ -351,13 +374,13 @@ impl Kt<'_> {
             return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), "begin the program with `0 BEGIN PGM name MM` (or INCH), or pass --units mm|inch"));
         }
         if let Some((l, w)) = &self.label {
-            return Some((col, w.clone(), format!("cut inside the label `{w}` (line {l}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone"), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
+            return Some((col, w.clone(), format!("cut inside the label `{w}` ({}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone", self.at(*l)), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
         }
         if let Some(f) = self.frames.last() {
             let msg = if f.cycle == "?" {
-                format!("`{}` (line {}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what, f.line)
+                format!("`{}` ({}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what, self.at(f.line))
             } else {
-                format!("`{}` (line {}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.line, f.cycle)
+                format!("`{}` ({}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, self.at(f.line), f.cycle)
             };
             return Some((col, f.what.clone(), msg, "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"));
         }
@@ -371,7 +394,7 @@ impl Kt<'_> {
             } else {
                 w.as_str()
             };
-            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from line {l}) is active on a cut in the compensation zone"), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
+            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from {}) is active on a cut in the compensation zone", self.at(*l)), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
         }
         if b.head == "CT" {
             return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT));
@@ -381,7 +404,12 @@ impl Kt<'_> {
 
     /// A word of the block forbids compensating, or the start point is unknown.
     fn word_refusal(&self, b: &Block, start: &Point) -> Option<Refusal> {
-        if let Some(w) = b.words.iter().find(|w| w.value == Value::Param) {
+        // A feed from a parameter (`F Q5`) does not move the path.
+        if let Some(w) = b
+            .words
+            .iter()
+            .find(|w| w.value == Value::Param && w.addr != "F")
+        {
             return Some((
                 w.col,
                 w.text.clone(),
@@ -416,7 +444,7 @@ impl Kt<'_> {
         if start.iter().any(Option::is_none) {
             let since = self
                 .unknown_since
-                .map(|l| format!(" since line {l}"))
+                .map(|l| format!(" since {}", self.at(l)))
                 .unwrap_or_else(|| " (no X, Y and Z since the program start)".into());
             return Some((b.head_col, b.head.clone(), format!("the start point of this cut is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"), "give absolute X, Y and Z (e.g. L X… Y… Z… R0 FMAX) before the cut"));
         }
@@ -437,7 +465,7 @@ impl Kt<'_> {
             (None, false) => Motion::Rapid,
             (None, true) => Motion::Linear,
         };
-        if b.head != "L" && mv.arc.is_none() {
+        if !matches!(b.head.as_str(), "L" | "LP") && mv.arc.is_none() {
             return;
         }
         let arc_mm = mv.arc.as_ref().map(|a| {
@@ -463,8 +491,16 @@ impl Kt<'_> {
         }
     }
 
-    /// M99/M89 on a path block call the cycle defined last at the end point.
+    /// M99/M89 on a path block call the cycle defined last at the end point; M140 retracts
+    /// along the tool axis (`MB MAX`: to the end of the traverse range), so the tool-axis
+    /// coordinate is unknown after it, until an absolute one.
     fn after_path_m(&mut self, n: u64, b: &Block) -> Result<()> {
+        if b.words
+            .iter()
+            .any(|w| w.addr == "M" && w.num() == Some(140.0))
+        {
+            self.lose_position(n, &[self.tool_axis]);
+        }
         if let Some(w) = b
             .words
             .iter()
@@ -497,28 +533,39 @@ impl Kt<'_> {
 
     /// `CC X… Y…` (absolute), `CC IX… IY…` (from the last position), `CC` (the last position).
     fn circle_centre(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
-        let (a1, a2, _) = self.plane().axes();
+        let mut axes: Vec<usize> = Vec::new();
         for w in &b.words {
-            let plane_word = [a1, a2]
+            let axis = AXES
                 .iter()
-                .any(|&i| w.addr.trim_start_matches('I') == AXES[i]);
-            if !plane_word || w.value == Value::None {
-                return Err(self.err(
-                    n,
-                    w.col,
-                    &w.text,
-                    format!(
-                        "`{}` is not a coordinate of the working plane for CC",
-                        w.text
-                    ),
-                    "write CC with the plane's two coordinates, e.g. CC X+25 Y+25",
-                ));
+                .position(|a| w.addr.trim_start_matches('I') == *a && w.addr.len() <= 2);
+            match axis {
+                Some(i) if w.value != Value::None && !axes.contains(&i) => axes.push(i),
+                _ => {
+                    return Err(self.err(
+                        n,
+                        w.col,
+                        &w.text,
+                        format!("`{}` is not a coordinate of a plane for CC", w.text),
+                        "write CC with two coordinates of a plane, e.g. CC X+25 Y+25 (or CC X… Z… for a circle in the ZX plane)",
+                    ))
+                }
             }
         }
         if b.words.is_empty() {
             self.centre = self.pos;
+            self.cc_plane = None;
         } else {
+            // The CC's two axes give the plane of the circles about it (ZX: 0° along +Z,
+            // positive towards +X; YZ: 0° along +Y, positive towards +Z).
+            let plane = match (axes.contains(&0), axes.contains(&1), axes.contains(&2)) {
+                (true, true, false) => Some(Plane::G17),
+                (true, false, true) => Some(Plane::G18),
+                (false, true, true) => Some(Plane::G19),
+                _ => None,
+            };
+            self.cc_plane = plane;
             let c = self.end_point(b, self.pos);
+            let (a1, a2, _) = self.circle_plane().axes();
             let given = |i: usize| b.has(AXES[i]) || b.has(&format!("I{}", AXES[i]));
             for i in [a1, a2] {
                 self.centre[i] = if given(i) { c[i] } else { None };
@@ -544,7 +591,69 @@ impl Kt<'_> {
         self.unchanged(n, content, term, b, false)
     }
 
-    /// Polar (`LP`, `CP`), FK (`FL`, `FC` …) and approach/departure blocks: not followed; refused
+    /// A block with the block skip `/`: it runs or not by the operator's switch. One that
+    /// changes no position or mode errmap follows is read as usual; a move leaves the axes it
+    /// names unknown and is refused where it may cut in the zone; anything else is a function
+    /// errmap does not follow.
+    fn skipped_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let mut plain = b.clone();
+        plain.skip = false;
+        let harmless_m = is_m_block(&b.head)
+            && !b.words.iter().any(|w| {
+                w.addr == "M" && matches!(w.num(), Some(89.0 | 91.0 | 92.0 | 99.0 | 140.0))
+            });
+        let path = matches!(b.head.as_str(), "L" | "C" | "CR" | "CT" | "LP" | "CP");
+        if matches!(b.head.as_str(), "" | ";" | "*" | "STOP") || harmless_m {
+            return self.line(n, content, term, &plain);
+        }
+        if path
+            && !has_coordinates(b)
+            && !b.words.iter().any(|w| {
+                w.addr == "M"
+                    && !w
+                        .num()
+                        .is_some_and(|m| M_START.contains(&m) || M_END.contains(&m))
+            })
+            && !b.has("RL")
+            && !b.has("RR")
+        {
+            return self.line(n, content, term, &plain);
+        }
+        if path {
+            let mut end = self.end_point(b, self.pos);
+            let (a1, a2, _) = self.circle_plane().axes();
+            if b.head != "L" {
+                end[a1] = None;
+                end[a2] = None;
+            }
+            let cutting = !b.has("FMAX");
+            self.prev_touch = self.may_touch(&[self.pos, end]);
+            if cutting && self.prev_touch {
+                return Err(self.err(n, 1, "/", format!("block skip `/` on a cut that may lie in the compensation zone: whether the TNC runs `{} {}` depends on the block-skip switch", b.head, b.rest), "remove the `/` from cuts in the zone (or the block), or move the zone away"));
+            }
+            self.unchanged(n, content, term, b, false)?;
+            let moved: Vec<usize> = (0..3).filter(|&i| end[i] != self.pos[i]).collect();
+            self.lose_position(n, &moved);
+            if b.has("RL") || b.has("RR") || b.has("R") {
+                self.radius_comp = Some((
+                    n,
+                    format!("/ {} {} (radius compensation unknown here)", b.head, b.rest),
+                ));
+            }
+            return Ok(());
+        }
+        let what = format!("/ {} {}", b.head, b.rest).trim().to_string();
+        self.frames.push(Frame {
+            cycle: "?".into(),
+            line: n,
+            what,
+            normal: true,
+        });
+        self.lose_position(n, &[0, 1, 2]);
+        self.unchanged(n, content, term, b, false)
+    }
+
+    /// FK (`FL`, `FC` …) and approach/departure blocks: not followed; refused
     /// when they may touch the zone, and they leave the plane position unknown.
     fn unfollowed_contour(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.radius_words(n, b, false);
@@ -643,9 +752,20 @@ const CT_HINT: &str = "post the arc as CC + C or as CR (or move the zone away)";
 
 const CORNER_HINT: &str = "post the rounding as an explicit arc (CR/C) and the chamfer as an L block, or move the zone away";
 
+/// Whether a path block moves an axis (`X`, `IY`, `A` …, or polar `PA`, `IPA`, `PR`, `IPR`).
+fn has_coordinates(b: &Block) -> bool {
+    b.words.iter().any(|w| {
+        let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
+        matches!(
+            a,
+            "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W" | "PA" | "PR"
+        )
+    })
+}
+
 /// A block of M functions only (`M30`).
 pub(super) fn is_m_block(head: &str) -> bool {
-    head.len() > 1 && head.starts_with('M') && head[1..].bytes().all(|b| b.is_ascii_digit())
+    super::block::is_m_head(head)
 }
 
 /// All three coordinates, if known.
