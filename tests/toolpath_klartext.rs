@@ -384,7 +384,7 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 C X+10 Y+0 DR+\n", &["k.h:3", "circle centre CC"]),
         ("2 CC X+0 Y+10\n3 C X+10 Y+10\n", &["k.h:4", "DR+"]),
         ("2 CR X+10 Y+0 DR+\n", &["k.h:3", "radius"]),
-        ("2 CC X+0 Y+10\n3 C X+20 Y+10 DR+\n", &["k.h:4", "radius differs"]),
+        ("2 CC X+0 Y+10\n3 C X+20 Y+10 DR+\n", &["k.h:4", "not on the circle", "radius 10.0000 at the start", "20.0000 at the end", "0.016 mm"]),
         ("2 TOOL CALL 1 Y\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 CC X+0 Z+5\n5 C X+0 Z-11 DR+\n", &["k.h:6", "tool axis Y"]),
         ("2 L X+1.2.3 F100\n", &["k.h:3", "X+1.2.3", "malformed"]),
         ("2 L X+1 X+2 F100\n", &["k.h:3", "twice"]),
@@ -781,4 +781,117 @@ fn lp_goes_to_the_point_at_pr_and_pa_about_the_pole() {
     );
     assert!((last[2] - (-1.0 - F1.e(0.0))).abs() < 1e-9, "{out}");
     assert!(l_blocks(&out).iter().all(|l| !l.contains("PA")), "{out}");
+}
+
+#[test]
+fn a_c_end_point_off_the_circle_within_the_tnc_tolerance_is_followed() {
+    // Start radius 10, end radius 10.012 (within the TNC's 0.016 mm): the radius grows
+    // linearly with the angle, both ends exact.
+    let text = "0 BEGIN PGM C MM
+1 L X+10 Y+0 Z-1 R0 FMAX
+2 CC X+0 Y+0
+3 C X+0 Y+10.012 DR+ F100
+4 END PGM C MM
+";
+    let (out, _) = run(text, &settings());
+    let pts = cut_points(&out);
+    assert!(pts.len() > 5, "{out}");
+    let mut angle = 0.0;
+    for p in &pts {
+        angle = unwrap(angle, p[0], p[1]);
+        let want = 10.0 + 0.012 * angle / (std::f64::consts::PI / 2.0);
+        assert!((p[0].hypot(p[1]) - want).abs() < 2e-4, "{p:?}\n{out}");
+        assert!((p[2] - (-1.0 - F1.e(p[0]))).abs() < 2e-4, "{p:?}");
+    }
+    let last = pts.last().unwrap();
+    assert!(last[0].abs() < 1e-9 && (last[1] - 10.012).abs() < 1e-9, "{out}");
+    // 0.02 mm off: the TNC refuses it, errmap too, naming both radii.
+    let msg = refuse(&text.replace("Y+10.012", "Y+10.02"));
+    assert_msg(&msg, &["k.h:4", "block 3:", "10.0000 at the start", "10.0200 at the end"]);
+}
+
+/// E = 0.01 + 0.001·x measured for x ≤ 35 only.
+const F35: F = F {
+    e0: 0.01,
+    g: 0.001,
+    x_meas: 35.0,
+};
+
+/// Written after the TNC cycle manual's cycle 200 DRILLING: a definition over several lines
+/// and calls by M99 on a positioning block and by CYCL CALL.
+const HOLES: &str = "0 BEGIN PGM D MM
+1 TOOL CALL 1 Z S3000
+2 L X+10 Y+10 Z+20 R0 FMAX
+3 CYCL DEF 200 DRILLING ~
+  Q200=+2 ;SET-UP CLEARANCE ~
+  Q201=-5 ;DEPTH ~
+  Q206=+150 ;FEED RATE FOR PLNGNG ~
+  Q202=+5 ;PLUNGING DEPTH ~
+  Q210=+0 ;DWELL TIME AT TOP ~
+  Q203=+0 ;SURFACE COORDINATE ~
+  Q204=+50 ;2ND SET-UP CLEARANCE ~
+  Q211=+0 ;DWELL TIME AT DEPTH
+4 L X+10 Y+10 FMAX M99
+5 L X+30 Y+10 FMAX M99
+6 L X+40 Y+10 FMAX M99
+7 L X+20 Y+10 FMAX
+8 CYCL CALL
+9 L Z+100 FMAX M30
+10 END PGM D MM
+";
+
+#[test]
+fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_by_minus_e() {
+    let s = settings();
+    let msg = match compensate_gcode(HOLES, Path::new("k.h"), &F35, &s) {
+        Ok((out, _)) => panic!("expected a refusal:\n{out}"),
+        Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
+    };
+    assert_msg(&msg, &["k.h:13", "block 4:", "M99", "cycle 200", "Z-5.0000", "--compensate-holes", "Q203"]);
+    let s = CompensationSettings {
+        compensate_holes: true,
+        ..settings()
+    };
+    let (out, rep) = compensate_gcode(HOLES, Path::new("k.h"), &F35, &s).unwrap();
+    // Each call is preceded (nearest definition above it) by Q203 = 0 − E(x) of its hole; the
+    // hole at x = 40 lies outside the measured domain and gets the program's own Q203=+0.
+    let lines: Vec<&str> = out.lines().collect();
+    let mut surface: Option<&str> = None;
+    let mut x = None;
+    let mut calls = Vec::new();
+    for l in &lines {
+        if let Some(at) = l.find("Q203=") {
+            surface = l[at + 5..].split_whitespace().next();
+        }
+        if let Some(v) = word(l, "X") {
+            x = Some(v);
+        }
+        if l.contains("M99") || l.contains("CYCL CALL") {
+            calls.push((x.unwrap(), surface.unwrap().to_string()));
+        }
+    }
+    assert_eq!(calls.len(), 4, "{out}");
+    for (x, q203) in &calls {
+        let q: f64 = q203.parse().unwrap();
+        if *x > 35.0 {
+            assert_eq!(q203, "+0", "{out}");
+        } else {
+            assert!((q - (0.0 - (0.01 + 0.001 * x))).abs() < 1e-12, "x {x}: Q203 {q203}\n{out}");
+        }
+    }
+    assert_eq!(rep.moves_changed, 3);
+    // The program's lines are all there, in order; the definitions errmap adds are whole
+    // copies (8 lines each) with only Q203 changed; numbered lines are sequential.
+    let def: Vec<&str> = HOLES.lines().skip(4).take(7).collect();
+    assert_eq!(out.matches("CYCL DEF 200 DRILLING ~").count(), 5, "{out}");
+    assert_eq!(out.matches(def[0]).count(), 5);
+    let numbered: Vec<u64> = lines
+        .iter()
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert_eq!(numbered, (0..numbered.len() as u64).collect::<Vec<_>>(), "{out}");
+    // Far from the zone (surface at Z+50), nothing changes.
+    let high = HOLES.replace("Q203=+0 ", "Q203=+50 ");
+    let (out, _) = compensate_gcode(&high, Path::new("k.h"), &F35, &s).unwrap();
+    assert_eq!(out, high);
 }

@@ -25,17 +25,13 @@ impl Kt<'_> {
             }
             return Ok(());
         }
-        let id = b
-            .words
-            .iter()
-            .find(|w| w.addr.is_empty())
-            .and_then(|w| w.num());
+        let id = super::cycle_id(b);
         let (major, minor) = match id {
             Some(v) => (v.trunc() as i64, ((v - v.trunc()) * 10.0).round() as i64),
             None => (-1, 0),
         };
         let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26);
-        if let (true, Some((col, word, msg))) = (followed, b.bad.clone()) {
+        if let (true, Some((col, word, msg))) = (followed && minor != 0, b.bad.clone()) {
             return Err(self.err(
                 n,
                 col,
@@ -47,6 +43,10 @@ impl Kt<'_> {
         // The cycle's own block (`7.0 DATUM SHIFT`) and machining-cycle definitions do nothing
         // until called.
         if !followed || minor == 0 {
+            // A machining cycle's definition replaces the one a later call runs.
+            if ![7, 8, 9, 10, 11, 19, 26, 32, 247].contains(&major) {
+                self.define_cycle(n, major, b);
+            }
             if major == 247 {
                 self.frames.push(Frame {
                     cycle: "247".into(),

@@ -343,7 +343,9 @@ impl Kt<'_> {
                     "program CC X… Y… before the circle",
                 ))));
             };
-            Arc::from_centre(plane, s, e, (c1, c2), !dr, 1)
+            return self
+                .circle_c(n, b, plane, s, e, (c1, c2), !dr)
+                .map(|a| (Some(a), None));
         } else {
             let Some(r) = b.word("R").and_then(|w| w.num()).filter(|r| *r != 0.0) else {
                 return Err(self.err(
@@ -365,6 +367,46 @@ impl Kt<'_> {
                 "fix the arc's end point, centre CC or radius",
             )
         })
+    }
+
+    /// The arc of a C block. Its end may lie off the circle through the start by up to the
+    /// TNC's input tolerance (0.016 mm, TNC 410 manual "Circular path C around circle centre
+    /// CC"): the radius then changes linearly from start to end, as the TNC's own correction
+    /// is not documented; beyond it the TNC refuses the block, and so does errmap.
+    #[allow(clippy::too_many_arguments)]
+    fn circle_c(
+        &self,
+        n: u64,
+        b: &Block,
+        plane: Plane,
+        s: [f64; 3],
+        e: [f64; 3],
+        centre: (f64, f64),
+        clockwise: bool,
+    ) -> Result<Arc> {
+        let (a1, a2, _) = plane.axes();
+        let r_start = (s[a1] - centre.0).hypot(s[a2] - centre.1);
+        let r_end = (e[a1] - centre.0).hypot(e[a2] - centre.1);
+        let tol = C_END_TOLERANCE_MM / self.scale_mm();
+        let bad = |m: String| self.err(n, b.head_col, "C", m, "fix the arc's end point or its centre CC");
+        if r_start < 1e-9 || r_end < 1e-9 {
+            return Err(bad("circle C whose start or end point is its centre CC".into()));
+        }
+        if (r_start - r_end).abs() > tol {
+            return Err(bad(format!(
+                "the end point of C is not on the circle about CC: radius {r_start:.4} at the start, {r_end:.4} at the end ({:.4} apart; the TNC accepts at most {C_END_TOLERANCE_MM} mm)",
+                (r_start - r_end).abs()
+            )));
+        }
+        // The arc is built to the end point moved onto the start circle (same angle), then ends
+        // at the programmed point with its own radius.
+        let mut on = e;
+        on[a1] = centre.0 + (e[a1] - centre.0) * r_start / r_end;
+        on[a2] = centre.1 + (e[a2] - centre.1) * r_start / r_end;
+        let mut arc = Arc::from_centre(plane, s, on, centre, clockwise, 1).map_err(bad)?;
+        arc.end = e;
+        arc.r_end = r_end;
+        Ok(arc)
     }
 
     /// The program's state forbids compensating a cut here.
@@ -507,7 +549,12 @@ impl Kt<'_> {
             .find(|w| w.addr == "M" && matches!(w.num(), Some(99.0 | 89.0)))
         {
             let (col, text) = (w.col, w.text.clone());
+            // M89 calls the cycle after every positioning block from here on; errmap does
+            // not end it (each later position is judged as a call).
+            self.modal_call |= w.num() == Some(89.0);
             self.cycle_call(n, col, &text)?;
+        } else if self.modal_call && b.head == "L" && has_coordinates(b) {
+            self.cycle_call(n, b.head_col, "M89 (modal cycle call)")?;
         }
         Ok(())
     }
@@ -515,6 +562,10 @@ impl Kt<'_> {
     /// A machining cycle runs at the current position: refused if it may touch the zone; it
     /// leaves the tool-axis coordinate unknown.
     pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
+        if self.hole_call(n, col, word)?.is_some() {
+            self.lose_position(n, &[self.tool_axis, self.normal]);
+            return Ok(());
+        }
         let mut p = self.pos;
         p[self.tool_axis] = None;
         p[self.normal] = None;
@@ -747,6 +798,9 @@ impl Kt<'_> {
         Ok(())
     }
 }
+
+/// How far the end point of a C block may lie off the circle through its start, mm.
+const C_END_TOLERANCE_MM: f64 = 0.016;
 
 const CT_HINT: &str = "post the arc as CC + C or as CR (or move the zone away)";
 

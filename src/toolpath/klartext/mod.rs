@@ -7,6 +7,7 @@
 
 mod block;
 mod cycles;
+mod holes;
 mod interp;
 mod polar;
 mod rewrite;
@@ -125,6 +126,16 @@ struct Kt<'a> {
     numbered_in: usize,
     /// The TNC block number of each line (index = line − 1), for messages.
     block_numbers: Vec<Option<u64>>,
+    /// The lines (content, terminator) of the block being read, and where its output starts.
+    block_lines: Vec<(String, String)>,
+    block_out_start: usize,
+    /// The last drilling cycle defined (200–209), if it is the active machining cycle.
+    hole_cycle: Option<holes::HoleCycle>,
+    /// The surface Q203 of the definition written last in the output, when errmap wrote it
+    /// again (`None`: the program's own definition is in force).
+    hole_surface_out: Option<f64>,
+    /// `M89`: the cycle is called after every positioning block from here on.
+    modal_call: bool,
     trace: Option<Vec<TracedMove>>,
 }
 
@@ -219,6 +230,11 @@ impl<'a> Kt<'a> {
             out_bytes: 0,
             numbered_in: 0,
             block_numbers: Vec::new(),
+            block_lines: Vec::new(),
+            block_out_start: 0,
+            hole_cycle: None,
+            hole_surface_out: None,
+            modal_call: false,
             trace: None,
         })
     }
@@ -263,6 +279,14 @@ impl<'a> Kt<'a> {
             if block.number.is_some() {
                 self.numbered_in += 1;
             }
+            self.block_lines = lines[i..=last]
+                .iter()
+                .map(|l| {
+                    let c = &l[..content_of(l)];
+                    (c.to_string(), l[c.len()..].to_string())
+                })
+                .collect();
+            self.block_out_start = self.out.len();
             self.line(number, content, term, &block)?;
             for raw in &lines[i + 1..=last] {
                 let content = &raw[..content_of(raw)];
@@ -521,12 +545,26 @@ fn code_part(content: &str) -> &str {
 
 /// `CYCL DEF` 7, 8, 10, 11, 19, 26 or 247: a cycle that moves the coordinate system.
 fn is_transform_cycle(b: &Block) -> bool {
-    let id = b
+    let id = cycle_id(b);
+    id.is_none_or(|v| [7, 8, 10, 11, 19, 26, 247].contains(&(v.trunc() as i64)))
+}
+
+/// The cycle number of a `CYCL DEF n.m …` block (`7.1`, `203`), read from its words or, when a
+/// word errmap does not read follows (`Q200=+2`, `~`), from its text.
+fn cycle_id(b: &Block) -> Option<f64> {
+    let from_words = b
         .words
         .iter()
         .find(|w| w.addr.is_empty())
         .and_then(|w| w.num());
-    b.bad.is_some() || id.is_some_and(|v| [7, 8, 10, 11, 19, 26, 247].contains(&(v.trunc() as i64)))
+    from_words.or_else(|| {
+        let mut t = b.rest.split_whitespace();
+        t.next()
+            .filter(|d| d.eq_ignore_ascii_case("DEF"))
+            .and(t.next())
+            .filter(|n| n.bytes().all(|c| c.is_ascii_digit() || c == b'.'))
+            .and_then(|n| n.parse().ok())
+    })
 }
 
 /// The units of the `BEGIN PGM name MM|INCH` block, with its line, if the program has one.
