@@ -895,3 +895,30 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
     let (out, _) = compensate_gcode(&high, Path::new("k.h"), &F35, &s).unwrap();
     assert_eq!(out, high);
 }
+
+#[test]
+fn a_cycle_32_tolerance_larger_than_e_is_noted_in_the_report() {
+    let text = "0 BEGIN PGM T MM
+1 CYCL DEF 32.0 TOLERANCE
+2 CYCL DEF 32.1 T0.05
+3 L X+0 Y+0 Z-1 R0 FMAX
+4 L X+10 F100
+5 END PGM T MM
+";
+    // Largest |E| = 0.01 + 0.001·10 = 0.02 mm < 0.05 mm.
+    let (out, rep) = run(text, &settings());
+    assert_eq!(rep.notes.len(), 1, "{rep:?}");
+    assert_msg(&rep.notes[0], &["CYCL DEF 32", "T0.05", "block 2, line 3", "0.0200 mm"]);
+    assert!(out.contains("2 CYCL DEF 32.1 T0.05\n"));
+    // A tolerance below |E| is not noted, and the note is not in the JSON when there is none.
+    let (_, rep) = run(&text.replace("T0.05", "T0.005"), &settings());
+    assert!(rep.notes.is_empty());
+    let json = errmap::toolpath::CompensationDocument {
+        input: Path::new("a"),
+        output: Path::new("b"),
+        report: &rep,
+    }
+    .to_json()
+    .unwrap();
+    assert!(!json.contains("notes"), "{json}");
+}

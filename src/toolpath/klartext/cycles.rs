@@ -30,8 +30,8 @@ impl Kt<'_> {
             Some(v) => (v.trunc() as i64, ((v - v.trunc()) * 10.0).round() as i64),
             None => (-1, 0),
         };
-        let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26);
-        if let (true, Some((col, word, msg))) = (followed && minor != 0, b.bad.clone()) {
+        let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26 | 32);
+        if let (true, Some((col, word, msg))) = (followed && minor != 0 && major != 32, b.bad.clone()) {
             return Err(self.err(
                 n,
                 col,
@@ -58,11 +58,30 @@ impl Kt<'_> {
             return self.unchanged(n, content, term, b, false);
         }
         self.unchanged(n, content, term, b, false)?;
+        if major == 32 {
+            self.path_tolerance(n, b);
+            return Ok(());
+        }
         match major {
             7 => self.datum_shift(n, b),
             _ => {
                 self.transform(n, b, major);
                 Ok(())
+            }
+        }
+    }
+
+    /// Cycle 32 TOLERANCE: `32.1 T0.05` lets the control deviate from the programmed path by
+    /// up to T (program units) while it smooths it; `32.1` alone resets the machine's default.
+    fn path_tolerance(&mut self, n: u64, b: &Block) {
+        let t = b.rest.split_whitespace().find_map(|w| {
+            let v = w.strip_prefix('T').or_else(|| w.strip_prefix('t'))?;
+            v.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
+        });
+        if let Some(t) = t {
+            let mm = t * self.scale_mm();
+            if self.path_tolerance_mm.is_none_or(|(old, _)| mm > old) {
+                self.path_tolerance_mm = Some((mm, n));
             }
         }
     }

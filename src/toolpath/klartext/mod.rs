@@ -136,6 +136,8 @@ struct Kt<'a> {
     hole_surface_out: Option<f64>,
     /// `M89`: the cycle is called after every positioning block from here on.
     modal_call: bool,
+    /// The largest path tolerance of cycle 32 in the program (mm) and its line.
+    path_tolerance_mm: Option<(f64, u64)>,
     trace: Option<Vec<TracedMove>>,
 }
 
@@ -235,6 +237,7 @@ impl<'a> Kt<'a> {
             hole_cycle: None,
             hole_surface_out: None,
             modal_call: false,
+            path_tolerance_mm: None,
             trace: None,
         })
     }
@@ -384,6 +387,15 @@ impl<'a> Kt<'a> {
             out.push_str(&l.term);
         }
         self.report.lines_out = self.out.len() as u64;
+        let applied = self.report.max_abs_error_mm;
+        if let Some((t, line)) = self.path_tolerance_mm {
+            if applied > 0.0 && t > applied {
+                self.report.notes.push(format!(
+                    "CYCL DEF 32 TOLERANCE T{t} mm ({}) is larger than the largest |E| applied ({applied:.4} mm): the control may smooth the path by up to T, which can swallow the compensation; set a tolerance smaller than |E| for the finishing cuts",
+                    self.at(line)
+                ));
+            }
+        }
         (out, self.report)
     }
 
