@@ -374,7 +374,12 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+10 F Q5 Y+Q2\n", &["k.h:3", "Y+Q2", "Q parameter"]),
         ("2 FL X+10 Y+0 F100\n", &["k.h:3", "FK free contour"]),
         ("2 APPR LT X+10 Y+0 LEN5 RL F100\n", &["k.h:3", "APPR"]),
-        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "does not follow"]),
+        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "5-axis", "untilted"]),
+        ("2 M128\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "M128", "5-axis"]),
+        ("2 L X+0 Y+0 Z-1 R0 FMAX M128\n3 M129\n4 FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS\n5 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+10 F100\n", &["k.h:7", "FUNCTION TCPM", "5-axis"]),
+        ("2 CALL PGM TNC:\\REF\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "CALL PGM", "another program", "paste"]),
+        ("2 TCH PROBE 412 DATUM INSIDE CIRCLE\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "TCH PROBE", "probes"]),
+        ("2 CYCL DEF 200 DRILLING Q200=+2 Q201=-5 Q203=+Q7\n3 M99\n", &["k.h:4", "Q203 is `Q203=+Q7`"]),
         ("2 TOOL CALL 2 Z S3000\n3 L X+10 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
         ("2 CYCL DEF 200 DRILLING\n3 CYCL CALL\n", &["k.h:4", "CYCL CALL", "cycle"]),
         ("2 L X+10 F100 M99\n", &["k.h:3", "M99"]),
@@ -804,10 +809,21 @@ fn a_c_end_point_off_the_circle_within_the_tnc_tolerance_is_followed() {
         assert!((p[2] - (-1.0 - F1.e(p[0]))).abs() < 2e-4, "{p:?}");
     }
     let last = pts.last().unwrap();
-    assert!(last[0].abs() < 1e-9 && (last[1] - 10.012).abs() < 1e-9, "{out}");
+    assert!(
+        last[0].abs() < 1e-9 && (last[1] - 10.012).abs() < 1e-9,
+        "{out}"
+    );
     // 0.02 mm off: the TNC refuses it, errmap too, naming both radii.
     let msg = refuse(&text.replace("Y+10.012", "Y+10.02"));
-    assert_msg(&msg, &["k.h:4", "block 3:", "10.0000 at the start", "10.0200 at the end"]);
+    assert_msg(
+        &msg,
+        &[
+            "k.h:4",
+            "block 3:",
+            "10.0000 at the start",
+            "10.0200 at the end",
+        ],
+    );
 }
 
 /// E = 0.01 + 0.001·x measured for x ≤ 35 only.
@@ -847,7 +863,18 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
         Ok((out, _)) => panic!("expected a refusal:\n{out}"),
         Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
     };
-    assert_msg(&msg, &["k.h:13", "block 4:", "M99", "cycle 200", "Z-5.0000", "--compensate-holes", "Q203"]);
+    assert_msg(
+        &msg,
+        &[
+            "k.h:13",
+            "block 4:",
+            "M99",
+            "cycle 200",
+            "Z-5.0000",
+            "--compensate-holes",
+            "Q203",
+        ],
+    );
     let s = CompensationSettings {
         compensate_holes: true,
         ..settings()
@@ -876,7 +903,10 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
         if *x > 35.0 {
             assert_eq!(q203, "+0", "{out}");
         } else {
-            assert!((q - (0.0 - (0.01 + 0.001 * x))).abs() < 1e-12, "x {x}: Q203 {q203}\n{out}");
+            assert!(
+                (q - (0.0 - (0.01 + 0.001 * x))).abs() < 1e-12,
+                "x {x}: Q203 {q203}\n{out}"
+            );
         }
     }
     assert_eq!(rep.moves_changed, 3);
@@ -889,7 +919,11 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
         .iter()
         .filter_map(|l| l.split_whitespace().next()?.parse().ok())
         .collect();
-    assert_eq!(numbered, (0..numbered.len() as u64).collect::<Vec<_>>(), "{out}");
+    assert_eq!(
+        numbered,
+        (0..numbered.len() as u64).collect::<Vec<_>>(),
+        "{out}"
+    );
     // Far from the zone (surface at Z+50), nothing changes.
     let high = HOLES.replace("Q203=+0 ", "Q203=+50 ");
     let (out, _) = compensate_gcode(&high, Path::new("k.h"), &F35, &s).unwrap();
@@ -908,7 +942,10 @@ fn a_cycle_32_tolerance_larger_than_e_is_noted_in_the_report() {
     // Largest |E| = 0.01 + 0.001·10 = 0.02 mm < 0.05 mm.
     let (out, rep) = run(text, &settings());
     assert_eq!(rep.notes.len(), 1, "{rep:?}");
-    assert_msg(&rep.notes[0], &["CYCL DEF 32", "T0.05", "block 2, line 3", "0.0200 mm"]);
+    assert_msg(
+        &rep.notes[0],
+        &["CYCL DEF 32", "T0.05", "block 2, line 3", "0.0200 mm"],
+    );
     assert!(out.contains("2 CYCL DEF 32.1 T0.05\n"));
     // A tolerance below |E| is not noted, and the note is not in the JSON when there is none.
     let (_, rep) = run(&text.replace("T0.05", "T0.005"), &settings());

@@ -31,7 +31,9 @@ impl Kt<'_> {
             None => (-1, 0),
         };
         let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26 | 32);
-        if let (true, Some((col, word, msg))) = (followed && minor != 0 && major != 32, b.bad.clone()) {
+        if let (true, Some((col, word, msg))) =
+            (followed && minor != 0 && major != 32, b.bad.clone())
+        {
             return Err(self.err(
                 n,
                 col,

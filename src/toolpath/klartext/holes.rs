@@ -21,7 +21,10 @@ pub(super) struct HoleCycle {
 fn q_value(rest: &str, q: &str) -> Option<Result<f64, String>> {
     let key = format!("{q}=");
     rest.split_whitespace().find_map(|t| {
-        let v = t.to_ascii_uppercase().strip_prefix(&key).map(str::to_string)?;
+        let v = t
+            .to_ascii_uppercase()
+            .strip_prefix(&key)
+            .map(str::to_string)?;
         Some(
             v.parse::<f64>()
                 .ok()
@@ -64,11 +67,7 @@ impl Kt<'_> {
         let (Some(x), Some(y)) = (self.pos[u], self.pos[v]) else {
             return Ok(None);
         };
-        let hole = format!(
-            "cycle {} ({})",
-            cycle.number,
-            self.at(cycle.line)
-        );
+        let hole = format!("cycle {} ({})", cycle.number, self.at(cycle.line));
         let (surface, depth) = match (&cycle.surface, &cycle.depth) {
             (Some(Ok(s)), Some(Ok(d))) => (*s, *d),
             (s, d) => {

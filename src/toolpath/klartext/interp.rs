@@ -64,8 +64,16 @@ impl Kt<'_> {
             }
             _ => {
                 let what = format!("{} {}", b.head, b.rest).trim().to_string();
+                let up = what.to_ascii_uppercase();
+                let kind = if up.starts_with("PLANE") || up.contains("TCPM") {
+                    "5x"
+                } else if up.starts_with("TCH PROBE") {
+                    "probe"
+                } else {
+                    "?"
+                };
                 self.frames.push(Frame {
-                    cycle: "?".into(),
+                    cycle: kind.into(),
                     line: n,
                     what,
                     normal: true,
@@ -388,9 +396,19 @@ impl Kt<'_> {
         let r_start = (s[a1] - centre.0).hypot(s[a2] - centre.1);
         let r_end = (e[a1] - centre.0).hypot(e[a2] - centre.1);
         let tol = C_END_TOLERANCE_MM / self.scale_mm();
-        let bad = |m: String| self.err(n, b.head_col, "C", m, "fix the arc's end point or its centre CC");
+        let bad = |m: String| {
+            self.err(
+                n,
+                b.head_col,
+                "C",
+                m,
+                "fix the arc's end point or its centre CC",
+            )
+        };
         if r_start < 1e-9 || r_end < 1e-9 {
-            return Err(bad("circle C whose start or end point is its centre CC".into()));
+            return Err(bad(
+                "circle C whose start or end point is its centre CC".into()
+            ));
         }
         if (r_start - r_end).abs() > tol {
             return Err(bad(format!(
@@ -419,12 +437,15 @@ impl Kt<'_> {
             return Some((col, w.clone(), format!("cut inside the label `{w}` ({}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone", self.at(*l)), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
         }
         if let Some(f) = self.frames.last() {
-            let msg = if f.cycle == "?" {
-                format!("`{}` ({}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what, self.at(f.line))
-            } else {
-                format!("`{}` ({}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, self.at(f.line), f.cycle)
+            let at = self.at(f.line);
+            let (msg, hint) = match f.cycle.as_str() {
+                "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
+                "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
+                "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
+                "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away"),
+                _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"),
             };
-            return Some((col, f.what.clone(), msg, "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"));
+            return Some((col, f.what.clone(), msg, hint));
         }
         if let Some((l, w)) = &self.radius_comp {
             let w = if b.has("RL") || b.has("RR") {
@@ -537,6 +558,23 @@ impl Kt<'_> {
     /// along the tool axis (`MB MAX`: to the end of the traverse range), so the tool-axis
     /// coordinate is unknown after it, until an absolute one.
     fn after_path_m(&mut self, n: u64, b: &Block) -> Result<()> {
+        // M128 (TCPM), M114 and M144 make X/Y/Z depend on the rotary axes until M129, M115
+        // and M145: cuts in the zone are refused while one is active.
+        for w in b.words.iter().filter(|w| w.addr == "M") {
+            match w.num() {
+                Some(m @ (114.0 | 128.0 | 144.0)) => self.frames.push(Frame {
+                    cycle: "5x".into(),
+                    line: n,
+                    what: format!("M{m}"),
+                    normal: true,
+                }),
+                Some(m @ (115.0 | 129.0 | 145.0)) => {
+                    let on = format!("M{}", m - 1.0);
+                    self.frames.retain(|f| f.what != on);
+                }
+                _ => {}
+            }
+        }
         if b.words
             .iter()
             .any(|w| w.addr == "M" && w.num() == Some(140.0))
@@ -770,9 +808,10 @@ impl Kt<'_> {
         let what = format!("CALL {}", b.rest).trim().to_string();
         self.unchanged(n, content, term, b, false)?;
         self.enter_unknown(n, &what);
-        if !b.rest.trim_start().to_ascii_uppercase().starts_with("LBL") {
+        let up = b.rest.trim_start().to_ascii_uppercase();
+        if !up.starts_with("LBL") {
             self.frames.push(Frame {
-                cycle: "?".into(),
+                cycle: if up.starts_with("PGM") { "pgm" } else { "?" }.into(),
                 line: n,
                 what,
                 normal: true,
