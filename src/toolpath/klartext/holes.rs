@@ -60,8 +60,13 @@ impl Kt<'_> {
             return Ok(None);
         }
         let (u, v) = self.plane_uv;
-        // Holes along the map's normal only, in plain work coordinates.
-        if self.tool_axis != self.normal || !self.frames.is_empty() || cycle.number == 204 {
+        // Holes along the map's normal only, in plain work coordinates, outside label bodies
+        // (a label runs with whatever definition its caller left in force).
+        if self.tool_axis != self.normal
+            || !self.frames.is_empty()
+            || self.label.is_some()
+            || cycle.number == 204
+        {
             return Ok(None);
         }
         let (Some(x), Some(y)) = (self.pos[u], self.pos[v]) else {

@@ -259,7 +259,12 @@ impl<'a> Kt<'a> {
             let content = &raw[..content_of(raw)];
             let term = &raw[content.len()..];
             let mut last = i;
-            while last + 1 < lines.len() && continued(&lines[last][..content_of(lines[last])]) {
+            // A block continues only from a line with code of its own (`CYCL DEF 203 … ~`).
+            let has_code = !code_part(content).trim().is_empty();
+            while has_code
+                && last + 1 < lines.len()
+                && continued(&lines[last][..content_of(lines[last])])
+            {
                 last += 1;
             }
             let joined = if last > i {
@@ -279,6 +284,17 @@ impl<'a> Kt<'a> {
                     "write each word once, with a number like +10 or -2.5 (a point, not a comma)",
                 )
             })?;
+            let path_head = matches!(
+                block.head.as_str(),
+                "L" | "C" | "CR" | "CT" | "CC" | "LP" | "CP" | "RND" | "CHF"
+            ) || block::is_m_head(&block.head);
+            if last > i && path_head {
+                return Err(Error::input(
+                    Location::cell(self.source, number, format!("{} ({})", block.head_col, block.head)),
+                    format!("{}a {} block continued with `~` on the next line: errmap reads path and M blocks on one line", self.block_prefix(number), block.head),
+                    "write the block on one line (only cycle definitions are continued with ~)",
+                ));
+            }
             if block.number.is_some() {
                 self.numbered_in += 1;
             }
@@ -403,12 +419,12 @@ impl<'a> Kt<'a> {
     fn copy(&mut self, content: &str, term: &str, block: &Block) {
         let span = block.number_span.clone();
         let (before, number, after) = match block.number {
-            Some(_) => (
+            Some(_) if span.end <= content.len() && content.is_char_boundary(span.start) => (
                 &content[..span.start],
                 Some(&content[span.clone()]),
                 &content[span.end..],
             ),
-            None => ("", None, content),
+            _ => ("", None, content),
         };
         self.push(OutLine {
             before: before.to_string(),
