@@ -394,6 +394,8 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+1.2.3 F100\n", &["k.h:3", "X+1.2.3", "malformed"]),
         ("2 L X+1 X+2 F100\n", &["k.h:3", "twice"]),
         ("2 L X+1 G01 F100\n", &["k.h:3", "G01"]),
+        ("2 L Z 25.000 FMAX\n", &["k.h:3", "block 2:", "without a value", "Z+25"]),
+        ("2 L X+10 ~\n  Y+5 F100\n", &["k.h:3", "continued with `~`", "one line"]),
     ];
     for (body, parts) in cases {
         let text = format!("{HEAD}{body}");

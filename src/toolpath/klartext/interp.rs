@@ -223,6 +223,19 @@ impl Kt<'_> {
                 "DR" => matches!(w.value, Value::Sign(_)),
                 _ => matches!(w.value, Value::Num(_) | Value::Param),
             };
+            let axis = matches!(
+                w.addr.trim_start_matches('I'),
+                "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W"
+            );
+            if ok && axis && w.value == Value::None {
+                return Err(self.err(
+                    n,
+                    w.col,
+                    &w.text,
+                    format!("axis word `{}` without a value right after it (a TNC block writes `{}+25`, not `{} 25`)", w.text, w.addr, w.addr),
+                    "join the value to its axis letter (e.g. `L Z+25.000 FMAX`), as the TNC writes it",
+                ));
+            }
             if !ok || !value_ok {
                 return Err(self.err(
                     n,
