@@ -108,8 +108,9 @@ impl Kt<'_> {
                     self.centre[i] = self.centre[i].map(|p| p - delta);
                 }
                 _ => {
+                    let param = w.value == Value::Param;
                     self.frames.push(Frame {
-                        cycle: "7".into(),
+                        cycle: if param { "param" } else { "7" }.into(),
                         line: n,
                         what: format!("CYCL DEF 7 DATUM SHIFT {}", w.text),
                         normal: true,

@@ -455,6 +455,7 @@ impl Kt<'_> {
                 "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
                 "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
                 "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
+                "param" => (format!("`{}` ({at}) shifts the datum by a Q parameter, whose value errmap does not know (read at run time, e.g. by FN18 SYSREAD, or computed), and this cut may lie in the compensation zone", f.what), "shift the datum by numbers (CYCL DEF 7.1 Z+…) for the cuts in the zone, or move the zone away"),
                 "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away"),
                 _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"),
             };
@@ -486,10 +487,15 @@ impl Kt<'_> {
             .iter()
             .find(|w| w.value == Value::Param && w.addr != "F")
         {
+            let q = w
+                .text
+                .get(w.addr.len()..)
+                .unwrap_or("")
+                .trim_start_matches(['+', '-']);
             return Some((
                 w.col,
                 w.text.clone(),
-                "Q parameter in a cut in the compensation zone".into(),
+                format!("`{}` takes its value from the Q parameter {q} on a cut in the compensation zone: errmap does not compute Q parameters", w.text),
                 "post the program with numbers instead of Q parameters (or move the zone away)",
             ));
         }
