@@ -97,7 +97,11 @@ impl Kt<'_> {
         p[u] = x;
         p[v] = y;
         p[self.normal] = bottom;
-        let Some(e) = self.error_at(&p) else {
+        let e = self.error_at(&p);
+        if self.extrapolated.replace(false) {
+            self.report.moves_outside_domain += 1;
+        }
+        let Some(e) = e else {
             // Outside the zone or the measured domain: the original definition drills it.
             if self.hole_surface_out.is_some() {
                 self.define_again(None);
