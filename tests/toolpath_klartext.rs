@@ -913,7 +913,10 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
         }
     }
     assert_eq!(rep.moves_changed, 3);
-    assert_eq!(rep.moves_outside_domain, 1, "the hole at x = 40 is kept nominal");
+    assert_eq!(
+        rep.moves_outside_domain, 1,
+        "the hole at x = 40 is kept nominal"
+    );
     // The program's lines are all there, in order; the definitions errmap adds are whole
     // copies (8 lines each) with only Q203 changed; numbered lines are sequential.
     let def: Vec<&str> = HOLES.lines().skip(4).take(7).collect();
