@@ -377,6 +377,8 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 APPR LT X+10 Y+0 LEN5 RL F100\n", &["k.h:3", "APPR"]),
         ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "5-axis", "untilted"]),
         ("2 M128\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "M128", "5-axis"]),
+        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 PLANE RESET STAY\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "PLANE RESET STAY", "5-axis"]),
+        ("2 PLANE RESET TURN FMAX\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE RESET TURN", "5-axis"]),
         ("2 L X+0 Y+0 Z-1 R0 FMAX M128\n3 M129\n4 FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS\n5 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+10 F100\n", &["k.h:7", "FUNCTION TCPM", "5-axis"]),
         ("2 CALL PGM TNC:\\REF\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "CALL PGM", "another program", "paste"]),
         ("2 TCH PROBE 412 DATUM INSIDE CIRCLE\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "TCH PROBE", "probes"]),
@@ -965,4 +967,74 @@ fn a_cycle_32_tolerance_larger_than_e_is_noted_in_the_report() {
     .to_json()
     .unwrap();
     assert!(!json.contains("notes"), "{json}");
+}
+
+#[test]
+fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
+    let text = "0 BEGIN PGM P MM
+1 CYCL DEF 247 DATUM SETTING ~
+  Q339=+1 ;DATUM NUMBER
+2 L X+0 Y+0 Z-1 R0 FMAX
+3 L X+10 F100
+4 L Z+50 FMAX
+5 CYCL DEF 247 DATUM SETTING ~
+  Q339=+2 ;DATUM NUMBER
+6 L X+0 Y+0 Z+50 R0 FMAX
+7 CYCL DEF 247 DATUM SETTING ~
+  Q339=+1 ;DATUM NUMBER
+8 L X+0 Y+0 Z-1 R0 FMAX
+9 L X+10 F100
+10 END PGM P MM
+";
+    let s = CompensationSettings {
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, rep) = run(
+        &text.replace(
+            "0 BEGIN PGM P MM\n",
+            "0 BEGIN PGM P MM\n0 PLANE RESET STAY\n",
+        ),
+        &s,
+    );
+    assert_eq!(
+        rep.moves_changed, 2,
+        "PLANE RESET STAY with no tilt is nothing\n{out}"
+    );
+    let ends: Vec<[f64; 3]> = cut_points(&out)
+        .into_iter()
+        .filter(|p| p[0] == 10.0)
+        .collect();
+    assert_eq!(ends.len(), 2, "{out}");
+    for p in ends {
+        assert!((p[2] - (-1.0 - F1.e(10.0))).abs() < 1e-9, "{out}");
+    }
+    // A cut under preset 2 is refused, naming both presets.
+    let msg = refuse_with(
+        &text.replace(
+            "6 L X+0 Y+0 Z+50 R0 FMAX",
+            "6 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+5 F100",
+        ),
+        &s,
+    );
+    assert_msg(
+        &msg,
+        &[
+            "k.h:10",
+            "block 6:",
+            "Q339=2",
+            "another preset",
+            "Q339=1",
+            "first preset",
+        ],
+    );
+    // A cut before the first CYCL DEF 247: that preset is not the map's frame either.
+    let msg = refuse_with(
+        &text.replace(
+            "0 BEGIN PGM P MM\n",
+            "0 BEGIN PGM P MM\n0 L X+0 Y+0 Z-1 R0 FMAX\n0 L X+5 F100\n",
+        ),
+        &s,
+    );
+    assert_msg(&msg, &["k.h:7", "after cuts"]);
 }

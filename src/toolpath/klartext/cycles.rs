@@ -50,12 +50,7 @@ impl Kt<'_> {
                 self.define_cycle(n, major, b);
             }
             if major == 247 {
-                self.frames.push(Frame {
-                    cycle: "247".into(),
-                    line: n,
-                    what: "CYCL DEF 247 DATUM SETTING".into(),
-                    normal: true,
-                });
+                return self.preset(n, content, term, b);
             }
             return self.unchanged(n, content, term, b, false);
         }
@@ -71,6 +66,49 @@ impl Kt<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// Cycle 247 DATUM SETTING activates preset Q339 of the preset table. The map is applied in
+    /// the coordinates of the first preset the program selects (as the G-code dialects use the
+    /// first work offset), provided no cut that may lie in the zone and no datum shift came
+    /// before it; cuts under another preset are refused until the first is selected again.
+    fn preset(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let q = super::holes::q_value(&b.rest, "Q339");
+        let number = match &q {
+            Some(Ok(p)) => Some(*p),
+            _ => None,
+        };
+        let first = match (number, self.first_preset) {
+            (Some(p), Some(first)) => Ok(p == first),
+            (Some(p), None) if !self.cut_seen && self.shift == [0.0; 3] => {
+                self.first_preset = Some(p);
+                Ok(true)
+            }
+            (Some(_), None) => {
+                Err("after cuts or a datum shift under the preset in force before it")
+            }
+            (None, _) => Err("with a preset number errmap cannot read"),
+        };
+        self.frames.retain(|f| f.cycle != "247");
+        if first != Ok(true) {
+            let why = match (first, self.first_preset) {
+                (Err(why), _) => why.to_string(),
+                (_, Some(p)) => format!("another preset than the program's first (Q339={p})"),
+                _ => String::new(),
+            };
+            let text = q
+                .map(|v| v.map_or_else(|t| t, |p| format!("Q339={p}")))
+                .unwrap_or_else(|| "no Q339".into());
+            self.frames.push(Frame {
+                cycle: "247".into(),
+                line: n,
+                what: format!("CYCL DEF 247 DATUM SETTING {text}, {why}"),
+                normal: true,
+            });
+        }
+        self.unchanged(n, content, term, b, false)?;
+        self.lose_position(n, &[0, 1, 2]);
+        Ok(())
     }
 
     /// Cycle 32 TOLERANCE: `32.1 T0.05` lets the control deviate from the programmed path by

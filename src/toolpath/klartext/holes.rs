@@ -18,7 +18,7 @@ pub(super) struct HoleCycle {
 }
 
 /// `Q203=+0` in a block's text: the number, or the text that is not one.
-fn q_value(rest: &str, q: &str) -> Option<Result<f64, String>> {
+pub(super) fn q_value(rest: &str, q: &str) -> Option<Result<f64, String>> {
     let key = format!("{q}=");
     rest.split_whitespace().find_map(|t| {
         let v = t
@@ -133,6 +133,7 @@ impl Kt<'_> {
         self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
         self.report.points_compensated += 1;
         self.report.moves_changed += 1;
+        self.cut_seen = true;
         Ok(Some(()))
     }
 

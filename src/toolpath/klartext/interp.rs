@@ -65,6 +65,17 @@ impl Kt<'_> {
             _ => {
                 let what = format!("{} {}", b.head, b.rest).trim().to_string();
                 let up = what.to_ascii_uppercase();
+                // PLANE RESET STAY with no tilt active resets nothing and moves no axis.
+                let words: Vec<&str> = up.split_whitespace().collect();
+                if words.starts_with(&["PLANE", "RESET", "STAY"])
+                    && words.len() == 3
+                    && !self
+                        .frames
+                        .iter()
+                        .any(|f| f.cycle == "5x" || f.cycle == "19")
+                {
+                    return self.unchanged(n, content, term, b, false);
+                }
                 let kind = if up.starts_with("PLANE") || up.contains("TCPM") {
                     "5x"
                 } else if up.starts_with("TCH PROBE") {
@@ -170,6 +181,7 @@ impl Kt<'_> {
             ));
         }
         self.prev_touch = touch;
+        self.cut_seen |= mv.cutting && touch;
         if mv.cutting && (touch || !self.units_known) {
             if let Some((col, word, msg, hint)) = mv.refusal.clone() {
                 return Err(self.err(n, col, &word, msg, hint));
@@ -455,6 +467,7 @@ impl Kt<'_> {
                 "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
                 "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
                 "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
+                "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), "select the program's first preset again (CYCL DEF 247 with its Q339) before the cuts in the zone, or compensate this part with a map measured in this preset"),
                 "param" => (format!("`{}` ({at}) shifts the datum by a Q parameter, whose value errmap does not know (read at run time, e.g. by FN18 SYSREAD, or computed), and this cut may lie in the compensation zone", f.what), "shift the datum by numbers (CYCL DEF 7.1 Z+…) for the cuts in the zone, or move the zone away"),
                 "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away"),
                 _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"),

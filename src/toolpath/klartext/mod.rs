@@ -136,6 +136,10 @@ struct Kt<'a> {
     hole_surface_out: Option<f64>,
     /// `M89`: the cycle is called after every positioning block from here on.
     modal_call: bool,
+    /// The preset (cycle 247 Q339) whose coordinates the map is applied in, once selected.
+    first_preset: Option<f64>,
+    /// A cut that may lie in the zone has been read (or a hole compensated).
+    cut_seen: bool,
     /// The largest path tolerance of cycle 32 in the program (mm) and its line.
     path_tolerance_mm: Option<(f64, u64)>,
     trace: Option<Vec<TracedMove>>,
@@ -238,6 +242,8 @@ impl<'a> Kt<'a> {
             hole_surface_out: None,
             modal_call: false,
             path_tolerance_mm: None,
+            first_preset: None,
+            cut_seen: false,
             trace: None,
         })
     }
