@@ -1037,4 +1037,19 @@ fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
         &s,
     );
     assert_msg(&msg, &["k.h:7", "after cuts"]);
+    // With --same-part-per-offset, preset 2 holds an identical part: its cut is compensated in
+    // its own coordinates with the same map.
+    let two = text.replace(
+        "6 L X+0 Y+0 Z+50 R0 FMAX",
+        "6 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+5 F100",
+    );
+    assert_msg(&refuse_with(&two, &s), &["--same-part-per-offset"]);
+    let same = CompensationSettings {
+        same_part_per_offset: true,
+        ..s
+    };
+    let (out, rep) = run(&two, &same);
+    assert_eq!(rep.moves_changed, 3, "{out}");
+    let p = cut_points(&out).into_iter().find(|p| p[0] == 5.0).unwrap();
+    assert!((p[2] - (-1.0 - F1.e(5.0))).abs() < 1e-9, "{out}");
 }

@@ -79,14 +79,16 @@ impl Kt<'_> {
             _ => None,
         };
         let first = match (number, self.first_preset) {
+            // Whether a cycle 7 shift survives a preset change is not in the manuals errmap has.
+            _ if self.shift != [0.0; 3] => Err("with a datum shift (cycle 7) in force"),
+            // Identical parts, one per preset: the map applies in each preset's coordinates.
+            (Some(_), _) if self.settings.same_part_per_offset => Ok(true),
             (Some(p), Some(first)) => Ok(p == first),
-            (Some(p), None) if !self.cut_seen && self.shift == [0.0; 3] => {
+            (Some(p), None) if !self.cut_seen => {
                 self.first_preset = Some(p);
                 Ok(true)
             }
-            (Some(_), None) => {
-                Err("after cuts or a datum shift under the preset in force before it")
-            }
+            (Some(_), None) => Err("after cuts under the preset in force before it"),
             (None, _) => Err("with a preset number errmap cannot read"),
         };
         self.frames.retain(|f| f.cycle != "247");
