@@ -358,26 +358,47 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+10 F100\n3 CT X+20 Y+10\n", &["k.h:4", "CT", "CC + C"]),
         ("2 L X+0 Y+0 Z+20 FMAX\n3 CT X+20 Y+10 Z-1\n", &["k.h:4", "CT"]),
         ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "CALL LBL"]),
-        ("2 CALL LBL 1 REP 2\n3 L X+10 F100\n4 M30\n5 LBL 1\n6 L IX+1 F100\n7 LBL 0\n", &["k.h:4", "unknown since line 3"]),
-        ("2 L X+Q1 F100\n", &["k.h:3", "X+Q1", "Q parameter"]),
-        ("2 CC X+0 Y+10\n3 LP PR+10 PA+0 F100\n", &["k.h:4", "LP/CP"]),
+        ("2 CALL LBL 1 REP 2\n3 L X+10 F100\n4 M30\n5 LBL 1\n6 L IX+1 F100\n7 LBL 0\n", &["k.h:4", "block 3:", "unknown since block 2, line 3"]),
+        ("2 L X+Q1 F100\n", &["k.h:3", "X+Q1", "Q parameter Q1"]),
+        ("2 CYCL DEF 7.0 DATUM SHIFT\n3 CYCL DEF 7.1 Z+Q12\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "Z+Q12", "Q parameter", "FN18"]),
+        ("2 CC X+0 Y+10\n3 LP IPR+10 PA+0 F100\n", &["k.h:4", "IPR+10", "absolute radius PR"]),
+        ("2 CC X+0 Y+10\n3 CP IPA+90 DR- F100\n", &["k.h:4", "IPA+90", "same sign"]),
+        ("2 CP IPA+90 DR+ F100\n", &["k.h:3", "unknown pole CC"]),
+        ("2 CC X+0 Y+10\n3 CP IPA+90 X+5 DR+ F100\n", &["k.h:4", "X+5", "polar coordinates"]),
+        ("2 CC X+0 Y+10\n3 CP IPA+90 F100\n", &["k.h:4", "DR+"]),
+        ("2 / L X+10 F100\n", &["k.h:3", "block 2:", "block skip", "switch"]),
+        ("/ 2 L X+10 F100\n", &["k.h:3", "block 2:", "block skip"]),
+        ("2 / L Z+5 FMAX\n3 L X+10 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
+        ("2 L M140 MB MAX\n3 L X+10 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
+        ("2 M140 MB MAX\n3 L X+10 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
+        ("2 L X+10 Y+0 FMAX M91\n3 L X+20 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
+        ("2 L X+10 F Q5 Y+Q2\n", &["k.h:3", "Y+Q2", "Q parameter"]),
         ("2 FL X+10 Y+0 F100\n", &["k.h:3", "FK free contour"]),
         ("2 APPR LT X+10 Y+0 LEN5 RL F100\n", &["k.h:3", "APPR"]),
-        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "does not follow"]),
-        ("2 TOOL CALL 2 Z S3000\n3 L X+10 F100\n", &["k.h:4", "unknown since line 3"]),
+        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE SPATIAL", "5-axis", "untilted"]),
+        ("2 M128\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "M128", "5-axis"]),
+        ("2 PLANE SPATIAL SPA+0 SPB+10 SPC+0\n3 PLANE RESET STAY\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "PLANE RESET STAY", "5-axis"]),
+        ("2 PLANE RESET TURN FMAX\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "PLANE RESET TURN", "5-axis"]),
+        ("2 L X+0 Y+0 Z-1 R0 FMAX M128\n3 M129\n4 FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS\n5 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+10 F100\n", &["k.h:7", "FUNCTION TCPM", "5-axis"]),
+        ("2 CALL PGM TNC:\\REF\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "CALL PGM", "another program", "paste"]),
+        ("2 TCH PROBE 412 DATUM INSIDE CIRCLE\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n", &["k.h:5", "TCH PROBE", "probes"]),
+        ("2 CYCL DEF 200 DRILLING Q200=+2 Q201=-5 Q203=+Q7\n3 M99\n", &["k.h:4", "Q203 is `Q203=+Q7`"]),
+        ("2 TOOL CALL 2 Z S3000\n3 L X+10 F100\n", &["k.h:4", "unknown since block 2, line 3"]),
         ("2 CYCL DEF 200 DRILLING\n3 CYCL CALL\n", &["k.h:4", "CYCL CALL", "cycle"]),
         ("2 L X+10 F100 M99\n", &["k.h:3", "M99"]),
-        ("2 L X+10 F100 M91\n", &["k.h:3", "M91", "block of its own"]),
+        ("2 L X+10 F100 M126\n", &["k.h:3", "M126", "block of its own"]),
         ("2 L X+10 B+10 F100\n", &["k.h:3", "B+10", "axis B"]),
         ("2 CC X+0 Y+10\n3 C X+10 Y+10 DR+ Z-2\n", &["k.h:4", "helix"]),
         ("2 C X+10 Y+0 DR+\n", &["k.h:3", "circle centre CC"]),
         ("2 CC X+0 Y+10\n3 C X+10 Y+10\n", &["k.h:4", "DR+"]),
         ("2 CR X+10 Y+0 DR+\n", &["k.h:3", "radius"]),
-        ("2 CC X+0 Y+10\n3 C X+20 Y+10 DR+\n", &["k.h:4", "radius differs"]),
+        ("2 CC X+0 Y+10\n3 C X+20 Y+10 DR+\n", &["k.h:4", "not on the circle", "radius 10.0000 at the start", "20.0000 at the end", "0.016 mm"]),
         ("2 TOOL CALL 1 Y\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 CC X+0 Z+5\n5 C X+0 Z-11 DR+\n", &["k.h:6", "tool axis Y"]),
         ("2 L X+1.2.3 F100\n", &["k.h:3", "X+1.2.3", "malformed"]),
         ("2 L X+1 X+2 F100\n", &["k.h:3", "twice"]),
         ("2 L X+1 G01 F100\n", &["k.h:3", "G01"]),
+        ("2 L Z 25.000 FMAX\n", &["k.h:3", "block 2:", "without a value", "Z+25"]),
+        ("2 L X+10 ~\n  Y+5 F100\n", &["k.h:3", "continued with `~`", "one line"]),
     ];
     for (body, parts) in cases {
         let text = format!("{HEAD}{body}");
@@ -460,4 +481,575 @@ fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
         out.stderr
     );
     assert!(!dir.join("bad.h").exists());
+}
+
+/// A flat 20 µm error along Z, measured everywhere.
+struct Flat20;
+
+impl ErrorField for Flat20 {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, _u: f64, _v: f64) -> Option<f64> {
+        Some(0.02)
+    }
+    fn measured(&self, _u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(true)
+    }
+}
+
+#[test]
+fn every_heidenhain_program_of_the_corpus_is_followed_or_refused_at_a_line() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/programs/heidenhain");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        eprintln!("no corpus at {}: skipped", dir.display());
+        return;
+    };
+    let mut files: Vec<_> = entries.filter_map(|e| Some(e.ok()?.path())).collect();
+    files.sort();
+    let s = CompensationSettings {
+        zone: None,
+        everywhere: true,
+        dialect: Some(Dialect::Heidenhain),
+        ..CompensationSettings::default()
+    };
+    let (mut followed, mut refused) = (0, 0);
+    for path in &files {
+        let bytes = std::fs::read(path).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        match compensate_gcode(&text, Path::new(&name), &Flat20, &s) {
+            Ok((_, rep)) => {
+                followed += 1;
+                eprintln!("followed  {name}: {} moves changed", rep.moves_changed);
+            }
+            Err(e) => {
+                refused += 1;
+                let msg = e.to_string();
+                eprintln!("refused   {msg}");
+                assert!(
+                    msg.starts_with(&format!("{name}:"))
+                        && msg[name.len() + 1..].starts_with(|c: char| c.is_ascii_digit()),
+                    "an error without a line number: {msg}"
+                );
+            }
+        }
+    }
+    eprintln!("{followed} followed, {refused} refused of {}", files.len());
+}
+
+/// (x, y, z) of every `L` block with all three coordinates that is not a rapid (FMAX).
+fn cut_points(out: &str) -> Vec<[f64; 3]> {
+    let cuts: String = out
+        .lines()
+        .filter(|l| !l.contains("FMAX"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    points(&cuts)
+}
+
+/// The lines of an output that are `L` blocks (with or without a block number).
+fn l_blocks(out: &str) -> Vec<&str> {
+    out.lines()
+        .filter(|l| l.starts_with("L ") || l.split_whitespace().nth(1) == Some("L"))
+        .collect()
+}
+
+#[test]
+fn a_program_without_block_numbers_is_followed_and_stays_unnumbered() {
+    // As CAM posts write it (the APT post, NX): no block numbers, TOOL DEF, M140 MB MAX, STOP,
+    // comments, a skipped STOP, trailing-dot numbers, feeds F AUTO / F Q5 / FQ5, and a
+    // continued cycle definition.
+    let text = "BEGIN PGM U MM
+BLK FORM 0.1 Z X+0 Y+0 Z-20
+BLK FORM 0.2 X+100 Y+100 Z+0
+TOOL DEF 1 L+0 R+3
+TOOL CALL 1 Z S3000 F AUTO
+L M140 MB MAX
+; setup
+STOP
+/ STOP
+CYCL DEF 200 DRILLING ~
+  Q200=+2 ;SET-UP CLEARANCE ~
+  Q201=-5 ;DEPTH
+L X-450. Y-10. R0 FMAX M91
+L X+0 Y+0. R0 FMAX
+L Z-1. R0 FMAX
+L X+12. R0 F Q5
+L Y+6 FQ5
+L X+20 F AUTO
+M140 MB MAX
+END PGM U MM
+";
+    let (out, rep) = run(text, &settings());
+    assert_eq!(rep.dialect, Some(Dialect::Heidenhain));
+    let lines: Vec<&str> = out.lines().collect();
+    // Everything up to the first cut is copied byte for byte, the continued cycle included.
+    let head: Vec<&str> = text.lines().take(15).collect();
+    assert_eq!(&lines[..15], &head[..], "{out}");
+    // Cut X 0 → 12 at Z −1 in three pieces of 4 mm, Y 0 → 6 in two of 3, X 12 → 20 in two of 4;
+    // each point at Z = −1 − E(x), E = 0.01 + 0.001·x; no block numbers.
+    let want: Vec<[f64; 3]> = [
+        [0.0, 0.0],
+        [4.0, 0.0],
+        [8.0, 0.0],
+        [12.0, 0.0],
+        [12.0, 3.0],
+        [12.0, 6.0],
+        [16.0, 6.0],
+        [20.0, 6.0],
+    ]
+    .iter()
+    .map(|p| [p[0], p[1], -1.0 - (0.01 + 0.001 * p[0])])
+    .collect();
+    let cut: Vec<&str> = lines[15..].iter().copied().take(want.len()).collect();
+    for (l, w) in cut.iter().zip(&want) {
+        assert!(
+            l.starts_with("L X"),
+            "numbered or not an L block: {l}\n{out}"
+        );
+        let p = [
+            word(l, "X").unwrap(),
+            word(l, "Y").unwrap(),
+            word(l, "Z").unwrap(),
+        ];
+        for k in 0..3 {
+            assert!((p[k] - w[k]).abs() < 1e-9, "{l}: want {w:?}\n{out}");
+        }
+    }
+    // The feed words stay on the first piece of their block, as written.
+    assert!(cut[0].ends_with(" R0 F Q5"), "{out}");
+    assert!(cut[4].ends_with(" FQ5"), "{out}");
+    assert!(cut[6].ends_with(" F AUTO"), "{out}");
+    // Before M140 the tool returns to the programmed Z −1 (an unnumbered L block).
+    assert_eq!(lines[15 + want.len()], "L Z-1.0000", "{out}");
+    assert_eq!(&lines[16 + want.len()..], &["M140 MB MAX", "END PGM U MM"]);
+}
+
+#[test]
+fn m140_and_m91_leave_the_tool_axis_unknown_until_an_absolute_coordinate() {
+    let text = "0 BEGIN PGM M MM
+1 L X+0 Y+0 Z-1 R0 FMAX
+2 L M140 MB MAX
+3 L Z-1 FMAX
+4 L X+5 F100
+5 L X+10 Y+0 Z-2 F100 M91
+6 L X+0 Y+0 Z-1 FMAX
+7 L X+5 F100
+8 END PGM M MM
+";
+    let s = CompensationSettings {
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, _) = run(text, &s);
+    // The M91 move is copied as it is (machine coordinates, never compensated).
+    assert!(
+        out.contains("\nL X+10 Y+0 Z-2 F100 M91\n") || out.contains(" L X+10 Y+0 Z-2 F100 M91\n"),
+        "{out}"
+    );
+    let ends: Vec<[f64; 3]> = points(&out).into_iter().filter(|p| p[0] == 5.0).collect();
+    assert_eq!(ends.len(), 2, "{out}");
+    for p in ends {
+        assert!((p[2] - (-1.0 - 0.015)).abs() < 1e-9, "{out}");
+    }
+}
+
+/// The angle of (x, y) about the origin, continued from `prev` (no jump of 2π).
+fn unwrap(prev: f64, x: f64, y: f64) -> f64 {
+    let a = y.atan2(x);
+    let k = ((prev - a) / (2.0 * std::f64::consts::PI)).round();
+    a + k * 2.0 * std::f64::consts::PI
+}
+
+#[test]
+fn a_cp_helix_around_cc_is_compensated_on_the_helix() {
+    // TNC manual, helical interpolation: the total angle as IPA, the height as Z, DR with the
+    // sign of IPA. Radius 10 about (0, 0) from Z −1 down to Z −3 in one and a half turns.
+    let text = "0 BEGIN PGM H MM
+1 L X+10 Y+0 Z-1 R0 FMAX
+2 CC X+0 Y+0
+3 CP IPA+540 Z-3 DR+ F200
+4 L Z+50 FMAX
+5 END PGM H MM
+";
+    let (out, rep) = run(text, &settings());
+    assert_sequential(&out);
+    let pts = cut_points(&out);
+    assert!(pts.len() > 100, "{out}");
+    let total = 3.0 * std::f64::consts::PI;
+    let mut angle = 0.0;
+    for (i, p) in pts.iter().enumerate() {
+        angle = unwrap(angle, p[0], p[1]);
+        // On the cylinder r = 10, at the height of its angle, minus E.
+        let r = p[0].hypot(p[1]);
+        assert!((r - 10.0).abs() < 2e-4, "{p:?}");
+        let z = -1.0 - 2.0 * angle / total;
+        assert!(
+            (p[2] - (z - F1.e(p[0]))).abs() < 2e-4,
+            "point {i} {p:?} angle {angle}\n{out}"
+        );
+        // Counter-clockwise: the angle never decreases.
+        assert!(angle >= -1e-9 && angle <= total + 1e-6, "{p:?}");
+    }
+    assert!((angle - total).abs() < 1e-6, "ends after 540°: {angle}");
+    let last = pts.last().unwrap();
+    assert!(
+        (last[0] + 10.0).abs() < 1e-9 && last[1].abs() < 1e-9,
+        "{last:?}"
+    );
+    // Chords within the chord tolerance: the midpoint of each lies within 5 µm of the circle.
+    for w in pts.windows(2) {
+        let mid = ((w[0][0] + w[1][0]) / 2.0).hypot((w[0][1] + w[1][1]) / 2.0);
+        assert!(mid > 10.0 - 0.005 - 2e-4, "{w:?}");
+    }
+    // No CP or CC is left in the rewritten cut.
+    assert!(!out.contains(" CP "), "{out}");
+    assert_eq!(rep.moves_changed, 1);
+
+    // A full circle CP IPA-360 DR- ends where it started, clockwise.
+    let text = "0 BEGIN PGM H MM\n1 L X+10 Y+0 Z-1 R0 FMAX\n2 CC X+0 Y+0\n3 CP IPA-360 DR- F200\n4 END PGM H MM\n";
+    let (out, _) = run(text, &settings());
+    let pts = points(&out);
+    let last = pts.last().unwrap();
+    assert!(
+        (last[0] - 10.0).abs() < 1e-9 && last[1].abs() < 1e-9,
+        "{out}"
+    );
+    // The first point after the start is below the X axis (clockwise).
+    assert!(pts[2][1] < 0.0, "{out}");
+}
+
+#[test]
+fn cc_in_the_zx_plane_gives_arcs_in_that_plane_with_its_rotation_sense() {
+    // TNC angle reference: in the Z/X plane 0° lies along +Z and positive angles turn towards
+    // +X. From (x 50, z 0) about CC X+50 Z-5, IPA-90 DR- ends at (x 45, z −5) through x < 50.
+    let text = "0 BEGIN PGM Z MM
+1 L X+50 Y+0 Z+0 R0 FMAX
+2 CC X+50 Z-5
+3 CP IPA-90 DR- F100
+4 L Z+50 FMAX
+5 END PGM Z MM
+";
+    let (out, _) = run(text, &settings());
+    let pts = cut_points(&out);
+    assert!(pts.len() > 10, "{out}");
+    for p in &pts {
+        // Nominal z = written z + E(x).
+        let z = p[2] + F1.e(p[0]);
+        let r = (z + 5.0).hypot(p[0] - 50.0);
+        assert!((r - 5.0).abs() < 2e-4, "{p:?} off the circle\n{out}");
+        assert!(
+            p[0] <= 50.0 + 1e-9 && z >= -5.0 - 1e-9,
+            "{p:?} in the wrong quadrant\n{out}"
+        );
+        assert!(p[1] == 0.0);
+    }
+    let last = pts.last().unwrap();
+    assert!(
+        (last[0] - 45.0).abs() < 1e-9 && (last[2] - (-5.0 - F1.e(45.0))).abs() < 1e-9,
+        "{out}"
+    );
+    // A C block after it turns in the same plane: back to (x 50, z 0) counter-clockwise (DR+).
+    let text = text.replace(
+        "3 CP IPA-90 DR- F100",
+        "3 C X+45 Z-5 DR- F100\n4 C X+50 Z+0 DR+",
+    );
+    let text = text
+        .replace("4 L Z+50", "5 L Z+50")
+        .replace("5 END", "6 END");
+    let (out, _) = run(&text, &settings());
+    let pts = cut_points(&out);
+    for p in &pts {
+        let z = p[2] + F1.e(p[0]);
+        assert!(
+            ((z + 5.0).hypot(p[0] - 50.0) - 5.0).abs() < 2e-4,
+            "{p:?}\n{out}"
+        );
+        assert!(p[0] <= 50.0 + 1e-9 && z >= -5.0 - 1e-9, "{p:?}\n{out}");
+    }
+}
+
+#[test]
+fn lp_goes_to_the_point_at_pr_and_pa_about_the_pole() {
+    let text = "0 BEGIN PGM P MM
+1 L X+10 Y+0 Z-1 R0 FMAX
+2 CC X+0 Y+0
+3 LP PR+10 PA+90 F100
+4 END PGM P MM
+";
+    let s = CompensationSettings {
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, _) = run(text, &s);
+    let pts = points(&out);
+    let last = pts.last().unwrap();
+    assert!(
+        last[0].abs() < 1e-9 && (last[1] - 10.0).abs() < 1e-9,
+        "{out}"
+    );
+    assert!((last[2] - (-1.0 - F1.e(0.0))).abs() < 1e-9, "{out}");
+    assert!(l_blocks(&out).iter().all(|l| !l.contains("PA")), "{out}");
+}
+
+#[test]
+fn a_c_end_point_off_the_circle_within_the_tnc_tolerance_is_followed() {
+    // Start radius 10, end radius 10.012 (within the TNC's 0.016 mm): the radius grows
+    // linearly with the angle, both ends exact.
+    let text = "0 BEGIN PGM C MM
+1 L X+10 Y+0 Z-1 R0 FMAX
+2 CC X+0 Y+0
+3 C X+0 Y+10.012 DR+ F100
+4 END PGM C MM
+";
+    let (out, _) = run(text, &settings());
+    let pts = cut_points(&out);
+    assert!(pts.len() > 5, "{out}");
+    let mut angle = 0.0;
+    for p in &pts {
+        angle = unwrap(angle, p[0], p[1]);
+        let want = 10.0 + 0.012 * angle / (std::f64::consts::PI / 2.0);
+        assert!((p[0].hypot(p[1]) - want).abs() < 2e-4, "{p:?}\n{out}");
+        assert!((p[2] - (-1.0 - F1.e(p[0]))).abs() < 2e-4, "{p:?}");
+    }
+    let last = pts.last().unwrap();
+    assert!(
+        last[0].abs() < 1e-9 && (last[1] - 10.012).abs() < 1e-9,
+        "{out}"
+    );
+    // 0.02 mm off: the TNC refuses it, errmap too, naming both radii.
+    let msg = refuse(&text.replace("Y+10.012", "Y+10.02"));
+    assert_msg(
+        &msg,
+        &[
+            "k.h:4",
+            "block 3:",
+            "10.0000 at the start",
+            "10.0200 at the end",
+        ],
+    );
+}
+
+/// E = 0.01 + 0.001·x measured for x ≤ 35 only.
+const F35: F = F {
+    e0: 0.01,
+    g: 0.001,
+    x_meas: 35.0,
+};
+
+/// Written after the TNC cycle manual's cycle 200 DRILLING: a definition over several lines
+/// and calls by M99 on a positioning block and by CYCL CALL.
+const HOLES: &str = "0 BEGIN PGM D MM
+1 TOOL CALL 1 Z S3000
+2 L X+10 Y+10 Z+20 R0 FMAX
+3 CYCL DEF 200 DRILLING ~
+  Q200=+2 ;SET-UP CLEARANCE ~
+  Q201=-5 ;DEPTH ~
+  Q206=+150 ;FEED RATE FOR PLNGNG ~
+  Q202=+5 ;PLUNGING DEPTH ~
+  Q210=+0 ;DWELL TIME AT TOP ~
+  Q203=+0 ;SURFACE COORDINATE ~
+  Q204=+50 ;2ND SET-UP CLEARANCE ~
+  Q211=+0 ;DWELL TIME AT DEPTH
+4 L X+10 Y+10 FMAX M99
+5 L X+30 Y+10 FMAX M99
+6 L X+40 Y+10 FMAX M99
+7 L X+20 Y+10 FMAX
+8 CYCL CALL
+9 L Z+100 FMAX M30
+10 END PGM D MM
+";
+
+#[test]
+fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_by_minus_e() {
+    let s = settings();
+    let msg = match compensate_gcode(HOLES, Path::new("k.h"), &F35, &s) {
+        Ok((out, _)) => panic!("expected a refusal:\n{out}"),
+        Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
+    };
+    assert_msg(
+        &msg,
+        &[
+            "k.h:13",
+            "block 4:",
+            "M99",
+            "cycle 200",
+            "Z-5.0000",
+            "--compensate-holes",
+            "Q203",
+        ],
+    );
+    let s = CompensationSettings {
+        compensate_holes: true,
+        ..settings()
+    };
+    let (out, rep) = compensate_gcode(HOLES, Path::new("k.h"), &F35, &s).unwrap();
+    // Each call is preceded (nearest definition above it) by Q203 = 0 − E(x) of its hole; the
+    // hole at x = 40 lies outside the measured domain and gets the program's own Q203=+0.
+    let lines: Vec<&str> = out.lines().collect();
+    let mut surface: Option<&str> = None;
+    let mut x = None;
+    let mut calls = Vec::new();
+    for l in &lines {
+        if let Some(at) = l.find("Q203=") {
+            surface = l[at + 5..].split_whitespace().next();
+        }
+        if let Some(v) = word(l, "X") {
+            x = Some(v);
+        }
+        if l.contains("M99") || l.contains("CYCL CALL") {
+            calls.push((x.unwrap(), surface.unwrap().to_string()));
+        }
+    }
+    assert_eq!(calls.len(), 4, "{out}");
+    for (x, q203) in &calls {
+        let q: f64 = q203.parse().unwrap();
+        if *x > 35.0 {
+            assert_eq!(q203, "+0", "{out}");
+        } else {
+            assert!(
+                (q - (0.0 - (0.01 + 0.001 * x))).abs() < 1e-12,
+                "x {x}: Q203 {q203}\n{out}"
+            );
+        }
+    }
+    assert_eq!(rep.moves_changed, 3);
+    assert_eq!(
+        rep.moves_outside_domain, 1,
+        "the hole at x = 40 is kept nominal"
+    );
+    // The program's lines are all there, in order; the definitions errmap adds are whole
+    // copies (8 lines each) with only Q203 changed; numbered lines are sequential.
+    let def: Vec<&str> = HOLES.lines().skip(4).take(7).collect();
+    assert_eq!(out.matches("CYCL DEF 200 DRILLING ~").count(), 5, "{out}");
+    assert_eq!(out.matches(def[0]).count(), 5);
+    let numbered: Vec<u64> = lines
+        .iter()
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert_eq!(
+        numbered,
+        (0..numbered.len() as u64).collect::<Vec<_>>(),
+        "{out}"
+    );
+    // Far from the zone (surface at Z+50), nothing changes.
+    let high = HOLES.replace("Q203=+0 ", "Q203=+50 ");
+    let (out, _) = compensate_gcode(&high, Path::new("k.h"), &F35, &s).unwrap();
+    assert_eq!(out, high);
+}
+
+#[test]
+fn a_cycle_32_tolerance_larger_than_e_is_noted_in_the_report() {
+    let text = "0 BEGIN PGM T MM
+1 CYCL DEF 32.0 TOLERANCE
+2 CYCL DEF 32.1 T0.05
+3 L X+0 Y+0 Z-1 R0 FMAX
+4 L X+10 F100
+5 END PGM T MM
+";
+    // Largest |E| = 0.01 + 0.001·10 = 0.02 mm < 0.05 mm.
+    let (out, rep) = run(text, &settings());
+    assert_eq!(rep.notes.len(), 1, "{rep:?}");
+    assert_msg(
+        &rep.notes[0],
+        &["CYCL DEF 32", "T0.05", "block 2, line 3", "0.0200 mm"],
+    );
+    assert!(out.contains("2 CYCL DEF 32.1 T0.05\n"));
+    // A tolerance below |E| is not noted, and the note is not in the JSON when there is none.
+    let (_, rep) = run(&text.replace("T0.05", "T0.005"), &settings());
+    assert!(rep.notes.is_empty());
+    let json = errmap::toolpath::CompensationDocument {
+        input: Path::new("a"),
+        output: Path::new("b"),
+        report: &rep,
+    }
+    .to_json()
+    .unwrap();
+    assert!(!json.contains("notes"), "{json}");
+}
+
+#[test]
+fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
+    let text = "0 BEGIN PGM P MM
+1 CYCL DEF 247 DATUM SETTING ~
+  Q339=+1 ;DATUM NUMBER
+2 L X+0 Y+0 Z-1 R0 FMAX
+3 L X+10 F100
+4 L Z+50 FMAX
+5 CYCL DEF 247 DATUM SETTING ~
+  Q339=+2 ;DATUM NUMBER
+6 L X+0 Y+0 Z+50 R0 FMAX
+7 CYCL DEF 247 DATUM SETTING ~
+  Q339=+1 ;DATUM NUMBER
+8 L X+0 Y+0 Z-1 R0 FMAX
+9 L X+10 F100
+10 END PGM P MM
+";
+    let s = CompensationSettings {
+        max_segment: 1000.0,
+        ..settings()
+    };
+    let (out, rep) = run(
+        &text.replace(
+            "0 BEGIN PGM P MM\n",
+            "0 BEGIN PGM P MM\n0 PLANE RESET STAY\n",
+        ),
+        &s,
+    );
+    assert_eq!(
+        rep.moves_changed, 2,
+        "PLANE RESET STAY with no tilt is nothing\n{out}"
+    );
+    let ends: Vec<[f64; 3]> = cut_points(&out)
+        .into_iter()
+        .filter(|p| p[0] == 10.0)
+        .collect();
+    assert_eq!(ends.len(), 2, "{out}");
+    for p in ends {
+        assert!((p[2] - (-1.0 - F1.e(10.0))).abs() < 1e-9, "{out}");
+    }
+    // A cut under preset 2 is refused, naming both presets.
+    let msg = refuse_with(
+        &text.replace(
+            "6 L X+0 Y+0 Z+50 R0 FMAX",
+            "6 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+5 F100",
+        ),
+        &s,
+    );
+    assert_msg(
+        &msg,
+        &[
+            "k.h:10",
+            "block 6:",
+            "Q339=2",
+            "another preset",
+            "Q339=1",
+            "first preset",
+        ],
+    );
+    // A cut before the first CYCL DEF 247: that preset is not the map's frame either.
+    let msg = refuse_with(
+        &text.replace(
+            "0 BEGIN PGM P MM\n",
+            "0 BEGIN PGM P MM\n0 L X+0 Y+0 Z-1 R0 FMAX\n0 L X+5 F100\n",
+        ),
+        &s,
+    );
+    assert_msg(&msg, &["k.h:7", "after cuts"]);
+    // With --same-part-per-offset, preset 2 holds an identical part: its cut is compensated in
+    // its own coordinates with the same map.
+    let two = text.replace(
+        "6 L X+0 Y+0 Z+50 R0 FMAX",
+        "6 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+5 F100",
+    );
+    assert_msg(&refuse_with(&two, &s), &["--same-part-per-offset"]);
+    let same = CompensationSettings {
+        same_part_per_offset: true,
+        ..s
+    };
+    let (out, rep) = run(&two, &same);
+    assert_eq!(rep.moves_changed, 3, "{out}");
+    let p = cut_points(&out).into_iter().find(|p| p[0] == 5.0).unwrap();
+    assert!((p[2] - (-1.0 - F1.e(5.0))).abs() < 1e-9, "{out}");
 }

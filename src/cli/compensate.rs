@@ -121,6 +121,9 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
         outln!("{}", doc.to_json()?);
     } else {
         outln!("{}: {}", args.output.display(), report.summary_line());
+        for note in &report.notes {
+            outln!("note: {note}");
+        }
     }
     Ok(0)
 }

@@ -242,6 +242,10 @@ pub struct CompensationReport {
     /// Lines read and written.
     pub lines_in: u64,
     pub lines_out: u64,
+    /// What a machinist should know about the compensated program (e.g. a path tolerance of
+    /// the program's own larger than the compensation it carries).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl CompensationReport {

@@ -33,6 +33,8 @@ impl Word {
 /// A block: `lead` (whitespace) + `number` + `body`, as in the text, read into words.
 #[derive(Debug, Clone)]
 pub(super) struct Block {
+    /// Block skip `/` before the block: whether it runs depends on the operator's switch.
+    pub skip: bool,
     pub number: Option<u64>,
     /// Byte range of the block number in the line's content.
     pub number_span: Range<usize>,
@@ -73,15 +75,25 @@ pub(super) fn read(content: &str) -> Result<Block, LexError> {
         }
         None => (content, ""),
     };
-    let t = code.trim_start();
+    let mut t = code.trim_start();
+    let skip = t.starts_with('/');
+    if skip {
+        t = t[1..].trim_start();
+    }
     let lead = code.len() - t.len();
     let digits = t.bytes().take_while(u8::is_ascii_digit).count();
     let number = t[..digits].parse::<u64>().ok();
     let number_span = lead..lead + digits;
     let after = &code[lead + digits..];
-    let body = after.trim_start();
+    let mut body = after.trim_start();
+    // `/ 24 L …` as the TNC shows it, or `24 / L …`.
+    let skip = skip || body.starts_with('/');
+    if body.starts_with('/') {
+        body = body[1..].trim_start();
+    }
     let body_at = code.len() - body.len();
     let mut block = Block {
+        skip,
         number,
         number_span,
         head: String::new(),
@@ -106,8 +118,13 @@ pub(super) fn read(content: &str) -> Result<Block, LexError> {
         block.rest = r.to_string();
         return Ok(block);
     }
-    let head_len = body.find(|c: char| c.is_whitespace()).unwrap_or(body.len());
+    let mut head_len = body.find(|c: char| c.is_whitespace()).unwrap_or(body.len());
     block.head = body[..head_len].to_ascii_uppercase();
+    // `FN18: SYSREAD …`, `FN0: Q3 = 1.995`: the function FN, its number in the rest.
+    if block.head.len() > 2 && block.head.starts_with("FN") {
+        block.head = "FN".into();
+        head_len = 2;
+    }
     let rest = &body[head_len..];
     block.rest = rest.trim().to_string();
     let rest_at = body_at + head_len;
@@ -116,6 +133,9 @@ pub(super) fn read(content: &str) -> Result<Block, LexError> {
         "L" | "C" | "CR" | "CT" | "CC" | "LP" | "CP" | "RND" | "CHF"
     ) {
         block.words = words(content, rest, rest_at)?;
+    } else if is_m_head(&block.head) {
+        // `M140 MB MAX`, `M5 M9`: the head is a word too.
+        block.words = words(content, body, body_at)?;
     } else if block.head == "CYCL" {
         match words(content, rest, rest_at) {
             Ok(w) => block.words = w,
@@ -123,6 +143,11 @@ pub(super) fn read(content: &str) -> Result<Block, LexError> {
         }
     }
     Ok(block)
+}
+
+/// `M3`, `M140`: a block of miscellaneous functions.
+pub(super) fn is_m_head(head: &str) -> bool {
+    head.len() > 1 && head.starts_with('M') && head[1..].bytes().all(|b| b.is_ascii_digit())
 }
 
 /// 1-based column of byte `at` in `content`.
@@ -134,10 +159,50 @@ fn col(content: &str, at: usize) -> usize {
 fn words(content: &str, rest: &str, rest_at: usize) -> Result<Vec<Word>, LexError> {
     let mut out: Vec<Word> = Vec::new();
     let mut offset = 0;
-    for tok in rest.split_whitespace() {
+    let mut toks = rest.split_whitespace().peekable();
+    while let Some(tok) = toks.next() {
         let at = rest_at + offset + rest[offset..].find(tok).unwrap_or(0);
         offset = at - rest_at + tok.len();
         let column = col(content, at);
+        // Two-token words: `F AUTO` (the feed of the TOOL CALL), `F Q5` / `FQ5` (a feed from a
+        // parameter), `MB MAX` / `MB +50` (M140's retract distance).
+        let upper = tok.to_ascii_uppercase();
+        let next = toks.peek().map(|t| t.to_ascii_uppercase());
+        let merged = match (upper.as_str(), next.as_deref()) {
+            ("F", Some("AUTO")) => Some(("FAUTO", Value::None)),
+            ("F", Some(q)) if q.starts_with('Q') => Some(("F", Value::Param)),
+            ("MB", Some("MAX")) => Some(("MB", Value::None)),
+            ("MB", Some(v)) => value(v)
+                .filter(|v| matches!(v, Value::Num(_)))
+                .map(|v| ("MB", v)),
+            (fq, _) if fq.starts_with("FQ") => {
+                Some(("F", Value::Param)).filter(|_| value(&fq[1..]) == Some(Value::Param))
+            }
+            _ => None,
+        };
+        if let Some((addr, value)) = merged {
+            let mut text = tok.to_string();
+            if !upper.starts_with("FQ") {
+                let second = toks.next().unwrap_or_default();
+                let at2 = rest_at + offset + rest[offset..].find(second).unwrap_or(0);
+                offset = at2 - rest_at + second.len();
+                text = format!("{tok} {second}");
+            }
+            if out.iter().any(|w| w.addr == addr) {
+                return Err((
+                    column,
+                    text,
+                    format!("word `{addr}` given twice in one block"),
+                ));
+            }
+            out.push(Word {
+                addr: addr.to_string(),
+                value,
+                text,
+                col: column,
+            });
+            continue;
+        }
         let letters = tok
             .bytes()
             .take_while(|b| b.is_ascii_alphabetic() || *b == b'#')

@@ -25,17 +25,15 @@ impl Kt<'_> {
             }
             return Ok(());
         }
-        let id = b
-            .words
-            .iter()
-            .find(|w| w.addr.is_empty())
-            .and_then(|w| w.num());
+        let id = super::cycle_id(b);
         let (major, minor) = match id {
             Some(v) => (v.trunc() as i64, ((v - v.trunc()) * 10.0).round() as i64),
             None => (-1, 0),
         };
-        let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26);
-        if let (true, Some((col, word, msg))) = (followed, b.bad.clone()) {
+        let followed = matches!(major, 7 | 8 | 10 | 11 | 19 | 26 | 32);
+        if let (true, Some((col, word, msg))) =
+            (followed && minor != 0 && major != 32, b.bad.clone())
+        {
             return Err(self.err(
                 n,
                 col,
@@ -47,22 +45,85 @@ impl Kt<'_> {
         // The cycle's own block (`7.0 DATUM SHIFT`) and machining-cycle definitions do nothing
         // until called.
         if !followed || minor == 0 {
+            // A machining cycle's definition replaces the one a later call runs.
+            if ![7, 8, 9, 10, 11, 19, 26, 32, 247].contains(&major) {
+                self.define_cycle(n, major, b);
+            }
             if major == 247 {
-                self.frames.push(Frame {
-                    cycle: "247".into(),
-                    line: n,
-                    what: "CYCL DEF 247 DATUM SETTING".into(),
-                    normal: true,
-                });
+                return self.preset(n, content, term, b);
             }
             return self.unchanged(n, content, term, b, false);
         }
         self.unchanged(n, content, term, b, false)?;
+        if major == 32 {
+            self.path_tolerance(n, b);
+            return Ok(());
+        }
         match major {
             7 => self.datum_shift(n, b),
             _ => {
                 self.transform(n, b, major);
                 Ok(())
+            }
+        }
+    }
+
+    /// Cycle 247 DATUM SETTING activates preset Q339 of the preset table. The map is applied in
+    /// the coordinates of the first preset the program selects (as the G-code dialects use the
+    /// first work offset), provided no cut that may lie in the zone and no datum shift came
+    /// before it; cuts under another preset are refused until the first is selected again.
+    fn preset(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let q = super::holes::q_value(&b.rest, "Q339");
+        let number = match &q {
+            Some(Ok(p)) => Some(*p),
+            _ => None,
+        };
+        let first = match (number, self.first_preset) {
+            // Whether a cycle 7 shift survives a preset change is not in the manuals errmap has.
+            _ if self.shift != [0.0; 3] => Err("with a datum shift (cycle 7) in force"),
+            // Identical parts, one per preset: the map applies in each preset's coordinates.
+            (Some(_), _) if self.settings.same_part_per_offset => Ok(true),
+            (Some(p), Some(first)) => Ok(p == first),
+            (Some(p), None) if !self.cut_seen => {
+                self.first_preset = Some(p);
+                Ok(true)
+            }
+            (Some(_), None) => Err("after cuts under the preset in force before it"),
+            (None, _) => Err("with a preset number errmap cannot read"),
+        };
+        self.frames.retain(|f| f.cycle != "247");
+        if first != Ok(true) {
+            let why = match (first, self.first_preset) {
+                (Err(why), _) => why.to_string(),
+                (_, Some(p)) => format!("another preset than the program's first (Q339={p})"),
+                _ => String::new(),
+            };
+            let text = q
+                .map(|v| v.map_or_else(|t| t, |p| format!("Q339={p}")))
+                .unwrap_or_else(|| "no Q339".into());
+            self.frames.push(Frame {
+                cycle: "247".into(),
+                line: n,
+                what: format!("CYCL DEF 247 DATUM SETTING {text}, {why}"),
+                normal: true,
+            });
+        }
+        self.unchanged(n, content, term, b, false)?;
+        self.lose_position(n, &[0, 1, 2]);
+        Ok(())
+    }
+
+    /// Cycle 32 TOLERANCE: `32.1 T0.05` lets the control deviate from the programmed path by
+    /// up to T (program units) while it smooths it; `32.1` alone resets the machine's default.
+    fn path_tolerance(&mut self, n: u64, b: &Block) {
+        let t = b.rest.split_whitespace().find_map(|w| {
+            let v = w.strip_prefix('T').or_else(|| w.strip_prefix('t'))?;
+            v.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
+        });
+        if let Some(t) = t {
+            let mm = t * self.scale_mm();
+            if self.path_tolerance_mm.is_none_or(|(old, _)| mm > old) {
+                self.path_tolerance_mm = Some((mm, n));
             }
         }
     }
@@ -87,8 +148,9 @@ impl Kt<'_> {
                     self.centre[i] = self.centre[i].map(|p| p - delta);
                 }
                 _ => {
+                    let param = w.value == Value::Param;
                     self.frames.push(Frame {
-                        cycle: "7".into(),
+                        cycle: if param { "param" } else { "7" }.into(),
                         line: n,
                         what: format!("CYCL DEF 7 DATUM SHIFT {}", w.text),
                         normal: true,

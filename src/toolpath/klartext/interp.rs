@@ -31,15 +31,18 @@ pub(super) struct PathMove {
 impl Kt<'_> {
     /// One line: dispatch on its function.
     pub(super) fn line(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        if b.skip {
+            return self.skipped_block(n, content, term, b);
+        }
         match b.head.as_str() {
             "" | ";" | "*" | "BEGIN" | "END" | "BLK" | "FPOL" | "FSELECT" | "SEL" => {
                 self.copy(content, term, b);
                 Ok(())
             }
-            "L" | "C" | "CR" | "CT" => self.path(n, content, term, b),
+            "L" | "C" | "CR" | "CT" | "LP" | "CP" => self.path(n, content, term, b),
             "CC" => self.circle_centre(n, content, term, b),
             "RND" | "CHF" => self.corner_block(n, content, term, b),
-            "LP" | "CP" | "FL" | "FLT" | "FC" | "FCT" | "APPR" | "DEP" => {
+            "FL" | "FLT" | "FC" | "FCT" | "APPR" | "DEP" => {
                 self.unfollowed_contour(n, content, term, b)
             }
             "LBL" => self.label_block(n, content, term, b),
@@ -53,10 +56,7 @@ impl Kt<'_> {
             }
             h if is_m_block(h) => {
                 self.unchanged(n, content, term, b, false)?;
-                if matches!(h, "M99" | "M89") {
-                    self.cycle_call(n, b.head_col, h)?;
-                }
-                Ok(())
+                self.after_path_m(n, b)
             }
             h if h.starts_with('Q') => {
                 self.copy(content, term, b);
@@ -64,8 +64,27 @@ impl Kt<'_> {
             }
             _ => {
                 let what = format!("{} {}", b.head, b.rest).trim().to_string();
+                let up = what.to_ascii_uppercase();
+                // PLANE RESET STAY with no tilt active resets nothing and moves no axis.
+                let words: Vec<&str> = up.split_whitespace().collect();
+                if words.starts_with(&["PLANE", "RESET", "STAY"])
+                    && words.len() == 3
+                    && !self
+                        .frames
+                        .iter()
+                        .any(|f| f.cycle == "5x" || f.cycle == "19")
+                {
+                    return self.unchanged(n, content, term, b, false);
+                }
+                let kind = if up.starts_with("PLANE") || up.contains("TCPM") {
+                    "5x"
+                } else if up.starts_with("TCH PROBE") {
+                    "probe"
+                } else {
+                    "?"
+                };
                 self.frames.push(Frame {
-                    cycle: "?".into(),
+                    cycle: kind.into(),
                     line: n,
                     what,
                     normal: true,
@@ -97,7 +116,7 @@ impl Kt<'_> {
     }
 
     /// The working plane of the tool axis (TOOL CALL … Z: XY).
-    fn plane(&self) -> Plane {
+    pub(super) fn plane(&self) -> Plane {
         match self.tool_axis {
             0 => Plane::G19,
             1 => Plane::G18,
@@ -133,10 +152,7 @@ impl Kt<'_> {
     fn path(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.check_path_words(n, b)?;
         self.radius_words(n, b, b.head == "CR");
-        let coordinates = b.words.iter().any(|w| {
-            let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
-            matches!(a, "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W")
-        });
+        let coordinates = has_coordinates(b);
         if b.head == "L" && !coordinates {
             // `L R0 F200 M3`: no motion.
             self.unchanged(n, content, term, b, false)?;
@@ -150,7 +166,7 @@ impl Kt<'_> {
                     l,
                     col,
                     &word,
-                    format!("`{word}` rounds or chamfers the corner before a contour element (line {n}) that may lie in the compensation zone: errmap does not follow RND and CHF there"),
+                    format!("`{word}` rounds or chamfers the corner before a contour element ({}) that may lie in the compensation zone: errmap does not follow RND and CHF there", self.at(n)),
                     CORNER_HINT,
                 ));
             }
@@ -165,6 +181,7 @@ impl Kt<'_> {
             ));
         }
         self.prev_touch = touch;
+        self.cut_seen |= mv.cutting && touch;
         if mv.cutting && (touch || !self.units_known) {
             if let Some((col, word, msg, hint)) = mv.refusal.clone() {
                 return Err(self.err(n, col, &word, msg, hint));
@@ -185,24 +202,52 @@ impl Kt<'_> {
         } else {
             self.unchanged(n, content, term, b, absolute_normal)?;
         }
+        let lost: Vec<usize> = (0..3)
+            .filter(|&i| mv.end[i].is_none() && self.pos[i].is_some())
+            .collect();
+        if !lost.is_empty() {
+            self.lose_position(n, &lost);
+        }
         self.pos = mv.end;
         self.after_path_m(n, b)
     }
 
     /// Words a path block may hold; anything else is an error (strict blocks).
     fn check_path_words(&self, n: u64, b: &Block) -> Result<()> {
-        const COMMON: [&str; 26] = [
+        const COMMON: [&str; 31] = [
             "X", "Y", "Z", "IX", "IY", "IZ", "A", "B", "C", "IA", "IB", "IC", "U", "V", "W", "R",
-            "RL", "RR", "F", "FMAX", "FAUTO", "FU", "FZ", "AUTO", "M", "DR",
+            "RL", "RR", "F", "FMAX", "FAUTO", "FU", "FZ", "AUTO", "M", "DR", "MB", "PA", "IPA",
+            "PR", "IPR",
         ];
         for w in &b.words {
             let ok = COMMON.contains(&w.addr.as_str())
-                && (w.addr != "DR" || matches!(b.head.as_str(), "C" | "CR"));
+                && (w.addr != "DR" || matches!(b.head.as_str(), "C" | "CR" | "CP"))
+                && (!matches!(w.addr.as_str(), "PA" | "IPA")
+                    || matches!(b.head.as_str(), "LP" | "CP"))
+                && (!matches!(w.addr.as_str(), "PR" | "IPR") || b.head == "LP")
+                && (w.addr != "MB"
+                    || b.words
+                        .iter()
+                        .any(|m| m.addr == "M" && m.num() == Some(140.0)));
             let value_ok = match w.addr.as_str() {
                 "RL" | "RR" | "FMAX" | "FAUTO" | "AUTO" => w.value == Value::None,
+                "MB" => matches!(w.value, Value::None | Value::Num(_)),
                 "DR" => matches!(w.value, Value::Sign(_)),
                 _ => matches!(w.value, Value::Num(_) | Value::Param),
             };
+            let axis = matches!(
+                w.addr.trim_start_matches('I'),
+                "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W"
+            );
+            if ok && axis && w.value == Value::None {
+                return Err(self.err(
+                    n,
+                    w.col,
+                    &w.text,
+                    format!("axis word `{}` without a value right after it (a TNC block writes `{}+25`, not `{} 25`)", w.text, w.addr, w.addr),
+                    "join the value to its axis letter (e.g. `L Z+25.000 FMAX`), as the TNC writes it",
+                ));
+            }
             if !ok || !value_ok {
                 return Err(self.err(
                     n,
@@ -241,9 +286,16 @@ impl Kt<'_> {
                 }
             }
         }
-        let cutting = !b.has("FMAX");
+        // An M91/M92 block ends at machine coordinates, outside the map's frame: errmap never
+        // compensates it (it is copied) and treats it as leaving the zone.
+        let cutting = !b.has("FMAX") && machine.is_none();
         let (arc, arc_refusal) = match b.head.as_str() {
             "C" | "CR" => self.arc(n, b, start, end)?,
+            "LP" | "CP" => {
+                let (e, arc, refusal) = self.polar_move(n, b, start)?;
+                end = e;
+                (arc, refusal)
+            }
             _ => (None, None),
         };
         let refusal = self
@@ -289,7 +341,11 @@ impl Kt<'_> {
                 "add DR+ (counterclockwise) or DR- (clockwise)",
             ));
         };
-        let plane = self.plane();
+        let plane = if b.head == "C" {
+            self.circle_plane()
+        } else {
+            self.plane()
+        };
         let (a1, a2, ax) = plane.axes();
         if self.tool_axis != 2 {
             return Ok((None, Some((
@@ -320,7 +376,9 @@ impl Kt<'_> {
                     "program CC X… Y… before the circle",
                 ))));
             };
-            Arc::from_centre(plane, s, e, (c1, c2), !dr, 1)
+            return self
+                .circle_c(n, b, plane, s, e, (c1, c2), !dr)
+                .map(|a| (Some(a), None));
         } else {
             let Some(r) = b.word("R").and_then(|w| w.num()).filter(|r| *r != 0.0) else {
                 return Err(self.err(
@@ -344,6 +402,56 @@ impl Kt<'_> {
         })
     }
 
+    /// The arc of a C block. Its end may lie off the circle through the start by up to the
+    /// TNC's input tolerance (0.016 mm, TNC 410 manual "Circular path C around circle centre
+    /// CC"): the radius then changes linearly from start to end, as the TNC's own correction
+    /// is not documented; beyond it the TNC refuses the block, and so does errmap.
+    #[allow(clippy::too_many_arguments)]
+    fn circle_c(
+        &self,
+        n: u64,
+        b: &Block,
+        plane: Plane,
+        s: [f64; 3],
+        e: [f64; 3],
+        centre: (f64, f64),
+        clockwise: bool,
+    ) -> Result<Arc> {
+        let (a1, a2, _) = plane.axes();
+        let r_start = (s[a1] - centre.0).hypot(s[a2] - centre.1);
+        let r_end = (e[a1] - centre.0).hypot(e[a2] - centre.1);
+        let tol = C_END_TOLERANCE_MM / self.scale_mm();
+        let bad = |m: String| {
+            self.err(
+                n,
+                b.head_col,
+                "C",
+                m,
+                "fix the arc's end point or its centre CC",
+            )
+        };
+        if r_start < 1e-9 || r_end < 1e-9 {
+            return Err(bad(
+                "circle C whose start or end point is its centre CC".into()
+            ));
+        }
+        if (r_start - r_end).abs() > tol {
+            return Err(bad(format!(
+                "the end point of C is not on the circle about CC: radius {r_start:.4} at the start, {r_end:.4} at the end ({:.4} apart; the TNC accepts at most {C_END_TOLERANCE_MM} mm)",
+                (r_start - r_end).abs()
+            )));
+        }
+        // The arc is built to the end point moved onto the start circle (same angle), then ends
+        // at the programmed point with its own radius.
+        let mut on = e;
+        on[a1] = centre.0 + (e[a1] - centre.0) * r_start / r_end;
+        on[a2] = centre.1 + (e[a2] - centre.1) * r_start / r_end;
+        let mut arc = Arc::from_centre(plane, s, on, centre, clockwise, 1).map_err(bad)?;
+        arc.end = e;
+        arc.r_end = r_end;
+        Ok(arc)
+    }
+
     /// The program's state forbids compensating a cut here.
     fn context_refusal(&self, b: &Block) -> Option<Refusal> {
         let col = b.head_col;
@@ -351,15 +459,24 @@ impl Kt<'_> {
             return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), "begin the program with `0 BEGIN PGM name MM` (or INCH), or pass --units mm|inch"));
         }
         if let Some((l, w)) = &self.label {
-            return Some((col, w.clone(), format!("cut inside the label `{w}` (line {l}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone"), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
+            return Some((col, w.clone(), format!("cut inside the label `{w}` ({}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone", self.at(*l)), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
         }
         if let Some(f) = self.frames.last() {
-            let msg = if f.cycle == "?" {
-                format!("`{}` (line {}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what, f.line)
-            } else {
-                format!("`{}` (line {}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.line, f.cycle)
+            let at = self.at(f.line);
+            let (msg, hint) = match f.cycle.as_str() {
+                "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
+                "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
+                "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
+                "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), if self.settings.same_part_per_offset || f.what.contains("cannot read") {
+                    "select the program's first preset again (CYCL DEF 247 with its Q339 as a number) before the cuts in the zone, or compensate this part with a map measured in this preset"
+                } else {
+                    "select the program's first preset again (CYCL DEF 247 with its Q339) before the cuts in the zone; for identical parts, one per preset, pass --same-part-per-offset to apply the map in each preset's coordinates"
+                }),
+                "param" => (format!("`{}` ({at}) shifts the datum by a Q parameter, whose value errmap does not know (read at run time, e.g. by FN18 SYSREAD, or computed), and this cut may lie in the compensation zone", f.what), "shift the datum by numbers (CYCL DEF 7.1 Z+…) for the cuts in the zone, or move the zone away"),
+                "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away"),
+                _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"),
             };
-            return Some((col, f.what.clone(), msg, "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"));
+            return Some((col, f.what.clone(), msg, hint));
         }
         if let Some((l, w)) = &self.radius_comp {
             let w = if b.has("RL") || b.has("RR") {
@@ -371,7 +488,7 @@ impl Kt<'_> {
             } else {
                 w.as_str()
             };
-            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from line {l}) is active on a cut in the compensation zone"), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
+            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from {}) is active on a cut in the compensation zone", self.at(*l)), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
         }
         if b.head == "CT" {
             return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT));
@@ -381,11 +498,21 @@ impl Kt<'_> {
 
     /// A word of the block forbids compensating, or the start point is unknown.
     fn word_refusal(&self, b: &Block, start: &Point) -> Option<Refusal> {
-        if let Some(w) = b.words.iter().find(|w| w.value == Value::Param) {
+        // A feed from a parameter (`F Q5`) does not move the path.
+        if let Some(w) = b
+            .words
+            .iter()
+            .find(|w| w.value == Value::Param && w.addr != "F")
+        {
+            let q = w
+                .text
+                .get(w.addr.len()..)
+                .unwrap_or("")
+                .trim_start_matches(['+', '-']);
             return Some((
                 w.col,
                 w.text.clone(),
-                "Q parameter in a cut in the compensation zone".into(),
+                format!("`{}` takes its value from the Q parameter {q} on a cut in the compensation zone: errmap does not compute Q parameters", w.text),
                 "post the program with numbers instead of Q parameters (or move the zone away)",
             ));
         }
@@ -416,7 +543,7 @@ impl Kt<'_> {
         if start.iter().any(Option::is_none) {
             let since = self
                 .unknown_since
-                .map(|l| format!(" since line {l}"))
+                .map(|l| format!(" since {}", self.at(l)))
                 .unwrap_or_else(|| " (no X, Y and Z since the program start)".into());
             return Some((b.head_col, b.head.clone(), format!("the start point of this cut is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"), "give absolute X, Y and Z (e.g. L X… Y… Z… R0 FMAX) before the cut"));
         }
@@ -437,7 +564,7 @@ impl Kt<'_> {
             (None, false) => Motion::Rapid,
             (None, true) => Motion::Linear,
         };
-        if b.head != "L" && mv.arc.is_none() {
+        if !matches!(b.head.as_str(), "L" | "LP") && mv.arc.is_none() {
             return;
         }
         let arc_mm = mv.arc.as_ref().map(|a| {
@@ -463,15 +590,45 @@ impl Kt<'_> {
         }
     }
 
-    /// M99/M89 on a path block call the cycle defined last at the end point.
+    /// M99/M89 on a path block call the cycle defined last at the end point; M140 retracts
+    /// along the tool axis (`MB MAX`: to the end of the traverse range), so the tool-axis
+    /// coordinate is unknown after it, until an absolute one.
     fn after_path_m(&mut self, n: u64, b: &Block) -> Result<()> {
+        // M128 (TCPM), M114 and M144 make X/Y/Z depend on the rotary axes until M129, M115
+        // and M145: cuts in the zone are refused while one is active.
+        for w in b.words.iter().filter(|w| w.addr == "M") {
+            match w.num() {
+                Some(m @ (114.0 | 128.0 | 144.0)) => self.frames.push(Frame {
+                    cycle: "5x".into(),
+                    line: n,
+                    what: format!("M{m}"),
+                    normal: true,
+                }),
+                Some(m @ (115.0 | 129.0 | 145.0)) => {
+                    let on = format!("M{}", m - 1.0);
+                    self.frames.retain(|f| f.what != on);
+                }
+                _ => {}
+            }
+        }
+        if b.words
+            .iter()
+            .any(|w| w.addr == "M" && w.num() == Some(140.0))
+        {
+            self.lose_position(n, &[self.tool_axis]);
+        }
         if let Some(w) = b
             .words
             .iter()
             .find(|w| w.addr == "M" && matches!(w.num(), Some(99.0 | 89.0)))
         {
             let (col, text) = (w.col, w.text.clone());
+            // M89 calls the cycle after every positioning block from here on; errmap does
+            // not end it (each later position is judged as a call).
+            self.modal_call |= w.num() == Some(89.0);
             self.cycle_call(n, col, &text)?;
+        } else if self.modal_call && b.head == "L" && has_coordinates(b) {
+            self.cycle_call(n, b.head_col, "M89 (modal cycle call)")?;
         }
         Ok(())
     }
@@ -479,6 +636,10 @@ impl Kt<'_> {
     /// A machining cycle runs at the current position: refused if it may touch the zone; it
     /// leaves the tool-axis coordinate unknown.
     pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
+        if self.hole_call(n, col, word)?.is_some() {
+            self.lose_position(n, &[self.tool_axis, self.normal]);
+            return Ok(());
+        }
         let mut p = self.pos;
         p[self.tool_axis] = None;
         p[self.normal] = None;
@@ -497,28 +658,39 @@ impl Kt<'_> {
 
     /// `CC X… Y…` (absolute), `CC IX… IY…` (from the last position), `CC` (the last position).
     fn circle_centre(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
-        let (a1, a2, _) = self.plane().axes();
+        let mut axes: Vec<usize> = Vec::new();
         for w in &b.words {
-            let plane_word = [a1, a2]
+            let axis = AXES
                 .iter()
-                .any(|&i| w.addr.trim_start_matches('I') == AXES[i]);
-            if !plane_word || w.value == Value::None {
-                return Err(self.err(
-                    n,
-                    w.col,
-                    &w.text,
-                    format!(
-                        "`{}` is not a coordinate of the working plane for CC",
-                        w.text
-                    ),
-                    "write CC with the plane's two coordinates, e.g. CC X+25 Y+25",
-                ));
+                .position(|a| w.addr.trim_start_matches('I') == *a && w.addr.len() <= 2);
+            match axis {
+                Some(i) if w.value != Value::None && !axes.contains(&i) => axes.push(i),
+                _ => {
+                    return Err(self.err(
+                        n,
+                        w.col,
+                        &w.text,
+                        format!("`{}` is not a coordinate of a plane for CC", w.text),
+                        "write CC with two coordinates of a plane, e.g. CC X+25 Y+25 (or CC X… Z… for a circle in the ZX plane)",
+                    ))
+                }
             }
         }
         if b.words.is_empty() {
             self.centre = self.pos;
+            self.cc_plane = None;
         } else {
+            // The CC's two axes give the plane of the circles about it (ZX: 0° along +Z,
+            // positive towards +X; YZ: 0° along +Y, positive towards +Z).
+            let plane = match (axes.contains(&0), axes.contains(&1), axes.contains(&2)) {
+                (true, true, false) => Some(Plane::G17),
+                (true, false, true) => Some(Plane::G18),
+                (false, true, true) => Some(Plane::G19),
+                _ => None,
+            };
+            self.cc_plane = plane;
             let c = self.end_point(b, self.pos);
+            let (a1, a2, _) = self.circle_plane().axes();
             let given = |i: usize| b.has(AXES[i]) || b.has(&format!("I{}", AXES[i]));
             for i in [a1, a2] {
                 self.centre[i] = if given(i) { c[i] } else { None };
@@ -544,7 +716,69 @@ impl Kt<'_> {
         self.unchanged(n, content, term, b, false)
     }
 
-    /// Polar (`LP`, `CP`), FK (`FL`, `FC` …) and approach/departure blocks: not followed; refused
+    /// A block with the block skip `/`: it runs or not by the operator's switch. One that
+    /// changes no position or mode errmap follows is read as usual; a move leaves the axes it
+    /// names unknown and is refused where it may cut in the zone; anything else is a function
+    /// errmap does not follow.
+    fn skipped_block(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
+        let mut plain = b.clone();
+        plain.skip = false;
+        let harmless_m = is_m_block(&b.head)
+            && !b.words.iter().any(|w| {
+                w.addr == "M" && matches!(w.num(), Some(89.0 | 91.0 | 92.0 | 99.0 | 140.0))
+            });
+        let path = matches!(b.head.as_str(), "L" | "C" | "CR" | "CT" | "LP" | "CP");
+        if matches!(b.head.as_str(), "" | ";" | "*" | "STOP") || harmless_m {
+            return self.line(n, content, term, &plain);
+        }
+        if path
+            && !has_coordinates(b)
+            && !b.words.iter().any(|w| {
+                w.addr == "M"
+                    && !w
+                        .num()
+                        .is_some_and(|m| M_START.contains(&m) || M_END.contains(&m))
+            })
+            && !b.has("RL")
+            && !b.has("RR")
+        {
+            return self.line(n, content, term, &plain);
+        }
+        if path {
+            let mut end = self.end_point(b, self.pos);
+            let (a1, a2, _) = self.circle_plane().axes();
+            if b.head != "L" {
+                end[a1] = None;
+                end[a2] = None;
+            }
+            let cutting = !b.has("FMAX");
+            self.prev_touch = self.may_touch(&[self.pos, end]);
+            if cutting && self.prev_touch {
+                return Err(self.err(n, 1, "/", format!("block skip `/` on a cut that may lie in the compensation zone: whether the TNC runs `{} {}` depends on the block-skip switch", b.head, b.rest), "remove the `/` from cuts in the zone (or the block), or move the zone away"));
+            }
+            self.unchanged(n, content, term, b, false)?;
+            let moved: Vec<usize> = (0..3).filter(|&i| end[i] != self.pos[i]).collect();
+            self.lose_position(n, &moved);
+            if b.has("RL") || b.has("RR") || b.has("R") {
+                self.radius_comp = Some((
+                    n,
+                    format!("/ {} {} (radius compensation unknown here)", b.head, b.rest),
+                ));
+            }
+            return Ok(());
+        }
+        let what = format!("/ {} {}", b.head, b.rest).trim().to_string();
+        self.frames.push(Frame {
+            cycle: "?".into(),
+            line: n,
+            what,
+            normal: true,
+        });
+        self.lose_position(n, &[0, 1, 2]);
+        self.unchanged(n, content, term, b, false)
+    }
+
+    /// FK (`FL`, `FC` …) and approach/departure blocks: not followed; refused
     /// when they may touch the zone, and they leave the plane position unknown.
     fn unfollowed_contour(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.radius_words(n, b, false);
@@ -610,9 +844,10 @@ impl Kt<'_> {
         let what = format!("CALL {}", b.rest).trim().to_string();
         self.unchanged(n, content, term, b, false)?;
         self.enter_unknown(n, &what);
-        if !b.rest.trim_start().to_ascii_uppercase().starts_with("LBL") {
+        let up = b.rest.trim_start().to_ascii_uppercase();
+        if !up.starts_with("LBL") {
             self.frames.push(Frame {
-                cycle: "?".into(),
+                cycle: if up.starts_with("PGM") { "pgm" } else { "?" }.into(),
                 line: n,
                 what,
                 normal: true,
@@ -639,13 +874,27 @@ impl Kt<'_> {
     }
 }
 
+/// How far the end point of a C block may lie off the circle through its start, mm.
+const C_END_TOLERANCE_MM: f64 = 0.016;
+
 const CT_HINT: &str = "post the arc as CC + C or as CR (or move the zone away)";
 
 const CORNER_HINT: &str = "post the rounding as an explicit arc (CR/C) and the chamfer as an L block, or move the zone away";
 
+/// Whether a path block moves an axis (`X`, `IY`, `A` …, or polar `PA`, `IPA`, `PR`, `IPR`).
+fn has_coordinates(b: &Block) -> bool {
+    b.words.iter().any(|w| {
+        let a = w.addr.strip_prefix('I').unwrap_or(&w.addr);
+        matches!(
+            a,
+            "X" | "Y" | "Z" | "A" | "B" | "C" | "U" | "V" | "W" | "PA" | "PR"
+        )
+    })
+}
+
 /// A block of M functions only (`M30`).
 pub(super) fn is_m_block(head: &str) -> bool {
-    head.len() > 1 && head.starts_with('M') && head[1..].bytes().all(|b| b.is_ascii_digit())
+    super::block::is_m_head(head)
 }
 
 /// All three coordinates, if known.

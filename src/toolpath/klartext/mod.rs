@@ -7,7 +7,9 @@
 
 mod block;
 mod cycles;
+mod holes;
 mod interp;
+mod polar;
 mod rewrite;
 
 use super::dialect::{self, Dialect};
@@ -35,17 +37,25 @@ pub(crate) fn applies(text: &str, source: &Path, given: Option<Dialect>) -> bool
     else {
         return false;
     };
-    let mut words = first.split_whitespace();
+    let mut words = first.split_whitespace().peekable();
+    // Block numbers are optional: CAM posts (the APT post, some NX posts) leave them out.
     let number = words
-        .next()
+        .peek()
         .is_some_and(|w| w.bytes().all(|b| b.is_ascii_digit()));
+    if number {
+        words.next();
+    }
+    let head = words.next().unwrap_or("");
     let second = words.next().unwrap_or("");
-    if number && second.eq_ignore_ascii_case("BEGIN") {
+    if head.eq_ignore_ascii_case("BEGIN") && second.eq_ignore_ascii_case("PGM") {
         return true;
     }
-    number
-        && second.bytes().all(|b| b.is_ascii_uppercase())
-        && !second.is_empty()
+    let klartext_head = matches!(
+        head.to_ascii_uppercase().as_str(),
+        "L" | "CC" | "C" | "CR" | "LBL" | "CALL" | "TOOL" | "CYCL" | "BLK" | "LP" | "CP" | "FN"
+    );
+    let uppercase = !head.is_empty() && head.bytes().all(|b| b.is_ascii_uppercase());
+    (number && uppercase || klartext_head)
         && dialect::resolve(text, source, given).ok() == Some(Dialect::Heidenhain)
 }
 
@@ -80,8 +90,10 @@ struct Kt<'a> {
     plane_uv: (usize, usize),
     /// The original program's position (program coordinates, program units).
     pos: Point,
-    /// Circle centre / pole (coordinates of the working plane).
+    /// Circle centre / pole (coordinates of its plane).
     centre: Point,
+    /// The plane of the last CC block's two axes (`None`: the working plane).
+    cc_plane: Option<super::arc::Plane>,
     inches: bool,
     units_known: bool,
     /// The zone in program units and work coordinates.
@@ -112,6 +124,24 @@ struct Kt<'a> {
     out: Vec<OutLine>,
     out_bytes: usize,
     numbered_in: usize,
+    /// The TNC block number of each line (index = line − 1), for messages.
+    block_numbers: Vec<Option<u64>>,
+    /// The lines (content, terminator) of the block being read, and where its output starts.
+    block_lines: Vec<(String, String)>,
+    block_out_start: usize,
+    /// The last drilling cycle defined (200–209), if it is the active machining cycle.
+    hole_cycle: Option<holes::HoleCycle>,
+    /// The surface Q203 of the definition written last in the output, when errmap wrote it
+    /// again (`None`: the program's own definition is in force).
+    hole_surface_out: Option<f64>,
+    /// `M89`: the cycle is called after every positioning block from here on.
+    modal_call: bool,
+    /// The preset (cycle 247 Q339) whose coordinates the map is applied in, once selected.
+    first_preset: Option<f64>,
+    /// A cut that may lie in the zone has been read (or a hole compensated).
+    cut_seen: bool,
+    /// The largest path tolerance of cycle 32 in the program (mm) and its line.
+    path_tolerance_mm: Option<(f64, u64)>,
     trace: Option<Vec<TracedMove>>,
 }
 
@@ -184,6 +214,7 @@ impl<'a> Kt<'a> {
             plane_uv: (u.index(), v.index()),
             pos: [None; 3],
             centre: [None; 3],
+            cc_plane: None,
             inches,
             units_known: units.is_some(),
             zone,
@@ -204,33 +235,114 @@ impl<'a> Kt<'a> {
             out: Vec::new(),
             out_bytes: 0,
             numbered_in: 0,
+            block_numbers: Vec::new(),
+            block_lines: Vec::new(),
+            block_out_start: 0,
+            hole_cycle: None,
+            hole_surface_out: None,
+            modal_call: false,
+            path_tolerance_mm: None,
+            first_preset: None,
+            cut_seen: false,
             trace: None,
         })
     }
 
-    /// Read every line in order.
+    /// Read every block in order; a block continued with `~` at the end of its lines (a cycle
+    /// definition) is read as one and copied line by line.
     fn run(&mut self, text: &str) -> Result<()> {
         self.prescan(text);
-        let mut number = 0u64;
-        for raw in text.split_inclusive('\n') {
-            number += 1;
-            let content = raw.trim_end_matches(['\n', '\r']);
+        let lines: Vec<&str> = text.split_inclusive('\n').collect();
+        let content_of = |raw: &str| raw.trim_end_matches(['\n', '\r']).len();
+        self.block_numbers = lines
+            .iter()
+            .map(|raw| block::read(&raw[..content_of(raw)]).ok()?.number)
+            .collect();
+        let mut i = 0;
+        while i < lines.len() {
+            let number = i as u64 + 1;
+            let raw = lines[i];
+            let content = &raw[..content_of(raw)];
             let term = &raw[content.len()..];
+            let mut last = i;
+            // A block continues only from a line with code of its own (`CYCL DEF 203 … ~`).
+            let has_code = !code_part(content).trim().is_empty();
+            while has_code
+                && last + 1 < lines.len()
+                && continued(&lines[last][..content_of(lines[last])])
+            {
+                last += 1;
+            }
+            let joined = if last > i {
+                let parts: Vec<&str> = lines[i..=last]
+                    .iter()
+                    .map(|l| code_part(&l[..content_of(l)]))
+                    .collect();
+                parts.join(" ")
+            } else {
+                content.to_string()
+            };
             self.report.lines_in += 1;
-            let block = block::read(content).map_err(|(col, word, msg)| {
+            let block = block::read(&joined).map_err(|(col, word, msg)| {
                 Error::input(
                     Location::cell(self.source, number, format!("{col} ({word})")),
-                    msg,
+                    format!("{}{msg}", self.block_prefix(number)),
                     "write each word once, with a number like +10 or -2.5 (a point, not a comma)",
                 )
             })?;
+            let path_head = matches!(
+                block.head.as_str(),
+                "L" | "C" | "CR" | "CT" | "CC" | "LP" | "CP" | "RND" | "CHF"
+            ) || block::is_m_head(&block.head);
+            if last > i && path_head {
+                return Err(Error::input(
+                    Location::cell(self.source, number, format!("{} ({})", block.head_col, block.head)),
+                    format!("{}a {} block continued with `~` on the next line: errmap reads path and M blocks on one line", self.block_prefix(number), block.head),
+                    "write the block on one line (only cycle definitions are continued with ~)",
+                ));
+            }
             if block.number.is_some() {
                 self.numbered_in += 1;
             }
+            self.block_lines = lines[i..=last]
+                .iter()
+                .map(|l| {
+                    let c = &l[..content_of(l)];
+                    (c.to_string(), l[c.len()..].to_string())
+                })
+                .collect();
+            self.block_out_start = self.out.len();
             self.line(number, content, term, &block)?;
-            super::check_output_size(self.source, number, self.out_bytes)?;
+            for raw in &lines[i + 1..=last] {
+                let content = &raw[..content_of(raw)];
+                self.report.lines_in += 1;
+                self.push(OutLine {
+                    before: String::new(),
+                    number: None,
+                    after: content.to_string(),
+                    term: raw[content.len()..].to_string(),
+                });
+            }
+            super::check_output_size(self.source, last as u64 + 1, self.out_bytes)?;
+            i = last + 1;
         }
         Ok(())
+    }
+
+    /// `block 45: ` for a line with a TNC block number, else nothing.
+    fn block_prefix(&self, line: u64) -> String {
+        match self.block_numbers.get(line.wrapping_sub(1) as usize) {
+            Some(Some(b)) => format!("block {b}: "),
+            _ => String::new(),
+        }
+    }
+
+    /// `block 45, line 47` (or `line 47` in a program without block numbers).
+    fn at(&self, line: u64) -> String {
+        match self.block_numbers.get(line.wrapping_sub(1) as usize) {
+            Some(Some(b)) => format!("block {b}, line {line}"),
+            _ => format!("line {line}"),
+        }
     }
 
     /// Whether the program transforms coordinates (or has blocks errmap does not know) or uses
@@ -272,8 +384,19 @@ impl<'a> Kt<'a> {
             .unwrap_or(0);
         let mut out = String::with_capacity(self.out_bytes + self.out.len() * 4);
         let mut n = first;
+        let numbered = self.numbered_in > 0;
         for l in &self.out {
             out.push_str(&l.before);
+            if !numbered {
+                // A program without block numbers gets none: an inserted block is ` L …`.
+                let after = match &l.number {
+                    Some(_) => l.after.strip_prefix(' ').unwrap_or(&l.after),
+                    None => &l.after,
+                };
+                out.push_str(after);
+                out.push_str(&l.term);
+                continue;
+            }
             if let Some(num) = &l.number {
                 if renumber {
                     out.push_str(&n.to_string());
@@ -286,6 +409,15 @@ impl<'a> Kt<'a> {
             out.push_str(&l.term);
         }
         self.report.lines_out = self.out.len() as u64;
+        let applied = self.report.max_abs_error_mm;
+        if let Some((t, line)) = self.path_tolerance_mm {
+            if applied > 0.0 && t > applied {
+                self.report.notes.push(format!(
+                    "CYCL DEF 32 TOLERANCE T{t} mm ({}) is larger than the largest |E| applied ({applied:.4} mm): the control may smooth the path by up to T, which can swallow the compensation; set a tolerance smaller than |E| for the finishing cuts",
+                    self.at(line)
+                ));
+            }
+        }
         (out, self.report)
     }
 
@@ -293,12 +425,12 @@ impl<'a> Kt<'a> {
     fn copy(&mut self, content: &str, term: &str, block: &Block) {
         let span = block.number_span.clone();
         let (before, number, after) = match block.number {
-            Some(_) => (
+            Some(_) if span.end <= content.len() && content.is_char_boundary(span.start) => (
                 &content[..span.start],
                 Some(&content[span.clone()]),
                 &content[span.end..],
             ),
-            None => ("", None, content),
+            _ => ("", None, content),
         };
         self.push(OutLine {
             before: before.to_string(),
@@ -330,7 +462,7 @@ impl<'a> Kt<'a> {
     fn err(&self, line: u64, col: usize, word: &str, message: String, hint: &str) -> Error {
         Error::input(
             Location::cell(self.source, line, format!("{col} ({word})")),
-            message,
+            format!("{}{message}", self.block_prefix(line)),
             hint,
         )
     }
@@ -434,14 +566,39 @@ impl<'a> Kt<'a> {
     }
 }
 
+/// A line continued on the next (`CYCL DEF 203 … ~`, `Q200=+5 ;SET-UP CLEARANCE ~`).
+fn continued(content: &str) -> bool {
+    content.trim_end().ends_with('~')
+}
+
+/// The code of a continued line: before its comment, without the `~`.
+fn code_part(content: &str) -> &str {
+    let code = content.split(';').next().unwrap_or("");
+    code.trim_end().trim_end_matches('~').trim_end()
+}
+
 /// `CYCL DEF` 7, 8, 10, 11, 19, 26 or 247: a cycle that moves the coordinate system.
 fn is_transform_cycle(b: &Block) -> bool {
-    let id = b
+    let id = cycle_id(b);
+    id.is_none_or(|v| [7, 8, 10, 11, 19, 26, 247].contains(&(v.trunc() as i64)))
+}
+
+/// The cycle number of a `CYCL DEF n.m …` block (`7.1`, `203`), read from its words or, when a
+/// word errmap does not read follows (`Q200=+2`, `~`), from its text.
+fn cycle_id(b: &Block) -> Option<f64> {
+    let from_words = b
         .words
         .iter()
         .find(|w| w.addr.is_empty())
         .and_then(|w| w.num());
-    b.bad.is_some() || id.is_some_and(|v| [7, 8, 10, 11, 19, 26, 247].contains(&(v.trunc() as i64)))
+    from_words.or_else(|| {
+        let mut t = b.rest.split_whitespace();
+        t.next()
+            .filter(|d| d.eq_ignore_ascii_case("DEF"))
+            .and(t.next())
+            .filter(|n| n.bytes().all(|c| c.is_ascii_digit() || c == b'.'))
+            .and_then(|n| n.parse().ok())
+    })
 }
 
 /// The units of the `BEGIN PGM name MM|INCH` block, with its line, if the program has one.

@@ -171,7 +171,10 @@ impl Kt<'_> {
     fn bodies(&self, b: &Block, targets: &[[f64; 3]]) -> Vec<String> {
         let end_m = |w: &Word| w.addr == "M" && w.num().is_some_and(|m| M_END.contains(&m));
         let replaced = |w: &Word| {
-            let coordinate = matches!(w.addr.as_str(), "X" | "Y" | "Z" | "IX" | "IY" | "IZ" | "DR");
+            let coordinate = matches!(
+                w.addr.as_str(),
+                "X" | "Y" | "Z" | "IX" | "IY" | "IZ" | "DR" | "PA" | "IPA" | "PR" | "IPR"
+            );
             let radius = b.head == "CR" && w.addr == "R";
             coordinate || radius || end_m(w)
         };
