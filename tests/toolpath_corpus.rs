@@ -319,6 +319,7 @@ static REASONS: &[Reason] = &[
             "is not a word",
             "is not a G code",
             "not a word of a Klartext",
+            "without a value right after it",
             "outside a comment",
         ],
         cannot_vouch: false,

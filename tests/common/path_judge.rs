@@ -1,4 +1,4 @@
-//! The judge of a compensated program, independent of errmap's code: given the moves of the original and of the output as an outside executor read them (mm), every cutting point of the output lies on the original path lowered by E along Z, and the rapids are the original ones except return steps of +E.
+//! The judge of a compensated program, independent of errmap's code: given the moves of the original and of the output as an outside executor read them (mm), every cutting point of the output lies on the original path lowered by E along Z, and the rapids are the original ones (or, for a drilling cycle's reference level moved with its hole, the original's lowered by E) except return steps of +E.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
 
@@ -148,9 +148,16 @@ pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
     let orig_rapids: Vec<&Seg> = orig.iter().filter(|s| !s.cut).collect();
     let out_rapids: Vec<&Seg> = out.iter().filter(|s| !s.cut && !is_return(s)).collect();
     for (n, (a, b)) in orig_rapids.iter().zip(&out_rapids).enumerate() {
-        let same = (0..3).all(|k| {
-            (a.end[k].is_nan() && b.end[k].is_nan()) || (a.end[k] - b.end[k]).abs() <= RAPID_MM
-        });
+        // A rapid of a drilling cycle to its reference level (R, Q203 + Q200) moved by −E
+        // with the hole (`--compensate-holes`) ends E lower; every other rapid is copied.
+        let same_at = |dz: f64| {
+            (0..3).all(|k| {
+                let (ak, bk) = (a.end[k], b.end[k]);
+                let ak = if k == 2 { ak - dz } else { ak };
+                (ak.is_nan() && bk.is_nan()) || (ak - bk).abs() <= RAPID_MM
+            })
+        };
+        let same = same_at(0.0) || same_at(e_mm);
         if !same {
             return Err(format!(
                 "rapid {} (output line {}) ends at {:?}, the original's (line {}) at {:?}",
