@@ -466,6 +466,7 @@ impl Kt<'_> {
             let (msg, hint) = match f.cycle.as_str() {
                 "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
                 "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
+                "rot" => (format!("rotary axis {} ({at}) stands away from 0, where errmap takes the map to be measured: the part is turned, and this cut may lie in the compensation zone", f.what), "compensate the cuts of each rotary position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away"),
                 "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
                 "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), if self.settings.same_part_per_offset || f.what.contains("cannot read") {
                     "select the program's first preset again (CYCL DEF 247 with its Q339 as a number) before the cuts in the zone, or compensate this part with a map measured in this preset"
@@ -617,6 +618,7 @@ impl Kt<'_> {
         {
             self.lose_position(n, &[self.tool_axis]);
         }
+        self.rotary_positions(n, b);
         if let Some(w) = b
             .words
             .iter()
@@ -631,6 +633,28 @@ impl Kt<'_> {
             self.cycle_call(n, b.head_col, "M89 (modal cycle call)")?;
         }
         Ok(())
+    }
+
+    /// Rotary axes: the map is taken as measured with every rotary axis at 0, so one standing
+    /// elsewhere (or moved incrementally, to where errmap cannot tell) is a frame under which
+    /// cuts in the zone are refused, until it is back at 0.
+    fn rotary_positions(&mut self, n: u64, b: &Block) {
+        for w in b.words.iter().filter(|w| {
+            matches!(w.addr.as_str(), "A" | "B" | "C" | "IA" | "IB" | "IC")
+        }) {
+            let axis = w.addr.trim_start_matches('I').to_string();
+            self.frames
+                .retain(|f| !(f.cycle == "rot" && f.what.starts_with(axis.as_str())));
+            let at_zero = w.addr.len() == 1 && w.num() == Some(0.0);
+            if !at_zero {
+                self.frames.push(Frame {
+                    cycle: "rot".into(),
+                    line: n,
+                    what: format!("{axis}{}", w.text.trim_start_matches(['I', 'A', 'B', 'C'])),
+                    normal: true,
+                });
+            }
+        }
     }
 
     /// A machining cycle runs at the current position: refused if it may touch the zone; it
