@@ -1,0 +1,340 @@
+//! `--expand`: Fanuc subprograms, macro calls, loops and variables run into plain blocks, each compensated point checked against P − E computed by hand; refusals name the original line.
+
+use errmap::geom::{Axis, ErrorField};
+use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect, FanucNumbers};
+use std::path::Path;
+
+/// E = 0.01 + 0.001·x mm along Z, everywhere measured.
+struct F;
+
+impl ErrorField for F {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, u: f64, v: f64) -> Option<f64> {
+        (u.abs() <= 1000.0 && v.abs() <= 1000.0).then(|| e(u))
+    }
+    fn measured(&self, _u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(true)
+    }
+}
+
+fn e(x_mm: f64) -> f64 {
+    0.01 + 0.001 * x_mm
+}
+
+fn settings(expand: bool) -> CompensationSettings {
+    CompensationSettings {
+        everywhere: true,
+        dialect: Some(Dialect::Fanuc),
+        max_segment: 1000.0,
+        expand,
+        ..CompensationSettings::default()
+    }
+}
+
+fn run(text: &str, s: &CompensationSettings) -> String {
+    compensate_gcode(text, Path::new("t.nc"), &F, s)
+        .unwrap_or_else(|e| panic!("refused: {e}\n--- input ---\n{text}"))
+        .0
+}
+
+fn refuse(text: &str, s: &CompensationSettings) -> String {
+    match compensate_gcode(text, Path::new("t.nc"), &F, s) {
+        Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn word(line: &str, letter: char) -> Option<f64> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(letter))
+        .and_then(|v| v.parse().ok())
+}
+
+/// (x, y, z) of every output block that writes all three, in order.
+fn points(out: &str) -> Vec<[f64; 3]> {
+    out.lines()
+        .filter_map(|l| Some([word(l, 'X')?, word(l, 'Y')?, word(l, 'Z')?]))
+        .collect()
+}
+
+/// The cut end points `(x, y, z)` compensated by hand: z − E(x). The first cut starts in the
+/// zone, so its start point gets a step to z − E first (listed as a cut).
+fn expect(out: &str, first: [f64; 3], cuts: &[[f64; 3]]) {
+    let got = points(out);
+    let mut want = vec![first];
+    want.extend(cuts.iter().map(|p| [p[0], p[1], p[2] - e(p[0])]));
+    assert_eq!(got.len(), want.len(), "{out}");
+    for (g, w) in got.iter().zip(&want) {
+        for k in 0..3 {
+            assert!((g[k] - w[k]).abs() < 1e-6, "got {g:?}, want {w:?}\n{out}");
+        }
+    }
+}
+
+fn assert_msg(msg: &str, parts: &[&str]) {
+    for p in parts {
+        assert!(msg.contains(p), "`{p}` not in: {msg}");
+    }
+}
+
+const WHILE_LOOP: &str = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=0
+WHILE [#1 LT 3] DO1
+#2=10.*[#1+1]
+G1 X#2 Y[#1*2.] Z-1. F100.
+#1=#1+1
+END1
+G0 Z5.
+M30
+";
+
+#[test]
+fn while_loop_with_variables_is_run_and_compensated() {
+    let out = run(WHILE_LOOP, &settings(true));
+    expect(
+        &out,
+        [0.0, 0.0, 5.0],
+        &[
+            [0.0, 0.0, 5.0],
+            [10.0, 0.0, -1.0],
+            [20.0, 2.0, -1.0],
+            [30.0, 4.0, -1.0],
+        ],
+    );
+    assert!(!out.contains('#') && !out.contains("WHILE"), "{out}");
+}
+
+#[test]
+fn without_expand_the_refusal_names_the_flag_and_the_original_line() {
+    let msg = refuse(WHILE_LOOP, &settings(false));
+    assert_msg(&msg, &["t.nc:7", "--expand"]);
+}
+
+#[test]
+fn m98_subprogram_repeated_with_l_and_a_common_variable() {
+    let text = "%
+O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#100=0
+M98 P1000 L3
+G0 Z5.
+M30
+O1000
+#100=#100+1
+G1 X[#100*10.] Y5. Z-2. F100.
+M99
+%
+";
+    let out = run(text, &settings(true));
+    expect(
+        &out,
+        [0.0, 0.0, 5.0],
+        &[
+            [0.0, 0.0, 5.0],
+            [10.0, 5.0, -2.0],
+            [20.0, 5.0, -2.0],
+            [30.0, 5.0, -2.0],
+        ],
+    );
+    assert!(
+        out.starts_with("%\nO0001\n") && out.ends_with("%\n"),
+        "{out}"
+    );
+    assert!(!out.contains("M98") && !out.contains("M99"), "{out}");
+}
+
+#[test]
+fn old_form_p_count_and_number_is_a_repeat() {
+    // `M98 P30100`: O0100 three times (Fanuc's P<count><number> form; no O30100 in the file).
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#100=0
+M98 P30100
+M30
+O0100
+#100=#100+5.
+G1 X#100 Y0. Z-1. F100.
+M99
+";
+    let out = run(text, &settings(true));
+    expect(
+        &out,
+        [0.0, 0.0, 5.0],
+        &[
+            [0.0, 0.0, 5.0],
+            [5.0, 0.0, -1.0],
+            [10.0, 0.0, -1.0],
+            [15.0, 0.0, -1.0],
+        ],
+    );
+}
+
+#[test]
+fn g65_macro_arguments_if_goto_and_trig() {
+    // A = #1 (count), B = #2 (radius), C = #3 (start angle): argument specification I.
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+G65 P9001 A2. B10. C60.
+G0 Z5.
+M30
+O9001
+#4=0
+N10 IF [#4 GE #1] GOTO 20
+G1 X[#2*COS[#3+#4*30.]] Y[#2*SIN[#3+#4*30.]] Z-1. F100.
+#4=#4+1
+GOTO 10
+N20 M99
+";
+    let out = run(text, &settings(true));
+    let (c60, s60) = (60f64.to_radians().cos(), 60f64.to_radians().sin());
+    expect(
+        &out,
+        [0.0, 0.0, 5.0],
+        &[
+            [0.0, 0.0, 5.0],
+            [10.0 * c60, 10.0 * s60, -1.0],
+            [0.0, 10.0, -1.0],
+        ],
+    );
+}
+
+#[test]
+fn a_system_variable_is_refused_naming_it_and_its_line() {
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=#5021
+G1 X#1 Y0. Z-1. F100.
+M30
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:4", "#5021 is a system variable", "positions"]);
+    assert!(!msg.contains("--expand"), "{msg}");
+}
+
+#[test]
+fn a_vacant_variable_is_refused() {
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=0
+WHILE [#1 LT 2] DO1
+G1 X#7 Y0. Z-1. F100.
+#1=#1+1
+END1
+M30
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:6", "X#7", "vacant"]);
+}
+
+#[test]
+fn a_subprogram_in_another_file_is_refused_naming_it() {
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+G1 Z-1. F100.
+M98 P1012 L4
+M30
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:5", "O1012", "not in this file"]);
+}
+
+#[test]
+fn an_endless_loop_is_refused_naming_its_line() {
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=0
+WHILE [#1 GE 0] DO1
+IF [#1 GT 0] GOTO 10
+G1 X1. Y0. Z-1. F100.
+N10 #1=#1+1
+END1
+M30
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:5", "line 9", "more than 10000000 times"]);
+}
+
+#[test]
+fn the_flattened_program_stops_at_the_output_limit() {
+    // 200 000 cuts of about 20 bytes: 4 MB, over a 1 MB limit (every other test here writes
+    // a few hundred bytes, so the process-wide limit does not touch them).
+    errmap::io::safety::set_max_output_mb(1);
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=0
+WHILE [#1 LT 200000] DO1
+G1 X[#1*0.001] Y0. Z-1. F100.
+#1=#1+1
+END1
+M30
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:6", "output limit of 1 MB", "--max-output-mb"]);
+}
+
+#[test]
+fn a_refusal_inside_a_subprogram_names_the_original_line_and_call() {
+    // Cutter compensation in the zone is refused by the rewrite of the flattened program; the
+    // message names the subprogram's own lines and the call.
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+M98 P2000
+M30
+O2000
+G41 D1
+G1 X10. Y0. Z-1. F100.
+G40
+M99
+";
+    let msg = refuse(text, &settings(true));
+    assert_msg(&msg, &["t.nc:8", "G41", "line 7", "O2000 called on line 4"]);
+}
+
+#[test]
+fn flow_that_never_reaches_the_zone_is_copied_byte_for_byte() {
+    let text = "O0001\r\nG21 G90 G17\r\nG0 X0. Y0. Z5.\r\n#1=0\r\nWHILE [#1 LT 3] DO1\r\nG1 X[#1*10.] Y0. Z5. F100.\r\n#1=#1+1\r\nEND1\r\nM30\r\n";
+    let s = CompensationSettings {
+        everywhere: false,
+        zone: Some((-10.0, 0.0)),
+        ..settings(true)
+    };
+    assert_eq!(run(text, &s), text);
+}
+
+/// A public Haas program whose subprogram sits before the main program in the same file:
+/// refused without --expand (the hint names it), compensated with it.
+#[test]
+fn corpus_sub_before_main_is_run() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/corpus/programs/fanuc/vendetta-sscnc-Sub_Programs_Test.txt");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return;
+    };
+    // Whole numbers without a decimal point read as mm (calculator-type input).
+    let s = |expand| CompensationSettings {
+        fanuc_numbers: Some(FanucNumbers::Calculator),
+        ..settings(expand)
+    };
+    let msg = refuse(&text, &s(false));
+    assert_msg(&msg, &["--expand"]);
+    let out = run(&text, &s(true));
+    assert!(!out.contains("M98") && !out.contains("M99"), "{out}");
+    // The plunge to Z-10 at X-50: −10 − E(−50) = −10 + 0.04 = −9.96.
+    assert!(
+        out.lines().any(|l| l.contains("Z-9.96")),
+        "no compensated plunge:\n{out}"
+    );
+}
