@@ -338,3 +338,196 @@ fn corpus_sub_before_main_is_run() {
         "no compensated plunge:\n{out}"
     );
 }
+
+// ---- LinuxCNC: LinuxCNC's own interpreter (rs274) is the judge -----------------------------
+
+/// A subroutine with arguments and a `while` loop, `if/else` on the returned `#<_value>`,
+/// `do/while`, `while` left by `break`, `repeat`, named local and global parameters.
+const NGC: &str = "G21 G90 G17
+G0 X0 Y0 Z5
+o<row> sub
+  #<n> = 0
+  o101 while [#<n> LT #1]
+    G1 X[#2 + #<n> * 5] Y#3 Z-1 F100
+    #<n> = [#<n> + 1]
+  o101 endwhile
+o<row> endsub [#<n> * 2]
+o<row> call [3] [10] [2]
+o102 if [#<_value> EQ 6]
+  G1 X[#<_value>] Y0 Z-2
+o102 else
+  G1 X1 Y1 Z-2
+o102 endif
+#<k> = 0
+o103 do
+  G1 X[#<k>] Y[#<k> * 2 + 1] Z-3
+  #<k> = [#<k> + 1]
+o103 while [#<k> LT 2]
+#<_r> = 0
+o104 while [1]
+  #<_r> = [#<_r> + 1]
+  o105 if [#<_r> GT 2]
+    o104 break
+  o105 endif
+  G1 X[7 + #<_r>] Y7 Z-4
+o104 endwhile
+o106 repeat [2]
+  #<_r> = [#<_r> + 1]
+  G1 X[10 + #<_r>] Y8 Z-4
+o106 endrepeat
+G0 Z5
+M2
+";
+
+/// E = 0.01 + 0.001·x, or nothing at all (then the output is the flattened program).
+struct Lin(bool);
+
+impl ErrorField for Lin {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, u: f64, _v: f64) -> Option<f64> {
+        Some(if self.0 { e(u) } else { 0.0 })
+    }
+    fn measured(&self, _u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(true)
+    }
+}
+
+/// The motion calls of rs274's canonical output: (kind, [x, y, z]); `None` without rs274.
+fn rs274_motions(name: &str, program: &str) -> Option<Vec<(String, [f64; 3])>> {
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/gcode/rs274-check.sh");
+    if !script.exists() {
+        return None;
+    }
+    let dir = std::env::temp_dir().join(format!("errmap-expand-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ngc = dir.join(format!("{name}.ngc"));
+    let canon = dir.join(format!("{name}.canon"));
+    std::fs::write(&ngc, program).unwrap();
+    let out = std::process::Command::new(&script)
+        .arg(&ngc)
+        .arg(&canon)
+        .output()
+        .unwrap();
+    match out.status.code() {
+        Some(127) => return None,
+        Some(0) => {}
+        c => panic!(
+            "rs274 refused {name} ({c:?}): {}\n{program}",
+            String::from_utf8_lossy(&out.stderr)
+        ),
+    }
+    let text = std::fs::read_to_string(&canon).unwrap();
+    Some(
+        text.lines()
+            .filter_map(|l| {
+                let kind = ["STRAIGHT_TRAVERSE", "STRAIGHT_FEED"]
+                    .into_iter()
+                    .find(|k| l.contains(&format!("{k}(")))?;
+                let args = l.split_once('(')?.1.trim_end_matches(')');
+                let v: Vec<f64> = args
+                    .split(',')
+                    .filter_map(|a| a.trim().parse().ok())
+                    .collect();
+                Some((kind.to_string(), [v[0], v[1], v[2]]))
+            })
+            .collect(),
+    )
+}
+
+fn lin_settings() -> CompensationSettings {
+    CompensationSettings {
+        dialect: Some(Dialect::Linuxcnc),
+        ..settings(true)
+    }
+}
+
+#[test]
+fn linuxcnc_flattened_program_moves_as_the_original_under_rs274() {
+    let Some(original) = rs274_motions("original", NGC) else {
+        println!("skipping: rs274 is not installed");
+        return;
+    };
+    // Hand check of what rs274 reads: the subroutine's three cuts, the `if` on #<_value> = 6,
+    // the do/while twice, the while left by break after two cuts, the repeat twice.
+    let feeds: Vec<[f64; 3]> = original
+        .iter()
+        .filter(|m| m.0 == "STRAIGHT_FEED")
+        .map(|m| m.1)
+        .collect();
+    assert_eq!(
+        feeds,
+        vec![
+            [10.0, 2.0, -1.0],
+            [15.0, 2.0, -1.0],
+            [20.0, 2.0, -1.0],
+            [6.0, 0.0, -2.0],
+            [0.0, 1.0, -3.0],
+            [1.0, 3.0, -3.0],
+            [8.0, 7.0, -4.0],
+            [9.0, 7.0, -4.0],
+            [14.0, 8.0, -4.0],
+            [15.0, 8.0, -4.0],
+        ]
+    );
+    let (flat, _) = compensate_gcode(NGC, Path::new("t.ngc"), &Lin(false), &lin_settings())
+        .unwrap_or_else(|e| panic!("refused: {e}"));
+    assert!(
+        !flat.contains('#') && !flat.to_ascii_lowercase().contains("o10"),
+        "{flat}"
+    );
+    assert_eq!(rs274_motions("flat", &flat).unwrap(), original, "{flat}");
+    // Compensated: every feed is the original's minus E, after one entry step at the start.
+    let (out, _) = compensate_gcode(NGC, Path::new("t.ngc"), &Lin(true), &lin_settings())
+        .unwrap_or_else(|e| panic!("refused: {e}"));
+    let got: Vec<[f64; 3]> = rs274_motions("compensated", &out)
+        .unwrap()
+        .iter()
+        .filter(|m| m.0 == "STRAIGHT_FEED")
+        .map(|m| m.1)
+        .collect();
+    let mut want = vec![[0.0, 0.0, 5.0 - e(0.0)]];
+    want.extend(feeds.iter().map(|p| [p[0], p[1], p[2] - e(p[0])]));
+    assert_eq!(got.len(), want.len(), "{out}");
+    for (g, w) in got.iter().zip(&want) {
+        for k in 0..3 {
+            assert!((g[k] - w[k]).abs() < 1e-4, "got {g:?}, want {w:?}\n{out}");
+        }
+    }
+}
+
+#[test]
+fn linuxcnc_refusals_name_the_parameter_or_subroutine_and_the_line() {
+    let s = lin_settings();
+    let probe = "G21 G90\nG0 X0 Y0 Z5\no1 repeat [2]\nG1 X[#5061] Y0 Z-1 F100\no1 endrepeat\nM2\n";
+    assert_msg(
+        &refuse_ngc(probe, &s),
+        &["t.ngc:4", "#5061 is a system parameter"],
+    );
+    let other = "G21 G90\nG0 X0 Y0 Z5\nG1 Z-1 F100\no<pocket> call [1]\nM2\n";
+    assert_msg(
+        &refuse_ngc(other, &s),
+        &["t.ngc:4", "o<pocket>", "not in this file"],
+    );
+    // The cut runs on the first turn only, so the loop count, not the output limit, stops it.
+    let endless = "G21 G90\nG0 X0 Y0 Z5\n#<a> = 0\no1 while [1]\no2 if [#<a> EQ 0]\nG1 X1 Y0 Z-1 F100\no2 endif\n#<a> = [#<a> + 1]\no1 endwhile\nM2\n";
+    assert_msg(
+        &refuse_ngc(endless, &s),
+        &["t.ngc:4", "more than 10000000 times"],
+    );
+    let unset = "G21 G90\nG0 X0 Y0 Z5\no1 repeat [2]\nG1 X#<_x> Y0 Z-1 F100\no1 endrepeat\nM2\n";
+    assert_msg(&refuse_ngc(unset, &s), &["t.ngc:4", "#<_x> is read before"]);
+    // Without --expand the same loop is refused with the flag in the hint.
+    let fine = "G21 G90\nG0 X0 Y0 Z5\no1 repeat [2]\nG1 X1 Y0 Z-1 F100\no1 endrepeat\nM2\n";
+    let msg = refuse_ngc(fine, &CompensationSettings { expand: false, ..s });
+    assert_msg(&msg, &["t.ngc:4", "--expand"]);
+}
+
+fn refuse_ngc(text: &str, s: &CompensationSettings) -> String {
+    match compensate_gcode(text, Path::new("t.ngc"), &F, s) {
+        Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
+        Err(e) => e.to_string(),
+    }
+}

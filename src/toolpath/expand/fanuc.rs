@@ -617,17 +617,18 @@ impl Run<'_> {
                     return Err(self.err(pc, w, m.clone(), "write the statement as the Fanuc macro B manual gives it, or move the zone away"));
                 }
             };
-            let content = self.text[self.lines[pc].span.clone()].to_string();
+            let text = self.text;
+            let content = &text[self.lines[pc].span.clone()];
             match stmt {
                 Stmt::Copy => {
-                    if !(content.trim() == "%" && !self.frames.is_empty()) {
-                        self.flat.push(self.source, line_no, chain, &content)?;
+                    if content.trim() != "%" || self.frames.is_empty() {
+                        self.flat.push(self.source, line_no, chain, content)?;
                     }
                     pc += 1;
                 }
                 Stmt::Header => {
                     if self.frames.is_empty() {
-                        self.flat.push(self.source, line_no, chain, &content)?;
+                        self.flat.push(self.source, line_no, chain, content)?;
                     }
                     pc += 1;
                 }
@@ -636,28 +637,28 @@ impl Run<'_> {
                     pc += 1;
                 }
                 Stmt::IfGoto(c, n) => {
-                    let w = content.trim().to_string();
-                    if self.condition(pc, &w, c)? {
-                        let n = self.value(pc, &w, n)?;
-                        pc = self.goto(pc, &w, n, range)?;
+                    let w = content.trim();
+                    if self.condition(pc, w, c)? {
+                        let n = self.value(pc, w, n)?;
+                        pc = self.goto(pc, w, n, range)?;
                     } else {
                         pc += 1;
                     }
                 }
                 Stmt::IfThen(c, v, e) => {
-                    let w = content.trim().to_string();
-                    if self.condition(pc, &w, c)? {
-                        self.assign(pc, &w, v, e)?;
+                    let w = content.trim();
+                    if self.condition(pc, w, c)? {
+                        self.assign(pc, w, v, e)?;
                     }
                     pc += 1;
                 }
                 Stmt::Goto(n) => {
-                    let w = content.trim().to_string();
-                    let n = self.value(pc, &w, n)?;
-                    pc = self.goto(pc, &w, n, range)?;
+                    let w = content.trim();
+                    let n = self.value(pc, w, n)?;
+                    pc = self.goto(pc, w, n, range)?;
                 }
                 Stmt::While(c, _) => {
-                    let w = content.trim().to_string();
+                    let w = content.trim();
                     let Some(&end) = self.partner.get(&pc) else {
                         return Err(self.err(
                             pc,
@@ -666,7 +667,7 @@ impl Run<'_> {
                             "close the loop with ENDm",
                         ));
                     };
-                    pc = if self.condition(pc, &w, c)? {
+                    pc = if self.condition(pc, w, c)? {
                         pc + 1
                     } else {
                         end + 1
@@ -997,7 +998,7 @@ impl Run<'_> {
             }
         } else {
             let by = |n: u64| self.programs.iter().find(|q| q.number == n);
-            let old = (l.is_none() && pv >= 10_000).then(|| (pv / 10_000, pv % 10_000));
+            let old = (l.is_none() && pv >= 10_000).then_some((pv / 10_000, pv % 10_000));
             let target = match (by(pv), old.and_then(|(k, n)| by(n).map(|q| (k, q)))) {
                 (Some(_), Some(_)) => {
                     return Err(self.err(pc, &p.text.clone(), format!("`M98 {}` is ambiguous: O{pv} called once, or O{} called {} times (the old P<count><number> form)", p.text, pv % 10_000, pv / 10_000), "write the repeat count with L"))
