@@ -1,5 +1,7 @@
 //! `--expand`: Fanuc subprograms, macro calls, loops and variables run into plain blocks, each compensated point checked against P − E computed by hand; refusals name the original line.
 
+mod common;
+
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect, FanucNumbers};
 use std::path::Path;
@@ -530,4 +532,83 @@ fn refuse_ngc(text: &str, s: &CompensationSettings) -> String {
         Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
         Err(e) => e.to_string(),
     }
+}
+
+/// The CLI: `--expand` turns a refusal (exit 2, the hint naming the flag) into a compensated
+/// program (exit 0) with the loop written out; the flat 20 µm map lowers every cut by 0.02 mm.
+#[test]
+fn cli_expand_flag_runs_the_loop() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("model.json"), common::FLAT_MODEL_20UM).unwrap();
+    let program = "G21 G90\nG0 X10 Y10 Z5\nG1 Z-1 F100\n#<x> = 10\no1 repeat [2]\n#<x> = [#<x> + 5]\nG1 X#<x> Y10 Z-1\no1 endrepeat\nG0 Z5\nM2\n";
+    std::fs::write(dir.join("in.ngc"), program).unwrap();
+    let args = [
+        "compensate",
+        "--model",
+        "model.json",
+        "--zone",
+        "-2,0",
+        "--dialect",
+        "linuxcnc",
+        "in.ngc",
+        "-o",
+        "out.ngc",
+    ];
+    let refused = common::errmap(dir, &args);
+    refused.expect_code(2);
+    assert!(
+        refused.stderr.contains("in.ngc:7") && refused.stderr.contains("--expand"),
+        "{}",
+        refused.report()
+    );
+    let done = common::errmap(dir, &[&args[..], &["--expand"]].concat());
+    done.expect_code(0);
+    let out = std::fs::read_to_string(dir.join("out.ngc")).unwrap();
+    for cut in ["X15.0000 Y10.0000 Z-1.0200", "X20.0000 Y10.0000 Z-1.0200"] {
+        assert!(out.contains(cut), "no `{cut}` in:\n{out}");
+    }
+    assert!(!out.contains("o1") && !out.contains('#'), "{out}");
+}
+
+/// A public Haas program whose subprogram is another file (`M98 P1012 L4`, O1012 in
+/// donpayne-gauge_tool_o1012.cnc): refused with --expand, naming the subprogram and the line.
+#[test]
+fn corpus_sub_in_another_file_is_refused_naming_it() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/corpus/programs/fanuc/donpayne-gauge_tool_o1011.cnc");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return;
+    };
+    let s = CompensationSettings {
+        fanuc_numbers: Some(FanucNumbers::IsB),
+        units: None,
+        ..settings(true)
+    };
+    let msg = refuse(&text, &s);
+    assert_msg(&msg, &["t.nc:24", "O1012", "not in this file"]);
+}
+
+/// Without --expand errmap only tries the run on a small budget (100 000 loop turns) to decide
+/// the hint: a longer loop is left to the run with the flag, and the hint still names it.
+#[test]
+fn without_expand_a_long_loop_still_names_the_flag() {
+    let text = "O0001
+G21 G90 G17
+G0 X0. Y0. Z5.
+#1=0
+WHILE [#1 LT 300000] DO1
+IF [#1 GT 0] GOTO 10
+G1 X1. Y0. Z-1. F100.
+N10 #1=#1+1
+END1
+M30
+";
+    let started = std::time::Instant::now();
+    let msg = refuse(text, &settings(false));
+    assert_msg(&msg, &["t.nc:7", "--expand"]);
+    assert!(started.elapsed().as_secs_f64() < 1.0, "{:?}", started.elapsed());
+    // With the flag the whole loop runs: one cut, compensated.
+    let out = run(text, &settings(true));
+    expect(&out, [0.0, 0.0, 5.0], &[[0.0, 0.0, 5.0], [1.0, 0.0, -1.0]]);
 }

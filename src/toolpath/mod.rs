@@ -313,10 +313,12 @@ fn expand_refused(
     let Ok(dialect) = dialect::resolve(text, source, settings.dialect) else {
         return Err(refused);
     };
-    let flat = match expand::flatten(text, source, dialect) {
+    let flat = match expand::flatten(text, source, dialect, !settings.expand) {
         Ok(Some(flat)) => flat,
         Ok(None) => return Err(refused),
         Err(e) if settings.expand => return Err(e),
+        // A trial too long to finish here: the full run with the flag decides.
+        Err(e) if expand::is_trial_stop(&e) => return Err(expand::with_hint(refused)),
         Err(_) => return Err(refused),
     };
     let flat_settings = CompensationSettings {

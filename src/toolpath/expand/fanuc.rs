@@ -319,7 +319,7 @@ struct Run<'a> {
     iterations: u64,
 }
 
-pub(super) fn flatten(text: &str, source: &Path) -> Result<Option<Flat>> {
+pub(super) fn flatten(text: &str, source: &Path, trial: bool) -> Result<Option<Flat>> {
     let lines = lexer::lex_dialect(text, Dialect::Fanuc);
     let stmts: Vec<_> = lines.iter().map(|l| compile(text, l)).collect();
     if !has_flow(&stmts) {
@@ -368,7 +368,7 @@ pub(super) fn flatten(text: &str, source: &Path) -> Result<Option<Flat>> {
         locals: vec![[None; 34]],
         commons: HashMap::new(),
         frames: Vec::new(),
-        flat: Flat::new(text.len() * 2),
+        flat: Flat::new(text.len() * 2, trial),
         iterations: 0,
     };
     run.pair_loops()?;
@@ -550,6 +550,9 @@ impl Run<'_> {
     /// A backward jump to `target` from `pc`; refused past [`MAX_ITERATIONS`].
     fn turn(&mut self, pc: usize, target: usize) -> Result<()> {
         self.iterations += 1;
+        if let Some(stop) = self.flat.over_budget(self.iterations) {
+            return Err(stop);
+        }
         if self.iterations > MAX_ITERATIONS {
             let word = self.text[self.lines[target].span.clone()]
                 .trim()

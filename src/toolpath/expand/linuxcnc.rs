@@ -145,7 +145,7 @@ struct Run<'a> {
     compiled: std::cell::RefCell<HashMap<(usize, usize), eval::Expr>>,
 }
 
-pub(super) fn flatten(text: &str, source: &Path) -> Result<Option<Flat>> {
+pub(super) fn flatten(text: &str, source: &Path, trial: bool) -> Result<Option<Flat>> {
     let lines = lexer::lex_dialect(text, Dialect::Linuxcnc);
     let owords: Vec<Option<OLine>> = lines.iter().map(|l| oline(text, l)).collect();
     let flow = owords.iter().any(Option::is_some)
@@ -176,7 +176,7 @@ pub(super) fn flatten(text: &str, source: &Path) -> Result<Option<Flat>> {
         args: vec![None; ARGS],
         frames: Vec::new(),
         repeats: HashMap::new(),
-        flat: Flat::new(text.len() * 2),
+        flat: Flat::new(text.len() * 2, trial),
         iterations: 0,
         chain: 0,
         percents: 0,
@@ -345,6 +345,9 @@ impl Run<'_> {
     /// A backward jump to `target`; refused past [`MAX_ITERATIONS`].
     fn turn(&mut self, pc: usize, target: usize) -> Result<()> {
         self.iterations += 1;
+        if let Some(stop) = self.flat.over_budget(self.iterations) {
+            return Err(stop);
+        }
         if self.iterations > MAX_ITERATIONS {
             return Err(self.err(
                 target,

@@ -18,6 +18,15 @@ use std::path::Path;
 /// for an endless loop and refused naming the loop's line.
 pub(crate) const MAX_ITERATIONS: u64 = 10_000_000;
 
+/// The smaller budget of a trial run made without `--expand`, only to decide whether a
+/// refusal's hint may offer the flag: loop turns and flattened bytes. Past it the trial stops
+/// (the flag is offered; the full run decides).
+const TRIAL_ITERATIONS: u64 = 100_000;
+const TRIAL_BYTES: u64 = 8_000_000;
+
+/// The message of the error that stops a trial run at its budget (never shown).
+const TRIAL_STOP: &str = "expand trial budget reached";
+
 /// Deepest nesting of calls followed (controllers allow fewer: Fanuc 4 macro levels).
 pub(crate) const MAX_CALL_DEPTH: usize = 16;
 
@@ -28,6 +37,8 @@ pub(crate) const HINT: &str = "pass --expand to run the program's subprograms, l
 #[derive(Debug, Default)]
 pub(crate) struct Flat {
     pub text: String,
+    /// A trial run (smaller budget, see [`TRIAL_ITERATIONS`]).
+    trial: bool,
     /// Per output line: the source line (1-based) and its call chain (index into `chains`).
     origin: Vec<(u64, u32)>,
     /// Call chains: (parent chain, line of the call, what was called). Chain 0 is the top level.
@@ -35,8 +46,9 @@ pub(crate) struct Flat {
 }
 
 impl Flat {
-    fn new(capacity: usize) -> Flat {
+    fn new(capacity: usize, trial: bool) -> Flat {
         Flat {
+            trial,
             text: String::with_capacity(capacity),
             origin: Vec::new(),
             chains: vec![(0, 0, String::new())],
@@ -55,6 +67,9 @@ impl Flat {
         self.text.push('\n');
         self.origin.push((line, chain));
         let limit = crate::io::safety::max_output_bytes();
+        if self.trial && self.text.len() as u64 > TRIAL_BYTES.min(limit) {
+            return Err(Error::Internal(TRIAL_STOP.into()));
+        }
         if self.text.len() as u64 > limit {
             return Err(Error::input(
                 Location::line(source, line),
@@ -67,6 +82,12 @@ impl Flat {
             ));
         }
         Ok(())
+    }
+
+    /// Past the loop budget: `Some(stop)` for a trial (stop quietly), `None` for a full run
+    /// (the caller refuses naming the loop).
+    fn over_budget(&self, iterations: u64) -> Option<Error> {
+        (self.trial && iterations > TRIAL_ITERATIONS).then(|| Error::Internal(TRIAL_STOP.into()))
     }
 
     /// `" (in O1000 called on line 12, in …)"`: the calls that led to a chain, innermost first.
@@ -177,13 +198,24 @@ impl Flat {
 }
 
 /// The program run into straight-line text, or `None` when it has nothing to run (no
-/// subprogram, loop, jump or parameter) or its dialect is not one errmap runs.
-pub(crate) fn flatten(text: &str, source: &Path, dialect: Dialect) -> Result<Option<Flat>> {
+/// subprogram, loop, jump or parameter) or its dialect is not one errmap runs. A `trial` run
+/// (without `--expand`) stops at a smaller budget: see [`is_trial_stop`].
+pub(crate) fn flatten(
+    text: &str,
+    source: &Path,
+    dialect: Dialect,
+    trial: bool,
+) -> Result<Option<Flat>> {
     match dialect {
-        Dialect::Fanuc => fanuc::flatten(text, source),
-        Dialect::Linuxcnc => linuxcnc::flatten(text, source),
+        Dialect::Fanuc => fanuc::flatten(text, source, trial),
+        Dialect::Linuxcnc => linuxcnc::flatten(text, source, trial),
         Dialect::Sinumerik | Dialect::Heidenhain => Ok(None),
     }
+}
+
+/// Whether a trial run stopped at its budget (it found nothing to refuse before).
+pub(crate) fn is_trial_stop(e: &Error) -> bool {
+    matches!(e, Error::Internal(m) if m == TRIAL_STOP)
 }
 
 /// Compensate the flattened program with `compensate`; its refusals name the original lines.
