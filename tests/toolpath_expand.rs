@@ -607,8 +607,42 @@ M30
     let started = std::time::Instant::now();
     let msg = refuse(text, &settings(false));
     assert_msg(&msg, &["t.nc:7", "--expand"]);
-    assert!(started.elapsed().as_secs_f64() < 1.0, "{:?}", started.elapsed());
+    assert!(
+        started.elapsed().as_secs_f64() < 1.0,
+        "{:?}",
+        started.elapsed()
+    );
     // With the flag the whole loop runs: one cut, compensated.
     let out = run(text, &settings(true));
     expect(&out, [0.0, 0.0, 5.0], &[[0.0, 0.0, 5.0], [1.0, 0.0, -1.0]]);
+}
+
+/// Recursion, huge repeat counts, deep indirection and broken blocks are refused with a
+/// message, never a panic or an endless run.
+#[test]
+fn hostile_programs_are_refused_not_a_panic() {
+    let fanuc = settings(true);
+    let ngc = lin_settings();
+    let deep = format!("#1={}1{}", "#[".repeat(200), "]".repeat(200));
+    let cases: Vec<(&CompensationSettings, String, &str)> = vec![
+        (&fanuc, "O0001\nG21 G90\nG0 X0. Y0. Z5.\nM98 P1000\nM30\nO1000\nG1 X1. Y0. Z-1. F100.\nM98 P1000\nM99\n".into(), "nested deeper"),
+        (&fanuc, "O0001\nG21 G90\nG0 X0. Y0. Z5.\nM98 P1000 L0\nM30\nO1000\nG1 X1. Y0. Z-1. F100.\nM99\n".into(), "repeat count"),
+        (&fanuc, format!("O0001\nG21 G90\nG0 X0. Y0. Z5.\n{deep}\nWHILE [#1 LT 2] DO1\nG1 X1. Y0. Z-1. F100.\nEND1\nM30\n"), "t.nc:4"),
+        (&fanuc, "O0001\nG21 G90\nG0 X0. Y0. Z5.\n#1=0\nWHILE [#1 LT 2] DO1\nG1 X1. Y0. Z-1. F100.\nEND2\nM30\n".into(), "t.nc:5, column 1 (WHILE): a DO without its END"),
+        (&fanuc, "O0001\nG21 G90\nG0 X0. Y0. Z5.\n#1=0\nN10 G1 X1. Y0. Z-1. F100.\nGOTO 99\nM30\n".into(), "no block N99"),
+        (&ngc, "G21 G90\nG0 X0 Y0 Z5\no<r> sub\nG1 X1 Y0 Z-1 F100\no<r> call\no<r> endsub\no<r> call\nM2\n".into(), "nested deeper"),
+        (&ngc, "G21 G90\nG0 X0 Y0 Z5\no1 if [0]\nG1 X1 Y0 Z-1 F100\nM2\n".into(), "t.ngc:3"),
+        (&ngc, "G21 G90\nG0 X0 Y0 Z5\no1 repeat [1e300]\nG1 X1 Y0 Z-1 F100\no1 endrepeat\nM2\n".into(), "t.ngc:3"),
+    ];
+    for (s, text, want) in cases {
+        let path = if s.dialect == Some(Dialect::Linuxcnc) {
+            "t.ngc"
+        } else {
+            "t.nc"
+        };
+        match compensate_gcode(&text, Path::new(path), &F, s) {
+            Ok((out, _)) => panic!("expected a refusal of\n{text}\ngot\n{out}"),
+            Err(e) => assert!(e.to_string().contains(want), "`{want}` not in: {e}\n{text}"),
+        }
+    }
 }
