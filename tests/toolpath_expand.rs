@@ -51,7 +51,7 @@ fn refuse(text: &str, s: &CompensationSettings) -> String {
 fn word(line: &str, letter: char) -> Option<f64> {
     line.split_whitespace()
         .find_map(|w| w.strip_prefix(letter))
-        .and_then(|v| v.parse().ok())
+        .and_then(|v| v.trim_end_matches(';').parse().ok())
 }
 
 /// (x, y, z) of every output block that writes all three, in order.
@@ -645,4 +645,41 @@ fn hostile_programs_are_refused_not_a_panic() {
             Err(e) => assert!(e.to_string().contains(want), "`{want}` not in: {e}\n{text}"),
         }
     }
+}
+
+/// The public Haas pair O2001 (main) + O9001 (a G65 macro solving Pythagoras into the variable
+/// whose number is passed as V) run together: errmap refuses #10100 (a Fanuc tool offset, a Haas
+/// NGC variable); written with #100 and in one file, the arc's start Y = 1.625 + .625 − √(.625² −
+/// .125²) is computed by the macro, and the cut is lowered by E (inch program: E/25.4).
+#[test]
+fn corpus_g65_macro_pair_in_one_file() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/programs/fanuc");
+    let (Ok(main), Ok(mac)) = (
+        std::fs::read_to_string(dir.join("donpayne-advanced_arcs_o2001.cnc")),
+        std::fs::read_to_string(dir.join("donpayne-advanced_arcs_o9001.cnc")),
+    ) else {
+        return;
+    };
+    let s = CompensationSettings {
+        fanuc_numbers: Some(FanucNumbers::IsB),
+        ..settings(true)
+    };
+    let msg = refuse(&main, &s);
+    assert_msg(&msg, &["t.nc:24", "#10100", "write it as #100"]);
+    let main = main
+        .replace("#10100", "#100")
+        .replace("V10100.", "V100.")
+        .replace(":(", "(");
+    let msg = refuse(&main, &s);
+    assert_msg(&msg, &["t.nc:25", "G65 P9001", "O9001", "not in this file"]);
+    let out = run(&format!("{main}{mac}"), &s);
+    let y = 1.625 + 0.625 - (0.625f64 * 0.625 - 0.125 * 0.125).sqrt();
+    let z = -e(3.125 * 25.4) / 25.4;
+    let hit = out.lines().any(|l| {
+        matches!(
+            (word(l, 'X'), word(l, 'Y'), word(l, 'Z')),
+            (Some(x), Some(yy), Some(zz)) if x == 3.125 && (yy - y).abs() < 1e-6 && (zz - z).abs() < 1e-6
+        )
+    });
+    assert!(hit, "no cut to X3.125 Y{y:.6} Z{z:.6} in:\n{out}");
 }

@@ -49,7 +49,10 @@ fn corpus() -> Option<PathBuf> {
 fn rs274_motions(program: &str) -> Option<Vec<(bool, [f64; 3])>> {
     let require = std::env::var("ERRMAP_REQUIRE_RS274").is_ok_and(|v| v == "1");
     let Some(dir) = corpus() else {
-        assert!(!require, "ERRMAP_REQUIRE_RS274=1 but rs274-check.sh is missing");
+        assert!(
+            !require,
+            "ERRMAP_REQUIRE_RS274=1 but rs274-check.sh is missing"
+        );
         println!("SKIPPED the rs274 check: ../shared/corpus/gcode/rs274-check.sh not found");
         return None;
     };
@@ -63,7 +66,10 @@ fn rs274_motions(program: &str) -> Option<Vec<(bool, [f64; 3])>> {
         .expect("cannot run rs274-check.sh");
     match out.status.code() {
         Some(127) => {
-            assert!(!require, "ERRMAP_REQUIRE_RS274=1 but rs274 is not installed");
+            assert!(
+                !require,
+                "ERRMAP_REQUIRE_RS274=1 but rs274 is not installed"
+            );
             println!("SKIPPED the rs274 check: rs274 not installed (see docs/toolpath.md)");
             return None;
         }
@@ -107,9 +113,13 @@ const FIELD_REPORT: &str = "G21 G90\nG0 X0 Y0 Z20\nG1 Z10 F100\nG1 X10\nG91 G0 Z
 
 #[test]
 fn a_return_before_a_g91_line_is_written_in_the_mode_in_force_before_it() {
-    let (out, report) =
-        compensate_gcode(FIELD_REPORT, Path::new("t.ngc"), &Flat, &settings(Dialect::Linuxcnc))
-            .unwrap();
+    let (out, report) = compensate_gcode(
+        FIELD_REPORT,
+        Path::new("t.ngc"),
+        &Flat,
+        &settings(Dialect::Linuxcnc),
+    )
+    .unwrap();
     assert_eq!(report.returns_inserted, 1, "{out}");
     // The return stands before `G91 G0 Z5`, in G90: an absolute Z of the original.
     assert!(out.contains("G1 Z10.0000\nG91 G0 Z5\n"), "{out}");
@@ -185,13 +195,21 @@ fn a_return_before_g91_g28_is_written_in_g90_in_every_dialect() {
 fn a_return_before_a_unit_switch_is_written_in_the_units_in_force_before_it() {
     // The cut ends at Z10 mm compensated; the next line switches to inches and moves up.
     let text = "G21 G90\nG0 X0 Y0 Z20\nG1 Z10 F100\nG1 X10\nG20 G91 G0 Z0.2\nG21 G90 X0\nM2\n";
-    let (out, _) =
-        compensate_gcode(text, Path::new("t.ngc"), &Flat, &settings(Dialect::Linuxcnc)).unwrap();
+    let (out, _) = compensate_gcode(
+        text,
+        Path::new("t.ngc"),
+        &Flat,
+        &settings(Dialect::Linuxcnc),
+    )
+    .unwrap();
     assert!(out.contains("G1 Z10.0000\nG20 G91 G0 Z0.2\n"), "{out}");
     if let Some(m) = rs274_motions(&out) {
         let ends: Vec<[f64; 3]> = m.iter().map(|(_, p)| *p).collect();
         assert!(close(ends[4], [10.0, 0.0, 10.0]), "{m:?}\n{out}");
-        assert!(close(ends[5], [10.0, 0.0, 10.0 + 0.2 * 25.4]), "{m:?}\n{out}");
+        assert!(
+            close(ends[5], [10.0, 0.0, 10.0 + 0.2 * 25.4]),
+            "{m:?}\n{out}"
+        );
     }
 }
 
@@ -200,8 +218,13 @@ fn a_return_comes_before_a_loop_not_inside_it() {
     // After the compensated cut, the loop body's incremental rapids run many times: the
     // return must stand before the loop, once.
     let text = "G21 G90\nG0 X0 Y0 Z20\nG1 Z10 F100\nG1 X10\no100 repeat [3]\nG91 G0 Z1\nG90\no100 endrepeat\nM2\n";
-    let (out, report) =
-        compensate_gcode(text, Path::new("t.ngc"), &Flat, &settings(Dialect::Linuxcnc)).unwrap();
+    let (out, report) = compensate_gcode(
+        text,
+        Path::new("t.ngc"),
+        &Flat,
+        &settings(Dialect::Linuxcnc),
+    )
+    .unwrap();
     assert_eq!(report.returns_inserted, 1, "{out}");
     assert!(out.contains("G1 Z10.0000\no100 repeat [3]\n"), "{out}");
     if let Some(m) = rs274_motions(&out) {
@@ -245,7 +268,10 @@ fn axis_words_before_any_motion_word_are_refused_or_read_in_the_power_on_mode() 
             .unwrap_err()
             .to_string();
         assert!(err.contains(param), "{dialect:?}: {err}");
-        assert!(err.contains("--power-on-motion g0|g1"), "{dialect:?}: {err}");
+        assert!(
+            err.contains("--power-on-motion g0|g1"),
+            "{dialect:?}: {err}"
+        );
         // As G0 the block positions the tool, and X10 is then a compensated cut.
         let s = CompensationSettings {
             power_on_motion: Some(PowerOnMotion::Rapid),

@@ -78,6 +78,9 @@ struct Vars<'r> {
 
 /// What a system variable holds, for messages.
 fn system_variable(n: u32) -> String {
+    if (10_000..=10_999).contains(&n) {
+        return format!("#{n} is a tool offset on a Fanuc (#10001–#13999) but a general-purpose variable on a Haas NGC (#10000–#10999 = #100–#999 there), and errmap reads both as one dialect; on a Haas write it as #{}", n - 10_000);
+    }
     let what = match n {
         1000..=1999 => "interface signals",
         2000..=2999 => "tool offsets",
@@ -538,8 +541,8 @@ impl Run<'_> {
                 pc,
                 word,
                 format!(
-                    "`{word}` sets {}: what the machine does with it errmap does not reproduce",
-                    system_variable(n).replace(" whose value only the machine knows", "")
+                    "`{word}` sets a variable errmap does not follow: {}",
+                    system_variable(n)
                 ),
                 "remove the assignment from the program errmap compensates, or move the zone away",
             )),
@@ -946,7 +949,11 @@ impl Run<'_> {
         chain: u32,
         range: (usize, usize),
     ) -> Result<Next> {
-        let name = if local { "M97" } else { "M98" };
+        let name = match (local, words.iter().any(|w| w.letter == b'G')) {
+            (true, _) => "M97",
+            (false, true) => "G65",
+            (false, false) => "M98",
+        };
         let Some(p) = words.iter().find(|w| w.letter == b'P') else {
             return Err(self.err(
                 pc,
@@ -1004,7 +1011,7 @@ impl Run<'_> {
             let old = (l.is_none() && pv >= 10_000).then_some((pv / 10_000, pv % 10_000));
             let target = match (by(pv), old.and_then(|(k, n)| by(n).map(|q| (k, q)))) {
                 (Some(_), Some(_)) => {
-                    return Err(self.err(pc, &p.text.clone(), format!("`M98 {}` is ambiguous: O{pv} called once, or O{} called {} times (the old P<count><number> form)", p.text, pv % 10_000, pv / 10_000), "write the repeat count with L"))
+                    return Err(self.err(pc, &p.text.clone(), format!("`{name} {}` is ambiguous: O{pv} called once, or O{} called {} times (the old P<count><number> form)", p.text, pv % 10_000, pv / 10_000), "write the repeat count with L"))
                 }
                 (Some(q), None) => q,
                 (None, Some((k, q))) => {
@@ -1015,7 +1022,7 @@ impl Run<'_> {
                     return Err(self.err(
                         pc,
                         &p.text.clone(),
-                        format!("`M98 {}` calls subprogram O{pv}, which is not in this file: errmap runs subprograms of the same file only", p.text),
+                        format!("`{name} {}` calls subprogram O{pv}, which is not in this file: errmap runs subprograms of the same file only", p.text),
                         "copy the subprogram into this file after the main program (each starting with its O number, ending in M99), or move the zone away",
                     ))
                 }
@@ -1096,7 +1103,7 @@ impl Run<'_> {
         }
         let plain: Vec<Word> = words
             .iter()
-            .filter(|w| matches!(w.letter, b'P' | b'L'))
+            .filter(|w| matches!(w.letter, b'P' | b'L' | b'G'))
             .map(|w| Word {
                 letter: w.letter,
                 value: w.value,
