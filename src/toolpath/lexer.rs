@@ -207,7 +207,7 @@ fn lex_line_into(b: &[u8], start: usize, end: usize, dialect: Dialect, tokens: &
         } else if c == b'%' {
             (TokenKind::Percent, i + 1)
         } else if c == b'#' {
-            lex_assignment(b, i, end)
+            lex_assignment(b, i, end, dialect)
         } else if c == b'o' || c == b'O' {
             lex_oword(b, i, end)
         } else if c.is_ascii_alphabetic() || c == b'@' || c == b'^' {
@@ -450,15 +450,28 @@ pub fn param_name(text: &str) -> String {
     t.to_ascii_lowercase()
 }
 
-fn lex_assignment(b: &[u8], i: usize, end: usize) -> (TokenKind, usize) {
+/// `#i = value`. A Fanuc macro B right side is an expression without brackets (`#1=#1+1`)
+/// running to the end of the block (before a comment).
+fn lex_assignment(b: &[u8], i: usize, end: usize, dialect: Dialect) -> (TokenKind, usize) {
     let pe = param_end(b, i, end);
     let eq = skip_spaces(b, pe, end);
     if eq < end && b[eq] == b'=' {
         let vs = skip_spaces(b, eq + 1, end);
-        let ve = lex_number(b, vs, end)
-            .map(|(j, _)| j)
-            .or_else(|| expr_value_end(b, vs, end))
-            .unwrap_or(vs);
+        let ve = if dialect == Dialect::Fanuc {
+            let mut m = vs;
+            while m < end && b[m] != b'(' && b[m] != b';' {
+                m += 1;
+            }
+            while m > vs && is_space(b[m - 1]) {
+                m -= 1;
+            }
+            m
+        } else {
+            lex_number(b, vs, end)
+                .map(|(j, _)| j)
+                .or_else(|| expr_value_end(b, vs, end))
+                .unwrap_or(vs)
+        };
         let target = param_name(&String::from_utf8_lossy(&b[i..pe]));
         return (
             TokenKind::Assignment {

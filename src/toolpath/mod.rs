@@ -15,6 +15,7 @@ mod arc;
 mod bytes;
 mod csv_path;
 pub mod dialect;
+mod expand;
 mod expr;
 mod gcode;
 mod klartext;
@@ -297,7 +298,46 @@ pub fn compensate_gcode(
     if klartext::applies(text, source, settings.dialect) {
         return klartext::compensate(text, source, field, settings);
     }
-    gcode::compensate(text, source, field, settings)
+    match gcode::compensate(text, source, field, settings) {
+        Err(refused) => expand_refused(text, source, field, settings, refused),
+        done => done,
+    }
+}
+
+/// The plain rewrite refused: run the program's control flow (`--expand`) and compensate the
+/// flattened program, its refusals naming the original lines; without `--expand`, point to it
+/// when the flattened program would compensate. A program with nothing to run keeps the
+/// plain refusal.
+fn expand_refused(
+    text: &str,
+    source: &Path,
+    field: &dyn ErrorField,
+    settings: &CompensationSettings,
+    refused: Error,
+) -> Result<(String, CompensationReport)> {
+    let Ok(dialect) = dialect::resolve(text, source, settings.dialect) else {
+        return Err(refused);
+    };
+    let flat = match expand::flatten(text, source, dialect, !settings.expand) {
+        Ok(Some(flat)) => flat,
+        Ok(None) => return Err(refused),
+        Err(e) if settings.expand => return Err(e),
+        // A trial too long to finish here: the full run with the flag decides.
+        Err(e) if expand::is_trial_stop(&e) => return Err(expand::with_hint(refused)),
+        Err(_) => return Err(refused),
+    };
+    let flat_settings = CompensationSettings {
+        dialect: Some(dialect),
+        ..*settings
+    };
+    let result = expand::compensate_flat(text, &flat, |t| {
+        gcode::compensate(t, source, field, &flat_settings)
+    });
+    match (settings.expand, result) {
+        (true, result) => result,
+        (false, Ok(_)) => Err(expand::with_hint(refused)),
+        (false, Err(_)) => Err(refused),
+    }
 }
 
 /// A move of a G-code program as errmap's interpreter reads it: mm, in work coordinates (the
