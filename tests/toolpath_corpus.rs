@@ -233,7 +233,13 @@ static REASONS: &[Reason] = &[
     },
     Reason {
         name: "runtime values (read from the machine)",
-        phrases: &["SYSREAD", "system variable", "at run time", "runtime"],
+        phrases: &[
+            "SYSREAD",
+            "system variable",
+            "at run time",
+            "runtime",
+            "sets a variable errmap does not follow",
+        ],
         cannot_vouch: true,
     },
     Reason {

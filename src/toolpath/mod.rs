@@ -334,6 +334,19 @@ fn expand_refused(
         gcode::compensate(t, source, field, &flat_settings)
     });
     match (settings.expand, result) {
+        // The run compensates nothing: the original runs exactly as its flattened program
+        // does, so it is copied byte for byte (a file of subroutines alone runs nothing).
+        (true, Ok((_, report))) if report.moves_changed == 0 => {
+            let lines = text.lines().count() as u64;
+            Ok((
+                text.to_string(),
+                CompensationReport {
+                    lines_in: lines,
+                    lines_out: lines,
+                    ..report
+                },
+            ))
+        }
         (true, result) => result,
         (false, Ok(_)) => Err(expand::with_hint(refused)),
         (false, Err(_)) => Err(refused),

@@ -11,8 +11,11 @@
 //! G80, G94, G98/G99, G15 move nothing here
 //! (the same in the original and the output). G28, G53 and G30 go to machine positions: the
 //! axes they name become unknown. G52 shifts the named axes, G92 names the current position.
-//! Anything else that moves (canned cycles, G41/G42, G68, G51, macros, M98, Fadal L) is
-//! refused: the judge cannot vouch for it.
+//! Subprograms in the same file: `M98 P<n> L<k>` runs program `O<n>` k times (once without
+//! L), its `M99` returns to the block after the call; the main program is the first one that
+//! ends in `M30`/`M02` (a program ending in `M99` is a subprogram), and `M30`/`M02` ends the
+//! run. Anything else that moves (canned cycles, G41/G42, G68, G51, macro variables, Fadal L)
+//! is refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
 
@@ -40,7 +43,9 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
     // G52 local shift and G92 setting, mm: positions are kept in the work coordinates.
     let (mut local, mut set) = ([0.0f64; 3], [0.0f64; 3]);
     let mut out = Vec::new();
-    for (n, raw) in text.lines().enumerate() {
+    let lines: Vec<&str> = text.lines().collect();
+    for n in run_order(&lines)? {
+        let raw = lines[n];
         let line = n as u64 + 1;
         let words = words(raw).map_err(|w| format!("line {line}: cannot read `{w}`"))?;
         if words.is_empty() || words[0].0 == 'O' && words.len() == 1 {
@@ -82,13 +87,17 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
                 }
                 'I' | 'J' | 'K' => ijk[(letter as u8 - b'I') as usize] = Some(value(true)?),
                 'R' => r = Some(value(true)?),
+                // The repeat count of an M98 call (run by `run_order`).
+                'L' if words
+                    .iter()
+                    .any(|(l, v)| *l == 'M' && v.parse::<f64>().ok() == Some(98.0)) => {}
                 'L' => {
-                    // A repeat count (Fadal L on an arc) or a subprogram call: not followed.
+                    // A repeat count (Fadal L on an arc) or a Fadal subprogram call: not followed.
                     return Err(format!("line {line}: L{num} is not followed"));
                 }
                 'M' => {
                     let m: f64 = num.parse().unwrap_or(-1.0);
-                    if m == 98.0 || m == 97.0 {
+                    if m == 97.0 {
                         return Err(format!("line {line}: M{num} calls a subprogram"));
                     }
                 }
@@ -234,6 +243,85 @@ fn number(
 
 /// The words of a line, comments removed: (letter, number text). A block-delete `/` is read
 /// as switched off (the block runs).
+/// The order the control runs the lines in: the main program from its O number, through
+/// `M98 P… L…` calls of subprograms in the same file and their `M99` returns, to `M30`/`M02`.
+fn run_order(lines: &[&str]) -> Result<Vec<usize>, String> {
+    let parsed: Vec<Vec<(char, String)>> =
+        lines.iter().map(|l| words(l).unwrap_or_default()).collect();
+    let has = |n: usize, letter: char, v: f64| {
+        parsed[n]
+            .iter()
+            .any(|(l, num)| *l == letter && num.parse::<f64>().ok() == Some(v))
+    };
+    let value = |n: usize, letter: char| {
+        parsed[n]
+            .iter()
+            .find(|(l, _)| *l == letter)
+            .and_then(|(_, num)| num.parse::<f64>().ok())
+    };
+    // Where each O program starts, and whether it ends the run (M30/M02) or returns (M99).
+    let mut starts: Vec<(u32, usize)> = Vec::new();
+    for n in 0..lines.len() {
+        if let Some(o) = parsed[n].first().filter(|(l, _)| *l == 'O') {
+            let number =
+                o.1.parse::<u32>()
+                    .map_err(|_| format!("line {}: O{}", n + 1, o.1))?;
+            starts.push((number, n));
+        }
+    }
+    let ends_run = |from: usize| {
+        (from..lines.len())
+            .take_while(|&n| n == from || !parsed[n].first().is_some_and(|(l, _)| *l == 'O'))
+            .any(|n| has(n, 'M', 30.0) || has(n, 'M', 2.0))
+    };
+    let main = match starts.iter().find(|(_, n)| ends_run(*n)) {
+        Some(&(_, n)) => n,
+        None if starts.is_empty() => 0,
+        None => return Err("no main program (ending in M30 or M02) is followed".into()),
+    };
+    let mut order = Vec::new();
+    let mut stack: Vec<(usize, usize, u32)> = Vec::new(); // (call line, sub start, runs left)
+    let mut n = main;
+    while n < lines.len() {
+        if order.len() > 10_000_000 {
+            return Err("more than 10 million blocks run".into());
+        }
+        order.push(n);
+        if has(n, 'M', 98.0) {
+            let p = value(n, 'P').ok_or(format!("line {}: M98 without P", n + 1))? as u32;
+            let times = value(n, 'L').unwrap_or(1.0) as u32;
+            let start = starts
+                .iter()
+                .find(|(o, _)| *o == p)
+                .map(|&(_, s)| s)
+                .ok_or(format!("line {}: O{p} is not in the file", n + 1))?;
+            if times > 0 {
+                stack.push((n, start, times));
+                n = start + 1;
+                continue;
+            }
+        } else if has(n, 'M', 99.0) {
+            let Some((call, start, left)) = stack.pop() else {
+                return Err(format!(
+                    "line {}: M99 in the main program is not followed",
+                    n + 1
+                ));
+            };
+            if left > 1 {
+                stack.push((call, start, left - 1));
+                n = start + 1;
+            } else {
+                n = call + 1;
+            }
+            continue;
+        } else if has(n, 'M', 30.0) || has(n, 'M', 2.0) {
+            break;
+        }
+        n += 1;
+    }
+    Ok(order)
+}
+
 fn words(raw: &str) -> Result<Vec<(char, String)>, String> {
     let mut out = Vec::new();
     let mut chars = raw.trim_end_matches(['\r', '\n']).chars().peekable();

@@ -639,9 +639,11 @@ impl Kt<'_> {
     /// elsewhere (or moved incrementally, to where errmap cannot tell) is a frame under which
     /// cuts in the zone are refused, until it is back at 0.
     fn rotary_positions(&mut self, n: u64, b: &Block) {
-        for w in b.words.iter().filter(|w| {
-            matches!(w.addr.as_str(), "A" | "B" | "C" | "IA" | "IB" | "IC")
-        }) {
+        for w in b
+            .words
+            .iter()
+            .filter(|w| matches!(w.addr.as_str(), "A" | "B" | "C" | "IA" | "IB" | "IC"))
+        {
             let axis = w.addr.trim_start_matches('I').to_string();
             self.frames
                 .retain(|f| !(f.cycle == "rot" && f.what.starts_with(axis.as_str())));
