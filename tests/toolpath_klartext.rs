@@ -399,12 +399,21 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+1 G01 F100\n", &["k.h:3", "G01"]),
         ("2 L Z 25.000 FMAX\n", &["k.h:3", "block 2:", "without a value", "Z+25"]),
         ("2 L X+10 ~\n  Y+5 F100\n", &["k.h:3", "continued with `~`", "one line"]),
+        // A rotary axis turned away from 0 by a positioning block: the part is turned.
+        ("2 L B+30 FMAX\n3 L X+10 F100\n", &["k.h:4", "rotary axis B+30", "block 2", "stands away from 0"]),
+        ("2 L IC+90 FMAX\n3 L X+10 F100\n", &["k.h:4", "rotary axis C+90", "stands away from 0"]),
+        ("2 L B+0 FMAX\n3 L B+15 FMAX\n4 L X+10 F100\n", &["k.h:5", "rotary axis B+15"]),
     ];
     for (body, parts) in cases {
         let text = format!("{HEAD}{body}");
         let msg = refuse(&text);
         assert_msg(&msg, parts);
     }
+    // Back at 0 the map applies again.
+    run(
+        &format!("{HEAD}2 L B+30 FMAX\n3 L B+0 C+0 FMAX\n4 L X+10 F100\n"),
+        &settings(),
+    );
     // No BEGIN PGM and no --units: the first cut is refused, at any height.
     let msg = refuse("1 L X+0 Y+0 Z+50 R0 FMAX\n2 L X+10 F100\n");
     assert_msg(&msg, &["k.h:2", "BEGIN PGM", "--units"]);
