@@ -3,6 +3,7 @@
 //!
 //! Lines that are not rewritten are copied byte for byte from the input. See `docs/toolpath.md`.
 
+mod contour;
 mod emit;
 mod format;
 mod modal;
@@ -114,6 +115,9 @@ struct Rewriter<'a> {
     plane: Plane,
     motion: Option<MotionMode>,
     cutter_comp: Option<(u64, String)>,
+    /// G41/G42/G40 given, and the block that starts up or cancels the offset (the next move
+    /// in the plane) not yet read: its line and code.
+    comp_transition: Option<(u64, String)>,
     params: Params,
     // Output state: the output position differs from `pos` only along the normal, by `offset`.
     offset: f64,
@@ -215,6 +219,7 @@ impl<'a> Rewriter<'a> {
             plane: Plane::G17,
             motion: None,
             cutter_comp: None,
+            comp_transition: None,
             params: Params::new(),
             offset: 0.0,
             standing: Standing {

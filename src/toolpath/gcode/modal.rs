@@ -168,9 +168,14 @@ impl<'a> Rewriter<'a> {
                 }
                 G::Distance(a) => self.absolute = a,
                 G::ArcDistance(a) => self.arc_absolute = a,
-                G::CutterComp(false) => self.cutter_comp = None,
+                G::CutterComp(false) => {
+                    if self.cutter_comp.take().is_some() {
+                        self.comp_transition = Some((line.number, code.to_string()));
+                    }
+                }
                 G::CutterComp(true) => {
                     self.cutter_comp = Some((line.number, code.to_string()));
+                    self.comp_transition = Some((line.number, code.to_string()));
                 }
                 G::WorkOffset => match self.first_offset {
                     None => self.first_offset = Some(code),

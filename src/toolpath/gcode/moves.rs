@@ -4,6 +4,7 @@ use super::super::arc::Arc;
 use super::super::dialect::{Dialect, Motion, PowerOnMotion, G};
 use super::super::lexer::{Line, TokenKind};
 use super::super::TracedMove;
+use super::contour::CompMode;
 use super::emit::{emit_curve, Breaks};
 use super::{dist, lerp, MotionMode, Rewriter, AXES, W};
 use crate::error::{Error, Result};
@@ -100,12 +101,19 @@ impl<'a> Rewriter<'a> {
         if self.trace.is_some() {
             self.trace_move(line, words, &mv)?;
         }
-        if !self.plain(&mv) {
+        let in_plane = self.moves_in_plane(&mv.start, &mv.end);
+        let result = if !self.plain(&mv) {
             // Not compensable, but shown above not to touch the zone: copy as is.
             let end = self.end_after_unfollowed(&mv);
-            return self.finish_unchanged(line, words, end);
+            self.finish_unchanged(line, words, end)
+        } else {
+            self.compensate_move(line, words, &mv, in_plane)
+        };
+        if in_plane {
+            // The start-up or cancel block of cutter radius compensation has run.
+            self.comp_transition = None;
         }
-        self.compensate_move(line, words, &mv)
+        result
     }
 
     /// The motion of a block with axis words before any motion word: LinuxCNC refuses such a
@@ -301,11 +309,14 @@ impl<'a> Rewriter<'a> {
                 "expand O-word loops, conditions and subroutines into plain G-code (or move the zone away)",
             ));
         }
-        if let Some((cl, code)) = &self.cutter_comp {
+        let comp = self.cutter_comp.as_ref().or(self.comp_transition.as_ref());
+        if let (Some((cl, code)), false) = (comp, self.tool_axis_is_normal()) {
+            let plane = format!("{:?}", self.plane);
+            let n = AXES[self.normal] as char;
             return Some((
                 code.clone(),
-                format!("cutter radius compensation {code} (from line {cl}) is active on a move in the compensation zone"),
-                "post the program as the tool-centre path (G40) for the zone, or move the zone away",
+                format!("cutter radius compensation {code} (from line {cl}) offsets the contour in the {plane} plane, which holds the map's normal axis {n}: moving {n} by −E would change the contour the control offsets"),
+                "compensate with the tool axis along the map's normal (G17 for a Z map), or post the program as the tool-centre path (G40) for the zone, or move the zone away",
             ));
         }
         if mv.block_delete {
@@ -410,7 +421,7 @@ impl<'a> Rewriter<'a> {
             && self.flow.is_none()
             && !mv.block_delete
             && self.blocks.is_empty()
-            && self.cutter_comp.is_none()
+            && (!self.comp_sensitive() || self.tool_axis_is_normal())
             && mv.polar.is_none()
             && mv.expr.is_none()
             && mv.other_axis.is_none()
@@ -438,7 +449,14 @@ impl<'a> Rewriter<'a> {
 
     /// Split the move at the zone and domain edges, compensate its points in both, and write
     /// it (or copy the line when no point is in).
-    fn compensate_move(&mut self, line: &Line, words: &[W], mv: &Move) -> Result<()> {
+    fn compensate_move(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        mv: &Move,
+        in_plane: bool,
+    ) -> Result<()> {
+        let mode = self.comp_mode(in_plane);
         let s = mv.start.map(|c| c.unwrap_or(0.0));
         let e = [0, 1, 2].map(|i| mv.end[i].unwrap_or(s[i]));
         let cw = mv.motion.kind == Motion::ArcCw;
@@ -447,7 +465,12 @@ impl<'a> Rewriter<'a> {
             _ => Some(self.arc(line, words, s, e, cw)?),
         };
         let step = self.settings.max_segment_in(self.inches);
-        let chords = self.chord_count(line, arc.as_ref(), &s, &e, step)?;
+        // Under cutter compensation arc pieces are arcs: only length and quarter turns cut them.
+        let tol = match mode {
+            CompMode::Off => self.settings.chord_tol_in(self.inches),
+            _ => f64::INFINITY,
+        };
+        let chords = self.chord_count(line, arc.as_ref(), &s, &e, step, tol)?;
         // The move as a curve over [0, 1] with its chord ends as break points: splits at the
         // zone and domain edges fall on the curve itself (on the arc, not on a chord).
         let mut emitted = std::mem::take(&mut self.emitted);
@@ -477,8 +500,11 @@ impl<'a> Rewriter<'a> {
             self.report.moves_outside_domain += 1;
         }
         let result = if emitted.iter().any(|(_, e)| e.is_some()) {
-            self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion)
-                .map(|()| self.pos = e.map(Some))
+            match mode {
+                CompMode::Off => self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion),
+                _ => self.rewrite_contour(line, words, &emitted, arc.as_ref(), mv.motion, s, mode),
+            }
+            .map(|()| self.pos = e.map(Some))
         } else {
             self.finish_unchanged(line, words, mv.end)
         };
@@ -516,13 +542,14 @@ impl<'a> Rewriter<'a> {
         s: &[f64; 3],
         e: &[f64; 3],
         step: f64,
+        chord_tol: f64,
     ) -> Result<usize> {
         let (length, chords) = match arc {
             None => (dist(s, e), 1),
             Some(a) => {
                 let (_, _, ax) = a.plane.axes();
                 let len = (a.sweep.abs() * a.r_start.max(a.r_end)).hypot(a.end[ax] - a.start[ax]);
-                (len, a.chords(self.settings.chord_tol_in(self.inches), step))
+                (len, a.chords(chord_tol, step))
             }
         };
         // Keep the output finite: a move needing over a million segments is a typo or a unit
@@ -613,6 +640,9 @@ impl<'a> Rewriter<'a> {
             self.offset = 0.0;
             return Ok(());
         }
+        if self.comp_sensitive() {
+            return Err(self.comp_return_error(line));
+        }
         let standing = self.standing;
         let Some(orig) = standing.normal_pos else {
             return Err(Error::Internal(format!(
@@ -653,22 +683,54 @@ impl<'a> Rewriter<'a> {
     /// Copy a line errmap does not change (after a return step if one is due), and track the
     /// position it leaves the tool at.
     pub(super) fn finish_unchanged(&mut self, line: &Line, words: &[W], end: Point) -> Result<()> {
+        // Under cutter compensation the return rides on this line's own move.
+        let fold = self.fold_return(line, words);
         self.return_if_needed(line, words, false)?;
         let has_motion_g = words.iter().any(|w| w.g().is_some_and(G::is_motion));
         let moves = words
             .iter()
             .any(|w| is_axis(w.letter) || matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
-        match self.motion {
-            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => {
-                self.copy_with_motion(line, m)
-            }
-            _ => self.copy_line(line),
+        let prefix = match self.motion {
+            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => Some(m),
+            _ => None,
+        };
+        match (prefix, fold) {
+            (None, None) => self.copy_line(line),
+            (prefix, fold) => self.copy_edited(line, prefix, fold.as_deref()),
         }
         if has_motion_g || moves {
             self.out_motion = self.motion;
         }
         self.track_unchanged_end(line, words, end);
         Ok(())
+    }
+
+    /// Copy a line with its modal motion said (`prefix`, after a return step changed the
+    /// output's) and a word appended after its last word (`append`, a folded return).
+    fn copy_edited(&mut self, line: &Line, prefix: Option<MotionMode>, append: Option<&str>) {
+        let Some(text) = append else {
+            if let Some(m) = prefix {
+                self.copy_with_motion(line, m);
+            }
+            return;
+        };
+        let at = line
+            .tokens
+            .iter()
+            .filter(|t| matches!(t.kind, TokenKind::Word { .. }))
+            .map(|t| t.span.end)
+            .max()
+            .unwrap_or(line.span.end);
+        let start = self.out.len();
+        match prefix {
+            Some(m) => self.copy_with_motion(line, m),
+            None => self.copy_line(line),
+        }
+        // The copied line ends with the original's bytes from `at` on.
+        let tail = line.end - at;
+        let pos = self.out.len() - tail;
+        debug_assert!(pos >= start);
+        self.out.insert_str(pos, text);
     }
 
     /// The output's modal motion differs (after a return step): say it on this line, after its
