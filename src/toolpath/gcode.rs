@@ -4,6 +4,7 @@
 //! Lines that are not rewritten are copied byte for byte from the input. See `docs/toolpath.md`.
 
 mod contour;
+mod cycles;
 mod emit;
 mod format;
 mod modal;
@@ -118,6 +119,10 @@ struct Rewriter<'a> {
     /// G41/G42/G40 given, and the block that starts up or cancels the offset (the next move
     /// in the plane) not yet read: its line and code.
     comp_transition: Option<(u64, String)>,
+    /// The canned-cycle series in progress, and the retract mode (G99: R level; G98: initial
+    /// level; `None` before either).
+    cycle: Option<cycles::Cycle>,
+    retract_to_r: Option<bool>,
     params: Params,
     // Output state: the output position differs from `pos` only along the normal, by `offset`.
     offset: f64,
@@ -220,6 +225,8 @@ impl<'a> Rewriter<'a> {
             motion: None,
             cutter_comp: None,
             comp_transition: None,
+            cycle: None,
+            retract_to_r: None,
             params: Params::new(),
             offset: 0.0,
             standing: Standing {

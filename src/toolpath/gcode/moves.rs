@@ -51,11 +51,16 @@ impl<'a> Rewriter<'a> {
         let scaled = self.fanuc_numbers(line, words_in)?;
         let words: &[W] = scaled.as_deref().unwrap_or(words_in);
         let motion_word = gs().find(|(_, _, g)| g.is_motion());
+        self.retract_mode(words_in);
         if let Some((_, code, g)) = motion_word {
             self.motion = match g {
                 G::Motion(kind) => Some(MotionMode { kind, code }),
                 _ => None,
             };
+            if g != G::Motion(Motion::Canned) {
+                // G80 or another motion mode ends the canned-cycle series.
+                self.cycle = None;
+            }
         }
         let group0 = gs().find(|(_, _, g)| {
             matches!(
@@ -95,6 +100,17 @@ impl<'a> Rewriter<'a> {
         };
         self.fix_zone();
         let mv = self.classify(line, words, motion, g53);
+        if motion.kind == Motion::Canned && !mv.block_delete && mv.polar.is_none() {
+            if self.trace.is_some() {
+                self.trace_move(line, words, &mv)?;
+            }
+            return self.canned(line, words, mv.start, mv.end);
+        }
+        if motion.kind == Motion::Canned {
+            if let Some(c) = self.cycle.as_mut() {
+                c.forget_levels();
+            }
+        }
         if let Some((col, msg, hint)) = self.refusal(words, &mv) {
             return Err(self.err(line, &col, msg, hint));
         }
