@@ -177,3 +177,25 @@ fn rs274_drills_each_compensated_hole_to_its_depth_minus_e() {
     }
     std::fs::remove_dir_all(&work).ok();
 }
+
+#[test]
+fn after_g28_and_g53_only_the_named_axes_are_unknown() {
+    // `G91 G28 Z0` sends Z home (unknown in work coordinates) and leaves X and Y where they
+    // are; `G0 Z5` makes Z known again, so the cut at depth is followed.
+    let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG91 G28 Z0\nG90 G0 Z5\nG1 Z-1 F100\nG1 X20\nM2\n";
+    let out = run(text, false).unwrap();
+    // By hand: E(20, 5) = 0.0425 at the end of the cut.
+    assert!(out.contains("X20.0000 Y5.0000 Z-1.0425\n"), "{out}");
+    // Without the absolute Z the cut is refused, naming the G28 line.
+    let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG91 G28 Z0\nG90 G1 X20 F100\n";
+    let err = run(text, false).unwrap_err();
+    assert!(err.contains("h.ngc:4") && err.contains("unknown since line 3"), "{err}");
+    // G53 moves the named axes in machine coordinates: here Z only.
+    let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG53 G0 Z0\nG0 Z5\nG1 Z-1 F100\nG1 X20\nM2\n";
+    let out = run(text, false).unwrap();
+    assert!(out.contains("X20.0000 Y5.0000 Z-1.0425\n"), "{out}");
+    // With no axis word LinuxCNC's G28 sends every axis home: X and Y are unknown after it.
+    let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG28\nG0 Z5\nG1 Z-1 F100\n";
+    let err = run(text, false).unwrap_err();
+    assert!(err.contains("h.ngc:5") && err.contains("unknown since line 3"), "{err}");
+}

@@ -88,6 +88,22 @@ impl<'a> Rewriter<'a> {
         let mut over = end;
         over[ax] = start[ax];
         let touches = self.may_touch(&[start, over, top, bottom]);
+        // K0 (Fanuc) or L0: the cycle's data is stored, no hole is drilled (and whether the
+        // block positions X/Y differs between controls): copied, the position unknown.
+        let stores_only = words
+            .iter()
+            .any(|w| matches!(w.letter, b'K' | b'L') && w.value == Some(0.0));
+        if stores_only {
+            if first {
+                self.return_if_needed(line, words, false)?;
+            }
+            self.copy_line(line);
+            self.out_motion = self.motion;
+            self.pos = [None; 3];
+            self.unknown_since = Some(line.number);
+            self.cycle = Some(cyc);
+            return Ok(());
+        }
         let hole = self.hole(line, words, &cyc, touches, bottom)?;
         if first {
             self.return_if_needed(line, words, false)?;

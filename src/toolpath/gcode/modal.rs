@@ -266,6 +266,19 @@ impl<'a> Rewriter<'a> {
                     "expand the macro into the program",
                 ))
             }
+            G::Home => {
+                // G28/G30 (Sinumerik G74/G75) move the named axes, through the intermediate
+                // point, to a machine position errmap does not know in work coordinates; the
+                // others stay. With no axis word LinuxCNC sends every axis home.
+                let named: Vec<usize> = (0..3).filter(|&i| find(AXES[i]).is_some()).collect();
+                if named.is_empty() {
+                    self.pos = [None; 3];
+                }
+                for i in named {
+                    self.pos[i] = None;
+                }
+                self.unknown_since = Some(line.number);
+            }
             _ => {
                 self.pos = [None; 3];
                 self.unknown_since = Some(line.number);
