@@ -152,7 +152,9 @@ struct Rewriter<'a> {
     /// Transformations errmap does not follow, with the line and word that started them.
     frames: Vec<(Frame, u64, String)>,
     /// The first work offset selected (the map's coordinates); another one is a frame.
-    first_offset: Option<GCode>,
+    first_offset: Option<String>,
+    /// The work offset selected now (`G55`, `G54.1 P3`), `None` before the first selection.
+    active_offset: Option<String>,
     /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
     flow: Option<(u64, String)>,
     /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
@@ -251,6 +253,7 @@ impl<'a> Rewriter<'a> {
             local: [0.0; 3],
             frames: Vec::new(),
             first_offset: None,
+            active_offset: None,
             flow: None,
             programs: 0,
             m99: None,

@@ -177,13 +177,7 @@ impl<'a> Rewriter<'a> {
                     self.cutter_comp = Some((line.number, code.to_string()));
                     self.comp_transition = Some((line.number, code.to_string()));
                 }
-                G::WorkOffset => match self.first_offset {
-                    None => self.first_offset = Some(code),
-                    Some(c) if c == code => self.frames.retain(|f| f.0 != Frame::WorkOffset),
-                    Some(_) => self
-                        .frames
-                        .push((Frame::WorkOffset, line.number, code.to_string())),
-                },
+                G::WorkOffset => self.work_offset(line, words, code),
                 _ => {}
             }
         }
@@ -202,6 +196,38 @@ impl<'a> Rewriter<'a> {
             self.set_units_known();
             self.fix_zone();
         }
+    }
+
+    /// A work offset selected. The map is in the first one's coordinates: another is a frame
+    /// errmap refuses cuts under, unless `--same-part-per-offset` (the map applies in each
+    /// offset's coordinates). Either way the machine stays put while its work coordinates
+    /// change by offsets the program does not show: the position is unknown after a change.
+    fn work_offset(&mut self, line: &Line, words: &[W], code: GCode) {
+        // `G54.1 P3` (Fanuc additional offsets) is its P, not G54.1.
+        let p = words
+            .iter()
+            .find(|w| w.letter == b'P' && code == GCode { number: 54, decimal: 1 })
+            .map(|w| format!(" P{}", self.wtext(w).get(1..).unwrap_or("")))
+            .unwrap_or_default();
+        let id = format!("{code}{p}");
+        if self.active_offset.as_ref().is_some_and(|a| *a != id) {
+            self.pos = [None; 3];
+            self.unknown_since = Some(line.number);
+        }
+        self.active_offset = Some(id.clone());
+        match &self.first_offset {
+            None => self.first_offset = Some(id),
+            Some(f) if *f == id || self.settings.same_part_per_offset => {
+                self.frames.retain(|f| f.0 != Frame::WorkOffset)
+            }
+            Some(_) => self.frames.push((Frame::WorkOffset, line.number, id)),
+        }
+    }
+
+    /// Whether the block selects a work offset other than the active one (after a compensated
+    /// cut, the return step must come before it, in the coordinates it was cut in).
+    pub(super) fn changes_offset(&self, words: &[W]) -> bool {
+        words.iter().any(|w| w.g() == Some(G::WorkOffset)) && self.active_offset.is_some()
     }
 
     /// Non-motion codes that take axis words (G92, G52, G68, G51, G10, G28 …): followed where

@@ -1,7 +1,7 @@
 //! One block's move: its G codes applied to the modal state, its start and end, what forbids compensating it (refusals in the zone), and the hand-off to the rewriter or to a byte-for-byte copy.
 
 use super::super::arc::Arc;
-use super::super::dialect::{Dialect, Motion, PowerOnMotion, G};
+use super::super::dialect::{Dialect, Frame, Motion, PowerOnMotion, G};
 use super::super::lexer::{Line, TokenKind};
 use super::super::TracedMove;
 use super::contour::CompMode;
@@ -46,6 +46,10 @@ impl<'a> Rewriter<'a> {
     /// group-0 code, no motion, a move errmap copies, or a move it compensates.
     pub(super) fn block(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
         self.check_g_words(line, words_in)?;
+        if self.offset != 0.0 && self.changes_offset(words_in) {
+            // Back to the program's Z in the offset the cut was made in.
+            self.return_if_needed(line, &[], true)?;
+        }
         self.modal(line, words_in);
         let gs = || words_in.iter().filter_map(|w| w.g.map(|(c, g)| (w, c, g)));
         let scaled = self.fanuc_numbers(line, words_in)?;
@@ -303,6 +307,14 @@ impl<'a> Rewriter<'a> {
 
     /// The program's state forbids compensating (a frame, a jump, a loop, cutter compensation).
     fn context_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
+        if let Some((Frame::WorkOffset, fl, fw)) = self.frames.last() {
+            let first = self.first_offset.clone().unwrap_or_default();
+            return Some((
+                fw.split_whitespace().next().unwrap_or("G").to_string(),
+                format!("`{fw}` (line {fl}) selects a work offset other than the program's first ({first}), whose coordinates the map is in, and this cut may lie in the compensation zone"),
+                "pass --same-part-per-offset if each offset holds an identical part (the map then applies in each offset's coordinates; job key [toolpaths] same_part_per_offset), or select the first offset again before cuts in the zone",
+            ));
+        }
         if let Some((kind, fl, fw)) = self.frames.last() {
             return Some((
                 fw.clone(),
