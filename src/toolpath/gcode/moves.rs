@@ -34,6 +34,46 @@ struct Move<'w> {
     block_delete: bool,
 }
 
+/// The first user variable a word reads: LinuxCNC/Fanuc `#100`, `#<name>`; Sinumerik `R1` or
+/// a named variable.
+fn variable_in(word: &str, dialect: Dialect) -> Option<String> {
+    if let Some(at) = word.find('#') {
+        let rest = &word[at + 1..];
+        let len = if rest.starts_with('<') {
+            rest.find('>').map_or(rest.len(), |e| e + 1)
+        } else {
+            rest.bytes().take_while(u8::is_ascii_digit).count()
+        };
+        return Some(format!("#{}", &rest[..len]));
+    }
+    if dialect != Dialect::Sinumerik {
+        return None;
+    }
+    // After the axis letter and `=`: the first identifier (R-parameter or named variable).
+    let body = word.get(1..)?.trim_start_matches('=');
+    let bytes = body.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i].is_ascii_alphabetic() || bytes[i] == b'_' {
+            let start = i;
+            while i < bytes.len() && (bytes[i].is_ascii_alphanumeric() || bytes[i] == b'_') {
+                i += 1;
+            }
+            let name = &body[start..i];
+            let function = matches!(
+                name.to_ascii_uppercase().as_str(),
+                "SIN" | "COS" | "TAN" | "SQRT" | "ABS" | "AC" | "IC" | "ATAN2" | "POT" | "TRUNC" | "ROUND"
+            );
+            if !function {
+                return Some(name.to_string());
+            }
+        } else {
+            i += 1;
+        }
+    }
+    None
+}
+
 fn is_axis(letter: u8) -> bool {
     matches!(
         letter,
@@ -51,6 +91,7 @@ impl<'a> Rewriter<'a> {
             self.return_if_needed(line, &[], true)?;
         }
         self.modal(line, words_in);
+        self.fadal_offset(line, words_in);
         let gs = || words_in.iter().filter_map(|w| w.g.map(|(c, g)| (w, c, g)));
         let scaled = self.fanuc_numbers(line, words_in)?;
         let words: &[W] = scaled.as_deref().unwrap_or(words_in);
@@ -368,10 +409,19 @@ impl<'a> Rewriter<'a> {
             ));
         }
         if let Some(w) = mv.expr {
+            let text = self.wtext(w).to_string();
+            let reads = match variable_in(&text, self.dialect) {
+                Some(v) => format!(": `{text}` reads the variable {v}"),
+                None => format!(": `{text}` is an expression"),
+            };
             return Some((
-                self.wtext(w).to_string(),
-                "# parameters or [expressions] on a move in the compensation zone".into(),
-                "expand the program to plain numbers (or move the zone away)",
+                text,
+                format!("# parameters or [expressions] on a move in the compensation zone{reads}, whose value errmap does not carry into a rewritten move"),
+                if self.settings.expand {
+                    "expand the program to plain numbers (or move the zone away)"
+                } else {
+                    "pass --expand to run the program's own parameter values into plain numbers, or expand the program to plain numbers (or move the zone away)"
+                },
             ));
         }
         if let Some(w) = mv.other_axis {
