@@ -127,7 +127,10 @@ fn nearest_on_contour(x: f64, y: f64) -> ((f64, f64), f64) {
     cands
         .into_iter()
         .map(|q| (q, (x - q.0).hypot(y - q.1)))
-        .fold(((0.0, 0.0), f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a })
+        .fold(
+            ((0.0, 0.0), f64::INFINITY),
+            |a, b| if b.1 < a.1 { b } else { a },
+        )
 }
 
 fn off_contour(x: f64, y: f64) -> f64 {
@@ -167,13 +170,21 @@ fn a_contour_under_g41_keeps_its_plane_path_and_arcs_and_gets_z_minus_e() {
         // Every point at depth: on the programmed contour, Z = −1 − E(x, y).
         assert!(off_contour(m.end[0], m.end[1]) < 1e-4, "{}", m.line);
         let want = -1.0 - FIELD.e(m.end[0], m.end[1]);
-        assert!((m.end[2] - want).abs() < 1e-4, "{}: want Z{want:.4}", m.line);
+        assert!(
+            (m.end[2] - want).abs() < 1e-4,
+            "{}: want Z{want:.4}",
+            m.line
+        );
         if let Some((cx, cy)) = m.centre {
             arcs += 1;
             // Arc pieces turn counter-clockwise about the programmed centre, and the helix
             // stays within the tolerance of P − E between its ends.
             assert_eq!(m.code, 3, "{}", m.line);
-            assert!((cx - 20.0).abs() < 2e-4 && (cy - 10.0).abs() < 2e-4, "{}", m.line);
+            assert!(
+                (cx - 20.0).abs() < 2e-4 && (cy - 10.0).abs() < 2e-4,
+                "{}",
+                m.line
+            );
             let t0 = (m.start[1] - 10.0).atan2(m.start[0] - 20.0);
             let t1 = (m.end[1] - 10.0).atan2(m.end[0] - 20.0);
             let sweep = (t1 - t0).rem_euclid(std::f64::consts::TAU);
@@ -205,8 +216,13 @@ fn steps_at_the_zone_edge_ride_on_the_next_piece_under_g41() {
     // The wall climbs out of the zone (Z > 0 is outside) along a ramp: the cut leaves the zone
     // mid-move, and its step back to the program's Z is merged into the next piece.
     let text = "G21 G90 G17\nG0 X-5 Y0 Z5\nG1 Z-1 F100\nG41 D1\nG1 X0 Y0\nG1 X10 Y0 Z1\nG1 X20 Y0\nG0 Z5\nG40\nM2\n";
-    let (out, _) = compensate_gcode(text, Path::new("ramp.ngc"), &FIELD, &settings((-2.0, 0.0), 0.005))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let (out, _) = compensate_gcode(
+        text,
+        Path::new("ramp.ngc"),
+        &FIELD,
+        &settings((-2.0, 0.0), 0.005),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     println!("{out}");
     let mv = moves(&out);
     for m in &mv {
@@ -238,23 +254,41 @@ fn the_return_after_a_compensated_cut_rides_on_the_next_move_under_g41() {
     let text = "G21 G90 G17\nG0 X-5 Y0 Z5\nG1 Z-1 F100\nG41 D1\nG1 X0 Y0\nG1 X5 Y0\nG1 Z1\nG1 X10 Y0 (next)\nG0 Z5\nG40\nM2\n";
     // Zone [−2, 0]: `G1 Z1` is a Z-only move of the program itself; it leaves the zone and
     // ends nominal, so `(next)` needs no return.
-    let (out, _) = compensate_gcode(text, Path::new("r.ngc"), &FIELD, &settings((-2.0, 0.0), 0.005))
-        .unwrap();
+    let (out, _) = compensate_gcode(
+        text,
+        Path::new("r.ngc"),
+        &FIELD,
+        &settings((-2.0, 0.0), 0.005),
+    )
+    .unwrap();
     assert!(out.contains("G1 X10 Y0 (next)\n"), "{out}");
     // Without the Z-only line the cut ends compensated and the next line carries the return.
     let text = "G21 G90 G17\nG0 X-5 Y0 Z5\nG1 Z-1 F100\nG41 D1\nG1 X0 Y0\nG1 X5 Y0\nG0 X10 Y0 (next)\nG0 Z5\nG40\nM2\n";
-    let (out, report) = compensate_gcode(text, Path::new("r.ngc"), &FIELD, &settings((-2.0, 0.0), 0.005))
-        .unwrap();
+    let (out, report) = compensate_gcode(
+        text,
+        Path::new("r.ngc"),
+        &FIELD,
+        &settings((-2.0, 0.0), 0.005),
+    )
+    .unwrap();
     println!("{out}");
     assert!(out.contains("G0 X10 Y0 Z-1.0000 (next)\n"), "{out}");
     assert_eq!(report.returns_inserted, 1);
     // A line that cannot carry it (a G91 Z-only move) is refused, naming it.
     let text = "G21 G90 G17\nG0 X-5 Y0 Z5\nG1 Z-1 F100\nG41 D1\nG1 X0 Y0\nG1 X5 Y0\nG28\nM2\n";
-    let err = compensate_gcode(text, Path::new("r.ngc"), &FIELD, &settings((-2.0, 0.0), 0.005))
-        .unwrap_err()
-        .to_string();
+    let err = compensate_gcode(
+        text,
+        Path::new("r.ngc"),
+        &FIELD,
+        &settings((-2.0, 0.0), 0.005),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("r.ngc:7"), "{err}");
-    assert!(err.contains("block without motion in the compensation plane"), "{err}");
+    assert!(
+        err.contains("block without motion in the compensation plane"),
+        "{err}"
+    );
     assert!(err.contains("G41 (line 4)"), "{err}");
 }
 
@@ -266,19 +300,29 @@ fn what_compensation_cannot_keep_exact_is_refused() {
         (
             "G21 G90 G18\nG0 X0 Y0 Z-1\nG41 D1\nG1 X10 Z-1 F100\n",
             4,
-            &["offsets the contour in the G18 plane", "normal axis Z", "G17"],
+            &[
+                "offsets the contour in the G18 plane",
+                "normal axis Z",
+                "G17",
+            ],
         ),
         // An arc start-up block cannot stay one block exactly with a sloped map.
         (
             "G21 G90 G17\nG0 X0 Y0 Z-1\nG41 D1\nG3 X10 Y10 I10 J0 F100\n",
             4,
-            &["starts up cutter radius compensation (G41, line 3)", "it is an arc"],
+            &[
+                "starts up cutter radius compensation (G41, line 3)",
+                "it is an arc",
+            ],
         ),
         // A start-up move that crosses the zone edge.
         (
             "G21 G90 G17\nG0 X0 Y0 Z1\nG41 G1 X10 Y0 Z-1 D1 F100\n",
             3,
-            &["starts up cutter radius compensation", "crosses the edge of the zone"],
+            &[
+                "starts up cutter radius compensation",
+                "crosses the edge of the zone",
+            ],
         ),
         // A D word on a move errmap splits: the new offset would be reached too early.
         (
@@ -306,8 +350,11 @@ fn corpus() -> Option<PathBuf> {
     dir.join("rs274-check.sh").is_file().then_some(dir)
 }
 
+/// A canonical motion's end (x, y, z) and, for an arc, its centre.
+type CanonMove = ([f64; 3], Option<(f64, f64)>);
+
 /// STRAIGHT_FEED / ARC_FEED ends (x, y, z) and arc centres of a canonical output.
-fn canon(text: &str) -> Vec<([f64; 3], Option<(f64, f64)>)> {
+fn canon(text: &str) -> Vec<CanonMove> {
     let mut out = Vec::new();
     for l in text.lines() {
         let Some(open) = l.find('(') else { continue };
@@ -411,7 +458,10 @@ fn rs274_offsets_the_compensated_contour_as_the_original_and_moves_only_z() {
             // The contour point the tool centre is offset from is the nearest programmed one,
             // one tool radius away: the offset is the original's. Z = −1 − E there.
             let (q, dist) = nearest_on_contour(p[0], p[1]);
-            assert!((dist - r_tool).abs() < 1e-3, "{p:?}: {dist} from the contour");
+            assert!(
+                (dist - r_tool).abs() < 1e-3,
+                "{p:?}: {dist} from the contour"
+            );
             let want = -1.0 - FIELD.e(q.0, q.1);
             assert!((p[2] - want).abs() < 2e-4, "{p:?}: want Z {want}");
             checked += 1;

@@ -74,17 +74,26 @@ M2
 fn holes_in_the_zone_are_refused_without_the_flag_and_with_g91() {
     let err = run(HOLES, false).unwrap_err();
     assert!(err.contains("h.ngc:3"), "{err}");
-    assert!(err.contains("canned cycle G81: the hole at X10 Y5 ends at Z-1 in the compensation zone"), "{err}");
+    assert!(
+        err.contains("canned cycle G81: the hole at X10 Y5 ends at Z-1 in the compensation zone"),
+        "{err}"
+    );
     assert!(err.contains("--compensate-holes"), "{err}");
     // Given the flag, a G91 series in the zone is refused without suggesting it again.
     let g91 = "G21 G90 G17\nG0 X0 Y0 Z10\nG91 G99 G81 X10 Y5 Z-11 R-8 F100\n";
     let err = run(g91, true).unwrap_err();
-    assert!(err.contains("h.ngc:3") && err.contains("under G91"), "{err}");
+    assert!(
+        err.contains("h.ngc:3") && err.contains("under G91"),
+        "{err}"
+    );
     assert!(!err.contains("--compensate-holes"), "{err}");
     // A through hole: from R2 to Z−5 through the zone [−2, 0], its bottom below it.
     let through = "G21 G90 G17\nG0 X0 Y0 Z10\nG98 G81 X10 Y5 Z-5 R2 F100\n";
     let err = run(through, true).unwrap_err();
-    assert!(err.contains("passes through the compensation zone"), "{err}");
+    assert!(
+        err.contains("passes through the compensation zone"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -102,9 +111,13 @@ fn the_position_after_a_cycle_is_its_retract_level() {
         assert!(out.contains("X30.0000 Y5.0000 Z-1.0525\n"), "{out}");
     }
     // Before G98/G99 is given the retract level is the machine's default: unknown.
-    let text = "G21 G90 G17\nG0 X0 Y0 Z10\nG81 X10 Y5 Z5 R8 F100\nG80\nG1 X20 Y5 F100\nG1 X30 Z-1\n";
+    let text =
+        "G21 G90 G17\nG0 X0 Y0 Z10\nG81 X10 Y5 Z5 R8 F100\nG80\nG1 X20 Y5 F100\nG1 X30 Z-1\n";
     let err = run(text, false).unwrap_err();
-    assert!(err.contains("h.ngc:5") && err.contains("unknown since line 3"), "{err}");
+    assert!(
+        err.contains("h.ngc:5") && err.contains("unknown since line 3"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -158,7 +171,10 @@ fn rs274_drills_each_compensated_hole_to_its_depth_minus_e() {
     // (Rapids differ: between holes of different E the control adds a µm traverse to the new
     // R level.) Every rapid stays over a point the original visits.
     let feeds = |m: &[(String, [f64; 3])]| -> Vec<[f64; 3]> {
-        m.iter().filter(|(k, _)| k == "STRAIGHT_FEED").map(|(_, p)| *p).collect()
+        m.iter()
+            .filter(|(k, _)| k == "STRAIGHT_FEED")
+            .map(|(_, p)| *p)
+            .collect()
     };
     let (of, nf) = (feeds(&orig), feeds(&new));
     assert_eq!(of.len(), nf.len());
@@ -189,7 +205,10 @@ fn after_g28_and_g53_only_the_named_axes_are_unknown() {
     // Without the absolute Z the cut is refused, naming the G28 line.
     let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG91 G28 Z0\nG90 G1 X20 F100\n";
     let err = run(text, false).unwrap_err();
-    assert!(err.contains("h.ngc:4") && err.contains("unknown since line 3"), "{err}");
+    assert!(
+        err.contains("h.ngc:4") && err.contains("unknown since line 3"),
+        "{err}"
+    );
     // G53 moves the named axes in machine coordinates: here Z only.
     let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG53 G0 Z0\nG0 Z5\nG1 Z-1 F100\nG1 X20\nM2\n";
     let out = run(text, false).unwrap();
@@ -197,5 +216,8 @@ fn after_g28_and_g53_only_the_named_axes_are_unknown() {
     // With no axis word LinuxCNC's G28 sends every axis home: X and Y are unknown after it.
     let text = "G21 G90 G17\nG0 X10 Y5 Z10\nG28\nG0 Z5\nG1 Z-1 F100\n";
     let err = run(text, false).unwrap_err();
-    assert!(err.contains("h.ngc:5") && err.contains("unknown since line 3"), "{err}");
+    assert!(
+        err.contains("h.ngc:5") && err.contains("unknown since line 3"),
+        "{err}"
+    );
 }

@@ -76,12 +76,18 @@ M30
 fn a_second_offset_is_refused_in_the_zone_without_the_flag() {
     let err = run(PLATE, Dialect::Linuxcnc, false).unwrap_err();
     assert!(err.contains("o.nc:8"), "{err}");
-    assert!(err.contains("`G55` (line 6) selects a work offset other than the program's first (G54)"), "{err}");
+    assert!(
+        err.contains("`G55` (line 6) selects a work offset other than the program's first (G54)"),
+        "{err}"
+    );
     assert!(err.contains("--same-part-per-offset"), "{err}");
     // Fanuc G54.1 P1 and P2 are two offsets, not one.
     let fanuc = "O1\nG21 G90 G17\nG54.1 P1\nG0 X10. Y5. Z5.\nG54.1 P2\nG0 X10. Y5. Z5.\nG1 Z-1. F100.\nM30\n";
     let err = run(fanuc, Dialect::Fanuc, false).unwrap_err();
-    assert!(err.contains("o.nc:7") && err.contains("`G54.1 P2` (line 5)"), "{err}");
+    assert!(
+        err.contains("o.nc:7") && err.contains("`G54.1 P2` (line 5)"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -94,7 +100,10 @@ fn the_position_is_unknown_after_an_offset_change() {
         "G21 G90 G17\nG54\nG0 X10 Y5 Z-1\nG55\nG54\nG1 X20 F100\n",
     ] {
         let err = run(text, Dialect::Linuxcnc, true).unwrap_err();
-        assert!(err.contains("the start point of this move is unknown since line"), "{err}");
+        assert!(
+            err.contains("the start point of this move is unknown since line"),
+            "{err}"
+        );
     }
 }
 
@@ -103,11 +112,20 @@ fn fadal_e_words_are_fixture_offsets_and_g187_is_not_one() {
     // Fadal: E1 selects fixture offset 1 (the map's), E2 another one.
     let text = "O1\nG21 G90 G17\nG0 X10. Y5. Z5. E1\nG1 Z-1. F100.\nG0 Z5.\nG0 X10. Y5. E2\nG1 Z-1.\nM30\n";
     let err = run(text, Dialect::Fanuc, false).unwrap_err();
-    assert!(err.contains("o.nc:7") && err.contains("`E2` (line 6) selects a work offset other than the program's first (E1)"), "{err}");
+    assert!(
+        err.contains("o.nc:7")
+            && err.contains(
+                "`E2` (line 6) selects a work offset other than the program's first (E1)"
+            ),
+        "{err}"
+    );
     // Haas G187 E.635: a tolerance, not an offset; the cut is followed (E(10) = 0.03).
     let text = "O1\nG21 G90 G17\nG187 P2 E.635\nG0 X10. Y5. Z5.\nG1 Z-1. F100.\nM30\n";
     let out = run(text, Dialect::Fanuc, false).unwrap();
-    assert!(out.contains("G187 P2 E.635\n") && out.contains("Z-1.0300"), "{out}");
+    assert!(
+        out.contains("G187 P2 E.635\n") && out.contains("Z-1.0300"),
+        "{out}"
+    );
 }
 
 #[test]
@@ -115,15 +133,33 @@ fn labels_variables_and_hints_read_as_a_machinist_names_them() {
     // A Sinumerik label on its own block is a label (copied), not an unknown instruction.
     let text = "G71 G90 G17\nG0 X10 Y5 Z5\nMETKA1:\nG1 Z-1 F100\nM30\n";
     let out = run(text, Dialect::Sinumerik, false).unwrap();
-    assert!(out.contains("\nMETKA1:\nG1 X10.0000 Y5.0000 Z0.0000 F100\n"), "{out}");
+    assert!(
+        out.contains("\nMETKA1:\nG1 X10.0000 Y5.0000 Z0.0000 F100\n"),
+        "{out}"
+    );
     // A variable on a move in the zone is named.
     let text = "G21 G90 G17\n#<z>=-1\nG0 X10 Y5 Z5\nG1 Z#<z> F100\n";
     let err = run(text, Dialect::Linuxcnc, false).unwrap_err();
-    assert!(err.contains("`Z#<z>` reads the variable #<z>") && err.contains("--expand"), "{err}");
+    assert!(
+        err.contains("`Z#<z>` reads the variable #<z>") && err.contains("--expand"),
+        "{err}"
+    );
     let text = "G71 G90 G17\nR1=-1\nG0 X10 Y5 Z5\nG1 Z=R1+0 F100\n";
     let err = run(text, Dialect::Sinumerik, false).unwrap_err();
     assert!(err.contains("reads the variable R1"), "{err}");
     // The dialect was given: the hint does not ask for it again.
     let err = run("G21 G90\nG0 X0 Y0 Z5 E1\n", Dialect::Linuxcnc, false).unwrap_err();
-    assert!(err.contains("E is not a LinuxCNC word") && !err.contains("--dialect"), "{err}");
+    assert!(
+        err.contains("E is not a LinuxCNC word") && !err.contains("--dialect"),
+        "{err}"
+    );
+}
+
+#[test]
+fn selecting_the_active_offset_again_changes_nothing() {
+    // `G54` again (posts repeat it with every tool) keeps the position: the cut is followed.
+    let text = "G21 G90 G17\nG54\nG0 X10 Y5 Z-1\nG54 G1 X20 F100\nM30\n";
+    let out = run(text, Dialect::Linuxcnc, false).unwrap();
+    // E(20) = 0.04 at the end of the cut (a step to −E(10) first).
+    assert!(out.contains("X20.0000 Y5.0000 Z-1.0400"), "{out}");
 }

@@ -57,7 +57,10 @@ impl<'a> Rewriter<'a> {
     }
 
     pub(super) fn comp_mode(&self, in_plane: bool) -> CompMode {
-        match (self.comp_sensitive(), self.comp_transition.is_some() && in_plane) {
+        match (
+            self.comp_sensitive(),
+            self.comp_transition.is_some() && in_plane,
+        ) {
             (false, _) => CompMode::Off,
             (true, true) => CompMode::Transition,
             (true, false) => CompMode::Contour,
@@ -78,8 +81,9 @@ impl<'a> Rewriter<'a> {
         mode: CompMode,
     ) -> Result<()> {
         let (a1, a2, _) = self.plane.axes();
-        let same_plane =
-            |p: &[f64; 3], q: &[f64; 3]| (p[a1] - q[a1]).abs() <= 1e-9 && (p[a2] - q[a2]).abs() <= 1e-9;
+        let same_plane = |p: &[f64; 3], q: &[f64; 3]| {
+            (p[a1] - q[a1]).abs() <= 1e-9 && (p[a2] - q[a2]).abs() <= 1e-9
+        };
         let Some(&last) = emitted.last() else {
             return Ok(());
         };
@@ -341,7 +345,10 @@ impl<'a> Rewriter<'a> {
 fn on_arc(arc: &Arc, a: &[f64; 3], b: &[f64; 3], f: f64) -> [f64; 3] {
     let (a1, a2, ax) = arc.plane.axes();
     let (c1, c2) = arc.centre;
-    let (ta, tb) = ((a[a2] - c2).atan2(a[a1] - c1), (b[a2] - c2).atan2(b[a1] - c1));
+    let (ta, tb) = (
+        (a[a2] - c2).atan2(a[a1] - c1),
+        (b[a2] - c2).atan2(b[a1] - c1),
+    );
     let tau = std::f64::consts::TAU;
     let sweep = if arc.sweep >= 0.0 {
         (tb - ta).rem_euclid(tau)

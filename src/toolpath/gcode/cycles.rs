@@ -55,7 +55,13 @@ impl<'a> Rewriter<'a> {
     }
 
     /// A block under a canned cycle: refused, copied or written, and the position after it.
-    pub(super) fn canned(&mut self, line: &Line, words: &[W], start: [Option<f64>; 3], end: [Option<f64>; 3]) -> Result<()> {
+    pub(super) fn canned(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        start: [Option<f64>; 3],
+        end: [Option<f64>; 3],
+    ) -> Result<()> {
         let (a1, a2, ax) = self.plane.axes();
         let code = self.motion.map_or(GCode::whole(81), |m| m.code);
         let first = self.cycle.is_none();
@@ -144,7 +150,14 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Decide a hole: copy it, write it with its own levels, or refuse it.
-    fn hole(&self, line: &Line, words: &[W], cyc: &Cycle, touches: bool, bottom: [Option<f64>; 3]) -> Result<Hole> {
+    fn hole(
+        &self,
+        line: &Line,
+        words: &[W],
+        cyc: &Cycle,
+        touches: bool,
+        bottom: [Option<f64>; 3],
+    ) -> Result<Hole> {
         let name = cyc.code.to_string();
         let drills = matches!(cyc.code.number, 73 | 81..=89) && cyc.code.decimal == 0;
         let known = |p: [Option<f64>; 3]| Some([p[0]?, p[1]?, p[2]?]);
@@ -173,7 +186,9 @@ impl<'a> Rewriter<'a> {
             return Err(self.err(
                 line,
                 &name,
-                format!("canned cycle {name} in the compensation zone cannot be compensated: {why}"),
+                format!(
+                    "canned cycle {name} in the compensation zone cannot be compensated: {why}"
+                ),
                 "expand the cycle into G0/G1 moves with your CAM post (or move the zone away)",
             ));
         };
@@ -201,7 +216,10 @@ impl<'a> Rewriter<'a> {
         if !self.compensable(b[u], b[v]) {
             return Ok(keep);
         }
-        if let Some((lo, hi)) = self.zone_now().filter(|(lo, hi)| depth < *lo || depth > *hi) {
+        if let Some((lo, hi)) = self
+            .zone_now()
+            .filter(|(lo, hi)| depth < *lo || depth > *hi)
+        {
             if r.min(depth) <= hi && r.max(depth) >= lo {
                 return Err(self.err(
                     line,

@@ -189,11 +189,11 @@ impl<'a> Rewriter<'a> {
                 }
                 G::Distance(a) => self.absolute = a,
                 G::ArcDistance(a) => self.arc_absolute = a,
-                G::CutterComp(false) => {
-                    if self.cutter_comp.take().is_some() {
-                        self.comp_transition = Some((line.number, code.to_string()));
-                    }
+                // G40 after G41/G42: the next move in the plane is the cancel block.
+                G::CutterComp(false) if self.cutter_comp.take().is_some() => {
+                    self.comp_transition = Some((line.number, code.to_string()));
                 }
+                G::CutterComp(false) => {}
                 G::CutterComp(true) => {
                     self.cutter_comp = Some((line.number, code.to_string()));
                     self.comp_transition = Some((line.number, code.to_string()));
@@ -224,13 +224,25 @@ impl<'a> Rewriter<'a> {
     /// offset's coordinates). Either way the machine stays put while its work coordinates
     /// change by offsets the program does not show: the position is unknown after a change.
     fn work_offset(&mut self, line: &Line, words: &[W], code: GCode) {
-        // `G54.1 P3` (Fanuc additional offsets) is its P, not G54.1.
+        let id = self.offset_id(words, code);
+        self.select_offset(line, id);
+    }
+
+    /// The name of a work offset: `G55`; `G54.1 P3` (Fanuc additional offsets are their P).
+    fn offset_id(&self, words: &[W], code: GCode) -> String {
         let p = words
             .iter()
-            .find(|w| w.letter == b'P' && code == GCode { number: 54, decimal: 1 })
+            .find(|w| {
+                w.letter == b'P'
+                    && code
+                        == GCode {
+                            number: 54,
+                            decimal: 1,
+                        }
+            })
             .map(|w| format!(" P{}", self.wtext(w).get(1..).unwrap_or("")))
             .unwrap_or_default();
-        self.select_offset(line, format!("{code}{p}"));
+        format!("{code}{p}")
     }
 
     /// Fadal `E1`…`E48` (and `E0`, none) select fixture offsets; on a Haas line with G187 the
@@ -242,7 +254,11 @@ impl<'a> Rewriter<'a> {
         let other_use = words
             .iter()
             .any(|w| matches!(w.g.map(|(c, _)| (c.number, c.decimal)), Some((187 | 33, 0))));
-        if let Some(w) = words.iter().find(|w| w.letter == b'E').filter(|_| !other_use) {
+        if let Some(w) = words
+            .iter()
+            .find(|w| w.letter == b'E')
+            .filter(|_| !other_use)
+        {
             let id = self.wtext(w).to_ascii_uppercase();
             self.select_offset(line, id);
         }
@@ -267,8 +283,21 @@ impl<'a> Rewriter<'a> {
     /// Whether the block selects a work offset other than the active one (after a compensated
     /// cut, the return step must come before it, in the coordinates it was cut in).
     pub(super) fn changes_offset(&self, words: &[W]) -> bool {
-        let fadal = self.dialect == Dialect::Fanuc && words.iter().any(|w| w.letter == b'E');
-        (fadal || words.iter().any(|w| w.g() == Some(G::WorkOffset))) && self.active_offset.is_some()
+        let Some(active) = &self.active_offset else {
+            return false;
+        };
+        let fadal = self.dialect == Dialect::Fanuc
+            && !words
+                .iter()
+                .any(|w| matches!(w.g.map(|(c, _)| (c.number, c.decimal)), Some((187 | 33, 0))))
+            && words
+                .iter()
+                .any(|w| w.letter == b'E' && self.wtext(w).to_ascii_uppercase() != *active);
+        fadal
+            || words.iter().any(|w| match w.g {
+                Some((code, G::WorkOffset)) => self.offset_id(words, code) != *active,
+                _ => false,
+            })
     }
 
     /// Non-motion codes that take axis words (G92, G52, G68, G51, G10, G28 …): followed where
@@ -549,7 +578,10 @@ impl<'a> Rewriter<'a> {
                             "write numbers with a decimal point (e.g. X20.5)".to_string(),
                         ),
                         _ => (
-                            format!("`{here}` is not a word errmap can read in the {} dialect", self.dialect.name()),
+                            format!(
+                                "`{here}` is not a word errmap can read in the {} dialect",
+                                self.dialect.name()
+                            ),
                             self.or_dialect("fix or remove it (a word is a letter and a number)"),
                         ),
                     };

@@ -62,7 +62,17 @@ fn variable_in(word: &str, dialect: Dialect) -> Option<String> {
             let name = &body[start..i];
             let function = matches!(
                 name.to_ascii_uppercase().as_str(),
-                "SIN" | "COS" | "TAN" | "SQRT" | "ABS" | "AC" | "IC" | "ATAN2" | "POT" | "TRUNC" | "ROUND"
+                "SIN"
+                    | "COS"
+                    | "TAN"
+                    | "SQRT"
+                    | "ABS"
+                    | "AC"
+                    | "IC"
+                    | "ATAN2"
+                    | "POT"
+                    | "TRUNC"
+                    | "ROUND"
             );
             if !function {
                 return Some(name.to_string());
