@@ -474,3 +474,27 @@ fn rs274_offsets_the_compensated_contour_as_the_original_and_moves_only_z() {
     assert_eq!(orig.last().unwrap().0, new.last().unwrap().0);
     std::fs::remove_dir_all(&work).ok();
 }
+
+#[test]
+fn a_piece_that_rounds_to_no_plane_motion_is_merged_into_the_next() {
+    // The ramp X0 Z1 → X8 Z−1 (8.25 mm) is split at its middle, X4 Z0, and enters the zone
+    // (Z ≤ 0.000005) at X3.99998, 0.02 µm before it: as written (4 decimals) both are X4.0000,
+    // and the step to −E between them would be a block without X/Y motion.
+    let text = "G21 G90 G17\nG0 X-5 Y0 Z1\nG41 D1\nG1 X0 Y0 F100\nG1 X8 Y0 Z-1\nG1 X15 Y0\nG0 Z5\nG40\nM2\n";
+    let mut s = settings((-2.0, 0.000005), 0.005);
+    s.max_segment = 5.0;
+    let (out, _) = compensate_gcode(text, Path::new("ramp.ngc"), &FIELD, &s).unwrap();
+    println!("{out}");
+    let mv = moves(&out);
+    let on = mv.iter().position(|m| m.line == "G1 X0 Y0 F100").unwrap();
+    for m in &mv[on + 1..] {
+        if m.line.starts_with("G0") {
+            break;
+        }
+        let d = (m.end[0] - m.start[0]).hypot(m.end[1] - m.start[1]);
+        assert!(d > 1e-9, "a block without X/Y motion under G41: {}", m.line);
+    }
+    // By hand: the ramp ends at Z−1 − E(8, 0) = −1.028, the run after it at −1 − E(15, 0).
+    assert!(out.contains("G1 X8.0000 Y0.0000 Z-1.0280\n"), "{out}");
+    assert!(out.contains("G1 X15.0000 Y0.0000 Z-1.0350\n"), "{out}");
+}

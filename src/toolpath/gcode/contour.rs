@@ -132,7 +132,7 @@ impl<'a> Rewriter<'a> {
             if let Some(e) = e {
                 q[self.normal] -= e;
             }
-            self.contour_segment(q, centre, motion, &mut out_pos, &mut segs);
+            self.contour_segment(q, centre, motion, in_plane, &mut out_pos, &mut segs);
         }
         if segs.spans.is_empty() {
             segs.spans.push(0..0);
@@ -144,7 +144,19 @@ impl<'a> Rewriter<'a> {
             self.report.moves_split += 1;
         }
         self.report.segments_emitted += nseg as u64;
-        self.offset = last_e.map_or(0.0, |e| -e);
+        // Where the output stands against the original's end: −E of the last piece, unless a
+        // piece too short to move in the plane as written was left out.
+        let end_n = pieces
+            .last()
+            .map_or(s[self.normal], |(p, _)| p[self.normal]);
+        let written_off = out_pos[self.normal] - end_n;
+        let half_digit = 0.5 * 10f64.powi(-(self.decimals() as i32));
+        let e_last = last_e.unwrap_or(0.0);
+        self.offset = if (written_off + e_last).abs() <= half_digit {
+            -e_last
+        } else {
+            written_off
+        };
         self.segments = segs;
         Ok(())
     }

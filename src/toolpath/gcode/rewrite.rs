@@ -168,12 +168,14 @@ impl<'a> Rewriter<'a> {
 
     /// One piece of a contour under cutter radius compensation to `q`: a G1, or with `centre`
     /// an arc about it (G2/G3 with the plane's centre words, incremental from the piece's
-    /// rounded start unless G90.1), unless it rounds to no motion.
+    /// rounded start unless G90.1), unless it rounds to no motion — or, with `in_plane`, to no
+    /// motion in the plane (a Z-only block the control's compensation must not see).
     pub(super) fn contour_segment(
         &mut self,
         q: [f64; 3],
         centre: Option<(f64, f64)>,
         motion: MotionMode,
+        in_plane: bool,
         out_pos: &mut [f64; 3],
         segs: &mut Segments,
     ) {
@@ -194,7 +196,16 @@ impl<'a> Rewriter<'a> {
                 now == Some(0)
             }
         });
-        if zero {
+        let (a1, a2, _) = self.plane.axes();
+        let still = |i: usize| {
+            let now = decimal_units(written[i].1, d);
+            if self.absolute {
+                now == decimal_units(out_pos[i], d)
+            } else {
+                now == Some(0)
+            }
+        };
+        if zero || (in_plane && still(a1) && still(a2)) {
             return;
         }
         let from = *out_pos;
