@@ -81,10 +81,11 @@ fn compensate_writes_the_program_and_reports() {
         "{text}"
     );
 
-    // A refusal names file:line and exits 2; nothing is written.
+    // A refusal names file:line and exits 2; nothing is written (G41 offsets in ZX under G18,
+    // which a Z map would change).
     std::fs::write(
         dir.join("comp.ngc"),
-        "G21 G0 X10 Y10 Z-1\nG41 D1\nG1 X20 F100\n",
+        "G21 G18 G0 X10 Y10 Z-1\nG41 D1\nG1 X20 F100\n",
     )
     .unwrap();
     let out = errmap(

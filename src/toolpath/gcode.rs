@@ -3,6 +3,8 @@
 //!
 //! Lines that are not rewritten are copied byte for byte from the input. See `docs/toolpath.md`.
 
+mod contour;
+mod cycles;
 mod emit;
 mod format;
 mod modal;
@@ -114,6 +116,13 @@ struct Rewriter<'a> {
     plane: Plane,
     motion: Option<MotionMode>,
     cutter_comp: Option<(u64, String)>,
+    /// G41/G42/G40 given, and the block that starts up or cancels the offset (the next move
+    /// in the plane) not yet read: its line and code.
+    comp_transition: Option<(u64, String)>,
+    /// The canned-cycle series in progress, and the retract mode (G99: R level; G98: initial
+    /// level; `None` before either).
+    cycle: Option<cycles::Cycle>,
+    retract_to_r: Option<bool>,
     params: Params,
     // Output state: the output position differs from `pos` only along the normal, by `offset`.
     offset: f64,
@@ -143,7 +152,9 @@ struct Rewriter<'a> {
     /// Transformations errmap does not follow, with the line and word that started them.
     frames: Vec<(Frame, u64, String)>,
     /// The first work offset selected (the map's coordinates); another one is a frame.
-    first_offset: Option<GCode>,
+    first_offset: Option<String>,
+    /// The work offset selected now (`G55`, `G54.1 P3`), `None` before the first selection.
+    active_offset: Option<String>,
     /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
     flow: Option<(u64, String)>,
     /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
@@ -215,6 +226,9 @@ impl<'a> Rewriter<'a> {
             plane: Plane::G17,
             motion: None,
             cutter_comp: None,
+            comp_transition: None,
+            cycle: None,
+            retract_to_r: None,
             params: Params::new(),
             offset: 0.0,
             standing: Standing {
@@ -239,6 +253,7 @@ impl<'a> Rewriter<'a> {
             local: [0.0; 3],
             frames: Vec::new(),
             first_offset: None,
+            active_offset: None,
             flow: None,
             programs: 0,
             m99: None,

@@ -6,9 +6,11 @@
 //! split to at most `max_segment`, arcs are linearised within `chord_tol`, and every emitted
 //! point in the zone gets P' = P − E(P) along the normal. Where a move enters or leaves the zone
 //! or domain it is split at the boundary: the outside part keeps the original coordinates and a
-//! short step along the normal joins it to the compensated part. What cannot be compensated
-//! safely in the zone (cutter compensation, parameters, expressions, O-word blocks, polar
-//! coordinates, canned cycles, unknown start points) is refused with an error naming file:line.
+//! short step along the normal joins it to the compensated part. Cutter radius compensation is
+//! followed when the map normal is the tool axis, drilling cycles under G90 (their holes with
+//! `--compensate-holes`). What cannot be compensated safely in the zone (parameters,
+//! expressions, O-word blocks, polar coordinates, G91 cycles, unknown start points …) is
+//! refused with an error naming file:line.
 //! `docs/toolpath.md` has the details and a worked example.
 
 mod arc;

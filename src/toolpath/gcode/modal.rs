@@ -35,6 +35,18 @@ pub(super) fn refuse_klartext(text: &str, source: &Path, dialect: Dialect) -> Re
     Ok(())
 }
 
+/// A Sinumerik jump label on a block of its own (`METKA1:`): a name of letters, digits and
+/// underscores, starting with a letter or underscore, ending in a colon. Words after it on the
+/// same block are not a label: errmap refuses them as an instruction it does not follow.
+fn is_label(body: &str) -> bool {
+    let Some(name) = body.trim().strip_suffix(':') else {
+        return false;
+    };
+    name.len() >= 2
+        && name.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
 /// The first jump of the program (Fanuc `GOTO`, Sinumerik `GOTOF`/`GOTOB`/`GOTO`/loops): after
 /// one, a block may run any number of times, so no cut in the zone can be vouched for.
 pub(super) fn first_jump(text: &str, line: &Line, dialect: Dialect) -> Option<(u64, String)> {
@@ -61,6 +73,15 @@ pub(super) fn first_jump(text: &str, line: &Line, dialect: Dialect) -> Option<(u
 }
 
 impl<'a> Rewriter<'a> {
+    /// A hint, with "or pass the program's --dialect" unless the dialect was given.
+    pub(super) fn or_dialect(&self, hint: &str) -> String {
+        if self.settings.dialect.is_some() {
+            hint.to_string()
+        } else {
+            format!("{hint}, or pass the program's --dialect")
+        }
+    }
+
     /// The units became known (a unit code, or `--units`).
     pub(super) fn set_units_known(&mut self) {
         self.units_known = true;
@@ -111,7 +132,7 @@ impl<'a> Rewriter<'a> {
                         self.wtext(w),
                         self.dialect.name()
                     ),
-                    "expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect), or pass the program's --dialect",
+                    &self.or_dialect("expand it into G0/G1/G2/G3 moves (docs/toolpath.md lists the codes of each dialect)"),
                 ));
             }
         }
@@ -168,17 +189,16 @@ impl<'a> Rewriter<'a> {
                 }
                 G::Distance(a) => self.absolute = a,
                 G::ArcDistance(a) => self.arc_absolute = a,
-                G::CutterComp(false) => self.cutter_comp = None,
+                // G40 after G41/G42: the next move in the plane is the cancel block.
+                G::CutterComp(false) if self.cutter_comp.take().is_some() => {
+                    self.comp_transition = Some((line.number, code.to_string()));
+                }
+                G::CutterComp(false) => {}
                 G::CutterComp(true) => {
                     self.cutter_comp = Some((line.number, code.to_string()));
+                    self.comp_transition = Some((line.number, code.to_string()));
                 }
-                G::WorkOffset => match self.first_offset {
-                    None => self.first_offset = Some(code),
-                    Some(c) if c == code => self.frames.retain(|f| f.0 != Frame::WorkOffset),
-                    Some(_) => self
-                        .frames
-                        .push((Frame::WorkOffset, line.number, code.to_string())),
-                },
+                G::WorkOffset => self.work_offset(line, words, code),
                 _ => {}
             }
         }
@@ -197,6 +217,87 @@ impl<'a> Rewriter<'a> {
             self.set_units_known();
             self.fix_zone();
         }
+    }
+
+    /// A work offset selected. The map is in the first one's coordinates: another is a frame
+    /// errmap refuses cuts under, unless `--same-part-per-offset` (the map applies in each
+    /// offset's coordinates). Either way the machine stays put while its work coordinates
+    /// change by offsets the program does not show: the position is unknown after a change.
+    fn work_offset(&mut self, line: &Line, words: &[W], code: GCode) {
+        let id = self.offset_id(words, code);
+        self.select_offset(line, id);
+    }
+
+    /// The name of a work offset: `G55`; `G54.1 P3` (Fanuc additional offsets are their P).
+    fn offset_id(&self, words: &[W], code: GCode) -> String {
+        let p = words
+            .iter()
+            .find(|w| {
+                w.letter == b'P'
+                    && code
+                        == GCode {
+                            number: 54,
+                            decimal: 1,
+                        }
+            })
+            .map(|w| format!(" P{}", self.wtext(w).get(1..).unwrap_or("")))
+            .unwrap_or_default();
+        format!("{code}{p}")
+    }
+
+    /// Fadal `E1`…`E48` (and `E0`, none) select fixture offsets; on a Haas line with G187 the
+    /// E word is G187's tolerance, and with G33 a thread lead.
+    pub(super) fn fadal_offset(&mut self, line: &Line, words: &[W]) {
+        if self.dialect != Dialect::Fanuc {
+            return;
+        }
+        let other_use = words
+            .iter()
+            .any(|w| matches!(w.g.map(|(c, _)| (c.number, c.decimal)), Some((187 | 33, 0))));
+        if let Some(w) = words
+            .iter()
+            .find(|w| w.letter == b'E')
+            .filter(|_| !other_use)
+        {
+            let id = self.wtext(w).to_ascii_uppercase();
+            self.select_offset(line, id);
+        }
+    }
+
+    /// Select the work offset `id` (see [`Self::work_offset`]).
+    fn select_offset(&mut self, line: &Line, id: String) {
+        if self.active_offset.as_ref().is_some_and(|a| *a != id) {
+            self.pos = [None; 3];
+            self.unknown_since = Some(line.number);
+        }
+        self.active_offset = Some(id.clone());
+        match &self.first_offset {
+            None => self.first_offset = Some(id),
+            Some(f) if *f == id || self.settings.same_part_per_offset => {
+                self.frames.retain(|f| f.0 != Frame::WorkOffset)
+            }
+            Some(_) => self.frames.push((Frame::WorkOffset, line.number, id)),
+        }
+    }
+
+    /// Whether the block selects a work offset other than the active one (after a compensated
+    /// cut, the return step must come before it, in the coordinates it was cut in).
+    pub(super) fn changes_offset(&self, words: &[W]) -> bool {
+        let Some(active) = &self.active_offset else {
+            return false;
+        };
+        let fadal = self.dialect == Dialect::Fanuc
+            && !words
+                .iter()
+                .any(|w| matches!(w.g.map(|(c, _)| (c.number, c.decimal)), Some((187 | 33, 0))))
+            && words
+                .iter()
+                .any(|w| w.letter == b'E' && self.wtext(w).to_ascii_uppercase() != *active);
+        fadal
+            || words.iter().any(|w| match w.g {
+                Some((code, G::WorkOffset)) => self.offset_id(words, code) != *active,
+                _ => false,
+            })
     }
 
     /// Non-motion codes that take axis words (G92, G52, G68, G51, G10, G28 …): followed where
@@ -260,6 +361,19 @@ impl<'a> Rewriter<'a> {
                     format!("`{word}` calls a macro whose moves errmap cannot follow"),
                     "expand the macro into the program",
                 ))
+            }
+            G::Home => {
+                // G28/G30 (Sinumerik G74/G75) move the named axes, through the intermediate
+                // point, to a machine position errmap does not know in work coordinates; the
+                // others stay. With no axis word LinuxCNC sends every axis home.
+                let named: Vec<usize> = (0..3).filter(|&i| find(AXES[i]).is_some()).collect();
+                if named.is_empty() {
+                    self.pos = [None; 3];
+                }
+                for i in named {
+                    self.pos[i] = None;
+                }
+                self.unknown_since = Some(line.number);
             }
             _ => {
                 self.pos = [None; 3];
@@ -400,6 +514,7 @@ impl<'a> Rewriter<'a> {
                 | "COMPON" | "COMPOF" | "CYCLE832" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA"
                 | "G642" | "G641",
             ) => Ok(true),
+            (Dialect::Sinumerik, _) if is_label(body) => Ok(false),
             (Dialect::Sinumerik, _) if self.flow.as_ref().is_some_and(|(l, _)| *l <= line.number) => Ok(false),
             _ => refuse(
                 format!("`{}`: errmap does not follow the {} instruction {name}, which may move the machine or change its coordinates", body.trim(), self.dialect.name()),
@@ -463,8 +578,11 @@ impl<'a> Rewriter<'a> {
                             "write numbers with a decimal point (e.g. X20.5)".to_string(),
                         ),
                         _ => (
-                            format!("`{here}` is not a word errmap can read in the {} dialect", self.dialect.name()),
-                            "fix or remove it (a word is a letter and a number), or pass the program's --dialect".to_string(),
+                            format!(
+                                "`{here}` is not a word errmap can read in the {} dialect",
+                                self.dialect.name()
+                            ),
+                            self.or_dialect("fix or remove it (a word is a letter and a number)"),
                         ),
                     };
                     return Err(self.err(line, here, msg, &hint));
@@ -476,7 +594,7 @@ impl<'a> Rewriter<'a> {
                             line,
                             here.trim(),
                             format!("`{}`: E is not a LinuxCNC word", here.trim()),
-                            "remove it, or pass the program's --dialect",
+                            &self.or_dialect("remove it"),
                         ));
                     }
                     if l != b'G' && l != b'M' {

@@ -1,9 +1,10 @@
 //! One block's move: its G codes applied to the modal state, its start and end, what forbids compensating it (refusals in the zone), and the hand-off to the rewriter or to a byte-for-byte copy.
 
 use super::super::arc::Arc;
-use super::super::dialect::{Dialect, Motion, PowerOnMotion, G};
+use super::super::dialect::{Dialect, Frame, Motion, PowerOnMotion, G};
 use super::super::lexer::{Line, TokenKind};
 use super::super::TracedMove;
+use super::contour::CompMode;
 use super::emit::{emit_curve, Breaks};
 use super::{dist, lerp, MotionMode, Rewriter, AXES, W};
 use crate::error::{Error, Result};
@@ -33,6 +34,56 @@ struct Move<'w> {
     block_delete: bool,
 }
 
+/// The first user variable a word reads: LinuxCNC/Fanuc `#100`, `#<name>`; Sinumerik `R1` or
+/// a named variable.
+fn variable_in(word: &str, dialect: Dialect) -> Option<String> {
+    if let Some(at) = word.find('#') {
+        let rest = &word[at + 1..];
+        let len = if rest.starts_with('<') {
+            rest.find('>').map_or(rest.len(), |e| e + 1)
+        } else {
+            rest.bytes().take_while(u8::is_ascii_digit).count()
+        };
+        return Some(format!("#{}", &rest[..len]));
+    }
+    if dialect != Dialect::Sinumerik {
+        return None;
+    }
+    // After the axis letter and `=`: the first identifier (R-parameter or named variable).
+    let body = word.get(1..)?.trim_start_matches('=');
+    let bytes = body.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i].is_ascii_alphabetic() || bytes[i] == b'_' {
+            let start = i;
+            while i < bytes.len() && (bytes[i].is_ascii_alphanumeric() || bytes[i] == b'_') {
+                i += 1;
+            }
+            let name = &body[start..i];
+            let function = matches!(
+                name.to_ascii_uppercase().as_str(),
+                "SIN"
+                    | "COS"
+                    | "TAN"
+                    | "SQRT"
+                    | "ABS"
+                    | "AC"
+                    | "IC"
+                    | "ATAN2"
+                    | "POT"
+                    | "TRUNC"
+                    | "ROUND"
+            );
+            if !function {
+                return Some(name.to_string());
+            }
+        } else {
+            i += 1;
+        }
+    }
+    None
+}
+
 fn is_axis(letter: u8) -> bool {
     matches!(
         letter,
@@ -45,16 +96,26 @@ impl<'a> Rewriter<'a> {
     /// group-0 code, no motion, a move errmap copies, or a move it compensates.
     pub(super) fn block(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
         self.check_g_words(line, words_in)?;
+        if self.offset != 0.0 && self.changes_offset(words_in) {
+            // Back to the program's Z in the offset the cut was made in.
+            self.return_if_needed(line, &[], true)?;
+        }
         self.modal(line, words_in);
+        self.fadal_offset(line, words_in);
         let gs = || words_in.iter().filter_map(|w| w.g.map(|(c, g)| (w, c, g)));
         let scaled = self.fanuc_numbers(line, words_in)?;
         let words: &[W] = scaled.as_deref().unwrap_or(words_in);
         let motion_word = gs().find(|(_, _, g)| g.is_motion());
+        self.retract_mode(words_in);
         if let Some((_, code, g)) = motion_word {
             self.motion = match g {
                 G::Motion(kind) => Some(MotionMode { kind, code }),
                 _ => None,
             };
+            if g != G::Motion(Motion::Canned) {
+                // G80 or another motion mode ends the canned-cycle series.
+                self.cycle = None;
+            }
         }
         let group0 = gs().find(|(_, _, g)| {
             matches!(
@@ -94,18 +155,36 @@ impl<'a> Rewriter<'a> {
         };
         self.fix_zone();
         let mv = self.classify(line, words, motion, g53);
+        if motion.kind == Motion::Canned && !mv.block_delete && mv.polar.is_none() {
+            if self.trace.is_some() {
+                self.trace_move(line, words, &mv)?;
+            }
+            return self.canned(line, words, mv.start, mv.end);
+        }
+        if motion.kind == Motion::Canned {
+            if let Some(c) = self.cycle.as_mut() {
+                c.forget_levels();
+            }
+        }
         if let Some((col, msg, hint)) = self.refusal(words, &mv) {
             return Err(self.err(line, &col, msg, hint));
         }
         if self.trace.is_some() {
             self.trace_move(line, words, &mv)?;
         }
-        if !self.plain(&mv) {
+        let in_plane = self.moves_in_plane(&mv.start, &mv.end);
+        let result = if !self.plain(&mv) {
             // Not compensable, but shown above not to touch the zone: copy as is.
             let end = self.end_after_unfollowed(&mv);
-            return self.finish_unchanged(line, words, end);
+            self.finish_unchanged(line, words, end)
+        } else {
+            self.compensate_move(line, words, &mv, in_plane)
+        };
+        if in_plane {
+            // The start-up or cancel block of cutter radius compensation has run.
+            self.comp_transition = None;
         }
-        self.compensate_move(line, words, &mv)
+        result
     }
 
     /// The motion of a block with axis words before any motion word: LinuxCNC refuses such a
@@ -279,6 +358,14 @@ impl<'a> Rewriter<'a> {
 
     /// The program's state forbids compensating (a frame, a jump, a loop, cutter compensation).
     fn context_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
+        if let Some((Frame::WorkOffset, fl, fw)) = self.frames.last() {
+            let first = self.first_offset.clone().unwrap_or_default();
+            return Some((
+                fw.split_whitespace().next().unwrap_or("G").to_string(),
+                format!("`{fw}` (line {fl}) selects a work offset other than the program's first ({first}), whose coordinates the map is in, and this cut may lie in the compensation zone"),
+                "pass --same-part-per-offset if each offset holds an identical part (the map then applies in each offset's coordinates; job key [toolpaths] same_part_per_offset), or select the first offset again before cuts in the zone",
+            ));
+        }
         if let Some((kind, fl, fw)) = self.frames.last() {
             return Some((
                 fw.clone(),
@@ -301,11 +388,14 @@ impl<'a> Rewriter<'a> {
                 "expand O-word loops, conditions and subroutines into plain G-code (or move the zone away)",
             ));
         }
-        if let Some((cl, code)) = &self.cutter_comp {
+        let comp = self.cutter_comp.as_ref().or(self.comp_transition.as_ref());
+        if let (Some((cl, code)), false) = (comp, self.tool_axis_is_normal()) {
+            let plane = format!("{:?}", self.plane);
+            let n = AXES[self.normal] as char;
             return Some((
                 code.clone(),
-                format!("cutter radius compensation {code} (from line {cl}) is active on a move in the compensation zone"),
-                "post the program as the tool-centre path (G40) for the zone, or move the zone away",
+                format!("cutter radius compensation {code} (from line {cl}) offsets the contour in the {plane} plane, which holds the map's normal axis {n}: moving {n} by −E would change the contour the control offsets"),
+                "compensate with the tool axis along the map's normal (G17 for a Z map), or post the program as the tool-centre path (G40) for the zone, or move the zone away",
             ));
         }
         if mv.block_delete {
@@ -329,10 +419,19 @@ impl<'a> Rewriter<'a> {
             ));
         }
         if let Some(w) = mv.expr {
+            let text = self.wtext(w).to_string();
+            let reads = match variable_in(&text, self.dialect) {
+                Some(v) => format!(": `{text}` reads the variable {v}"),
+                None => format!(": `{text}` is an expression"),
+            };
             return Some((
-                self.wtext(w).to_string(),
-                "# parameters or [expressions] on a move in the compensation zone".into(),
-                "expand the program to plain numbers (or move the zone away)",
+                text,
+                format!("# parameters or [expressions] on a move in the compensation zone{reads}, whose value errmap does not carry into a rewritten move"),
+                if self.settings.expand {
+                    "expand the program to plain numbers (or move the zone away)"
+                } else {
+                    "pass --expand to run the program's own parameter values into plain numbers, or expand the program to plain numbers (or move the zone away)"
+                },
             ));
         }
         if let Some(w) = mv.other_axis {
@@ -410,7 +509,7 @@ impl<'a> Rewriter<'a> {
             && self.flow.is_none()
             && !mv.block_delete
             && self.blocks.is_empty()
-            && self.cutter_comp.is_none()
+            && (!self.comp_sensitive() || self.tool_axis_is_normal())
             && mv.polar.is_none()
             && mv.expr.is_none()
             && mv.other_axis.is_none()
@@ -438,7 +537,14 @@ impl<'a> Rewriter<'a> {
 
     /// Split the move at the zone and domain edges, compensate its points in both, and write
     /// it (or copy the line when no point is in).
-    fn compensate_move(&mut self, line: &Line, words: &[W], mv: &Move) -> Result<()> {
+    fn compensate_move(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        mv: &Move,
+        in_plane: bool,
+    ) -> Result<()> {
+        let mode = self.comp_mode(in_plane);
         let s = mv.start.map(|c| c.unwrap_or(0.0));
         let e = [0, 1, 2].map(|i| mv.end[i].unwrap_or(s[i]));
         let cw = mv.motion.kind == Motion::ArcCw;
@@ -447,7 +553,12 @@ impl<'a> Rewriter<'a> {
             _ => Some(self.arc(line, words, s, e, cw)?),
         };
         let step = self.settings.max_segment_in(self.inches);
-        let chords = self.chord_count(line, arc.as_ref(), &s, &e, step)?;
+        // Under cutter compensation arc pieces are arcs: only length and quarter turns cut them.
+        let tol = match mode {
+            CompMode::Off => self.settings.chord_tol_in(self.inches),
+            _ => f64::INFINITY,
+        };
+        let chords = self.chord_count(line, arc.as_ref(), &s, &e, step, tol)?;
         // The move as a curve over [0, 1] with its chord ends as break points: splits at the
         // zone and domain edges fall on the curve itself (on the arc, not on a chord).
         let mut emitted = std::mem::take(&mut self.emitted);
@@ -477,8 +588,11 @@ impl<'a> Rewriter<'a> {
             self.report.moves_outside_domain += 1;
         }
         let result = if emitted.iter().any(|(_, e)| e.is_some()) {
-            self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion)
-                .map(|()| self.pos = e.map(Some))
+            match mode {
+                CompMode::Off => self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion),
+                _ => self.rewrite_contour(line, words, &emitted, arc.as_ref(), mv.motion, s, mode),
+            }
+            .map(|()| self.pos = e.map(Some))
         } else {
             self.finish_unchanged(line, words, mv.end)
         };
@@ -516,13 +630,14 @@ impl<'a> Rewriter<'a> {
         s: &[f64; 3],
         e: &[f64; 3],
         step: f64,
+        chord_tol: f64,
     ) -> Result<usize> {
         let (length, chords) = match arc {
             None => (dist(s, e), 1),
             Some(a) => {
                 let (_, _, ax) = a.plane.axes();
                 let len = (a.sweep.abs() * a.r_start.max(a.r_end)).hypot(a.end[ax] - a.start[ax]);
-                (len, a.chords(self.settings.chord_tol_in(self.inches), step))
+                (len, a.chords(chord_tol, step))
             }
         };
         // Keep the output finite: a move needing over a million segments is a typo or a unit
@@ -613,6 +728,9 @@ impl<'a> Rewriter<'a> {
             self.offset = 0.0;
             return Ok(());
         }
+        if self.comp_sensitive() {
+            return Err(self.comp_return_error(line));
+        }
         let standing = self.standing;
         let Some(orig) = standing.normal_pos else {
             return Err(Error::Internal(format!(
@@ -653,22 +771,54 @@ impl<'a> Rewriter<'a> {
     /// Copy a line errmap does not change (after a return step if one is due), and track the
     /// position it leaves the tool at.
     pub(super) fn finish_unchanged(&mut self, line: &Line, words: &[W], end: Point) -> Result<()> {
+        // Under cutter compensation the return rides on this line's own move.
+        let fold = self.fold_return(line, words);
         self.return_if_needed(line, words, false)?;
         let has_motion_g = words.iter().any(|w| w.g().is_some_and(G::is_motion));
         let moves = words
             .iter()
             .any(|w| is_axis(w.letter) || matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
-        match self.motion {
-            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => {
-                self.copy_with_motion(line, m)
-            }
-            _ => self.copy_line(line),
+        let prefix = match self.motion {
+            Some(m) if moves && !has_motion_g && self.out_motion != self.motion => Some(m),
+            _ => None,
+        };
+        match (prefix, fold) {
+            (None, None) => self.copy_line(line),
+            (prefix, fold) => self.copy_edited(line, prefix, fold.as_deref()),
         }
         if has_motion_g || moves {
             self.out_motion = self.motion;
         }
         self.track_unchanged_end(line, words, end);
         Ok(())
+    }
+
+    /// Copy a line with its modal motion said (`prefix`, after a return step changed the
+    /// output's) and a word appended after its last word (`append`, a folded return).
+    fn copy_edited(&mut self, line: &Line, prefix: Option<MotionMode>, append: Option<&str>) {
+        let Some(text) = append else {
+            if let Some(m) = prefix {
+                self.copy_with_motion(line, m);
+            }
+            return;
+        };
+        let at = line
+            .tokens
+            .iter()
+            .filter(|t| matches!(t.kind, TokenKind::Word { .. }))
+            .map(|t| t.span.end)
+            .max()
+            .unwrap_or(line.span.end);
+        let start = self.out.len();
+        match prefix {
+            Some(m) => self.copy_with_motion(line, m),
+            None => self.copy_line(line),
+        }
+        // The copied line ends with the original's bytes from `at` on.
+        let tail = line.end - at;
+        let pos = self.out.len() - tail;
+        debug_assert!(pos >= start);
+        self.out.insert_str(pos, text);
     }
 
     /// The output's modal motion differs (after a return step): say it on this line, after its

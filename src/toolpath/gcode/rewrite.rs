@@ -11,8 +11,8 @@ use std::ops::Range;
 /// The segments of a rewritten move: their words (`G1 X… Y… Z…`) one after another in `text`.
 #[derive(Debug, Default)]
 pub(super) struct Segments {
-    text: String,
-    spans: Vec<Range<usize>>,
+    pub(super) text: String,
+    pub(super) spans: Vec<Range<usize>>,
 }
 
 impl<'a> Rewriter<'a> {
@@ -48,7 +48,7 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Count the compensated points in the report; E of the last point.
-    fn count_compensated(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Option<f64> {
+    pub(super) fn count_compensated(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Option<f64> {
         for e in emitted.iter().filter_map(|(_, e)| *e) {
             let e_mm = e.abs() * self.scale_mm();
             if e_mm > self.report.max_abs_error_mm {
@@ -166,9 +166,86 @@ impl<'a> Rewriter<'a> {
         segs.spans.push(start..segs.text.len());
     }
 
+    /// One piece of a contour under cutter radius compensation to `q`: a G1, or with `centre`
+    /// an arc about it (G2/G3 with the plane's centre words, incremental from the piece's
+    /// rounded start unless G90.1), unless it rounds to no motion — or, with `in_plane`, to no
+    /// motion in the plane (a Z-only block the control's compensation must not see).
+    pub(super) fn contour_segment(
+        &mut self,
+        q: [f64; 3],
+        centre: Option<(f64, f64)>,
+        motion: MotionMode,
+        in_plane: bool,
+        out_pos: &mut [f64; 3],
+        segs: &mut Segments,
+    ) {
+        let d = self.decimals();
+        let written = [0, 1, 2].map(|i| {
+            let v = if self.absolute {
+                q[i]
+            } else {
+                q[i] - out_pos[i]
+            };
+            rounded(v, d)
+        });
+        let zero = (0..3).all(|i| {
+            let now = decimal_units(written[i].1, d);
+            if self.absolute {
+                now == decimal_units(out_pos[i], d)
+            } else {
+                now == Some(0)
+            }
+        });
+        let (a1, a2, _) = self.plane.axes();
+        let still = |i: usize| {
+            let now = decimal_units(written[i].1, d);
+            if self.absolute {
+                now == decimal_units(out_pos[i], d)
+            } else {
+                now == Some(0)
+            }
+        };
+        if zero || (in_plane && still(a1) && still(a2)) {
+            return;
+        }
+        let from = *out_pos;
+        let start = segs.text.len();
+        let mode = if centre.is_some() {
+            motion
+        } else {
+            MotionMode::LINEAR
+        };
+        segs.text.push_str(match mode.kind {
+            Motion::ArcCw => "G2",
+            Motion::ArcCcw => "G3",
+            _ => "G1",
+        });
+        for (i, l) in AXES.iter().enumerate() {
+            out_pos[i] = if self.absolute {
+                written[i].1
+            } else {
+                out_pos[i] + written[i].1
+            };
+            segs.text.push(' ');
+            segs.text.push(*l as char);
+            push_rounded(&mut segs.text, written[i], d);
+        }
+        if let Some(c) = centre {
+            let (a1, a2, _) = self.plane.axes();
+            for (axis, c) in [(a1, c.0), (a2, c.1)] {
+                let v = if self.arc_absolute { c } else { c - from[axis] };
+                segs.text.push(' ');
+                segs.text.push([b'I', b'J', b'K'][axis] as char);
+                push_rounded(&mut segs.text, rounded(v, d), d);
+            }
+        }
+        self.out_motion = Some(mode);
+        segs.spans.push(start..segs.text.len());
+    }
+
     /// The original line with its motion words replaced by the first segment, then the other
     /// segments on lines of their own; program stops move to the last one.
-    fn write_lines(&mut self, line: &Line, words: &[W], is_arc: bool, segs: &Segments) {
+    pub(super) fn write_lines(&mut self, line: &Line, words: &[W], is_arc: bool, segs: &Segments) {
         let text = self.text;
         let nseg = segs.spans.len();
         // Program stops (M0 M1 M2 M30 M60) act after the line's motion: they move to the last
