@@ -801,3 +801,118 @@ fn random_mode_switches_returns_and_axis_only_blocks_run_in_rs274_as_the_origina
     assert!(totals.0 > 200 && totals.1 > 200, "{totals:?}");
     assert!(returns > 20, "{returns}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// States errmap does not follow across blocks: modes a called subroutine changes, rotary axes
+// away from 0, Fadal subprograms. Each was a program written wrong with exit 0.
+
+#[test]
+fn a_subroutine_that_changes_the_distance_mode_refuses_the_cuts_after_its_call() {
+    let text =
+        "G21 G90\no100 sub\nG91\no100 endsub\nG0 X5 Y0 Z1\no100 call\nG1 X10 Z-1 F100\nG90\nM2\n";
+    let err = compensate_gcode(
+        text,
+        Path::new("t.ngc"),
+        &Flat,
+        &settings(Dialect::Linuxcnc),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("t.ngc:7")
+            && err.contains("distance (G90/G91)")
+            && err.contains("line 3 in o100"),
+        "{err}"
+    );
+    // Saying the mode again after the call ends it: the cut is read in G90.
+    let said = text.replace("o100 call\n", "o100 call\nG90\n");
+    let (out, _) = compensate_gcode(
+        &said,
+        Path::new("t.ngc"),
+        &Flat,
+        &settings(Dialect::Linuxcnc),
+    )
+    .unwrap();
+    assert!(out.contains("G1 X10.0000 Y0.0000 Z-1.0200"), "{out}");
+    // With --expand the subroutine runs: rs274 ends the cut at the original's end minus E.
+    let s = CompensationSettings {
+        expand: true,
+        ..settings(Dialect::Linuxcnc)
+    };
+    let (out, _) = compensate_gcode(text, Path::new("t.ngc"), &Flat, &s).unwrap();
+    if let (Some(o), Some(c)) = (rs274_motions(text), rs274_motions(&out)) {
+        let (o, c) = (o.last().unwrap().1, c.last().unwrap().1);
+        assert!(close(o, [15.0, 0.0, 0.0]), "{o:?}");
+        assert!(close(c, [15.0, 0.0, -E_MM]), "{c:?}\n{out}");
+    }
+}
+
+#[test]
+fn a_rotary_axis_away_from_0_refuses_the_cuts_until_it_is_back() {
+    for (dialect, text) in [
+        (
+            Dialect::Linuxcnc,
+            "G21 G90\nG0 X0 Y0 Z10\nG0 B30\nG1 Z-1 F100\nG1 X10\nM2\n",
+        ),
+        (
+            Dialect::Sinumerik,
+            "G71 G90\nG0 X0 Y0 Z10\nG0 B30\nG1 Z-1 F100\nG1 X10\nM30\n",
+        ),
+        (
+            Dialect::Fanuc,
+            "O1\nG21 G90\nG0 X0. Y0. Z10.\nG0 A90.\nG1 Z-1. F100.\nG1 X10.\nM30\n",
+        ),
+    ] {
+        let err = compensate_gcode(text, Path::new("t.nc"), &Flat, &settings(dialect))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("t.nc:5") || err.contains("t.nc:4"),
+            "{dialect:?}: {err}"
+        );
+        assert!(err.contains("stands away from 0"), "{dialect:?}: {err}");
+        // Back at 0 before the cuts, the map applies.
+        let back = text
+            .replace("G0 B30\n", "G0 B30\nG0 B0\n")
+            .replace("G0 A90.\n", "G0 A90.\nG0 A0.\n");
+        let (_, report) =
+            compensate_gcode(&back, Path::new("t.nc"), &Flat, &settings(dialect)).unwrap();
+        assert_eq!(report.moves_changed, 2, "{dialect:?}");
+    }
+}
+
+#[test]
+fn fadal_subprograms_and_repeat_counts_are_refused() {
+    let s = CompensationSettings {
+        units: Some(errmap::toolpath::Units::Mm),
+        ..settings(Dialect::Fanuc)
+    };
+    for (text, word) in [
+        (
+            "O1\nG0 G90 X0. Y0. Z5.\nL100\nX1. Y1.\nM17\nG1 Z-1. F100.\nM30\n",
+            "L100",
+        ),
+        (
+            "O1\nG0 G90 X0. Y0. Z5.\nG1 Z-1. F100.\nG91 G3 I-2. Z-0.2 L19\nG90\nM30\n",
+            "L19",
+        ),
+    ] {
+        let err = compensate_gcode(text, Path::new("t.nc"), &Flat, &s)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(&format!("({word})")) && err.contains("Fadal"),
+            "{err}"
+        );
+    }
+    // L as M98's repeat count stays a repeat count (the call itself is refused, naming M98).
+    let err = compensate_gcode(
+        "O1\nG0 G90 X0. Y0. Z5.\nM98 P2 L3\nM30\n",
+        Path::new("t.nc"),
+        &Flat,
+        &s,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("M98") && !err.contains("Fadal"), "{err}");
+}

@@ -90,6 +90,19 @@ struct SubInfo {
     writes_normal: bool,
     first_move: Option<u64>,
     calls: Vec<String>,
+    /// Modal groups the body sets (`distance`, `units`, `plane`, `arc`, `motion`, `comp`),
+    /// with the line and word of the first setting of each.
+    sets: Vec<(&'static str, u64, String)>,
+}
+
+/// A state errmap does not follow (a rotary axis away from 0, modes a subroutine changed):
+/// cuts in the zone are refused while it lasts; `key` names what ends it.
+#[derive(Debug, Clone)]
+struct Unfollowed {
+    key: String,
+    word: String,
+    why: String,
+    hint: &'static str,
 }
 
 /// An open O-word block (`if`, `while`, `do`, `repeat`) at the top level.
@@ -149,6 +162,8 @@ struct Rewriter<'a> {
     shift: [f64; 3],
     /// Fanuc G52 local offsets (part of `shift`).
     local: [f64; 3],
+    /// States errmap does not follow, under which cuts in the zone are refused.
+    unfollowed: Vec<Unfollowed>,
     /// Transformations errmap does not follow, with the line and word that started them.
     frames: Vec<(Frame, u64, String)>,
     /// The first work offset selected (the map's coordinates); another one is a frame.
@@ -252,6 +267,7 @@ impl<'a> Rewriter<'a> {
             shift: [0.0; 3],
             local: [0.0; 3],
             frames: Vec::new(),
+            unfollowed: Vec::new(),
             first_offset: None,
             active_offset: None,
             flow: None,
@@ -595,6 +611,26 @@ impl<'a> Rewriter<'a> {
         }
         if axis_words && info.first_move.is_none() {
             info.first_move = Some(line.number);
+        }
+        for w in words.iter().filter(|w| w.letter == b'G') {
+            let group = match w.g() {
+                Some(G::Distance(_)) => "distance",
+                Some(G::Units(_)) => "units",
+                Some(G::Plane(_)) => "plane",
+                Some(G::ArcDistance(_)) => "arc",
+                Some(G::CutterComp(_)) => "comp",
+                Some(g) if g.is_motion() => "motion",
+                _ => continue,
+            };
+            if !info.sets.iter().any(|(k, _, _)| *k == group) {
+                let word = self
+                    .text
+                    .get(w.span.clone())
+                    .unwrap_or("")
+                    .trim()
+                    .to_string();
+                info.sets.push((group, line.number, word));
+            }
         }
     }
 }

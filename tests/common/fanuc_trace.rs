@@ -11,10 +11,11 @@
 //! G80, G94, G98/G99, G15 move nothing here
 //! (the same in the original and the output). G28, G53 and G30 go to machine positions: the
 //! axes they name become unknown. G52 shifts the named axes, G92 names the current position.
-//! Subprograms in the same file: `M98 P<n> L<k>` runs program `O<n>` k times (once without
+//! G41/G42 (cutter compensation) and G40 are followed as the programmed contour, and the moves
+//! without motion in the plane under them are counted. Subprograms in the same file: `M98 P<n> L<k>` runs program `O<n>` k times (once without
 //! L), its `M99` returns to the block after the call; the main program is the first one that
 //! ends in `M30`/`M02` (a program ending in `M99` is a subprogram), and `M30`/`M02` ends the
-//! run. Anything else that moves (canned cycles, G41/G42, G68, G51, macro variables, Fadal L)
+//! run. Anything else that moves (canned cycles, G68, G51, macro variables, Fadal L)
 //! is refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
@@ -35,6 +36,30 @@ pub struct FanucSetup {
 
 /// The moves of `text`, mm.
 pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
+    trace_counted(text, setup, &mut 0)
+}
+
+/// How many moves without motion in the plane run while cutter compensation is on (a control
+/// looks ahead past only a few of them before it gouges or alarms); 0 when the program is not
+/// followed.
+pub fn plane_less_moves_under_comp(text: &str, setup: FanucSetup) -> usize {
+    let mut n = 0;
+    match trace_counted(text, setup, &mut n) {
+        Ok(_) => n,
+        Err(_) => 0,
+    }
+}
+
+/// [`trace`], counting the moves without motion in the plane under cutter compensation.
+fn trace_counted(
+    text: &str,
+    setup: FanucSetup,
+    plane_less_under_comp: &mut usize,
+) -> Result<Vec<Seg>, String> {
+    // G41/G42 offset the tool from the programmed contour, G40 ends it: the judge compares
+    // programmed contours, which the control offsets alike in both programs when they agree
+    // in the plane.
+    let mut comp = false;
     let mut pos: [Option<f64>; 3] = [None; 3];
     let mut motion: Option<u32> = setup.power_on_g1.map(u32::from);
     let mut inch = setup.inch;
@@ -77,7 +102,9 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
                         90 => absolute = true,
                         91 => absolute = false,
                         m @ (4 | 10 | 28 | 30 | 52 | 53 | 92) => non_modal = Some(m),
-                        8 | 9 | 15 | 40 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 80 | 94 | 98 | 99 => {}
+                        41 | 42 => comp = true,
+                        40 => comp = false,
+                        8 | 9 | 15 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 80 | 94 | 98 | 99 => {}
                         _ => return Err(format!("line {line}: G{num} is not followed")),
                     }
                 }
@@ -207,6 +234,12 @@ pub fn trace(text: &str, setup: FanucSetup) -> Result<Vec<Seg>, String> {
         } else {
             None
         };
+        if comp
+            && arc.is_none()
+            && (end[plane.0] - start[plane.0]).hypot(end[plane.1] - start[plane.1]) < 1e-9
+        {
+            *plane_less_under_comp += 1;
+        }
         out.push(Seg {
             cut: m != 0,
             line,

@@ -138,10 +138,14 @@ pub const RAPID_MM: f64 = 0.002;
 
 /// Check `out` against `orig` for a flat map of `e_mm` along Z. Errors name the output move.
 pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
+    // A step of +E along Z (the return to the original after a compensated cut), or a rapid
+    // step of −E (a drilling cycle whose R level moved down by E to below where the tool
+    // already stands, which the original reached without a move).
     let is_return = |s: &Seg| {
+        let dz = s.end[2] - s.start[2];
         (s.end[0] - s.start[0]).abs() < RAPID_MM
             && (s.end[1] - s.start[1]).abs() < RAPID_MM
-            && (s.end[2] - s.start[2] - e_mm).abs() < RAPID_MM
+            && ((dz - e_mm).abs() < RAPID_MM || (!s.cut && (dz + e_mm).abs() < RAPID_MM))
             && s.arc.is_none()
     };
     // Rapids: the same ends in the same order, once the output's return steps are set aside.
@@ -178,8 +182,15 @@ pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
     }
     // Cuts: every vertex (and arc midpoint) of the output, raised by E, on the original cuts,
     // in order; and every original cut's end reached by an output vertex.
-    let orig_cuts: Vec<&Seg> = orig.iter().filter(|s| s.cut).collect();
-    let out_cuts: Vec<&Seg> = out.iter().filter(|s| s.cut && !is_return(s)).collect();
+    // A feed that moves nothing (rs274 reports one for a `G1` block without axis words) is no
+    // cut.
+    let moves = |s: &&Seg| s.arc.is_some() || dist(&s.start, &s.end) > 0.0;
+    let orig_cuts: Vec<&Seg> = orig.iter().filter(|s| s.cut).filter(moves).collect();
+    let out_cuts: Vec<&Seg> = out
+        .iter()
+        .filter(|s| s.cut && !is_return(s))
+        .filter(moves)
+        .collect();
     if orig_cuts.is_empty() {
         return Err("the original has no cutting move".into());
     }

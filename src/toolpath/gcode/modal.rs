@@ -264,15 +264,28 @@ impl<'a> Rewriter<'a> {
         }
     }
 
-    /// Select the work offset `id` (see [`Self::work_offset`]).
+    /// Select the work offset `id` (see [`Self::work_offset`]). Fadal `E0` cancels the fixture
+    /// offset: coordinates are the machine's, no work offset, so it is never the map's frame
+    /// and cuts in the zone under it are refused.
     fn select_offset(&mut self, line: &Line, id: String) {
         if self.active_offset.as_ref().is_some_and(|a| *a != id) {
             self.pos = [None; 3];
             self.unknown_since = Some(line.number);
         }
         self.active_offset = Some(id.clone());
+        let no_offset = id
+            .strip_prefix('E')
+            .is_some_and(|n| n.parse::<f64>() == Ok(0.0));
+        if no_offset {
+            self.frames.retain(|f| f.0 != Frame::WorkOffset);
+            self.frames.push((Frame::WorkOffset, line.number, id));
+            return;
+        }
         match &self.first_offset {
-            None => self.first_offset = Some(id),
+            None => {
+                self.frames.retain(|f| f.0 != Frame::WorkOffset);
+                self.first_offset = Some(id)
+            }
             Some(f) if *f == id || self.settings.same_part_per_offset => {
                 self.frames.retain(|f| f.0 != Frame::WorkOffset)
             }
@@ -695,6 +708,60 @@ impl<'a> Rewriter<'a> {
         }
     }
 
+    /// The modal groups a called subroutine (or what it calls, or a subroutine in another
+    /// file) may change are unknown after the call: cuts in the zone are refused until the
+    /// program sets each of them again (with `--expand` the body is run instead).
+    fn modes_after_call(&mut self, line: &Line, name: &str) {
+        let mut seen = HashSet::new();
+        let mut stack = vec![name.to_string()];
+        let mut sets: Vec<(&'static str, String)> = Vec::new();
+        while let Some(n) = stack.pop() {
+            if !seen.insert(n.clone()) {
+                continue;
+            }
+            match self.subs.get(&n) {
+                Some(info) => {
+                    for (group, l, word) in &info.sets {
+                        if !sets.iter().any(|(g, _)| g == group) {
+                            sets.push((group, format!("`{word}` on line {l} in o{n}")));
+                        }
+                    }
+                    stack.extend(info.calls.iter().cloned());
+                }
+                None => {
+                    for group in ["distance", "units", "plane", "arc", "comp", "motion"] {
+                        if !sets.iter().any(|(g, _)| *g == group) {
+                            sets.push((group, format!("o{n}, not defined in this file")));
+                        }
+                    }
+                }
+            }
+        }
+        let call = self
+            .text
+            .get(line.span.clone())
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        for (group, what) in sets {
+            let key = format!("mode:{group}");
+            self.unfollowed.retain(|u| u.key != key);
+            self.unfollowed.push(super::Unfollowed {
+                key,
+                word: call.split_whitespace().next().unwrap_or("o").to_string(),
+                why: format!("`{call}` (line {}) may change the {} mode ({what}), which errmap does not follow across a call, and this cut may lie in the compensation zone", line.number, match group {
+                    "distance" => "distance (G90/G91)",
+                    "units" => "units (G20/G21)",
+                    "plane" => "plane (G17/G18/G19)",
+                    "arc" => "arc centre (G90.1/G91.1)",
+                    "comp" => "cutter compensation (G40/G41/G42)",
+                    _ => "motion (G0/G1/G2/G3)",
+                }),
+                hint: "pass --expand to run the subroutine, or say the mode again after the call (e.g. G90, G21, G17, G1)",
+            });
+        }
+    }
+
     /// Subroutine closure: does it (or what it calls) write the normal axis; its first move line.
     pub(super) fn sub_summary(&self, name: &str) -> (bool, Option<(String, u64)>, bool) {
         let mut seen = HashSet::new();
@@ -721,6 +788,7 @@ impl<'a> Rewriter<'a> {
     }
 
     pub(super) fn call(&mut self, line: &Line, name: &str, otext: &str) -> Result<()> {
+        self.modes_after_call(line, name);
         let (writes_normal, first_move, external) = self.sub_summary(name);
         let moves = first_move.is_some() || external;
         if moves {

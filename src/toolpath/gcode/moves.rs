@@ -102,6 +102,8 @@ impl<'a> Rewriter<'a> {
         }
         self.modal(line, words_in);
         self.fadal_offset(line, words_in);
+        self.fanuc_l_word(line, words_in)?;
+        self.modes_said(words_in);
         let gs = || words_in.iter().filter_map(|w| w.g.map(|(c, g)| (w, c, g)));
         let scaled = self.fanuc_numbers(line, words_in)?;
         let words: &[W] = scaled.as_deref().unwrap_or(words_in);
@@ -146,7 +148,16 @@ impl<'a> Rewriter<'a> {
         let moves = words.iter().any(|w| is_axis(w.letter))
             || (motion_word.is_some() && arc_words && arc_mode);
         if moves && self.motion.is_none() {
+            if let Some(u) = self.unfollowed.iter().find(|u| u.key == "mode:motion") {
+                let why = u.why.clone();
+                return Err(self.err(line, "X", why, u.hint));
+            }
             self.motion = Some(self.power_on_motion(line, words)?);
+            // The output powers on in the same mode.
+            self.out_motion = self.out_motion.or(self.motion);
+        }
+        if moves {
+            self.rotary_positions(line, words);
         }
         let Some(motion) = self.motion.filter(|_| moves) else {
             self.sync_out_motion(words);
@@ -185,6 +196,75 @@ impl<'a> Rewriter<'a> {
             self.comp_transition = None;
         }
         result
+    }
+
+    /// Rotary axes (and the parallel axes U V W): the map is taken as measured with every such
+    /// axis at 0, so one commanded elsewhere (or incrementally, to where errmap cannot tell)
+    /// refuses the cuts in the zone after it, until it is commanded back to 0.
+    fn rotary_positions(&mut self, line: &Line, words: &[W]) {
+        for w in words
+            .iter()
+            .filter(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'))
+        {
+            let axis = w.letter as char;
+            let key = format!("axis:{axis}");
+            self.unfollowed.retain(|u| u.key != key);
+            let at_zero = w.value == Some(0.0) && !w.is_expr && w.abs.unwrap_or(self.absolute);
+            if !at_zero {
+                let word = self.wtext(w).to_string();
+                self.unfollowed.push(super::Unfollowed {
+                    key,
+                    why: format!("axis {axis} stands away from 0 (`{word}`, line {}), where errmap takes the map to be measured: the part or the tool is moved, and this cut may lie in the compensation zone", line.number),
+                    word,
+                    hint: "compensate the cuts of each rotary or parallel-axis position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away",
+                });
+            }
+        }
+    }
+
+    /// The modal groups a block sets end what a subroutine left unknown in them.
+    fn modes_said(&mut self, words: &[W]) {
+        for w in words.iter().filter(|w| w.letter == b'G') {
+            let key = match w.g() {
+                Some(G::Distance(_)) => "mode:distance",
+                Some(G::Units(_)) => "mode:units",
+                Some(G::Plane(_)) => "mode:plane",
+                Some(G::ArcDistance(_)) => "mode:arc",
+                Some(G::CutterComp(_)) => "mode:comp",
+                Some(g) if g.is_motion() => "mode:motion",
+                _ => continue,
+            };
+            self.unfollowed.retain(|u| u.key != key);
+        }
+    }
+
+    /// Fanuc `L`: a repeat count with M98, G65 or a canned cycle, and data with G10; anywhere
+    /// else it is a Fadal subprogram definition or call (`L100`, `L101`) or a Fadal repeat count
+    /// (`G3 I-2. L19`), which errmap does not follow.
+    fn fanuc_l_word(&self, line: &Line, words: &[W]) -> Result<()> {
+        if self.dialect != Dialect::Fanuc {
+            return Ok(());
+        }
+        let Some(l) = words.iter().find(|w| w.letter == b'L') else {
+            return Ok(());
+        };
+        let with = words.iter().any(|w| {
+            (w.letter == b'M' && w.value == Some(98.0))
+                || matches!(
+                    w.g(),
+                    Some(G::Call | G::DataSetting | G::Motion(Motion::Canned))
+                )
+        }) || self.motion.is_some_and(|m| m.kind == Motion::Canned);
+        if with {
+            return Ok(());
+        }
+        let t = self.wtext(l).to_string();
+        Err(self.err(
+            line,
+            &t,
+            format!("`{t}`: a Fadal subprogram definition or call (L100, L101) or a repeat count on a move, which errmap does not follow"),
+            "post the program without Fadal subprograms and repeat counts (plain blocks), or use M98 subprograms with --expand",
+        ))
     }
 
     /// The motion of a block with axis words before any motion word: LinuxCNC refuses such a
@@ -358,6 +438,9 @@ impl<'a> Rewriter<'a> {
 
     /// The program's state forbids compensating (a frame, a jump, a loop, cutter compensation).
     fn context_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
+        if let Some(u) = self.unfollowed.last() {
+            return Some((u.word.clone(), u.why.clone(), u.hint));
+        }
         if let Some((Frame::WorkOffset, fl, fw)) = self.frames.last() {
             let first = self.first_offset.clone().unwrap_or_default();
             return Some((
@@ -506,6 +589,7 @@ impl<'a> Rewriter<'a> {
         mv.cutting
             && self.units_known
             && self.frames.is_empty()
+            && self.unfollowed.is_empty()
             && self.flow.is_none()
             && !mv.block_delete
             && self.blocks.is_empty()
