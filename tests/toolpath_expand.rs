@@ -288,21 +288,21 @@ M30
 
 #[test]
 fn a_refusal_inside_a_subprogram_names_the_original_line_and_call() {
-    // Cutter compensation in the zone is refused by the rewrite of the flattened program; the
-    // message names the subprogram's own lines and the call.
+    // A rotation in the zone is refused by the rewrite of the flattened program; the message
+    // names the subprogram's own lines and the call.
     let text = "O0001
 G21 G90 G17
 G0 X0. Y0. Z5.
 M98 P2000
 M30
 O2000
-G41 D1
+G68 X0. Y0. R30.
 G1 X10. Y0. Z-1. F100.
-G40
+G69
 M99
 ";
     let msg = refuse(text, &settings(true));
-    assert_msg(&msg, &["t.nc:8", "G41", "line 7", "O2000 called on line 4"]);
+    assert_msg(&msg, &["t.nc:8", "G68", "line 7", "O2000 called on line 4"]);
 }
 
 #[test]

@@ -613,14 +613,8 @@ impl<'a> Rewriter<'a> {
             info.first_move = Some(line.number);
         }
         for w in words.iter().filter(|w| w.letter == b'G') {
-            let group = match w.g() {
-                Some(G::Distance(_)) => "distance",
-                Some(G::Units(_)) => "units",
-                Some(G::Plane(_)) => "plane",
-                Some(G::ArcDistance(_)) => "arc",
-                Some(G::CutterComp(_)) => "comp",
-                Some(g) if g.is_motion() => "motion",
-                _ => continue,
+            let Some(group) = w.g().and_then(modal_group) else {
+                continue;
             };
             if !info.sets.iter().any(|(k, _, _)| *k == group) {
                 let word = self
@@ -633,6 +627,19 @@ impl<'a> Rewriter<'a> {
             }
         }
     }
+}
+
+/// The modal group a G code sets, of those a called subroutine may leave changed.
+fn modal_group(g: G) -> Option<&'static str> {
+    Some(match g {
+        G::Distance(_) => "distance",
+        G::Units(_) => "units",
+        G::Plane(_) => "plane",
+        G::ArcDistance(_) => "arc",
+        G::CutterComp(_) => "comp",
+        g if g.is_motion() => "motion",
+        _ => return None,
+    })
 }
 
 fn line_terminator<'t>(text: &'t str, line: &Line) -> &'t str {

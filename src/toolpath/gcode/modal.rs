@@ -712,28 +712,22 @@ impl<'a> Rewriter<'a> {
     /// file) may change are unknown after the call: cuts in the zone are refused until the
     /// program sets each of them again (with `--expand` the body is run instead).
     fn modes_after_call(&mut self, line: &Line, name: &str) {
-        let mut seen = HashSet::new();
-        let mut stack = vec![name.to_string()];
         let mut sets: Vec<(&'static str, String)> = Vec::new();
-        while let Some(n) = stack.pop() {
-            if !seen.insert(n.clone()) {
-                continue;
-            }
-            match self.subs.get(&n) {
-                Some(info) => {
-                    for (group, l, word) in &info.sets {
-                        if !sets.iter().any(|(g, _)| g == group) {
-                            sets.push((group, format!("`{word}` on line {l} in o{n}")));
-                        }
-                    }
-                    stack.extend(info.calls.iter().cloned());
-                }
-                None => {
-                    for group in ["distance", "units", "plane", "arc", "comp", "motion"] {
-                        if !sets.iter().any(|(g, _)| *g == group) {
-                            sets.push((group, format!("o{n}, not defined in this file")));
-                        }
-                    }
+        for (n, info) in self.sub_closure(name) {
+            let found: Vec<(&'static str, String)> = match info {
+                Some(info) => info
+                    .sets
+                    .iter()
+                    .map(|(group, l, word)| (*group, format!("`{word}` on line {l} in o{n}")))
+                    .collect(),
+                None => ["distance", "units", "plane", "arc", "comp", "motion"]
+                    .into_iter()
+                    .map(|group| (group, format!("o{n}, not defined in this file")))
+                    .collect(),
+            };
+            for (group, what) in found {
+                if !sets.iter().any(|(g, _)| *g == group) {
+                    sets.push((group, what));
                 }
             }
         }
@@ -764,27 +758,40 @@ impl<'a> Rewriter<'a> {
 
     /// Subroutine closure: does it (or what it calls) write the normal axis; its first move line.
     pub(super) fn sub_summary(&self, name: &str) -> (bool, Option<(String, u64)>, bool) {
-        let mut seen = HashSet::new();
-        let mut stack = vec![name.to_string()];
         let mut writes = false;
         let mut first: Option<(String, u64)> = None;
         let mut external = false;
-        while let Some(n) = stack.pop() {
-            if !seen.insert(n.clone()) {
-                continue;
-            }
-            match self.subs.get(&n) {
+        for (n, info) in self.sub_closure(name) {
+            match info {
                 Some(info) => {
                     writes |= info.writes_normal;
                     if let (None, Some(l)) = (&first, info.first_move) {
-                        first = Some((n.clone(), l));
+                        first = Some((n, l));
                     }
-                    stack.extend(info.calls.iter().cloned());
                 }
                 None => external = true,
             }
         }
         (writes, first, external)
+    }
+
+    /// The subroutine `name` and every one it calls, each once, in the order met (`None`: not
+    /// defined in this file).
+    fn sub_closure(&self, name: &str) -> Vec<(String, Option<&SubInfo>)> {
+        let mut seen = HashSet::new();
+        let mut stack = vec![name.to_string()];
+        let mut out = Vec::new();
+        while let Some(n) = stack.pop() {
+            if !seen.insert(n.clone()) {
+                continue;
+            }
+            let info = self.subs.get(&n);
+            if let Some(info) = info {
+                stack.extend(info.calls.iter().cloned());
+            }
+            out.push((n, info));
+        }
+        out
     }
 
     pub(super) fn call(&mut self, line: &Line, name: &str, otext: &str) -> Result<()> {

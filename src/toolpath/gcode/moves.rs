@@ -224,16 +224,11 @@ impl<'a> Rewriter<'a> {
 
     /// The modal groups a block sets end what a subroutine left unknown in them.
     fn modes_said(&mut self, words: &[W]) {
-        for w in words.iter().filter(|w| w.letter == b'G') {
-            let key = match w.g() {
-                Some(G::Distance(_)) => "mode:distance",
-                Some(G::Units(_)) => "mode:units",
-                Some(G::Plane(_)) => "mode:plane",
-                Some(G::ArcDistance(_)) => "mode:arc",
-                Some(G::CutterComp(_)) => "mode:comp",
-                Some(g) if g.is_motion() => "mode:motion",
-                _ => continue,
-            };
+        for group in words
+            .iter()
+            .filter_map(|w| w.g().and_then(super::modal_group))
+        {
+            let key = format!("mode:{group}");
             self.unfollowed.retain(|u| u.key != key);
         }
     }
@@ -438,7 +433,12 @@ impl<'a> Rewriter<'a> {
 
     /// The program's state forbids compensating (a frame, a jump, a loop, cutter compensation).
     fn context_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
-        if let Some(u) = self.unfollowed.last() {
+        // An axis moving on this very cut is named by the word refusal.
+        let own_axis = |u: &&super::Unfollowed| {
+            mv.other_axis
+                .is_some_and(|w| u.key == format!("axis:{}", w.letter as char))
+        };
+        if let Some(u) = self.unfollowed.iter().rev().find(|u| !own_axis(u)) {
             return Some((u.word.clone(), u.why.clone(), u.hint));
         }
         if let Some((Frame::WorkOffset, fl, fw)) = self.frames.last() {

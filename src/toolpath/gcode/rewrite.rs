@@ -96,6 +96,54 @@ impl<'a> Rewriter<'a> {
         self.segment(last, arc, motion, &mut out_pos, segs);
     }
 
+    /// The X Y Z values the controller reads from the words written to reach `q` from
+    /// `out_pos` (absolute, or increments under G91, rounded as written), and for each axis
+    /// whether it rounds to no motion.
+    fn written_target(
+        &self,
+        q: [f64; 3],
+        out_pos: &[f64; 3],
+    ) -> ([(Option<i64>, f64); 3], [bool; 3]) {
+        let d = self.decimals();
+        let written = [0, 1, 2].map(|i| {
+            let v = if self.absolute {
+                q[i]
+            } else {
+                q[i] - out_pos[i]
+            };
+            rounded(v, d)
+        });
+        let still = [0, 1, 2].map(|i| {
+            let now = decimal_units(written[i].1, d);
+            if self.absolute {
+                now == decimal_units(out_pos[i], d)
+            } else {
+                now == Some(0)
+            }
+        });
+        (written, still)
+    }
+
+    /// Append ` X… Y… Z…` and move `out_pos` to where the controller goes after rounding.
+    fn push_axis_words(
+        &self,
+        written: &[(Option<i64>, f64); 3],
+        out_pos: &mut [f64; 3],
+        text: &mut String,
+        d: usize,
+    ) {
+        for (i, l) in AXES.iter().enumerate() {
+            out_pos[i] = if self.absolute {
+                written[i].1
+            } else {
+                out_pos[i] + written[i].1
+            };
+            text.push(' ');
+            text.push(*l as char);
+            push_rounded(text, written[i], d);
+        }
+    }
+
     /// One segment to `q` (an arc piece when `final_arc`), unless it rounds to no motion.
     fn segment(
         &mut self,
@@ -106,24 +154,8 @@ impl<'a> Rewriter<'a> {
         segs: &mut Segments,
     ) {
         let d = self.decimals();
-        // The values the controller reads from the words as written.
-        let written = [0, 1, 2].map(|i| {
-            let v = if self.absolute {
-                q[i]
-            } else {
-                q[i] - out_pos[i]
-            };
-            rounded(v, d)
-        });
-        let zero = (0..3).all(|i| {
-            let now = decimal_units(written[i].1, d);
-            if self.absolute {
-                now == decimal_units(out_pos[i], d)
-            } else {
-                now == Some(0)
-            }
-        });
-        if zero {
+        let (written, still) = self.written_target(q, out_pos);
+        if still.iter().all(|s| *s) {
             return;
         }
         // The last piece of an arc is an arc, so the modal motion stays the original's.
@@ -143,17 +175,7 @@ impl<'a> Rewriter<'a> {
             Motion::ArcCcw => "G3",
             _ => "G1",
         });
-        for (i, l) in AXES.iter().enumerate() {
-            // Track the position the controller will reach after rounding.
-            out_pos[i] = if self.absolute {
-                written[i].1
-            } else {
-                out_pos[i] + written[i].1
-            };
-            segs.text.push(' ');
-            segs.text.push(*l as char);
-            push_rounded(&mut segs.text, written[i], d);
-        }
+        self.push_axis_words(&written, out_pos, &mut segs.text, d);
         if let Some(r) = r_word {
             segs.text.push_str(if self.dialect == Dialect::Sinumerik {
                 " CR="
@@ -180,32 +202,9 @@ impl<'a> Rewriter<'a> {
         segs: &mut Segments,
     ) {
         let d = self.decimals();
-        let written = [0, 1, 2].map(|i| {
-            let v = if self.absolute {
-                q[i]
-            } else {
-                q[i] - out_pos[i]
-            };
-            rounded(v, d)
-        });
-        let zero = (0..3).all(|i| {
-            let now = decimal_units(written[i].1, d);
-            if self.absolute {
-                now == decimal_units(out_pos[i], d)
-            } else {
-                now == Some(0)
-            }
-        });
+        let (written, still) = self.written_target(q, out_pos);
         let (a1, a2, _) = self.plane.axes();
-        let still = |i: usize| {
-            let now = decimal_units(written[i].1, d);
-            if self.absolute {
-                now == decimal_units(out_pos[i], d)
-            } else {
-                now == Some(0)
-            }
-        };
-        if zero || (in_plane && still(a1) && still(a2)) {
+        if still.iter().all(|s| *s) || (in_plane && still[a1] && still[a2]) {
             return;
         }
         let from = *out_pos;
@@ -220,16 +219,7 @@ impl<'a> Rewriter<'a> {
             Motion::ArcCcw => "G3",
             _ => "G1",
         });
-        for (i, l) in AXES.iter().enumerate() {
-            out_pos[i] = if self.absolute {
-                written[i].1
-            } else {
-                out_pos[i] + written[i].1
-            };
-            segs.text.push(' ');
-            segs.text.push(*l as char);
-            push_rounded(&mut segs.text, written[i], d);
-        }
+        self.push_axis_words(&written, out_pos, &mut segs.text, d);
         if let Some(c) = centre {
             let (a1, a2, _) = self.plane.axes();
             for (axis, c) in [(a1, c.0), (a2, c.1)] {
