@@ -294,8 +294,8 @@ fn run_order(lines: &[&str]) -> Result<Vec<usize>, String> {
     };
     // Where each O program starts, and whether it ends the run (M30/M02) or returns (M99).
     let mut starts: Vec<(u32, usize)> = Vec::new();
-    for n in 0..lines.len() {
-        if let Some(o) = parsed[n].first().filter(|(l, _)| *l == 'O') {
+    for (n, words) in parsed.iter().enumerate() {
+        if let Some(o) = words.first().filter(|(l, _)| *l == 'O') {
             let number =
                 o.1.parse::<u32>()
                     .map_err(|_| format!("line {}: O{}", n + 1, o.1))?;
@@ -304,7 +304,7 @@ fn run_order(lines: &[&str]) -> Result<Vec<usize>, String> {
     }
     let ends_run = |from: usize| {
         (from..lines.len())
-            .take_while(|&n| n == from || !parsed[n].first().is_some_and(|(l, _)| *l == 'O'))
+            .take_while(|&n| n == from || parsed[n].first().is_none_or(|(l, _)| *l != 'O'))
             .any(|n| has(n, 'M', 30.0) || has(n, 'M', 2.0))
     };
     let main = match starts.iter().find(|(_, n)| ends_run(*n)) {

@@ -212,8 +212,8 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
                         "F" if num(rest).is_some() => {}
                         "M" => match num(rest) {
                             Some(m) if m == 91.0 || m == 92.0 || m == 140.0 => machine = true,
-                            Some(m) if m == 99.0 => call = true,
-                            Some(m) if m == 89.0 => return err("a modal cycle call M89"),
+                            Some(99.0) => call = true,
+                            Some(89.0) => return err("a modal cycle call M89"),
                             Some(_) => {}
                             None => return err(&format!("`{w}`")),
                         },
