@@ -177,9 +177,12 @@ const FLAGS: &[(&str, &[&str])] = &[
     ("lagun-HEMA-TMP-M6mm.ngc", &["--compensate-holes"]),
     ("lagun-HEMS-0003.ngc", &["--expand"]),
     ("lagun-HEQJ-P008.ngc", &[]),
-    ("lagun-camarm.ngc", &["--units", "inch"]),
+    ("lagun-camarm.ngc", &["--units", "inch", "--expand"]),
     ("lagun-mmh_rest.ngc", &[]),
     ("lagun-pocket_rect.ngc", &["--units", "inch", "--expand"]),
+    // Not --expand: the rs274 judge rejects the output at one arc junction under G42 as out of
+    // order, although the point lies on the original path; until that is understood the
+    // program is counted as refused.
     ("linuxcnc-tests-cam-nisley.ngc", &[]),
     // Sinumerik.
     ("dubovikov-123.mpf", &["--units", "mm", "--expand"]),
@@ -393,7 +396,17 @@ fn execute(
 ) -> Option<Result<Vec<Seg>, String>> {
     let text = String::from_utf8_lossy(bytes);
     match dialect {
-        "linuxcnc" => rs274_canon::run(work, name, bytes),
+        "linuxcnc" => {
+            // A program that states no units runs in the machine's (`--units`): say them to
+            // rs274 too, in front of both programs alike.
+            let mut with_units = match flag(flags, "--units") {
+                Some("inch") => b"G20\n".to_vec(),
+                Some("mm") => b"G21\n".to_vec(),
+                _ => Vec::new(),
+            };
+            with_units.extend_from_slice(bytes);
+            rs274_canon::run(work, name, &with_units)
+        }
         "fanuc" => Some(fanuc_trace::trace(&text, fanuc_setup(flags))),
         "heidenhain" => Some(klartext_trace::trace(&text)),
         "sinumerik" => {

@@ -149,37 +149,7 @@ pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
             && s.arc.is_none()
     };
     // Rapids: the same ends in the same order, once the output's return steps are set aside.
-    let orig_rapids: Vec<&Seg> = orig.iter().filter(|s| !s.cut).collect();
-    let out_rapids: Vec<&Seg> = out.iter().filter(|s| !s.cut && !is_return(s)).collect();
-    for (n, (a, b)) in orig_rapids.iter().zip(&out_rapids).enumerate() {
-        // A rapid of a drilling cycle to its reference level (R, Q203 + Q200) moved by −E
-        // with the hole (`--compensate-holes`) ends E lower; every other rapid is copied.
-        let same_at = |dz: f64| {
-            (0..3).all(|k| {
-                let (ak, bk) = (a.end[k], b.end[k]);
-                let ak = if k == 2 { ak - dz } else { ak };
-                (ak.is_nan() && bk.is_nan()) || (ak - bk).abs() <= RAPID_MM
-            })
-        };
-        let same = same_at(0.0) || same_at(e_mm);
-        if !same {
-            return Err(format!(
-                "rapid {} (output line {}) ends at {:?}, the original's (line {}) at {:?}",
-                n + 1,
-                b.line,
-                b.end,
-                a.line,
-                a.end
-            ));
-        }
-    }
-    if orig_rapids.len() != out_rapids.len() {
-        return Err(format!(
-            "{} rapids in the output (besides +E return steps), {} in the original",
-            out_rapids.len(),
-            orig_rapids.len()
-        ));
-    }
+    rapids_agree(orig, out, e_mm, &is_return)?;
     // Cuts: every vertex (and arc midpoint) of the output, raised by E, on the original cuts,
     // in order; and every original cut's end reached by an output vertex.
     // A feed that moves nothing (rs274 reports one for a `G1` block without axis words) is no
@@ -240,4 +210,81 @@ pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
     Ok(Verdict {
         points_checked: points,
     })
+}
+
+/// The output's rapids are the original's, in order. Two readings are tried, and either
+/// clears the output: (1) the output's ±E steps along Z set aside, the rest paired one by one
+/// with the original's; (2) each output rapid is the original's next one (a `G0 Z10` up from a
+/// compensated cut is one, though it also is a step of +E), or else a ±E step. A rapid of a
+/// drilling cycle to its reference level (R, Q203 + Q200) moved by −E with the hole
+/// (`--compensate-holes`) may end E lower; every other rapid is copied.
+fn rapids_agree(
+    orig: &[Seg],
+    out: &[Seg],
+    e_mm: f64,
+    is_step: &dyn Fn(&Seg) -> bool,
+) -> Result<(), String> {
+    let orig_rapids: Vec<&Seg> = orig.iter().filter(|s| !s.cut).collect();
+    let same = |a: &Seg, b: &Seg| {
+        let same_at = |dz: f64| {
+            (0..3).all(|k| {
+                let (ak, bk) = (a.end[k], b.end[k]);
+                let ak = if k == 2 { ak - dz } else { ak };
+                (ak.is_nan() && bk.is_nan()) || (ak - bk).abs() <= RAPID_MM
+            })
+        };
+        same_at(0.0) || same_at(e_mm)
+    };
+    let mismatch = |n: usize, a: &Seg, b: &Seg| {
+        format!(
+            "rapid {} (output line {}) ends at {:?}, the original's (line {}) at {:?}",
+            n + 1,
+            b.line,
+            b.end,
+            a.line,
+            a.end
+        )
+    };
+    // (1) Steps set aside, then pairs.
+    let paired = || -> Result<(), String> {
+        let out_rapids: Vec<&Seg> = out.iter().filter(|s| !s.cut && !is_step(s)).collect();
+        for (n, (a, b)) in orig_rapids.iter().zip(&out_rapids).enumerate() {
+            if !same(a, b) {
+                return Err(mismatch(n, a, b));
+            }
+        }
+        if orig_rapids.len() != out_rapids.len() {
+            return Err(format!(
+                "{} rapids in the output (besides steps of ±E), {} in the original",
+                out_rapids.len(),
+                orig_rapids.len()
+            ));
+        }
+        Ok(())
+    };
+    // (2) In order, a step only where the original's next rapid does not fit.
+    let in_order = || -> Result<(), String> {
+        let mut next = 0;
+        for b in out.iter().filter(|s| !s.cut) {
+            if orig_rapids.get(next).is_some_and(|a| same(a, b)) {
+                next += 1;
+            } else if !is_step(b) {
+                return Err(match orig_rapids.get(next) {
+                    Some(a) => mismatch(next, a, b),
+                    None => format!(
+                        "a rapid (output line {}) to {:?} after the original's last",
+                        b.line, b.end
+                    ),
+                });
+            }
+        }
+        if next != orig_rapids.len() {
+            return Err(format!(
+                "{next} of the original's {} rapids in the output",
+                orig_rapids.len()
+            ));
+        }
+        Ok(())
+    };
+    paired().or_else(|first| in_order().map_err(|_| first))
 }
