@@ -169,13 +169,29 @@ pub fn judge(orig: &[Seg], out: &[Seg], e_mm: f64) -> Result<Verdict, String> {
     let mut points = 0usize;
     let mut reached = vec![false; orig_cuts.len()];
     for s in &out_cuts {
-        let mut probes = vec![raise(s.end)];
+        // Each probe: the points it may be (one, or two where a piece may carry a step).
+        let mut probes: Vec<Vec<[f64; 3]>> = vec![vec![raise(s.end)]];
         if s.arc.is_some() {
-            probes.push(raise(s.at(0.5)));
+            let mid = s.at(0.5);
+            let mut alternatives = vec![raise(mid)];
+            // An arc piece that also carries the step of ±E onto or off the compensated path
+            // (under cutter compensation no block may move along Z alone, so the step rides
+            // on the piece) has its middle half a step lowered.
+            if ((s.end[2] - s.start[2]).abs() - e_mm).abs() < RAPID_MM {
+                alternatives.push([mid[0], mid[1], mid[2] + 0.5 * e_mm]);
+            }
+            probes.push(alternatives);
         }
-        for q in probes {
-            let found = (k..orig_cuts.len()).find(|&j| orig_cuts[j].distance(&q) <= ON_PATH_MM);
-            let Some(j) = found else {
+        for alternatives in probes {
+            let on = |j: usize| {
+                alternatives
+                    .iter()
+                    .copied()
+                    .find(|q| orig_cuts[j].distance(q) <= ON_PATH_MM)
+            };
+            let found = (k..orig_cuts.len()).find_map(|j| on(j).map(|q| (j, q)));
+            let Some((j, q)) = found else {
+                let q = alternatives[0];
                 let nearest = orig_cuts
                     .iter()
                     .map(|o| (o.distance(&q), o.line))
