@@ -449,7 +449,8 @@ fn column_of(text: &str, line: u64, word: &str) -> String {
 }
 
 /// The line without `( … )` and `;` comments.
-fn strip_comments(line: &str) -> String {
+/// A G-code line without its `( … )` comments and what follows a `;` outside them.
+pub(crate) fn strip_comments(line: &str) -> String {
     let mut out = String::with_capacity(line.len());
     let mut depth = 0;
     for c in line.chars() {

@@ -61,6 +61,15 @@ struct MotionMode {
 }
 
 impl MotionMode {
+    /// The word errmap writes for a piece in this mode: `G2`, `G3`, or `G1` for every other.
+    fn word(self) -> &'static str {
+        match self.kind {
+            Motion::ArcCw => "G2",
+            Motion::ArcCcw => "G3",
+            _ => "G1",
+        }
+    }
+
     const RAPID: MotionMode = MotionMode {
         kind: Motion::Rapid,
         code: GCode::whole(0),

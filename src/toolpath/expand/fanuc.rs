@@ -3,7 +3,7 @@
 use super::eval::{self, Env, Expr, Rules, Var};
 use super::{format_value, Flat, MAX_CALL_DEPTH, MAX_ITERATIONS};
 use crate::error::{Error, Location, Result};
-use crate::toolpath::dialect::Dialect;
+use crate::toolpath::dialect::{strip_comments, Dialect};
 use crate::toolpath::lexer::{self, Line, TokenKind, WordValue};
 use std::collections::HashMap;
 use std::path::Path;
@@ -107,22 +107,6 @@ impl Env for Vars<'_> {
             _ => Err(system_variable(n)),
         }
     }
-}
-
-/// The text of a keyword or assignment without `( … )` comments.
-fn strip_comments(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    let mut depth = 0;
-    for c in s.chars() {
-        match c {
-            '(' => depth += 1,
-            ')' if depth > 0 => depth -= 1,
-            ';' if depth == 0 => break,
-            _ if depth == 0 => out.push(c),
-            _ => {}
-        }
-    }
-    out
 }
 
 /// `[cond]` at the start of `s`: its inside and the rest.

@@ -170,11 +170,7 @@ impl<'a> Rewriter<'a> {
         } else {
             MotionMode::LINEAR
         };
-        segs.text.push_str(match mode.kind {
-            Motion::ArcCw => "G2",
-            Motion::ArcCcw => "G3",
-            _ => "G1",
-        });
+        segs.text.push_str(mode.word());
         self.push_axis_words(&written, out_pos, &mut segs.text, d);
         if let Some(r) = r_word {
             segs.text.push_str(if self.dialect == Dialect::Sinumerik {
@@ -214,11 +210,7 @@ impl<'a> Rewriter<'a> {
         } else {
             MotionMode::LINEAR
         };
-        segs.text.push_str(match mode.kind {
-            Motion::ArcCw => "G2",
-            Motion::ArcCcw => "G3",
-            _ => "G1",
-        });
+        segs.text.push_str(mode.word());
         self.push_axis_words(&written, out_pos, &mut segs.text, d);
         if let Some(c) = centre {
             let (a1, a2, _) = self.plane.axes();
