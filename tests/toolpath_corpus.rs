@@ -72,10 +72,8 @@ const FLAGS: &[(&str, &[&str])] = &[
         "enier-1006-motor-spacer-bracket.nc",
         &["--compensate-holes"],
     ),
-    // No --compensate-holes: the Fanuc tracer does not run canned cycles, so a program whose
-    // holes errmap moves could not be judged (rs274 judges the LinuxCNC ones).
-    ("enier-mill_hp_4.nc", &[]),
-    ("enier-slot_assembly_11.nc", &[]),
+    ("enier-mill_hp_4.nc", &["--compensate-holes"]),
+    ("enier-slot_assembly_11.nc", &["--compensate-holes"]),
     ("haas-lathe-L8-Ex1.nc", &["--fanuc-numbers", "is-b"]),
     ("janforys-fadal-frezowanie.nc", &["--units", "mm"]),
     (
@@ -775,6 +773,30 @@ mod judges {
         // G92 names the position (10, 0) as 0; G52 shifts X by 5 more: X1. is 16.
         let s = fanuc("G21 G90 G17\nG0 X10. Y0 Z0\nG92 X0 Y0\nG52 X5.\nG1 X1.\n");
         assert!((s[1].end[0] - 16.0).abs() < 1e-9, "{:?}", s[1].end);
+        // G99 G81 from Z10: two holes, each rapid to the position and to R2, feed to Z−5, back
+        // to R (G99); then G98 with a new Z: the third hole goes back to the start Z, 10.
+        let s = fanuc(
+            "G21 G90 G17\nG0 X0 Y0 Z10.\nG99 G81 X5. Y0 Z-5. R2. F100.\nX10.\nG98 X15. Z-3.\nG80\n",
+        );
+        let ends: Vec<(bool, [f64; 3])> = s.iter().map(|g| (g.cut, g.end)).collect();
+        let expect = [
+            (false, [0.0, 0.0, 10.0]),
+            (false, [5.0, 0.0, 10.0]),
+            (false, [5.0, 0.0, 2.0]),
+            (true, [5.0, 0.0, -5.0]),
+            (false, [5.0, 0.0, 2.0]),
+            (false, [10.0, 0.0, 2.0]),
+            (true, [10.0, 0.0, -5.0]),
+            (false, [10.0, 0.0, 2.0]),
+            (false, [15.0, 0.0, 2.0]),
+            (true, [15.0, 0.0, -3.0]),
+            (false, [15.0, 0.0, 10.0]),
+        ];
+        assert_eq!(ends.len(), expect.len(), "{ends:?}");
+        for (a, b) in ends.iter().zip(&expect) {
+            assert_eq!(a.0, b.0, "{ends:?}");
+            assert!((0..3).all(|k| (a.1[k] - b.1[k]).abs() < 1e-9), "{ends:?}");
+        }
     }
 
     #[test]

@@ -15,7 +15,7 @@
 //! without motion in the plane under them are counted. Subprograms in the same file: `M98 P<n> L<k>` runs program `O<n>` k times (once without
 //! L), its `M99` returns to the block after the call; the main program is the first one that
 //! ends in `M30`/`M02` (a program ending in `M99` is a subprogram), and `M30`/`M02` ends the
-//! run. Anything else that moves (canned cycles, G68, G51, macro variables, Fadal L)
+//! run. Anything else that moves (G91 cycles, G68, G51, macro variables, Fadal L)
 //! is refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
@@ -60,6 +60,10 @@ fn trace_counted(
     // programmed contours, which the control offsets alike in both programs when they agree
     // in the plane.
     let mut comp = false;
+    // A canned drilling cycle series (G73, G81–G89 until G80 or a G0–G3): its code, bottom Z,
+    // R level and the Z it started from; G98 (back to that Z, the power-on mode) or G99 (to R).
+    let mut cycle: Option<(u32, Option<f64>, Option<f64>, f64)> = None;
+    let mut g98 = true;
     let mut pos: [Option<f64>; 3] = [None; 3];
     let mut motion: Option<u32> = setup.power_on_g1.map(u32::from);
     let mut inch = setup.inch;
@@ -77,6 +81,8 @@ fn trace_counted(
             continue;
         }
         let mut block_motion = None;
+        let mut block_cycle: Option<u32> = None;
+        let mut cancel_cycle = false;
         let mut non_modal = None;
         let mut axes: [Option<(f64, bool)>; 3] = [None; 3];
         let mut ijk: [Option<f64>; 3] = [None; 3];
@@ -94,6 +100,10 @@ fn trace_counted(
                     }
                     match g as u32 {
                         m @ 0..=3 => block_motion = Some(m),
+                        m @ (73 | 81..=89) => block_cycle = Some(m),
+                        80 => cancel_cycle = true,
+                        98 => g98 = true,
+                        99 => g98 = false,
                         17 => plane = (0, 1, 2),
                         18 => plane = (2, 0, 1),
                         19 => plane = (1, 2, 0),
@@ -104,7 +114,7 @@ fn trace_counted(
                         m @ (4 | 10 | 28 | 30 | 52 | 53 | 92) => non_modal = Some(m),
                         41 | 42 => comp = true,
                         40 => comp = false,
-                        8 | 9 | 15 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 80 | 94 | 98 | 99 => {}
+                        8 | 9 | 15 | 43 | 44 | 49 | 54..=59 | 61 | 64 | 94 => {}
                         _ => return Err(format!("line {line}: G{num} is not followed")),
                     }
                 }
@@ -170,6 +180,72 @@ fn trace_counted(
                     continue;
                 }
             }
+        }
+        if cancel_cycle || block_motion.is_some() {
+            // G80, or a motion code of group 01, ends the series.
+            cycle = None;
+            if cancel_cycle && block_motion.is_none() {
+                motion = None;
+            }
+        }
+        if let Some(code) = block_cycle {
+            let z_now = pos[2].ok_or(format!("line {line}: a cycle from an unknown Z"))?;
+            cycle = Some((code, None, None, z_now));
+        }
+        if let Some((code, z_bottom, r_level, initial)) = cycle.as_mut() {
+            // A hole at every block of the series that names X or Y (and the cycle's own block):
+            // rapid to the position, rapid to R, feed to the bottom, rapid back to the start Z
+            // (G98) or R (G99). Its pecks and dwells go up and down that line.
+            if !absolute {
+                return Err(format!("line {line}: a G91 canned cycle is not followed"));
+            }
+            if ijk[2].is_some_and(|k| k != 1.0) {
+                return Err(format!(
+                    "line {line}: a repeat count K on a cycle is not followed"
+                ));
+            }
+            if let Some((z, _)) = axes[2] {
+                *z_bottom = Some(z + local[2] + set[2]);
+            }
+            if let Some(rv) = r {
+                *r_level = Some(rv + local[2] + set[2]);
+            }
+            let hole_here = block_cycle.is_some() || axes[0].is_some() || axes[1].is_some();
+            if hole_here {
+                let (Some(bottom), Some(rl)) = (*z_bottom, *r_level) else {
+                    return Err(format!("line {line}: cycle G{code} without Z or R"));
+                };
+                let mut xy = [f64::NAN; 2];
+                for k in 0..2 {
+                    xy[k] = match (axes[k], pos[k]) {
+                        (Some((v, _)), _) => v + local[k] + set[k],
+                        (None, Some(p)) => p,
+                        _ => return Err(format!("line {line}: a hole at an unknown position")),
+                    };
+                }
+                let mut from = [
+                    pos[0].unwrap_or(f64::NAN),
+                    pos[1].unwrap_or(f64::NAN),
+                    pos[2].unwrap_or(f64::NAN),
+                ];
+                let back = if g98 { initial.max(rl) } else { rl };
+                let steps = [(false, from[2]), (false, rl), (true, bottom), (false, back)];
+                for (cut, level) in steps {
+                    let to = [xy[0], xy[1], level];
+                    if (0..3).any(|k| (to[k] - from[k]).abs() > 0.0 || from[k].is_nan()) {
+                        out.push(Seg {
+                            cut,
+                            line,
+                            start: from,
+                            end: to,
+                            arc: None,
+                        });
+                    }
+                    from = to;
+                }
+                pos = [Some(xy[0]), Some(xy[1]), Some(back)];
+            }
+            continue;
         }
         if let Some(m) = block_motion {
             motion = Some(m);
