@@ -452,14 +452,16 @@ impl ErrorField for Tilt {
     }
 }
 
-/// Two ways to compensate each program: (1) the dialect given, mm, everywhere, Fanuc
+/// Three ways to compensate each program: (1) the dialect given, mm, everywhere, Fanuc
 /// decimal-less numbers as IS-B increments; (2) the dialect detected, units and Fanuc numbers
-/// unknown (refused where they matter), the zone around the map's probed surface. Segments up
-/// to 25 mm keep the output short; arcs still split at the chord tolerance.
+/// unknown (refused where they matter), the zone around the map's probed surface; (3) as (1)
+/// with every opt-in of real programs: `--expand`, `--compensate-holes`,
+/// `--same-part-per-offset`, `--power-on-motion g1`. Segments up to 25 mm keep the output
+/// short; arcs still split at the chord tolerance.
 fn toolpath_cases(
     dialect: Option<errmap::toolpath::Dialect>,
-) -> [(Tilt, errmap::toolpath::CompensationSettings); 2] {
-    use errmap::toolpath::{CompensationSettings, FanucNumbers, Units};
+) -> [(Tilt, errmap::toolpath::CompensationSettings); 3] {
+    use errmap::toolpath::{CompensationSettings, FanucNumbers, PowerOnMotion, Units};
     let base = CompensationSettings {
         max_segment: 25.0,
         ..CompensationSettings::default()
@@ -476,6 +478,20 @@ fn toolpath_cases(
             },
         ),
         (Tilt { surface: true }, base),
+        (
+            Tilt { surface: false },
+            CompensationSettings {
+                everywhere: true,
+                dialect,
+                units: Some(Units::Mm),
+                fanuc_numbers: Some(FanucNumbers::IsB),
+                expand: true,
+                compensate_holes: true,
+                same_part_per_offset: true,
+                power_on_motion: Some(PowerOnMotion::Linear),
+                ..base
+            },
+        ),
     ]
 }
 
