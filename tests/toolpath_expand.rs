@@ -264,7 +264,7 @@ END1
 M30
 ";
     let msg = refuse(text, &settings(true));
-    assert_msg(&msg, &["t.nc:5", "line 9", "more than 10000000 times"]);
+    assert_msg(&msg, &["t.nc:5", "line 9", "more than 1000000 times"]);
 }
 
 #[test]
@@ -517,7 +517,7 @@ fn linuxcnc_refusals_name_the_parameter_or_subroutine_and_the_line() {
     let endless = "G21 G90\nG0 X0 Y0 Z5\n#<a> = 0\no1 while [1]\no2 if [#<a> EQ 0]\nG1 X1 Y0 Z-1 F100\no2 endif\n#<a> = [#<a> + 1]\no1 endwhile\nM2\n";
     assert_msg(
         &refuse_ngc(endless, &s),
-        &["t.ngc:4", "more than 10000000 times"],
+        &["t.ngc:4", "more than 1000000 times"],
     );
     let unset = "G21 G90\nG0 X0 Y0 Z5\no1 repeat [2]\nG1 X#<_x> Y0 Z-1 F100\no1 endrepeat\nM2\n";
     assert_msg(&refuse_ngc(unset, &s), &["t.ngc:4", "#<_x> is read before"]);
