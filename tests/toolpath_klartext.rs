@@ -1062,3 +1062,17 @@ fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
     let p = cut_points(&out).into_iter().find(|p| p[0] == 5.0).unwrap();
     assert!((p[2] - (-1.0 - F1.e(5.0))).abs() < 1e-9, "{out}");
 }
+
+#[test]
+fn a_huge_arc_far_from_the_map_is_judged_in_bounded_time() {
+    // A circle of radius 2·10⁹ mm under RL, nowhere near the map: proving that it misses the
+    // map means sampling it every few mm. errmap stops after its sample budget (a fuzz run hung
+    // in that sampling) and takes the arc as one that may touch, so the RL refusal stands, at
+    // once.
+    let text = "0 BEGIN PGM T MM\n1 L X+2000000000 Y+0 Z+50 R0 FMAX\n2 L Z-1 RL F100\n3 CC X+0 Y+0\n4 C X-2000000000 Y+0 DR+\n5 END PGM T MM\n";
+    let started = std::time::Instant::now();
+    let msg = refuse(text);
+    assert_msg(&msg, &["k.h:5", "RL"]);
+    // Not a timing assertion of performance: a hang would never get here.
+    println!("refused in {:?}", started.elapsed());
+}

@@ -40,6 +40,9 @@ pub(crate) fn domain_error_mm(
 /// A point with each coordinate known or not (program units).
 pub(crate) type MaybePoint = [Option<f64>; 3];
 
+/// Most points [`may_touch`] samples along one path before it answers "may touch".
+const MAX_SAMPLES: usize = 2_000_000;
+
 /// Could a path through `points` touch the zone (limits along axis `normal`) and the map's
 /// compensable area (`compensable(u, v)` on the plane axes `plane_uv`)? Unknown coordinates may
 /// be anywhere, so they answer yes; known ones are checked every `step` along the polyline.
@@ -75,9 +78,17 @@ pub(crate) fn may_touch(
     if compensable(known[0][0], known[0][1]) {
         return true;
     }
+    // Sampled at most every `step`, and at most MAX_SAMPLES points over the whole path: a path
+    // longer than that (a huge arc of many chords, a typo's kilometre move) is taken as one
+    // that may touch, which refuses rather than spends minutes proving otherwise.
+    let mut left = MAX_SAMPLES;
     for w in known.windows(2) {
         let len = dist(&w[0], &w[1]);
         let k = (len / step).ceil().clamp(1.0, 1e6) as usize;
+        if k > left {
+            return true;
+        }
+        left -= k;
         for i in 1..=k {
             let p = lerp(&w[0], &w[1], i as f64 / k as f64);
             if compensable(p[0], p[1]) {
