@@ -849,17 +849,20 @@ fn a_subroutine_that_changes_the_distance_mode_refuses_the_cuts_after_its_call()
 
 #[test]
 fn a_rotary_axis_away_from_0_refuses_the_cuts_until_it_is_back() {
-    for (dialect, text) in [
+    for (dialect, at, text) in [
         (
             Dialect::Linuxcnc,
+            "t.nc:4,",
             "G21 G90\nG0 X0 Y0 Z10\nG0 B30\nG1 Z-1 F100\nG1 X10\nM2\n",
         ),
         (
             Dialect::Sinumerik,
+            "t.nc:4,",
             "G71 G90\nG0 X0 Y0 Z10\nG0 B30\nG1 Z-1 F100\nG1 X10\nM30\n",
         ),
         (
             Dialect::Fanuc,
+            "t.nc:5,",
             "O1\nG21 G90\nG0 X0. Y0. Z10.\nG0 A90.\nG1 Z-1. F100.\nG1 X10.\nM30\n",
         ),
     ] {

@@ -104,11 +104,21 @@ struct SubInfo {
     sets: Vec<(&'static str, u64, String)>,
 }
 
+/// What a state errmap does not follow is about, and so what ends it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Holds {
+    /// A rotary or parallel axis (its letter) away from 0: ended by that axis at 0.
+    Axis(u8),
+    /// A modal group a called subroutine may have changed (see [`modal_group`]): ended by a
+    /// block that sets it.
+    Mode(&'static str),
+}
+
 /// A state errmap does not follow (a rotary axis away from 0, modes a subroutine changed):
-/// cuts in the zone are refused while it lasts; `key` names what ends it.
+/// cuts in the zone are refused while it lasts; `key` says what ends it.
 #[derive(Debug, Clone)]
 struct Unfollowed {
-    key: String,
+    key: Holds,
     word: String,
     why: String,
     hint: &'static str,

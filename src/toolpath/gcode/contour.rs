@@ -134,16 +134,7 @@ impl<'a> Rewriter<'a> {
             }
             self.contour_segment(q, centre, motion, in_plane, &mut out_pos, &mut segs);
         }
-        if segs.spans.is_empty() {
-            segs.spans.push(0..0);
-        }
-        let nseg = segs.spans.len();
-        self.write_lines(line, words, arc.is_some(), &segs);
-        self.report.moves_changed += 1;
-        if nseg > 1 {
-            self.report.moves_split += 1;
-        }
-        self.report.segments_emitted += nseg as u64;
+        self.write_move(line, words, arc.is_some(), &mut segs);
         // Where the output stands against the original's end: −E of the last piece, unless a
         // piece too short to move in the plane as written was left out.
         let end_n = pieces

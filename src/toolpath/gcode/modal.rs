@@ -738,7 +738,7 @@ impl<'a> Rewriter<'a> {
             .trim()
             .to_string();
         for (group, what) in sets {
-            let key = format!("mode:{group}");
+            let key = super::Holds::Mode(group);
             self.unfollowed.retain(|u| u.key != key);
             self.unfollowed.push(super::Unfollowed {
                 key,

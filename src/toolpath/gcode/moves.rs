@@ -148,7 +148,11 @@ impl<'a> Rewriter<'a> {
         let moves = words.iter().any(|w| is_axis(w.letter))
             || (motion_word.is_some() && arc_words && arc_mode);
         if moves && self.motion.is_none() {
-            if let Some(u) = self.unfollowed.iter().find(|u| u.key == "mode:motion") {
+            if let Some(u) = self
+                .unfollowed
+                .iter()
+                .find(|u| u.key == super::Holds::Mode("motion"))
+            {
                 let why = u.why.clone();
                 return Err(self.err(line, "X", why, u.hint));
             }
@@ -207,7 +211,7 @@ impl<'a> Rewriter<'a> {
             .filter(|w| matches!(w.letter, b'A' | b'B' | b'C' | b'U' | b'V' | b'W'))
         {
             let axis = w.letter as char;
-            let key = format!("axis:{axis}");
+            let key = super::Holds::Axis(w.letter);
             self.unfollowed.retain(|u| u.key != key);
             let at_zero = w.value == Some(0.0) && !w.is_expr && w.abs.unwrap_or(self.absolute);
             if !at_zero {
@@ -224,12 +228,15 @@ impl<'a> Rewriter<'a> {
 
     /// The modal groups a block sets end what a subroutine left unknown in them.
     fn modes_said(&mut self, words: &[W]) {
+        if self.unfollowed.is_empty() {
+            return;
+        }
         for group in words
             .iter()
             .filter_map(|w| w.g().and_then(super::modal_group))
         {
-            let key = format!("mode:{group}");
-            self.unfollowed.retain(|u| u.key != key);
+            self.unfollowed
+                .retain(|u| u.key != super::Holds::Mode(group));
         }
     }
 
@@ -436,7 +443,7 @@ impl<'a> Rewriter<'a> {
         // An axis moving on this very cut is named by the word refusal.
         let own_axis = |u: &&super::Unfollowed| {
             mv.other_axis
-                .is_some_and(|w| u.key == format!("axis:{}", w.letter as char))
+                .is_some_and(|w| u.key == super::Holds::Axis(w.letter))
         };
         if let Some(u) = self.unfollowed.iter().rev().find(|u| !own_axis(u)) {
             return Some((u.word.clone(), u.why.clone(), u.hint));

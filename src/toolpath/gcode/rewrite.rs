@@ -30,21 +30,32 @@ impl<'a> Rewriter<'a> {
         segs.spans.clear();
         let last_e = self.count_compensated(emitted);
         self.segment_words(emitted, arc, motion, &mut segs);
+        self.write_move(line, words, arc.is_some(), &mut segs);
+        // Offset of the output along the normal at the end of the move.
+        self.offset = last_e.map_or(0.0, |e| -e);
+        self.segments = segs;
+        Ok(())
+    }
+
+    /// Write a rewritten move's segments in place of its line (the line keeps its other words
+    /// only when every point rounds to where the tool stands) and count them in the report.
+    pub(super) fn write_move(
+        &mut self,
+        line: &Line,
+        words: &[W],
+        is_arc: bool,
+        segs: &mut Segments,
+    ) {
         if segs.spans.is_empty() {
-            // Every point rounds to the current position: the line keeps its other words only.
             segs.spans.push(0..0);
         }
         let nseg = segs.spans.len();
-        self.write_lines(line, words, arc.is_some(), &segs);
+        self.write_lines(line, words, is_arc, segs);
         self.report.moves_changed += 1;
         if nseg > 1 {
             self.report.moves_split += 1;
         }
         self.report.segments_emitted += nseg as u64;
-        // Offset of the output along the normal at the end of the move.
-        self.offset = last_e.map_or(0.0, |e| -e);
-        self.segments = segs;
-        Ok(())
     }
 
     /// Count the compensated points in the report; E of the last point.
