@@ -1,5 +1,6 @@
 //! Machine axes and the plane a map lies in: which coordinate is the error direction and which two span the map.
 
+use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
 /// A linear machine axis.
@@ -80,10 +81,40 @@ impl Domain {
     }
 
     /// A command-line value `UMIN,VMIN,UMAX,VMAX` (mm, finite, each minimum below its maximum),
-    /// for clap: [`crate::probe::parse_domain`]'s message as a string.
+    /// for clap: [`parse_domain`]'s message as a string.
     pub fn parse_arg(text: &str) -> std::result::Result<Domain, String> {
-        crate::probe::parse_domain(text).map_err(|e| e.to_string())
+        parse_domain(text).map_err(|e| e.to_string())
     }
+}
+
+/// Parse a domain written `UMIN,VMIN,UMAX,VMAX` in mm (the two plane axes of the normal, e.g.
+/// `XMIN,YMIN,XMAX,YMAX` for normal z), as given on the command line.
+pub fn parse_domain(text: &str) -> Result<Domain> {
+    let hint =
+        "write the domain as UMIN,VMIN,UMAX,VMAX in mm along the two plane axes, e.g. 0,0,600,300";
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| Error::usage(format!("domain '{text}' is not four numbers"), hint))?;
+    let [u_min_mm, v_min_mm, u_max_mm, v_max_mm] = values[..] else {
+        return Err(Error::usage(
+            format!("domain '{text}' has {} values, not 4", values.len()),
+            hint,
+        ));
+    };
+    if !values.iter().all(|v| v.is_finite()) || u_max_mm <= u_min_mm || v_max_mm <= v_min_mm {
+        return Err(Error::usage(
+            format!("domain '{text}' is not a rectangle: each minimum must be below its maximum"),
+            hint,
+        ));
+    }
+    Ok(Domain {
+        u_min_mm,
+        v_min_mm,
+        u_max_mm,
+        v_max_mm,
+    })
 }
 
 /// A machining-error field over a map plane: what toolpath compensation asks of a fitted map.

@@ -344,6 +344,21 @@ pub(crate) fn csv_error_hinted(path: &Path, e: csv::Error, hint: &str) -> Error 
     }
 }
 
+/// Environment variable naming errmap's cache folder (default `$XDG_CACHE_HOME/errmap`,
+/// else `~/.cache/errmap`).
+pub const CACHE_ENV: &str = "ERRMAP_CACHE_DIR";
+
+/// errmap's cache folder ([`CACHE_ENV`], `$XDG_CACHE_HOME/errmap` or `~/.cache/errmap`).
+pub fn cache_dir() -> Option<PathBuf> {
+    if let Some(dir) = std::env::var_os(CACHE_ENV).filter(|d| !d.is_empty()) {
+        return Some(PathBuf::from(dir));
+    }
+    if let Some(dir) = std::env::var_os("XDG_CACHE_HOME").filter(|d| !d.is_empty()) {
+        return Some(PathBuf::from(dir).join("errmap"));
+    }
+    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("errmap"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -143,3 +143,12 @@ mod tests {
         assert!(r.shows_detail() && !Silent.shows_detail());
     }
 }
+
+/// Where a library call sends a one-line note for the user (the CLI prints it on stderr
+/// unless `--quiet`; tests pass [`silent`]).
+pub type Notes = std::sync::Arc<dyn Fn(&str) + Send + Sync>;
+
+/// Notes that go nowhere.
+pub fn silent() -> Notes {
+    std::sync::Arc::new(|_| {})
+}

@@ -246,6 +246,8 @@ static REASONS: &[Reason] = &[
         name: "missing file (a called program or the caller)",
         phrases: &[
             "not defined in this file",
+            "not in this file",
+            "a main program errmap cannot see",
             "CALL PGM",
             "it is a subprogram",
             "file is not",

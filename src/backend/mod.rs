@@ -17,14 +17,7 @@ use crate::gpu::GpuTrainer;
 use crate::nn::{Backend, CpuTrainer, FastCpuTrainer, Mlp, ModelConfig, Trainer, TrainingSet};
 use crate::{Error, Result};
 
-/// Where a library call sends a one-line note for the user (the CLI prints it on stderr
-/// unless `--quiet`; tests pass [`silent`]).
-pub type Notes = Arc<dyn Fn(&str) + Send + Sync>;
-
-/// Notes that go nowhere.
-pub fn silent() -> Notes {
-    Arc::new(|_| {})
-}
+pub use crate::progress::{silent, Notes};
 
 /// The trainer chosen for a backend and why.
 pub struct Selection {

@@ -17,9 +17,7 @@ pub const PROBE_SAMPLES: usize = 768;
 /// … for this many Adam epochs (after one warm-up epoch that builds the pipelines).
 pub const PROBE_EPOCHS: u32 = 20;
 
-/// Environment variable naming errmap's cache folder (default `$XDG_CACHE_HOME/errmap`,
-/// else `~/.cache/errmap`).
-pub const CACHE_ENV: &str = "ERRMAP_CACHE_DIR";
+pub use crate::io::CACHE_ENV;
 
 /// One backend's figures on a workload.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -73,16 +71,7 @@ impl Verdict {
     }
 }
 
-/// errmap's cache folder ([`CACHE_ENV`], `$XDG_CACHE_HOME/errmap` or `~/.cache/errmap`).
-pub fn cache_dir() -> Option<PathBuf> {
-    if let Some(dir) = std::env::var_os(CACHE_ENV).filter(|d| !d.is_empty()) {
-        return Some(PathBuf::from(dir));
-    }
-    if let Some(dir) = std::env::var_os("XDG_CACHE_HOME").filter(|d| !d.is_empty()) {
-        return Some(PathBuf::from(dir).join("errmap"));
-    }
-    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("errmap"))
-}
+pub use crate::io::cache_dir;
 
 /// The probe cache: one JSON object, probe key → [`Verdict`].
 pub fn cache_file() -> Option<PathBuf> {

@@ -30,11 +30,11 @@ use super::context::GpuContext;
 use super::epochs::{init_buffer, sized, slot_offset, step_buffer, uniform_align, EpochLoop};
 use super::layout::{pack_samples, Step};
 use super::pipeline_cache::{self, CacheUse};
-use crate::backend::Notes;
 use crate::nn::{
     layer_spans, Activation, LayerSpan, Mlp, ModelConfig, TrainingSet, ADAM_BETA1, ADAM_BETA2,
     ADAM_EPSILON, ADAM_ONE_MINUS_BETA1, ADAM_ONE_MINUS_BETA2,
 };
+use crate::progress::Notes;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 
@@ -512,7 +512,7 @@ impl CpuKernels {
             layout,
             built: Mutex::new(HashMap::new()),
             cache_dir,
-            notes: crate::backend::silent(),
+            notes: crate::progress::silent(),
         }
     }
 

@@ -56,7 +56,7 @@ impl GpuTrainer {
     pub fn open(allow_software: bool) -> Result<GpuTrainer> {
         let ctx = GpuContext::open(allow_software)?;
         let train = train::TrainPipelines::new(&ctx)?;
-        let cpu_adapter = lavapipe::CpuKernels::new(&ctx, crate::backend::probe::cache_dir());
+        let cpu_adapter = lavapipe::CpuKernels::new(&ctx, crate::io::cache_dir());
         let eval = evaluate::EvalPipeline::new(&ctx)?;
         let buffer_limit_bytes = ctx
             .limits
@@ -94,7 +94,7 @@ impl GpuTrainer {
     }
 
     /// Sends notes (a pipeline cache that could not be used or written) to `notes`.
-    pub fn with_notes(mut self, notes: crate::backend::Notes) -> GpuTrainer {
+    pub fn with_notes(mut self, notes: crate::progress::Notes) -> GpuTrainer {
         self.cpu_adapter.notes = notes;
         self
     }

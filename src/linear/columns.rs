@@ -8,7 +8,7 @@
 //! optional `run` (else each pass is numbered in file order), `air_temp`, `pressure`,
 //! `humidity`, `material_temp`, `time`. Other columns of the export are ignored.
 
-use super::runs::Direction;
+use crate::direction::Direction;
 use crate::error::{Error, Location, Result};
 use crate::io::{CsvRow, CsvTable};
 

@@ -275,7 +275,7 @@ impl ErrorMap {
     /// Peak-to-valley and RMS (about 0) of the values, µm.
     pub fn pv_rms_um(&self) -> (f64, f64) {
         let opts: Vec<Option<f64>> = self.values.iter().map(|&v| Some(v)).collect();
-        crate::report::heatmap::pv_rms_um(&opts)
+        crate::numeric::pv_rms_um(&opts)
     }
 
     /// Which nodes lie outside the measured domain `hull_mm` (where the map extrapolates);
@@ -304,7 +304,7 @@ impl ErrorMap {
             .collect();
         opts.iter()
             .any(|v| v.is_some())
-            .then(|| crate::report::heatmap::pv_rms_um(&opts))
+            .then(|| crate::numeric::pv_rms_um(&opts))
     }
 
     /// Write as CSV `<u>_mm,<v>_mm,<value_column>` (e.g. `x_mm,y_mm,e_um`), atomically.

@@ -173,32 +173,4 @@ pub fn write_rejected_csv(path: &Path, rejected: &[Rejected]) -> Result<()> {
     })
 }
 
-/// Parse a domain written `UMIN,VMIN,UMAX,VMAX` in mm (the two plane axes of the normal, e.g.
-/// `XMIN,YMIN,XMAX,YMAX` for normal z), as given on the command line.
-pub fn parse_domain(text: &str) -> Result<Domain> {
-    let hint =
-        "write the domain as UMIN,VMIN,UMAX,VMAX in mm along the two plane axes, e.g. 0,0,600,300";
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|s| s.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| Error::usage(format!("domain '{text}' is not four numbers"), hint))?;
-    let [u_min_mm, v_min_mm, u_max_mm, v_max_mm] = values[..] else {
-        return Err(Error::usage(
-            format!("domain '{text}' has {} values, not 4", values.len()),
-            hint,
-        ));
-    };
-    if !values.iter().all(|v| v.is_finite()) || u_max_mm <= u_min_mm || v_max_mm <= v_min_mm {
-        return Err(Error::usage(
-            format!("domain '{text}' is not a rectangle: each minimum must be below its maximum"),
-            hint,
-        ));
-    }
-    Ok(Domain {
-        u_min_mm,
-        v_min_mm,
-        u_max_mm,
-        v_max_mm,
-    })
-}
+pub use crate::geom::parse_domain;

@@ -104,7 +104,7 @@ where
         [(x0, top), (x1, bottom)],
         BLACK.stroke_width(1),
     ))?;
-    let tick = super::heatmap::nice_limit((hi - lo) / 10.0);
+    let tick = nice_limit((hi - lo) / 10.0);
     let decimals = if tick >= 1.0 {
         0
     } else if tick >= 0.1 {
@@ -239,3 +239,17 @@ const VIRIDIS: [[f64; 3]; 256] = [
     [0.926106, 0.897330, 0.104071], [0.935904, 0.898570, 0.108131], [0.945636, 0.899815, 0.112838], [0.955300, 0.901065, 0.118128],
     [0.964894, 0.902323, 0.123941], [0.974417, 0.903590, 0.130215], [0.983868, 0.904867, 0.136897], [0.993248, 0.906157, 0.143936],
 ];
+
+/// A "nice" colour limit ≥ `v` (1, 2, 2.5, 5 × 10ⁿ), so colour-bar ticks fall on round numbers.
+pub fn nice_limit(v: f64) -> f64 {
+    if !(v.is_finite() && v > 0.0) {
+        return 1.0;
+    }
+    let p = 10f64.powf(v.log10().floor());
+    for m in [1.0, 2.0, 2.5, 5.0, 10.0] {
+        if m * p >= v * (1.0 - 1e-12) {
+            return m * p;
+        }
+    }
+    10.0 * p
+}

@@ -8,7 +8,7 @@
 
 use crate::error::Result;
 use crate::report::chart::{self, Frame, FONT};
-use crate::report::colormap::{draw_colour_bar, ColourBar, ColourMap};
+use crate::report::colormap::{draw_colour_bar, nice_limit, ColourBar, ColourMap};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
@@ -61,31 +61,7 @@ pub struct Heatmap<'a> {
     pub extrapolated: &'a [bool],
 }
 
-/// Peak-to-valley and RMS (about 0) of the values present, µm.
-pub fn pv_rms_um(values: &[Option<f64>]) -> (f64, f64) {
-    let present: Vec<f64> = values.iter().flatten().copied().collect();
-    if present.is_empty() {
-        return (0.0, 0.0);
-    }
-    let max = present.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    let min = present.iter().cloned().fold(f64::INFINITY, f64::min);
-    let rms = (present.iter().map(|v| v * v).sum::<f64>() / present.len() as f64).sqrt();
-    (max - min, rms)
-}
-
-/// A "nice" colour limit ≥ `v` (1, 2, 2.5, 5 × 10ⁿ), so colour-bar ticks fall on round numbers.
-pub fn nice_limit(v: f64) -> f64 {
-    if !(v.is_finite() && v > 0.0) {
-        return 1.0;
-    }
-    let p = 10f64.powf(v.log10().floor());
-    for m in [1.0, 2.0, 2.5, 5.0, 10.0] {
-        if m * p >= v * (1.0 - 1e-12) {
-            return m * p;
-        }
-    }
-    10.0 * p
-}
+pub use crate::numeric::pv_rms_um;
 
 /// The colour limits (lo, hi) a map is drawn with: symmetric about 0 for [`Scale::Diverging`].
 pub fn limits(values: &[Option<f64>], scale: Scale) -> (f64, f64) {

@@ -261,11 +261,17 @@ impl<'a> Rewriter<'a> {
             return Ok(());
         }
         let t = self.wtext(l).to_string();
+        // Never offer the flag the user already gave.
+        let hint = if self.settings.expand {
+            "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file"
+        } else {
+            "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file and pass --expand"
+        };
         Err(self.err(
             line,
             &t,
             format!("`{t}`: a Fadal subprogram definition or call (L100, L101) or a repeat count on a move, which errmap does not follow"),
-            "post the program without Fadal subprograms and repeat counts (plain blocks), or use M98 subprograms with --expand",
+            hint,
         ))
     }
 
