@@ -5,6 +5,7 @@ pub mod driver;
 pub mod job;
 pub mod k8s;
 pub mod manifest;
+mod part_record;
 pub mod reduce;
 pub mod run;
 pub mod single;

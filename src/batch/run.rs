@@ -5,6 +5,7 @@
 //! network is fitted to the node-wise mean of the parts' training sets. All of them go to the
 //! trainer in one call, so on a GPU a whole family trains in the same dispatches.
 
+use super::part_record::Marks;
 use super::summary::{BatchSummary, FamilySummary, PartSummary, ToolpathSummary};
 use super::timing::{PartTiming, Stopping, Timing};
 use super::train_step::{train_all, Role};
@@ -907,13 +908,6 @@ fn held_out(p: &Interpolated, norm: &Normalisation) -> Holdout {
 /// A part's delivered map, its model and its marks.
 type Fitted = (ErrorMap, FittedModel, Marks);
 
-/// Probe and rejected points (plane axes, mm) drawn on a map.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub(crate) struct Marks {
-    pub probes: Vec<(f64, f64)>,
-    pub rejected: Vec<(f64, f64)>,
-}
-
 /// A part's kept and rejected probe points in the map plane.
 fn part_marks(p: &Interpolated) -> Marks {
     Marks {
@@ -1115,7 +1109,7 @@ fn write_part(
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
     let marks = part_marks(p);
     if s.reduce_inputs {
-        super::reduce::PartReduce {
+        super::part_record::PartReduce {
             part: name.clone(),
             holdout_fit: p.holdout_nodes.is_some(),
             train_nodes: p.full_nodes.clone(),

@@ -1,6 +1,6 @@
 //! Where the map may be applied, for every toolpath reader: E inside the measured domain (or anywhere the map reaches, with `--extrapolate`), and whether a path through partly known points can reach the zone and that domain.
 
-use super::gcode::{dist, lerp};
+use super::point::{dist, lerp};
 use super::CompensationSettings;
 use crate::geom::ErrorField;
 use std::cell::Cell;
