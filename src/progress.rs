@@ -111,6 +111,15 @@ impl Reporter for Recorder {
     }
 }
 
+/// Where a library call sends a one-line note for the user (the CLI prints it on stderr
+/// unless `--quiet`; tests pass [`silent`]).
+pub type Notes = std::sync::Arc<dyn Fn(&str) + Send + Sync>;
+
+/// Notes that go nowhere.
+pub fn silent() -> Notes {
+    std::sync::Arc::new(|_| {})
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,13 +151,4 @@ mod tests {
         );
         assert!(r.shows_detail() && !Silent.shows_detail());
     }
-}
-
-/// Where a library call sends a one-line note for the user (the CLI prints it on stderr
-/// unless `--quiet`; tests pass [`silent`]).
-pub type Notes = std::sync::Arc<dyn Fn(&str) + Send + Sync>;
-
-/// Notes that go nowhere.
-pub fn silent() -> Notes {
-    std::sync::Arc::new(|_| {})
 }
