@@ -1,6 +1,6 @@
 //! Least-squares circle through points of a plane: the geometric fit (centre and radius minimising Σ(|p − c| − ρ)²) by Gauss–Newton.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::DMatrix;
 
 /// A fitted circle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,27 +18,30 @@ pub fn fit_circle(points: &[[f64; 2]], start_radius_mm: f64) -> Option<CircleFit
     }
     let (mut c, mut rho) = ([0.0_f64; 2], start_radius_mm);
     for _ in 0..50 {
-        let mut jtj = Matrix3::<f64>::zeros();
-        let mut jte = Vector3::<f64>::zeros();
-        for p in points {
+        // Residual e = dist − ρ; its gradient in (cx, cy, ρ) is (−u_x, −u_y, −1).
+        let mut jacobian = DMatrix::<f64>::zeros(points.len(), 3);
+        let mut minus_e = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
             let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
             let dist = dx.hypot(dy);
             if dist == 0.0 {
                 return None;
             }
-            // Residual e = dist − ρ; its gradient in (cx, cy, ρ) is (−u_x, −u_y, −1).
-            let j = Vector3::new(-dx / dist, -dy / dist, -1.0);
-            jtj += j * j.transpose();
-            jte += j * (dist - rho);
+            jacobian[(i, 0)] = -dx / dist;
+            jacobian[(i, 1)] = -dy / dist;
+            jacobian[(i, 2)] = -1.0;
+            minus_e.push(rho - dist);
         }
-        let step = jtj.lu().solve(&(-jte))?;
+        let step = crate::numeric::lsq::solve(&jacobian, &minus_e, 1e-12)
+            .ok()?
+            .beta;
         if !step.iter().all(|v| v.is_finite()) {
             return None;
         }
         c[0] += step[0];
         c[1] += step[1];
         rho += step[2];
-        if step.norm() < 1e-13 * (1.0 + rho.abs()) {
+        if step.iter().map(|v| v * v).sum::<f64>().sqrt() < 1e-13 * (1.0 + rho.abs()) {
             break;
         }
     }

@@ -177,10 +177,9 @@ fn fit_circle(
         a[(i, 2)] = 1.0;
         b[i] = -(u * u + v * v);
     }
-    let sol = a
-        .svd(true, true)
-        .solve(&b, 1e-14)
-        .map_err(|_| AxisFitError::Degenerate { sphere })?;
+    let sol = crate::numeric::lsq::solve(&a, b.as_slice(), 1e-12)
+        .map_err(|_| AxisFitError::Degenerate { sphere })?
+        .beta;
     let (cu, cv) = (-sol[0] / 2.0, -sol[1] / 2.0);
     let r2 = cu * cu + cv * cv - sol[2];
     if r2.is_nan() || r2 <= 0.0 {

@@ -128,10 +128,9 @@ fn algebraic_start(
         a[(i, 3)] = 1.0;
         b[i] = -q.norm_squared();
     }
-    let svd = a.svd(true, true);
-    let sol = svd
-        .solve(&b, 1e-12)
-        .map_err(|_| SphereFitError::Degenerate)?;
+    let sol = crate::numeric::lsq::solve(&a, b.as_slice(), 1e-12)
+        .map_err(|_| SphereFitError::Degenerate)?
+        .beta;
     let cq = Vector3::new(-sol[0] / 2.0, -sol[1] / 2.0, -sol[2] / 2.0);
     let r2 = cq.norm_squared() - sol[3];
     if r2.is_nan() || r2 <= 0.0 || !cq.iter().all(|v| v.is_finite()) {
@@ -172,10 +171,10 @@ fn gauss_newton(
             }
             r[i] = dist - radius;
         }
-        let step = j
-            .svd(true, true)
-            .solve(&(-r), 1e-14)
-            .map_err(|_| SphereFitError::Degenerate)?;
+        let minus_r: Vec<f64> = r.iter().map(|v| -v).collect();
+        let step = crate::numeric::lsq::solve(&j, &minus_r, 1e-12)
+            .map_err(|_| SphereFitError::Degenerate)?
+            .beta;
         centre += Vector3::new(step[0], step[1], step[2]);
         if cols == 4 {
             radius += step[3];
@@ -183,7 +182,7 @@ fn gauss_newton(
         if !centre.iter().all(|v| v.is_finite()) || !radius.is_finite() {
             return Err(SphereFitError::NoConvergence);
         }
-        if step.norm() <= 1e-13 * (1.0 + radius.abs()) {
+        if step.iter().map(|v| v * v).sum::<f64>().sqrt() <= 1e-13 * (1.0 + radius.abs()) {
             converged = true;
             break;
         }
