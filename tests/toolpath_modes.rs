@@ -11,6 +11,9 @@ use errmap::toolpath::{
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "common/sloped_field.rs"]
+mod sloped_field;
+
 /// E = +20 µm along Z everywhere, all measured.
 struct Flat;
 
@@ -305,30 +308,7 @@ fn axis_words_before_any_motion_word_are_refused_or_read_in_the_power_on_mode() 
 // output's rapids are the original's, and every cutting point of the output lies on the
 // original's path, lowered by E inside the zone and measured domain and unchanged outside.
 
-/// Measured (probed) for x ≤ this, mm.
-const X_MEASURED_MM: f64 = 3.0;
-/// The zone along Z, mm (the programs start in mm).
-const ZONE_MM: (f64, f64) = (-2.0, -0.25);
-const CHORD_TOL_MM: f64 = 0.005;
-
-/// E = 0.05 + 0.001·x mm along Z, measured for x ≤ 3 mm.
-struct Sloped;
-
-fn sloped_e_mm(x_mm: f64) -> f64 {
-    0.05 + 0.001 * x_mm
-}
-
-impl ErrorField for Sloped {
-    fn normal(&self) -> Axis {
-        Axis::Z
-    }
-    fn error_mm(&self, u: f64, v: f64) -> Option<f64> {
-        (u.abs() <= 1000.0 && v.abs() <= 1000.0).then(|| sloped_e_mm(u))
-    }
-    fn measured(&self, u: f64, _v: f64, margin: f64) -> Option<bool> {
-        Some(u <= X_MEASURED_MM + margin)
-    }
-}
+use sloped_field::{sloped_e_mm, Sloped, CHORD_TOL_MM, X_MEASURED_MM, ZONE_MM};
 
 /// A random program and the modes it leaves at each line, as the controller reads it.
 struct Generator {

@@ -3,7 +3,6 @@
 //! The rs274 part needs `../shared/corpus/gcode/rs274-check.sh` (or `$ERRMAP_GCODE_CORPUS`) and
 //! rs274 installed; it skips with a printed reason otherwise, unless `ERRMAP_REQUIRE_RS274=1`.
 
-use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::dialect::Motion;
 use errmap::toolpath::{compensate_gcode, trace_gcode, CompensationSettings, Dialect, TracedMove};
 use rand::{Rng, SeedableRng};
@@ -11,30 +10,9 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Measured (probed) for x ≤ this, mm.
-const X_MEASURED_MM: f64 = 3.0;
-/// The zone along Z, mm (the programs start in mm).
-const ZONE_MM: (f64, f64) = (-2.0, -0.25);
-const CHORD_TOL_MM: f64 = 0.005;
-
-/// E = 0.05 + 0.001·x mm along Z, measured for x ≤ 3 mm.
-struct F;
-
-fn e_mm(x_mm: f64) -> f64 {
-    0.05 + 0.001 * x_mm
-}
-
-impl ErrorField for F {
-    fn normal(&self) -> Axis {
-        Axis::Z
-    }
-    fn error_mm(&self, u: f64, v: f64) -> Option<f64> {
-        (u.abs() <= 1000.0 && v.abs() <= 1000.0).then(|| e_mm(u))
-    }
-    fn measured(&self, u: f64, _v: f64, margin: f64) -> Option<bool> {
-        Some(u <= X_MEASURED_MM + margin)
-    }
-}
+#[path = "common/sloped_field.rs"]
+mod sloped_field;
+use sloped_field::{sloped_e_mm as e_mm, Sloped as F, CHORD_TOL_MM, X_MEASURED_MM, ZONE_MM};
 
 /// How each dialect spells the program's words.
 struct Spelling {
