@@ -11,6 +11,10 @@ use errmap::toolpath::{
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "common/path_judge.rs"]
+mod path_judge;
+#[path = "common/rs274_canon.rs"]
+mod rs274_canon;
 #[path = "common/sloped_field.rs"]
 mod sloped_field;
 
@@ -529,76 +533,34 @@ struct CanonMove {
     arc: Option<([f64; 2], f64, f64, f64, f64)>,
 }
 
-/// rs274's motions of a program; `None` when rs274 is missing.
+/// rs274's motions of a program (read by tests/common/rs274_canon.rs), with each XY arc's
+/// start angle and radii; `None` when rs274 is missing.
 fn rs274_moves(program: &str) -> Option<Vec<CanonMove>> {
-    let dir = corpus()?;
+    corpus()?;
     let tmp = tempfile::tempdir().unwrap();
-    let (ngc, canon) = (tmp.path().join("p.ngc"), tmp.path().join("p.canon"));
-    std::fs::write(&ngc, program).unwrap();
-    let out = Command::new(dir.join("rs274-check.sh"))
-        .arg(&ngc)
-        .arg(&canon)
-        .output()
-        .expect("cannot run rs274-check.sh");
-    match out.status.code() {
-        Some(127) => return None,
-        Some(0) => {}
-        code => panic!(
-            "rs274 stopped ({code:?}): {}\n{program}",
-            String::from_utf8_lossy(&out.stderr)
-        ),
-    }
-    let canon = std::fs::read_to_string(&canon).unwrap();
-    let (mut k, mut pos, mut xy) = (1.0, [0.0; 3], true);
-    let mut moves = Vec::new();
-    for line in canon.lines() {
-        let Some(open) = line.find('(') else { continue };
-        let name = line[..open].split_whitespace().last().unwrap_or("");
-        let args: Vec<f64> = line[open + 1..]
-            .trim_end_matches(')')
-            .split(',')
-            .map(|a| a.trim().parse().unwrap_or(f64::NAN))
-            .collect();
-        let start = pos;
-        let mut push = |cut, end: [f64; 3], arc| {
-            moves.push(CanonMove {
-                cut,
-                start,
-                end,
-                arc,
+    let segs = match rs274_canon::run(tmp.path(), "p", program.as_bytes())? {
+        Ok(segs) => segs,
+        Err(e) => panic!("{e}\n{program}"),
+    };
+    let moves = segs
+        .iter()
+        .map(|s| {
+            let arc = s.arc.as_ref().map(|a| {
+                assert_eq!(a.axes, (0, 1, 2), "an arc outside the XY plane\n{program}");
+                let c = [a.centre.0, a.centre.1];
+                let a0 = (s.start[1] - c[1]).atan2(s.start[0] - c[0]);
+                let r0 = (s.start[0] - c[0]).hypot(s.start[1] - c[1]);
+                let r1 = (s.end[0] - c[0]).hypot(s.end[1] - c[1]);
+                (c, a0, a.sweep_rad, r0, r1)
             });
-            pos = end;
-        };
-        match name {
-            "USE_LENGTH_UNITS" => k = if line.contains("INCHES") { 25.4 } else { 1.0 },
-            "SELECT_PLANE" => xy = line.contains("CANON_PLANE_XY"),
-            "STRAIGHT_TRAVERSE" | "STRAIGHT_FEED" => push(
-                name == "STRAIGHT_FEED",
-                [args[0] * k, args[1] * k, args[2] * k],
-                None,
-            ),
-            "ARC_FEED" => {
-                assert!(xy, "an arc outside the XY plane: {line}\n{program}");
-                let end = [args[0] * k, args[1] * k, args[5] * k];
-                let c = [args[2] * k, args[3] * k];
-                let turns = args[4];
-                let a0 = (start[1] - c[1]).atan2(start[0] - c[0]);
-                let a1 = (end[1] - c[1]).atan2(end[0] - c[0]);
-                let tau = std::f64::consts::TAU;
-                let sweep = if turns > 0.0 {
-                    let d = (a1 - a0).rem_euclid(tau);
-                    (if d < 1e-9 { tau } else { d }) + (turns - 1.0) * tau
-                } else {
-                    let d = (a0 - a1).rem_euclid(tau);
-                    -((if d < 1e-9 { tau } else { d }) + (-turns - 1.0) * tau)
-                };
-                let r0 = (start[0] - c[0]).hypot(start[1] - c[1]);
-                let r1 = (end[0] - c[0]).hypot(end[1] - c[1]);
-                push(true, end, Some((c, a0, sweep, r0, r1)));
+            CanonMove {
+                cut: s.cut,
+                start: s.start,
+                end: s.end,
+                arc,
             }
-            _ => {}
-        }
-    }
+        })
+        .collect();
     Some(moves)
 }
 
