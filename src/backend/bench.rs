@@ -64,7 +64,7 @@ pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
     let open = Instant::now();
     let selection = select_trainer(bench.backend, &config, silent())?;
     let open_s = open.elapsed().as_secs_f64();
-    let sets = crate::synth::training::plate_family(bench.parts, bench.samples);
+    let sets = crate::nn::workload::plate_family(bench.parts, bench.samples);
     let measure = probe::measure(
         selection.trainer.as_ref(),
         selection.backend.name(),

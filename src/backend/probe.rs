@@ -117,7 +117,7 @@ pub fn compare_cached_in(
             ..found.clone()
         });
     }
-    let sets = crate::synth::training::plate_family(PROBE_PARTS, PROBE_SAMPLES);
+    let sets = crate::nn::workload::plate_family(PROBE_PARTS, PROBE_SAMPLES);
     let verdict = Verdict {
         cpu: measure(&FastCpuTrainer, "cpu", 0.0, &sets, config, PROBE_EPOCHS)?,
         gpu: measure(gpu, "gpu", 0.0, &sets, config, PROBE_EPOCHS)?,

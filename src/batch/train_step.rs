@@ -178,7 +178,7 @@ mod tests {
     use crate::nn::{mse, Activation, FastCpuTrainer};
 
     fn domain() -> Domain {
-        crate::synth::training::plate_domain()
+        crate::nn::workload::plate_domain()
     }
 
     #[test]
@@ -221,7 +221,7 @@ mod tests {
     fn parts_warm_started_from_the_family_fit_better_in_the_same_steps() {
         // Three parts of one family (the plate field, part-dependent tilt); the "family" set is
         // their first part. Same normalisation for all, so the rescale is the identity.
-        let sets = crate::synth::training::plate_family(3, 384);
+        let sets = crate::nn::workload::plate_family(3, 384);
         let norms = vec![Normalisation::new(&domain(), &[0.0, 2.0]); 3];
         let roles = vec![
             Role::Family,

@@ -11,6 +11,7 @@ mod mlp;
 mod norm;
 pub mod stop;
 mod train;
+pub mod workload;
 
 pub use config::{
     network_seed, tanh_f32, Activation, Backend, ModelConfig, Optimizer, Stop, WarmStart,

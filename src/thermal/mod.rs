@@ -12,6 +12,7 @@ pub mod model;
 pub mod outputs;
 pub mod pt100;
 pub mod runs;
+pub mod sample;
 pub mod sensors;
 pub mod store;
 pub mod text;

@@ -1188,14 +1188,14 @@ impl ThermalModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::thermal::{write_campaigns, SynthThermalOptions};
+    use crate::thermal::sample::{write_campaigns, SynthThermalOptions};
     use crate::thermal::sensors::{calibrate, SensorTable, TemperatureLog};
 
     /// Generate campaigns, calibrate the sensors on the calibration log, read the campaigns.
     pub(crate) fn synthetic(
         dir: &std::path::Path,
         options: &SynthThermalOptions,
-    ) -> (crate::synth::thermal::ThermalTruth, Vec<Campaign>) {
+    ) -> (crate::thermal::sample::ThermalTruth, Vec<Campaign>) {
         let truth = write_campaigns(dir, options).unwrap();
         let table_path = dir.join("sensors.csv");
         let mut table = SensorTable::read(&table_path).unwrap();

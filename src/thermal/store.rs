@@ -880,7 +880,7 @@ fn write_err(path: &Path, e: rusqlite::Error) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::thermal::{write_campaigns, SynthThermalOptions};
+    use crate::thermal::sample::{write_campaigns, SynthThermalOptions};
 
     fn small() -> SynthThermalOptions {
         SynthThermalOptions {

@@ -1,7 +1,7 @@
 //! Synthetic training work for throughput measurements: a family of web-plate-like deflection fields on a grid, the workload of `errmap bench training` and `benches/peers/peers.py`.
 
+use super::{Normalisation, TrainingSet};
 use crate::geom::Domain;
-use crate::nn::{Normalisation, TrainingSet};
 
 /// The plate: 600 × 300 mm from the origin.
 pub fn plate_domain() -> Domain {
