@@ -726,7 +726,10 @@ fn sin_refuse(text: &str, s: &CompensationSettings) -> String {
 /// installed (it hands what it cannot parse to the reference tracer), else the reference tracer.
 fn sin_trace(dir: &Path, name: &str, text: &str) -> Vec<path_judge::Seg> {
     if !sinumerik_nci::available() {
-        assert!(!sinumerik_nci::required(), "nc-gcode-interpreter is missing");
+        assert!(
+            !sinumerik_nci::required(),
+            "nc-gcode-interpreter is missing"
+        );
         return sinumerik_nci::reference::trace(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
     }
     let path = dir.join(format!("{name}.mpf"));
@@ -904,11 +907,17 @@ fn sinumerik_runtime_values_are_refused_naming_them() {
     // An R parameter read before the program sets it holds what the controller left in it.
     let unset = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 X=R7 Z-1 F100\nM30\n";
     let msg = sin_refuse(unset, &sin_settings(true));
-    assert_msg(&msg, &["t.mpf:3", "(R7)", "R7 is read before the program sets it"]);
+    assert_msg(
+        &msg,
+        &["t.mpf:3", "(R7)", "R7 is read before the program sets it"],
+    );
     // A name the program does not define: a global user variable of the controller.
     let gud = "G71 G90 G17\nG0 X0 Y0 Z5\nIF (ThHa<>0)\nG1 X1 Z-1 F100\nENDIF\nM30\n";
     let msg = sin_refuse(gud, &sin_settings(true));
-    assert_msg(&msg, &["t.mpf:3", "THHA is not defined in this program", "run time"]);
+    assert_msg(
+        &msg,
+        &["t.mpf:3", "THHA is not defined in this program", "run time"],
+    );
     // A value used only in a message is harmless: MSG is copied.
     let text = "G71 G90 G17\nMSG(\"PASS \"<<$AA_IM[X])\nR1=2\nG0 X0 Y0 Z5\nG1 X=R1 Z-1 F100\nM30\n";
     let (cuts, _) = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &sin_settings(true))
@@ -934,7 +943,10 @@ fn sinumerik_calls_of_other_programs_are_refused_as_not_in_this_file() {
     // A file that is a subprogram with parameters: only its caller gives them.
     let text = "PROC CHAMFER(REAL RSTART, REAL ANG)\nG1 X=RSTART Z-1 F100\nM17\n";
     let msg = sin_refuse(text, &sin_settings(true));
-    assert_msg(&msg, &["t.mpf:1", "PROC", "caller", "which is not in this file"]);
+    assert_msg(
+        &msg,
+        &["t.mpf:1", "PROC", "caller", "which is not in this file"],
+    );
 }
 
 #[test]
@@ -964,7 +976,10 @@ fn sinumerik_the_flattened_program_stops_at_the_output_limit() {
     errmap::io::safety::set_max_output_mb(1);
     let text = "G71 G90 G17\nG0 X0 Y0 Z5\nR1=0\nWHILE R1<200000\nG1 X=R1*0.001 Y0 Z-1 F100\nR1=R1+1\nENDWHILE\nM30\n";
     let msg = sin_refuse(text, &sin_settings(true));
-    assert_msg(&msg, &["t.mpf:5", "output limit of 1 MB", "--max-output-mb"]);
+    assert_msg(
+        &msg,
+        &["t.mpf:5", "output limit of 1 MB", "--max-output-mb"],
+    );
 }
 
 #[test]
@@ -982,6 +997,10 @@ fn sinumerik_hostile_lines_are_refused_not_a_panic() {
     ] {
         let _ = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &sin_settings(true));
     }
-    let deep = format!("R1={}1{}\nG1 X=R1\nM30\n", "(".repeat(5000), ")".repeat(5000));
+    let deep = format!(
+        "R1={}1{}\nG1 X=R1\nM30\n",
+        "(".repeat(5000),
+        ")".repeat(5000)
+    );
     assert!(compensate_gcode(&deep, Path::new("t.mpf"), &Flat20, &sin_settings(true)).is_err());
 }

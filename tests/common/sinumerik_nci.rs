@@ -178,11 +178,21 @@ pub mod reference {
     }
 
     fn parse_line(raw: &str) -> Line {
-        let mut code = raw.split(';').next().unwrap_or("").trim().to_ascii_uppercase();
+        let mut code = raw
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_uppercase();
         let mut number = None;
         if let Some(rest) = code.strip_prefix('N') {
             let d: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
-            if !d.is_empty() && rest[d.len()..].chars().next().is_none_or(|c| c == ' ' || c == '\t') {
+            if !d.is_empty()
+                && rest[d.len()..]
+                    .chars()
+                    .next()
+                    .is_none_or(|c| c == ' ' || c == '\t')
+            {
                 number = d.parse().ok();
                 code = rest[d.len()..].trim().to_string();
             }
@@ -191,14 +201,21 @@ pub mod reference {
         if let Some(colon) = code.find(':') {
             let name = &code[..colon];
             let ok = name.len() >= 2
-                && name.chars().take(2).all(|c| c.is_ascii_alphabetic() || c == '_')
+                && name
+                    .chars()
+                    .take(2)
+                    .all(|c| c.is_ascii_alphabetic() || c == '_')
                 && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
             if ok {
                 label = Some(name.to_string());
                 code = code[colon + 1..].trim().to_string();
             }
         }
-        Line { number, label, code }
+        Line {
+            number,
+            label,
+            code,
+        }
     }
 
     /// The expression evaluator: `(text, position)`, priority per the manual (comparisons
@@ -322,26 +339,43 @@ pub mod reference {
             let start = self.i;
             let c = *self.s.get(self.i).ok_or("value missing")?;
             if c.is_ascii_digit() || c == b'.' {
-                while self.i < self.s.len() && (self.s[self.i].is_ascii_digit() || self.s[self.i] == b'.') {
+                while self.i < self.s.len()
+                    && (self.s[self.i].is_ascii_digit() || self.s[self.i] == b'.')
+                {
                     self.i += 1;
                 }
                 let t = std::str::from_utf8(&self.s[start..self.i]).unwrap_or("");
-                let t = if t.ends_with('.') { format!("{t}0") } else { t.to_string() };
+                let t = if t.ends_with('.') {
+                    format!("{t}0")
+                } else {
+                    t.to_string()
+                };
                 return t.parse().map_err(|_| format!("number `{t}`"));
             }
-            while self.i < self.s.len() && (self.s[self.i].is_ascii_alphanumeric() || self.s[self.i] == b'_') {
+            while self.i < self.s.len()
+                && (self.s[self.i].is_ascii_alphanumeric() || self.s[self.i] == b'_')
+            {
                 self.i += 1;
             }
-            let name = std::str::from_utf8(&self.s[start..self.i]).unwrap_or("").to_string();
+            let name = std::str::from_utf8(&self.s[start..self.i])
+                .unwrap_or("")
+                .to_string();
             if name.is_empty() {
-                return Err(format!("cannot read at `{}`", String::from_utf8_lossy(&self.s[start..])));
+                return Err(format!(
+                    "cannot read at `{}`",
+                    String::from_utf8_lossy(&self.s[start..])
+                ));
             }
             if name == "R" && self.eat("[") {
                 let n = self.cmp()?;
                 if !self.eat("]") {
                     return Err("`]` missing".into());
                 }
-                return self.r.get(&(n as i64)).copied().ok_or(format!("R{n} unset"));
+                return self
+                    .r
+                    .get(&(n as i64))
+                    .copied()
+                    .ok_or(format!("R{n} unset"));
             }
             if let Some(n) = name.strip_prefix('R').and_then(|d| d.parse::<i64>().ok()) {
                 return self.r.get(&n).copied().ok_or(format!("R{n} unset"));
@@ -378,7 +412,11 @@ pub mod reference {
             match name.as_str() {
                 "TRUE" => Ok(1.0),
                 "FALSE" => Ok(0.0),
-                _ => self.v.get(&name).copied().ok_or(format!("variable {name} unset")),
+                _ => self
+                    .v
+                    .get(&name)
+                    .copied()
+                    .ok_or(format!("variable {name} unset")),
             }
         }
     }
@@ -412,7 +450,11 @@ pub mod reference {
             } else if let Some(n) = name.strip_prefix('R').and_then(|d| d.parse::<i64>().ok()) {
                 self.r.insert(n, v);
             } else if self.v.contains_key(name) {
-                let v = if self.ints.iter().any(|i| i == name) { v.round() } else { v };
+                let v = if self.ints.iter().any(|i| i == name) {
+                    v.round()
+                } else {
+                    v
+                };
                 self.v.insert(name.to_string(), v);
             } else {
                 return Err(format!("`{name}` is not a variable"));
@@ -466,7 +508,8 @@ pub mod reference {
         let lines: Vec<Line> = text.lines().map(parse_line).collect();
         let pairs = structures(&lines)?;
         let find = |target: &str, from: usize, dir: &str| -> Option<usize> {
-            let hit = |l: &Line| match target.strip_prefix('N').and_then(|d| d.parse::<u64>().ok()) {
+            let hit = |l: &Line| match target.strip_prefix('N').and_then(|d| d.parse::<u64>().ok())
+            {
                 Some(n) => l.number == Some(n),
                 None => l.label.as_deref() == Some(target),
             };
@@ -500,7 +543,12 @@ pub mod reference {
             let rest = rest.trim();
             let mut next = pc + 1;
             let mut end = false;
-            let partner = |k: usize| pairs.get(&k).copied().ok_or(format!("line {}: unpaired", k + 1));
+            let partner = |k: usize| {
+                pairs
+                    .get(&k)
+                    .copied()
+                    .ok_or(format!("line {}: unpaired", k + 1))
+            };
             match first {
                 "" | "STOPRE" | "ENDIF" | "REPEAT" if first != "REPEAT" || rest.is_empty() => {}
                 "LOOP" => {}
@@ -562,7 +610,12 @@ pub mod reference {
                 }
                 "ENDFOR" => {
                     let f = partner(pc)?;
-                    let var = lines[f].code[4..].split('=').next().unwrap_or("").trim().to_string();
+                    let var = lines[f].code[4..]
+                        .split('=')
+                        .next()
+                        .unwrap_or("")
+                        .trim()
+                        .to_string();
                     let now = st.eval(&var)? + 1.0;
                     st.set(&var, now)?;
                     if now <= for_limit[&f] {
@@ -580,10 +633,14 @@ pub mod reference {
                     let n = st.eval(p.trim())? as u64;
                     let names: Vec<&str> = labels.split_whitespace().collect();
                     // The label is searched toward the program start first, then toward its end.
-                    let a = find(names[0], pc, "GOTOB").or_else(|| find(names[0], pc, "GOTOF")).ok_or("section label")?;
+                    let a = find(names[0], pc, "GOTOB")
+                        .or_else(|| find(names[0], pc, "GOTOF"))
+                        .ok_or("section label")?;
                     let b = match (first, names.get(1)) {
                         ("REPEATB", _) => a,
-                        (_, Some(l)) => (a..lines.len()).find(|&k| lines[k].label.as_deref() == Some(*l)).ok_or("end label")?,
+                        (_, Some(l)) => (a..lines.len())
+                            .find(|&k| lines[k].label.as_deref() == Some(*l))
+                            .ok_or("end label")?,
                         _ => pc - 1,
                     };
                     if n > 0 {
@@ -595,7 +652,12 @@ pub mod reference {
                     // Assignments alone on their block, or a block of words.
                     let assignment = code.split_whitespace().all(|w| {
                         let lhs = w.split('=').next().unwrap_or("");
-                        w.contains('=') && (st.v.contains_key(lhs) || lhs.starts_with("R[") || lhs.strip_prefix('R').is_some_and(|d| d.parse::<u32>().is_ok()))
+                        w.contains('=')
+                            && (st.v.contains_key(lhs)
+                                || lhs.starts_with("R[")
+                                || lhs
+                                    .strip_prefix('R')
+                                    .is_some_and(|d| d.parse::<u32>().is_ok()))
                     });
                     if assignment && code.contains('=') && !code.contains("==") {
                         for w in code.split_whitespace() {
@@ -630,16 +692,29 @@ pub mod reference {
                                         b'Z' => Some(2),
                                         _ => None,
                                     };
-                                    let letters = w.bytes().take_while(|c| c.is_ascii_alphabetic()).count();
+                                    let letters =
+                                        w.bytes().take_while(|c| c.is_ascii_alphabetic()).count();
                                     match axis {
                                         Some(k) if letters == 1 => {
                                             let t = w[1..].strip_prefix('=').unwrap_or(&w[1..]);
-                                            let t = t.strip_prefix("AC(").and_then(|x| x.strip_suffix(')')).unwrap_or(t);
+                                            let t = t
+                                                .strip_prefix("AC(")
+                                                .and_then(|x| x.strip_suffix(')'))
+                                                .unwrap_or(t);
                                             target[k] = st.eval(t)? * scale(inch);
                                             moved = true;
                                         }
-                                        _ if letters == 1 && "FSTDMHG".contains(&w[..1]) && !w.starts_with("G2") && !w.starts_with("G3") && !w.starts_with("G91") => {}
-                                        _ => return Err(format!("line {}: `{w}` is not read by the reference tracer", pc + 1)),
+                                        _ if letters == 1
+                                            && "FSTDMHG".contains(&w[..1])
+                                            && !w.starts_with("G2")
+                                            && !w.starts_with("G3")
+                                            && !w.starts_with("G91") => {}
+                                        _ => {
+                                            return Err(format!(
+                                            "line {}: `{w}` is not read by the reference tracer",
+                                            pc + 1
+                                        ))
+                                        }
                                     }
                                 }
                             }
@@ -647,9 +722,18 @@ pub mod reference {
                         if moved && (0..3).any(|k| target[k].to_bits() != pos[k].to_bits()) {
                             let cut = motion == 1;
                             if cut && target.iter().chain(&pos).any(|v| v.is_nan()) {
-                                return Err(format!("line {}: a cut from an unknown position", pc + 1));
+                                return Err(format!(
+                                    "line {}: a cut from an unknown position",
+                                    pc + 1
+                                ));
                             }
-                            segs.push(Seg { cut, line: pc as u64 + 1, start: pos, end: target, arc: None });
+                            segs.push(Seg {
+                                cut,
+                                line: pc as u64 + 1,
+                                start: pos,
+                                end: target,
+                                arc: None,
+                            });
                             pos = target;
                         }
                     }

@@ -19,21 +19,150 @@ use std::path::Path;
 /// Predefined instructions copied to the flattened program for the rewriter to judge (it
 /// follows some, refuses the others with its own reasons).
 const INSTRUCTIONS: &[&str] = &[
-    "TRANS", "ATRANS", "ROT", "AROT", "RPL", "SCALE", "ASCALE", "MIRROR", "AMIRROR", "SUPA",
-    "TRAFOOF", "TRAORI", "TRANSMIT", "TRACYL", "TRAANG", "SOFT", "BRISK", "DRIVE", "FFWON",
-    "FFWOF", "CFC", "CFTCP", "CFIN", "COMPCAD", "COMPCURV", "COMPON", "COMPOF", "STOPRE", "MSG",
-    "WORKPIECE", "SPOS", "SPOSA", "SETMS", "FNORM", "FLIN", "FCUB", "CUT2D", "CUT2DF", "CUT3DC",
-    "DIAMON", "DIAMOF", "DIAM90", "ORIWKS", "ORIMKS", "ORIAXES", "ORIVECT", "RTLION", "RTLIOF",
-    "CP", "PTP", "PTPG0", "TOFRAME", "TOROT", "TOROTOF", "PAROT", "PAROTOF", "SBLOF", "SBLON",
-    "DISPLOF", "DISPLON", "WAITM", "WAITS", "WAITE", "STOPFIFO", "STARTFIFO", "FIFOCTRL", "TCOABS",
-    "TCOFR", "LEADON", "LEADOF", "COUPON", "COUPOF", "POLY", "BSPLINE", "ASPLINE", "CSPLINE",
-    "CIP", "CT", "SPATH", "UPATH", "FTOCON", "FTOCOF", "DYNNORM", "DYNPOS", "DYNROUGH",
-    "DYNSEMIFIN", "DYNFINISH", "SETINT", "ENABLE", "DISABLE", "CLRINT", "PRIO", "ID", "IDS",
-    "WHEN", "WHENEVER", "DO", "EVERY", "CPRECON", "CPRECOF", "UPATH", "OFFN", "G642", "G641",
-    "G645", "G644", "G643", "ACC", "VELOLIM", "JERKLIM", "TOWSTD", "TOWMCS", "TOWWCS", "TOWBCS",
-    "TOWTCS", "TOWKCS", "CALCPOSI", "PRESETON", "SETPIECE", "TURN", "CHF", "CHR", "RND", "RNDM",
-    "FRC", "FRCM", "ADIS", "ADISPOS", "CR", "AP", "RP", "AR", "POLF", "POLFMASK", "LIFTFAST",
-    "SETAL", "M", "H", "T", "D", "S", "F", "G", "L",
+    "TRANS",
+    "ATRANS",
+    "ROT",
+    "AROT",
+    "RPL",
+    "SCALE",
+    "ASCALE",
+    "MIRROR",
+    "AMIRROR",
+    "SUPA",
+    "TRAFOOF",
+    "TRAORI",
+    "TRANSMIT",
+    "TRACYL",
+    "TRAANG",
+    "SOFT",
+    "BRISK",
+    "DRIVE",
+    "FFWON",
+    "FFWOF",
+    "CFC",
+    "CFTCP",
+    "CFIN",
+    "COMPCAD",
+    "COMPCURV",
+    "COMPON",
+    "COMPOF",
+    "STOPRE",
+    "MSG",
+    "WORKPIECE",
+    "SPOS",
+    "SPOSA",
+    "SETMS",
+    "FNORM",
+    "FLIN",
+    "FCUB",
+    "CUT2D",
+    "CUT2DF",
+    "CUT3DC",
+    "DIAMON",
+    "DIAMOF",
+    "DIAM90",
+    "ORIWKS",
+    "ORIMKS",
+    "ORIAXES",
+    "ORIVECT",
+    "RTLION",
+    "RTLIOF",
+    "CP",
+    "PTP",
+    "PTPG0",
+    "TOFRAME",
+    "TOROT",
+    "TOROTOF",
+    "PAROT",
+    "PAROTOF",
+    "SBLOF",
+    "SBLON",
+    "DISPLOF",
+    "DISPLON",
+    "WAITM",
+    "WAITS",
+    "WAITE",
+    "STOPFIFO",
+    "STARTFIFO",
+    "FIFOCTRL",
+    "TCOABS",
+    "TCOFR",
+    "LEADON",
+    "LEADOF",
+    "COUPON",
+    "COUPOF",
+    "POLY",
+    "BSPLINE",
+    "ASPLINE",
+    "CSPLINE",
+    "CIP",
+    "CT",
+    "SPATH",
+    "UPATH",
+    "FTOCON",
+    "FTOCOF",
+    "DYNNORM",
+    "DYNPOS",
+    "DYNROUGH",
+    "DYNSEMIFIN",
+    "DYNFINISH",
+    "SETINT",
+    "ENABLE",
+    "DISABLE",
+    "CLRINT",
+    "PRIO",
+    "ID",
+    "IDS",
+    "WHEN",
+    "WHENEVER",
+    "DO",
+    "EVERY",
+    "CPRECON",
+    "CPRECOF",
+    "UPATH",
+    "OFFN",
+    "G642",
+    "G641",
+    "G645",
+    "G644",
+    "G643",
+    "ACC",
+    "VELOLIM",
+    "JERKLIM",
+    "TOWSTD",
+    "TOWMCS",
+    "TOWWCS",
+    "TOWBCS",
+    "TOWTCS",
+    "TOWKCS",
+    "CALCPOSI",
+    "PRESETON",
+    "SETPIECE",
+    "TURN",
+    "CHF",
+    "CHR",
+    "RND",
+    "RNDM",
+    "FRC",
+    "FRCM",
+    "ADIS",
+    "ADISPOS",
+    "CR",
+    "AP",
+    "RP",
+    "AR",
+    "POLF",
+    "POLFMASK",
+    "LIFTFAST",
+    "SETAL",
+    "M",
+    "H",
+    "T",
+    "D",
+    "S",
+    "F",
+    "G",
+    "L",
 ];
 
 /// Whether a name is a Siemens standard cycle (left to the rewriter, which refuses or follows it).
@@ -406,11 +535,19 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
         "ENDWHILE" if rest_t.is_empty() => Ok(Stmt::EndWhile),
         "FOR" => {
             let Some((var, range)) = rest.split_once('=') else {
-                return Err(bad("FOR", format!("`{body}`: FOR variable = start TO end"), "write FOR as the manual gives it"));
+                return Err(bad(
+                    "FOR",
+                    format!("`{body}`: FOR variable = start TO end"),
+                    "write FOR as the manual gives it",
+                ));
             };
             let upper = range.to_ascii_uppercase();
             let Some(to) = upper.find(" TO ") else {
-                return Err(bad("FOR", format!("`{body}`: FOR variable = start TO end"), "write FOR as the manual gives it"));
+                return Err(bad(
+                    "FOR",
+                    format!("`{body}`: FOR variable = start TO end"),
+                    "write FOR as the manual gives it",
+                ));
             };
             let name = var.trim();
             let (n, idx) = match name.split_once('[') {
@@ -437,16 +574,29 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
         "REPEAT" | "REPEATB" => {
             let upper = rest_t.to_ascii_uppercase();
             let (labels, count) = match upper.find("P=").or_else(|| upper.find("P =")) {
-                Some(at) => (&rest_t[..at], Some(rest_t[at..].split_once('=').map_or("", |x| x.1))),
+                Some(at) => (
+                    &rest_t[..at],
+                    Some(rest_t[at..].split_once('=').map_or("", |x| x.1)),
+                ),
                 None => (rest_t, None),
             };
-            let names: Vec<String> = labels.split_whitespace().map(|s| s.to_ascii_uppercase()).collect();
+            let names: Vec<String> = labels
+                .split_whitespace()
+                .map(|s| s.to_ascii_uppercase())
+                .collect();
             let ok = match kw.as_str() {
                 "REPEATB" => names.len() == 1,
                 _ => (1..=2).contains(&names.len()),
             } && names.iter().all(|n| is_label_name(n));
             if !ok {
-                return Err(bad(&kw, format!("`{body}`: {kw} takes a label{} and P=count", if kw == "REPEAT" { " (or two)" } else { "" }), "write the repetition as the manual gives it"));
+                return Err(bad(
+                    &kw,
+                    format!(
+                        "`{body}`: {kw} takes a label{} and P=count",
+                        if kw == "REPEAT" { " (or two)" } else { "" }
+                    ),
+                    "write the repetition as the manual gives it",
+                ));
             }
             let count = count.map(parse_cond).transpose()?.unwrap_or(X::Num(1.0));
             let end = names.get(1).cloned();
@@ -462,8 +612,18 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
             Ok(Stmt::Skip)
         }
         "RET" if rest_t.is_empty() => Ok(Stmt::Ret),
-        "CASE" | "ENDPROC" | "EXTERN" | "GOTOS" | "ENDLABEL" | "SETDEF" | "SAVE" => Err(bad(&kw, format!("`{body}`: errmap's --expand does not run {kw}"), "write the program with IF/GOTO or loops, or move the zone away")),
-        "CALL" | "PCALL" | "EXTCALL" | "MCALL" => Err(bad(&kw, format!("`{body}` calls a program which is not in this file, whose moves errmap cannot see"), "compensate a program with the called program written out in it, or move the zone away")),
+        "CASE" | "ENDPROC" | "EXTERN" | "GOTOS" | "ENDLABEL" | "SETDEF" | "SAVE" => Err(bad(
+            &kw,
+            format!("`{body}`: errmap's --expand does not run {kw}"),
+            "write the program with IF/GOTO or loops, or move the zone away",
+        )),
+        "CALL" | "PCALL" | "EXTCALL" | "MCALL" => Err(bad(
+            &kw,
+            format!(
+                "`{body}` calls a program which is not in this file, whose moves errmap cannot see"
+            ),
+            "compensate a program with the called program written out in it, or move the zone away",
+        )),
         _ => items(p, declared),
     }
 }
@@ -503,7 +663,9 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
         let mut j = e;
         let mut index = None;
         if b.get(j) == Some(&b'[') {
-            let (inner_end, close) = body[j..].find(']').map_or((b.len(), b.len()), |k| (j + k, j + k + 1));
+            let (inner_end, close) = body[j..]
+                .find(']')
+                .map_or((b.len(), b.len()), |k| (j + k, j + k + 1));
             index = Some(&body[j + 1..inner_end]);
             j = close;
         }
@@ -523,7 +685,11 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
                 assigns.push((item_text, l, value));
             } else if declared.contains_key(&upper) {
                 if index.is_some() {
-                    return Err(bad(name, format!("`{item_text}`: arrays are not run by errmap's --expand"), "use single variables, or move the zone away"));
+                    return Err(bad(
+                        name,
+                        format!("`{item_text}`: arrays are not run by errmap's --expand"),
+                        "use single variables, or move the zone away",
+                    ));
                 }
                 assigns.push((item_text, Lhs::Name(upper), value));
             } else {
@@ -535,8 +701,10 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
                     || matches!(&value, X::Neg(a) if matches!(**a, X::Num(_)));
                 let (wrap, value) = match value {
                     X::Call(f, mut args)
-                        if ["AC", "IC", "ACP", "ACN", "DC", "CAC", "CIC", "CACP", "CACN", "CDC"]
-                            .contains(&f.as_str())
+                        if [
+                            "AC", "IC", "ACP", "ACN", "DC", "CAC", "CIC", "CACP", "CACN", "CDC",
+                        ]
+                        .contains(&f.as_str())
                             && args.len() == 1 =>
                     {
                         let inner = args.pop().unwrap_or(X::Num(0.0));
@@ -691,10 +859,12 @@ fn has_flow(stmts: &[std::result::Result<Stmt, Bad>]) -> bool {
 
 /// Whether a block ends the program (M30, M2, M17: the end of a program run on its own).
 fn ends(p: &Parts<'_>) -> bool {
+    // Words outside quoted texts (`MSG("M30")` ends nothing).
     p.body
-        .to_ascii_uppercase()
-        .split(|c: char| !c.is_ascii_alphanumeric())
-        .any(|w| matches!(w, "M30" | "M2" | "M02" | "M17"))
+        .split('"')
+        .step_by(2)
+        .flat_map(|part| part.split(|c: char| !c.is_ascii_alphanumeric()))
+        .any(|w| ["M30", "M2", "M02", "M17"].iter().any(|m| w.eq_ignore_ascii_case(m)))
 }
 
 /// A program-section repetition in progress.
@@ -833,7 +1003,11 @@ impl Program<'_> {
                         Some(&(s, k)) if k == want => {
                             if is_else {
                                 if self.else_of.contains_key(&s) {
-                                    self.stmts[i] = Err(bad("ELSE", "a second ELSE of one IF".into(), "close the IF with ENDIF"));
+                                    self.stmts[i] = Err(bad(
+                                        "ELSE",
+                                        "a second ELSE of one IF".into(),
+                                        "close the IF with ENDIF",
+                                    ));
                                 } else {
                                     self.else_of.insert(s, i);
                                 }
@@ -844,8 +1018,17 @@ impl Program<'_> {
                             }
                         }
                         _ => {
-                            let word = self.parts[i].body.split_whitespace().next().unwrap_or("").to_string();
-                            self.stmts[i] = Err(bad(&word, format!("`{word}` does not close an open {want}"), "pair each control structure's start and end"));
+                            let word = self.parts[i]
+                                .body
+                                .split_whitespace()
+                                .next()
+                                .unwrap_or("")
+                                .to_string();
+                            self.stmts[i] = Err(bad(
+                                &word,
+                                format!("`{word}` does not close an open {want}"),
+                                "pair each control structure's start and end",
+                            ));
                         }
                     }
                 }
@@ -853,7 +1036,11 @@ impl Program<'_> {
             }
         }
         for (s, k) in open {
-            self.stmts[s] = Err(bad(k, format!("{k} without its end"), "close the control structure"));
+            self.stmts[s] = Err(bad(
+                k,
+                format!("{k} without its end"),
+                "close the control structure",
+            ));
         }
     }
 }
@@ -907,7 +1094,12 @@ impl Run<'_> {
             Lhs::R(i) => {
                 let n = self.value(pc, text, i)?;
                 if n.fract() != 0.0 || !(0.0..1e6).contains(&n) {
-                    return Err(self.err(pc, text, format!("`{text}`: R[{n}] is not an R parameter"), "fix the parameter number"));
+                    return Err(self.err(
+                        pc,
+                        text,
+                        format!("`{text}`: R[{n}] is not an R parameter"),
+                        "fix the parameter number",
+                    ));
                 }
                 self.r.insert(n as u32, v);
             }
@@ -934,8 +1126,17 @@ impl Run<'_> {
             return Err(stop);
         }
         if self.iterations > MAX_ITERATIONS {
-            let word: String = self.prog.parts[target].body.trim().chars().take(30).collect();
-            let word = if word.is_empty() { self.prog.lines[target].0.trim().to_string() } else { word };
+            let word: String = self.prog.parts[target]
+                .body
+                .trim()
+                .chars()
+                .take(30)
+                .collect();
+            let word = if word.is_empty() {
+                self.prog.lines[target].0.trim().to_string()
+            } else {
+                word
+            };
             return Err(self.err(
                 target,
                 &word,
@@ -957,7 +1158,15 @@ impl Run<'_> {
             Target::Number(n) => self.prog.numbers.get(n).unwrap_or(&empty),
         };
         if let (Target::Label(l), true) = (&j.target, found.len() > 1) {
-            return Err(self.err(pc, &j.word, format!("`{}`: the label {l} marks several blocks, which the controller refuses", j.word), "name each label once"));
+            return Err(self.err(
+                pc,
+                &j.word,
+                format!(
+                    "`{}`: the label {l} marks several blocks, which the controller refuses",
+                    j.word
+                ),
+                "name each label once",
+            ));
         }
         let forward = found.iter().copied().find(|&t| t > pc);
         let backward = found.iter().copied().rev().find(|&t| t <= pc);
@@ -977,7 +1186,15 @@ impl Run<'_> {
                 b'B' => " before this line",
                 _ => "",
             };
-            return Err(self.err(pc, &j.word, format!("`{}`: no such label or block number{way} in this program", j.word), "fix the jump's target"));
+            return Err(self.err(
+                pc,
+                &j.word,
+                format!(
+                    "`{}`: no such label or block number{way} in this program",
+                    j.word
+                ),
+                "fix the jump's target",
+            ));
         };
         // Into a control structure from outside it: the controller raises an alarm.
         let mut chain = Vec::new();
@@ -1002,7 +1219,11 @@ impl Run<'_> {
             let stmt = match &stmts[pc] {
                 Ok(s) => s,
                 Err((w, m, h)) => {
-                    let h = if h.is_empty() { "write the statement as the SINUMERIK programming manual gives it, or move the zone away" } else { h };
+                    let h = if h.is_empty() {
+                        "write the statement as the SINUMERIK programming manual gives it, or move the zone away"
+                    } else {
+                        h
+                    };
                     return Err(self.err(pc, w, m.clone(), h));
                 }
             };
@@ -1160,11 +1381,23 @@ impl Run<'_> {
 
     /// `REPEAT a P=n` (from label a up to this line), `REPEAT a b P=n` (a to b), `REPEATB a
     /// P=n` (the block a): run the section n times, then go on after this line.
-    fn section(&mut self, pc: usize, first: &str, last: Option<&str>, count: &X, single: bool) -> Result<usize> {
+    fn section(
+        &mut self,
+        pc: usize,
+        first: &str,
+        last: Option<&str>,
+        count: &X,
+        single: bool,
+    ) -> Result<usize> {
         let content = self.prog.lines[pc].0;
         let n = self.value(pc, content, count)?;
         if n.fract() != 0.0 || n < 0.0 {
-            return Err(self.err(pc, "P", format!("`{}`: P must be a whole number ≥ 0", content.trim()), "fix the repetition count"));
+            return Err(self.err(
+                pc,
+                "P",
+                format!("`{}`: P must be a whole number ≥ 0", content.trim()),
+                "fix the repetition count",
+            ));
         }
         let jump = |name: &str, dir: u8| Jump {
             dir,
@@ -1177,27 +1410,56 @@ impl Run<'_> {
             self.find(pc, &jump(first, b'B'))?
         };
         let Some(start) = start else {
-            return Err(self.err(pc, first, format!("`{}`: no label {first} in this program", content.trim()), "fix the label"));
+            return Err(self.err(
+                pc,
+                first,
+                format!("`{}`: no label {first} in this program", content.trim()),
+                "fix the label",
+            ));
         };
         let end = match (single, last) {
             (true, _) => start,
             (false, None) => pc.saturating_sub(1),
             (false, Some(l)) => {
-                let found = self.prog.labels.get(l).and_then(|v| v.iter().copied().find(|&t| t >= start));
+                let found = self
+                    .prog
+                    .labels
+                    .get(l)
+                    .and_then(|v| v.iter().copied().find(|&t| t >= start));
                 match found {
                     Some(e) => e,
-                    None => return Err(self.err(pc, l, format!("`{}`: no label {l} after {first}", content.trim()), "fix the labels")),
+                    None => {
+                        return Err(self.err(
+                            pc,
+                            l,
+                            format!("`{}`: no label {l} after {first}", content.trim()),
+                            "fix the labels",
+                        ))
+                    }
                 }
             }
         };
         if n == 0.0 || end < start || (start..=end).contains(&pc) {
             if (start..=end).contains(&pc) && n > 0.0 {
-                return Err(self.err(pc, first, format!("`{}`: the section repeats this REPEAT line itself", content.trim()), "end the section before the REPEAT line"));
+                return Err(self.err(
+                    pc,
+                    first,
+                    format!(
+                        "`{}`: the section repeats this REPEAT line itself",
+                        content.trim()
+                    ),
+                    "end the section before the REPEAT line",
+                ));
             }
             return Ok(pc + 1);
         }
         if self.sections.len() >= 64 {
-            return Err(self.err(pc, first, "section repetitions nested deeper than 64 levels".into(), "check the repetitions"));
+            return Err(self.err(
+                pc,
+                first,
+                "section repetitions nested deeper than 64 levels".into(),
+                "check the repetitions",
+            ));
         }
         self.turn(pc, start)?;
         self.sections.push(Section {
@@ -1229,12 +1491,23 @@ impl Run<'_> {
                     words.push_str(&content[last..r.end]);
                     last = r.end;
                 }
-                Item::Value { span, name, wrap, value } => {
+                Item::Value {
+                    span,
+                    name,
+                    wrap,
+                    value,
+                } => {
                     words.push_str(&content[last..span.start]);
                     let text = &content[span.clone()];
                     let v = self.value(pc, text, value)?;
                     let letter = name.as_bytes().first().copied().unwrap_or(b'X');
-                    let v = if b"MSTHDNPLGO".contains(&letter.to_ascii_uppercase()) && name.len() == 1 { v.round() } else { v };
+                    let v = if b"MSTHDNPLGO".contains(&letter.to_ascii_uppercase())
+                        && name.len() == 1
+                    {
+                        v.round()
+                    } else {
+                        v
+                    };
                     let num = format_value(letter, v);
                     match wrap {
                         Some(w) => words.push_str(&format!("{name}={w}({num})")),
