@@ -500,8 +500,8 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
             Stmt::Copy
         });
     }
-    if body.starts_with('/') {
-        let (kw, _) = upper_word(body[1..].trim_start());
+    if let Some(after) = body.strip_prefix('/') {
+        let (kw, _) = upper_word(after.trim_start());
         if FLOW.contains(&kw.as_str()) || body.contains('=') {
             return Err(bad(
                 "/",
@@ -826,9 +826,7 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
         }
         return Ok(Stmt::Assign(assigns));
     }
-    Ok(if any_value {
-        Stmt::Block(out)
-    } else if p.label.is_some() {
+    Ok(if any_value || p.label.is_some() {
         Stmt::Block(out)
     } else {
         Stmt::Copy
@@ -864,7 +862,11 @@ fn ends(p: &Parts<'_>) -> bool {
         .split('"')
         .step_by(2)
         .flat_map(|part| part.split(|c: char| !c.is_ascii_alphanumeric()))
-        .any(|w| ["M30", "M2", "M02", "M17"].iter().any(|m| w.eq_ignore_ascii_case(m)))
+        .any(|w| {
+            ["M30", "M2", "M02", "M17"]
+                .iter()
+                .any(|m| w.eq_ignore_ascii_case(m))
+        })
 }
 
 /// A program-section repetition in progress.
@@ -1002,14 +1004,16 @@ impl Program<'_> {
                     match open.last() {
                         Some(&(s, k)) if k == want => {
                             if is_else {
-                                if self.else_of.contains_key(&s) {
+                                if let std::collections::hash_map::Entry::Vacant(e) =
+                                    self.else_of.entry(s)
+                                {
+                                    e.insert(i);
+                                } else {
                                     self.stmts[i] = Err(bad(
                                         "ELSE",
                                         "a second ELSE of one IF".into(),
                                         "close the IF with ENDIF",
                                     ));
-                                } else {
-                                    self.else_of.insert(s, i);
                                 }
                             } else {
                                 open.pop();
