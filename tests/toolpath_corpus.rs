@@ -191,13 +191,13 @@ const FLAGS: &[(&str, &[&str])] = &[
         &["--units", "mm", "--expand"],
     ),
     ("dubovikov-slot.mpf", &["--units", "mm", "--expand"]),
-    ("fb422-PRIPREMA-KONTURA.MPF", &["--units", "mm"]),
+    ("fb422-PRIPREMA-KONTURA.MPF", &["--units", "mm", "--expand"]),
     (
         "fb422-PRIPREMA-PROBA_NAVOJA_KONTURNO.MPF",
         &["--units", "mm", "--expand"],
     ),
-    ("philip-CAM_TEST.MPF", &[]),
-    ("takashinord-test_1.mpf", &["--units", "mm"]),
+    ("philip-CAM_TEST.MPF", &["--expand"]),
+    ("takashinord-test_1.mpf", &["--units", "mm", "--expand"]),
 ];
 
 /// A refusal reason: a row of docs/toolpath.md's "Refusal reasons" table, recognised by any of

@@ -1,6 +1,10 @@
 //! `--expand`: Fanuc subprograms, macro calls, loops and variables run into plain blocks, each compensated point checked against P − E computed by hand; refusals name the original line.
 
 mod common;
+#[path = "common/path_judge.rs"]
+mod path_judge;
+#[path = "common/sinumerik_nci.rs"]
+mod sinumerik_nci;
 
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect, FanucNumbers};
@@ -682,4 +686,321 @@ fn corpus_g65_macro_pair_in_one_file() {
         )
     });
     assert!(hit, "no cut to X3.125 Y{y:.6} Z{z:.6} in:\n{out}");
+}
+
+// Sinumerik: R parameters, DEF variables, labels and jumps, loops and section repetition run
+// into plain blocks. Each flattened-and-compensated program is judged against its original by
+// an executor outside errmap (nc-gcode-interpreter where it parses the construct, else the
+// tests' reference tracer written from the SINUMERIK manuals), with E = 0.02 mm everywhere.
+
+/// E = 0.02 mm along Z everywhere.
+struct Flat20;
+
+impl ErrorField for Flat20 {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, _u: f64, _v: f64) -> Option<f64> {
+        Some(0.02)
+    }
+    fn measured(&self, _u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(true)
+    }
+}
+
+fn sin_settings(expand: bool) -> CompensationSettings {
+    CompensationSettings {
+        dialect: Some(Dialect::Sinumerik),
+        ..settings(expand)
+    }
+}
+
+fn sin_refuse(text: &str, s: &CompensationSettings) -> String {
+    match compensate_gcode(text, Path::new("t.mpf"), &Flat20, s) {
+        Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The moves of a Sinumerik program by the outside executor: nc-gcode-interpreter where it is
+/// installed (it hands what it cannot parse to the reference tracer), else the reference tracer.
+fn sin_trace(dir: &Path, name: &str, text: &str) -> Vec<path_judge::Seg> {
+    if !sinumerik_nci::available() {
+        assert!(
+            !sinumerik_nci::required(),
+            "nc-gcode-interpreter is missing"
+        );
+        return sinumerik_nci::reference::trace(text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    }
+    let path = dir.join(format!("{name}.mpf"));
+    std::fs::write(&path, text).unwrap();
+    sinumerik_nci::trace(&path, text).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+/// Compensate `text` with --expand and judge the output against the original; returns the
+/// original's cut ends (as the executor read them) and the output.
+fn sin_judged(text: &str) -> (Vec<[f64; 3]>, String) {
+    let (out, report) = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &sin_settings(true))
+        .unwrap_or_else(|e| panic!("refused: {e}\n{text}"));
+    assert!(report.moves_changed > 0, "{out}");
+    let dir = tempfile::tempdir().unwrap();
+    let orig = sin_trace(dir.path(), "orig", text);
+    let new = sin_trace(dir.path(), "out", &out);
+    let v = path_judge::judge(&orig, &new, 0.02).unwrap_or_else(|e| panic!("{e}\n{out}"));
+    let cuts: Vec<[f64; 3]> = orig.iter().filter(|s| s.cut).map(|s| s.end).collect();
+    assert!(v.points_checked >= cuts.len(), "{v:?}");
+    (cuts, out)
+}
+
+fn close(got: &[[f64; 3]], want: &[[f64; 3]]) {
+    assert_eq!(got.len(), want.len(), "{got:?}");
+    for (g, w) in got.iter().zip(want) {
+        for k in 0..3 {
+            assert!((g[k] - w[k]).abs() < 1e-9, "got {g:?}, want {w:?}");
+        }
+    }
+}
+
+#[test]
+fn sinumerik_labels_gotob_loop_and_functions() {
+    let text = "N10 G71 G90 G17
+N20 R1=0 ; counter
+N30 R2=TRUNC(7.9)/7
+N40 G0 X0 Y0 Z5
+N50 G1 Z-1 F100
+N60 LOOP_A:
+N70 R1=R1+10
+N80 G1 X=R1 Y=R1*SIN(30)*R2
+N90 IF R1<30 GOTOB LOOP_A
+N100 GOTOF ENDE
+N110 G1 X99 Y99
+N120 ENDE: G0 Z5
+N130 M30
+";
+    let (cuts, out) = sin_judged(text);
+    // By hand: the loop runs for R1 = 10, 20, 30; Y = R1·sin 30° = R1/2; N110 is jumped over.
+    close(
+        &cuts,
+        &[
+            [0.0, 0.0, -1.0],
+            [10.0, 5.0, -1.0],
+            [20.0, 10.0, -1.0],
+            [30.0, 15.0, -1.0],
+        ],
+    );
+    let upper = out.to_ascii_uppercase();
+    assert!(
+        !upper.contains("GOTO") && !upper.contains("R1") && !upper.contains("X99"),
+        "{out}"
+    );
+}
+
+#[test]
+fn sinumerik_if_else_and_while_as_nc_gcode_interpreter_runs_them() {
+    let text = "G71 G90 G17
+R1=5
+G0 X0 Y0 Z5
+G1 Z-1 F100
+IF R1==5
+G1 Y10
+ELSE
+G1 Y20
+ENDIF
+WHILE R1<8
+R1=R1+1
+G1 X=R1*2
+ENDWHILE
+G0 Z5
+M30
+";
+    let (cuts, _) = sin_judged(text);
+    close(
+        &cuts,
+        &[
+            [0.0, 0.0, -1.0],
+            [0.0, 10.0, -1.0],
+            [12.0, 10.0, -1.0],
+            [14.0, 10.0, -1.0],
+            [16.0, 10.0, -1.0],
+        ],
+    );
+}
+
+#[test]
+fn sinumerik_for_loop_and_def_variables() {
+    let text = "DEF INT I
+DEF REAL DEPTH=-1.5, STEP
+G71 G90 G17
+STEP=2.5
+G0 X0 Y0 Z5
+G1 Z=DEPTH F100
+FOR I=1 TO 3
+G1 X=I*STEP Y=I
+ENDFOR
+G0 Z5
+M30
+";
+    let (cuts, _) = sin_judged(text);
+    close(
+        &cuts,
+        &[
+            [0.0, 0.0, -1.5],
+            [2.5, 1.0, -1.5],
+            [5.0, 2.0, -1.5],
+            [7.5, 3.0, -1.5],
+        ],
+    );
+}
+
+#[test]
+fn sinumerik_repeat_sections_and_repeat_until() {
+    let text = "G71 G90 G17
+R1=0
+G0 X0 Y0 Z5
+G1 Z-1 F100
+STEP_A: R1=R1+1
+G1 X=R1
+REPEAT STEP_A P=2
+REPEATB STEP_B P=2
+G1 Y=R1
+STEP_B: G1 Y=R1*2
+REPEAT
+R1=R1+1
+G1 X=R1
+UNTIL R1>=6
+G0 Z5
+M30
+";
+    // By hand: STEP_A runs once and twice more (X1, X2, X3); REPEATB runs STEP_B's block
+    // twice (Y6, Y6), then Y3, then STEP_B once more on the way (Y6); REPEAT…UNTIL X4…X6.
+    let (cuts, out) = sin_judged(text);
+    close(
+        &cuts,
+        &[
+            [0.0, 0.0, -1.0],
+            [1.0, 0.0, -1.0],
+            [2.0, 0.0, -1.0],
+            [3.0, 0.0, -1.0],
+            [3.0, 6.0, -1.0],
+            [3.0, 3.0, -1.0],
+            [3.0, 6.0, -1.0],
+            [4.0, 6.0, -1.0],
+            [5.0, 6.0, -1.0],
+            [6.0, 6.0, -1.0],
+        ],
+    );
+    assert!(!out.to_ascii_uppercase().contains("REPEAT"), "{out}");
+}
+
+#[test]
+fn sinumerik_without_expand_the_refusal_names_the_flag() {
+    let text = "G71 G90 G17\nR1=0\nG0 X0 Y0 Z5\nLAB1:\nR1=R1+1\nG1 X=R1 Z-1 F100\nIF R1<3 GOTOB LAB1\nM30\n";
+    let msg = sin_refuse(text, &sin_settings(false));
+    assert_msg(&msg, &["t.mpf:", "--expand"]);
+}
+
+#[test]
+fn sinumerik_runtime_values_are_refused_naming_them() {
+    let system = "G71 G90 G17\nG0 X0 Y0 Z5\nR1=$AA_IM[X]+1\nG1 X=R1 Z-1 F100\nM30\n";
+    let msg = sin_refuse(system, &sin_settings(true));
+    assert_msg(&msg, &["t.mpf:3", "$AA_IM", "system variable", "run time"]);
+    // An R parameter read before the program sets it holds what the controller left in it.
+    let unset = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 X=R7 Z-1 F100\nM30\n";
+    let msg = sin_refuse(unset, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &["t.mpf:3", "(R7)", "R7 is read before the program sets it"],
+    );
+    // A name the program does not define: a global user variable of the controller.
+    let gud = "G71 G90 G17\nG0 X0 Y0 Z5\nIF (ThHa<>0)\nG1 X1 Z-1 F100\nENDIF\nM30\n";
+    let msg = sin_refuse(gud, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &["t.mpf:3", "THHA is not defined in this program", "run time"],
+    );
+    // A value used only in a message is harmless: MSG is copied.
+    let text = "G71 G90 G17\nMSG(\"PASS \"<<$AA_IM[X])\nR1=2\nG0 X0 Y0 Z5\nG1 X=R1 Z-1 F100\nM30\n";
+    let (cuts, _) = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &sin_settings(true))
+        .map(|(o, _)| (o.contains("MSG(\"PASS \"<<$AA_IM[X])"), ()))
+        .unwrap();
+    assert!(cuts);
+}
+
+#[test]
+fn sinumerik_calls_of_other_programs_are_refused_as_not_in_this_file() {
+    for (call, name) in [
+        ("L140(2)", "L140"),
+        ("L106", "L106"),
+        ("SPEC_UGV", "SPEC_UGV"),
+        ("_THREAD_SETUP(1,2)", "_THREAD_SETUP"),
+        ("println(\"METKA1\")", "PRINTLN"),
+        ("CALL \"SUB1\"", "CALL"),
+    ] {
+        let text = format!("G71 G90 G17\nR1=1\nG0 X0 Y0 Z5\n{call}\nG1 X=R1 Z-1 F100\nM30\n");
+        let msg = sin_refuse(&text, &sin_settings(true));
+        assert_msg(&msg, &["t.mpf:4", name, "which is not in this file"]);
+    }
+    // A file that is a subprogram with parameters: only its caller gives them.
+    let text = "PROC CHAMFER(REAL RSTART, REAL ANG)\nG1 X=RSTART Z-1 F100\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &["t.mpf:1", "PROC", "caller", "which is not in this file"],
+    );
+}
+
+#[test]
+fn sinumerik_an_endless_loop_is_refused_by_the_budget() {
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nR1=0\nLOOP\nR1=R1+1\nENDLOOP\nG1 X1 Z-1 F100\nM30\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(&msg, &["t.mpf:5", "line 6", "more than 1000000 times"]);
+}
+
+#[test]
+fn sinumerik_flow_that_never_reaches_the_zone_is_copied_byte_for_byte() {
+    let text = "G71 G90 G17\r\nDEF INT I\r\nG0 X0 Y0 Z5\r\nFOR I=0 TO 2\r\nG1 X=I*10 Y0 Z5 F100\r\nENDFOR\r\nM30\r\n";
+    let s = CompensationSettings {
+        everywhere: false,
+        zone: Some((-10.0, 0.0)),
+        ..sin_settings(true)
+    };
+    let out = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &s)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .0;
+    assert_eq!(out, text);
+}
+
+#[test]
+fn sinumerik_the_flattened_program_stops_at_the_output_limit() {
+    // 200 000 cuts of about 20 bytes: 4 MB, over the 1 MB limit (as the Fanuc test above).
+    errmap::io::safety::set_max_output_mb(1);
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nR1=0\nWHILE R1<200000\nG1 X=R1*0.001 Y0 Z-1 F100\nR1=R1+1\nENDWHILE\nM30\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &["t.mpf:5", "output limit of 1 MB", "--max-output-mb"],
+    );
+}
+
+#[test]
+fn sinumerik_hostile_lines_are_refused_not_a_panic() {
+    for text in [
+        "R1=(((((((\nM30\n",
+        "IF\nM30\n",
+        "ENDIF\nM30\n",
+        "GOTOB\nM30\n",
+        "R1=1\nREPEAT XX P=3\nM30\n",
+        "DEF REAL A[3]\nM30\n",
+        "R1=1/0\nG1 X=R1\nM30\n",
+        "FOR R1=1 TO\nENDFOR\nM30\n",
+        "R1=1 G1 X=R1 ; é\nM30\n",
+    ] {
+        let _ = compensate_gcode(text, Path::new("t.mpf"), &Flat20, &sin_settings(true));
+    }
+    let deep = format!(
+        "R1={}1{}\nG1 X=R1\nM30\n",
+        "(".repeat(5000),
+        ")".repeat(5000)
+    );
+    assert!(compensate_gcode(&deep, Path::new("t.mpf"), &Flat20, &sin_settings(true)).is_err());
 }

@@ -9,6 +9,7 @@
 pub(crate) mod eval;
 mod fanuc;
 mod linuxcnc;
+mod sinumerik;
 
 use super::dialect::Dialect;
 use crate::error::{Error, Location, Result};
@@ -211,7 +212,8 @@ pub(crate) fn flatten(
     match dialect {
         Dialect::Fanuc => fanuc::flatten(text, source, trial),
         Dialect::Linuxcnc => linuxcnc::flatten(text, source, trial),
-        Dialect::Sinumerik | Dialect::Heidenhain => Ok(None),
+        Dialect::Sinumerik => sinumerik::flatten(text, source, trial),
+        Dialect::Heidenhain => Ok(None),
     }
 }
 
