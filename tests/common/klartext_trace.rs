@@ -437,7 +437,7 @@ fn hole(
     shift: &[f64; 3],
     out: &mut Vec<Seg>,
 ) -> Result<(), String> {
-    let (Some(x), Some(y), Some(z)) = (pos[0], pos[1], pos[2]) else {
+    let (Some(x), Some(y)) = (pos[0], pos[1]) else {
         return Err(format!(
             "line {line}: a hole at an unknown position is not followed"
         ));
@@ -446,7 +446,9 @@ fn hole(
     let clearance = surface + q[&200];
     let bottom = surface + q[&201];
     let top = surface + q[&200].max(q.get(&204).copied().unwrap_or(0.0));
-    let mut from = [x, y, z];
+    // From a tool-axis position the program never gave, the cycle's first move (at FMAX to the
+    // set-up clearance, from wherever the tool is) is judged from the clearance on.
+    let mut from = [x, y, pos[2].unwrap_or(clearance)];
     for (cut, level) in [(false, clearance), (true, bottom), (false, top)] {
         let to = [x, y, level];
         out.push(Seg {
