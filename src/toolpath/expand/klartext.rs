@@ -231,7 +231,7 @@ fn code_of(s: &str) -> &str {
 /// `1` of `LBL 1` / `LBL1` / `LBL 01`, `"name"` of `LBL "name"`, and the text after it.
 fn label_name<'t>(original: &str, upper_rest: &'t str) -> (String, &'t str) {
     let rest = upper_rest.trim_start();
-    if rest.starts_with('"') {
+    if let Some(inside) = rest.strip_prefix('"') {
         // The name as written (case kept), from the original text.
         let name = original
             .find('"')
@@ -240,7 +240,7 @@ fn label_name<'t>(original: &str, upper_rest: &'t str) -> (String, &'t str) {
                 Some(original[a..a + e + 2].to_string())
             })
             .unwrap_or_default();
-        let after = rest[1..].find('"').map_or("", |e| &rest[e + 2..]);
+        let after = inside.find('"').map_or("", |e| &inside[e + 1..]);
         return (name, after);
     }
     let end = rest.find(|c: char| c.is_whitespace()).unwrap_or(rest.len());
