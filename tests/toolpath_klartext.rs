@@ -357,7 +357,7 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+0 Y+0 Z+20 FMAX\n3 L X+10 F100\n4 CHF 2\n5 L Y+10 Z-1\n", &["k.h:5", "CHF 2", "line 6"]),
         ("2 L X+10 F100\n3 CT X+20 Y+10\n", &["k.h:4", "CT", "CC + C"]),
         ("2 L X+0 Y+0 Z+20 FMAX\n3 CT X+20 Y+10 Z-1\n", &["k.h:4", "CT"]),
-        ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "CALL LBL"]),
+        ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "--expand"]),
         ("2 CALL LBL 1 REP 2\n3 L X+10 F100\n4 M30\n5 LBL 1\n6 L IX+1 F100\n7 LBL 0\n", &["k.h:4", "block 3:", "unknown since block 2, line 3"]),
         ("2 L X+Q1 F100\n", &["k.h:3", "X+Q1", "Q parameter Q1"]),
         ("2 CYCL DEF 7.0 DATUM SHIFT\n3 CYCL DEF 7.1 Z+Q12\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "Z+Q12", "Q parameter", "FN18"]),

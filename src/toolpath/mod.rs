@@ -299,7 +299,10 @@ pub fn compensate_gcode(
     settings: &CompensationSettings,
 ) -> Result<(String, CompensationReport)> {
     if klartext::applies(text, source, settings.dialect) {
-        return klartext::compensate(text, source, field, settings);
+        return match klartext::compensate(text, source, field, settings) {
+            Err(refused) => expand_refused(text, source, field, settings, refused),
+            done => done,
+        };
     }
     match gcode::compensate(text, source, field, settings) {
         Err(refused) => expand_refused(text, source, field, settings, refused),
@@ -318,10 +321,14 @@ fn expand_refused(
     settings: &CompensationSettings,
     refused: Error,
 ) -> Result<(String, CompensationReport)> {
-    let Ok(dialect) = dialect::resolve(text, source, settings.dialect) else {
-        return Err(refused);
+    // A Klartext program is run by the Klartext reader (its dialect is Heidenhain).
+    let is_klartext = klartext::applies(text, source, settings.dialect);
+    let dialect = match dialect::resolve(text, source, settings.dialect) {
+        _ if is_klartext => Dialect::Heidenhain,
+        Ok(d) => d,
+        Err(_) => return Err(refused),
     };
-    let flat = match expand::flatten(text, source, dialect, !settings.expand) {
+    let mut flat = match expand::flatten(text, source, dialect, !settings.expand) {
         Ok(Some(flat)) => flat,
         Ok(None) => return Err(refused),
         Err(e) if settings.expand => return Err(e),
@@ -333,9 +340,24 @@ fn expand_refused(
         dialect: Some(dialect),
         ..*settings
     };
+    // A run stopped by what it cannot follow: the blocks before it are compensated, so a
+    // refusal of an earlier cut comes first; else the run's own refusal. A trial keeps the
+    // plain refusal.
+    let pending = flat.pending.take();
+    if pending.is_some() && !settings.expand {
+        return Err(refused);
+    }
     let result = expand::compensate_flat(text, &flat, |t| {
-        gcode::compensate(t, source, field, &flat_settings)
+        if is_klartext {
+            klartext::compensate(t, source, field, &flat_settings)
+        } else {
+            gcode::compensate(t, source, field, &flat_settings)
+        }
     });
+    let result = match (result, pending) {
+        (Ok(_), Some(stop)) => Err(stop),
+        (result, _) => result,
+    };
     match (settings.expand, result) {
         // The run compensates nothing: the original runs exactly as its flattened program
         // does, so it is copied byte for byte (a file of subroutines alone runs nothing).

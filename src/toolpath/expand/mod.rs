@@ -8,6 +8,7 @@
 
 pub(crate) mod eval;
 mod fanuc;
+mod klartext;
 mod linuxcnc;
 mod sinumerik;
 
@@ -33,6 +34,10 @@ const TRIAL_STOP: &str = "expand trial budget reached";
 /// Deepest nesting of calls followed (controllers allow fewer: Fanuc 4 macro levels).
 pub(crate) const MAX_CALL_DEPTH: usize = 16;
 
+/// The end of the Klartext rewriter's refusal of a Q word on a cut, replaced by why the run
+/// does not know the value.
+const Q_UNKNOWN: &str = "errmap does not compute Q parameters";
+
 /// The hint given where the ordinary rewrite refuses control flow that `--expand` can run.
 pub(crate) const HINT: &str = "pass --expand to run the program's subprograms, loops and parameters as the controller would and compensate the flattened program (job key [toolpaths] expand), or move the zone away";
 
@@ -46,6 +51,14 @@ pub(crate) struct Flat {
     origin: Vec<(u64, u32)>,
     /// Call chains: (parent chain, line of the call, what was called). Chain 0 is the top level.
     chains: Vec<(u32, u64, String)>,
+    /// A refusal that stopped the run (Klartext): reported when the blocks before it compensate.
+    pub pending: Option<Error>,
+    /// Klartext: the output line of each output block number, and each source line's block
+    /// number, so `block N` in a message names the original block.
+    blocks: Vec<u64>,
+    source_blocks: Vec<Option<u64>>,
+    /// Klartext: why a Q word left in an output line (by line) has no value errmap knows.
+    why: std::collections::HashMap<u64, String>,
 }
 
 impl Flat {
@@ -55,6 +68,7 @@ impl Flat {
             text: String::with_capacity(capacity),
             origin: Vec::new(),
             chains: vec![(0, 0, String::new())],
+            ..Flat::default()
         }
     }
 
@@ -166,15 +180,49 @@ impl Flat {
                 None => format!("1 ({word})"),
             }
         });
+        let message = self.original_lines(&self.original_blocks(&message));
+        // A Q word the run left in place: say why its value is unknown (in original terms).
+        let message = match self.why.get(&out_line) {
+            Some(why) if message.contains(Q_UNKNOWN) => message.replace(Q_UNKNOWN, why),
+            _ => message,
+        };
         Error::Input {
             location: Location {
                 file: location.file,
                 line: Some(line),
                 column,
             },
-            message: format!("{}{}", self.original_lines(&message), self.calls(chain)),
+            message: format!("{message}{}", self.calls(chain)),
             hint,
         }
+    }
+
+    /// A message with each `block N` of the flattened Klartext program named by the original
+    /// block it came from.
+    fn original_blocks(&self, message: &str) -> String {
+        if self.blocks.is_empty() {
+            return message.to_string();
+        }
+        let mut out = String::with_capacity(message.len());
+        let mut rest = message;
+        while let Some(at) = rest.find("block ") {
+            let (head, tail) = rest.split_at(at + 6);
+            out.push_str(head);
+            let digits = tail.bytes().take_while(u8::is_ascii_digit).count();
+            let mapped = tail[..digits]
+                .parse::<usize>()
+                .ok()
+                .and_then(|n| self.blocks.get(n))
+                .and_then(|l| self.origin.get((*l as usize).checked_sub(1)?))
+                .and_then(|(line, _)| *self.source_blocks.get((*line as usize).checked_sub(1)?)?);
+            match mapped {
+                Some(b) => out.push_str(&b.to_string()),
+                None => out.push_str(&tail[..digits]),
+            }
+            rest = &tail[digits..];
+        }
+        out.push_str(rest);
+        out
     }
 
     /// A message with each `line N` of the flattened program named by its source line.
@@ -213,7 +261,7 @@ pub(crate) fn flatten(
         Dialect::Fanuc => fanuc::flatten(text, source, trial),
         Dialect::Linuxcnc => linuxcnc::flatten(text, source, trial),
         Dialect::Sinumerik => sinumerik::flatten(text, source, trial),
-        Dialect::Heidenhain => Ok(None),
+        Dialect::Heidenhain => klartext::flatten(text, source, trial),
     }
 }
 

@@ -37,6 +37,7 @@ pub(super) fn q_value(rest: &str, q: &str) -> Option<Result<f64, String>> {
 impl Kt<'_> {
     /// Remember a cycle 200–209 definition; another `CYCL DEF` of a machining cycle replaces it.
     pub(super) fn define_cycle(&mut self, n: u64, major: i64, b: &Block) {
+        self.machining_cycle = Some((major, n));
         self.hole_cycle = (200..=209).contains(&major).then(|| HoleCycle {
             number: major,
             line: n,

@@ -527,7 +527,12 @@ impl Kt<'_> {
                 w.col,
                 w.text.clone(),
                 format!(
-                    "axis {} moves together with a cut in the compensation zone",
+                    "{}axis {} moves together with a cut in the compensation zone",
+                    if matches!(w.addr.trim_start_matches('I'), "A" | "B" | "C") {
+                        "rotary "
+                    } else {
+                        ""
+                    },
                     w.addr.trim_start_matches('I')
                 ),
                 "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move",
@@ -670,11 +675,15 @@ impl Kt<'_> {
         p[self.tool_axis] = None;
         p[self.normal] = None;
         if self.may_touch(&[self.pos, p]) {
+            let cycle = match self.machining_cycle {
+                Some((c, l)) if c >= 0 => format!(" of cycle {c} ({})", self.at(l)),
+                _ => String::new(),
+            };
             return Err(self.err(
                 n,
                 col,
                 word,
-                format!("cycle call `{word}` in the compensation zone: errmap does not follow machining cycles"),
+                format!("cycle call `{word}`{cycle} in the compensation zone: errmap does not follow machining cycles"),
                 "expand the cycle into L moves with your CAM post (or move the zone away)",
             ));
         }

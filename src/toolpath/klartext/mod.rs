@@ -129,6 +129,8 @@ struct Kt<'a> {
     /// The lines (content, terminator) of the block being read, and where its output starts.
     block_lines: Vec<(String, String)>,
     block_out_start: usize,
+    /// The machining cycle defined last (its number and line), named by a refused call.
+    machining_cycle: Option<(i64, u64)>,
     /// The last drilling cycle defined (200–209), if it is the active machining cycle.
     hole_cycle: Option<holes::HoleCycle>,
     /// The surface Q203 of the definition written last in the output, when errmap wrote it
@@ -238,6 +240,7 @@ impl<'a> Kt<'a> {
             block_numbers: Vec::new(),
             block_lines: Vec::new(),
             block_out_start: 0,
+            machining_cycle: None,
             hole_cycle: None,
             hole_surface_out: None,
             modal_call: false,
