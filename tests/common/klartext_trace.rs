@@ -20,8 +20,11 @@
 //! the depth (Q203 + Q201), rapid to the higher of the two clearances (Q200, Q204) — its pecks,
 //! chip breaks and dwells go up and down that line. `PLANE RESET` and cycle 19 without an angle
 //! tilt nothing; an `L` block without a coordinate moves nothing.
+//! `RL`/`RR` (tool radius compensation, until `R0`) offset the programmed contour in the
+//! working plane: the moves traced are the programmed ones, and [`plane_less_blocks_under_comp`]
+//! counts the blocks the TNC must look past while compensation is on.
 //! What
-//! moves otherwise (cycles and their calls, labels, Q parameters, PLANE, RL/RR, APPR/DEP, RND,
+//! moves otherwise (cycles and their calls, labels, Q parameters, PLANE, APPR/DEP, RND,
 //! CT, rotary axes) is refused: the judge cannot vouch for it.
 // Each test binary that includes this module uses only part of it.
 #![allow(dead_code)]
@@ -188,7 +191,10 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
             match *w {
                 "FMAX" | "F" | "MAX" => rapid |= *w != "F",
                 "R0" | "AUTO" | "MB" => {}
-                "RL" | "RR" | "R+" | "R-" => return err(&format!("`{w}` (radius compensation)")),
+                // Tool radius compensation offsets the programmed contour, which is what the
+                // judge compares (see `plane_less_blocks_under_comp` for what the TNC needs).
+                "RL" | "RR" => {}
+                "R+" | "R-" => return err(&format!("`{w}`")),
                 "DR+" => ccw = true,
                 "DR-" => cw = true,
                 _ => {
@@ -444,4 +450,48 @@ fn hole(
     }
     pos[2] = Some(top);
     Ok(())
+}
+
+/// How many blocks run while RL/RR is in force (after the block that gives it, up to the block
+/// with R0) that do not move in the working plane XY: an `L` with only Z, or any block that
+/// is not a contour element (`L`, `C`, `CR`, `CP`) or a circle centre `CC` (TNC manual, "Tool
+/// radius compensation": compensation starts in an `L` block with RL/RR in the working plane
+/// and the TNC computes the offset path from the contour elements that follow). Comments do
+/// not count.
+pub fn plane_less_blocks_under_comp(text: &str) -> usize {
+    let mut on = false;
+    let mut count = 0;
+    for raw in text.lines() {
+        let code = raw.split(';').next().unwrap_or("").trim();
+        let code = code.trim_start_matches(|c: char| c.is_ascii_digit()).trim();
+        let upper = code.to_ascii_uppercase();
+        let words: Vec<&str> = upper.split_whitespace().collect();
+        let Some(&head) = words.first() else { continue };
+        if head == "*" {
+            continue;
+        }
+        let gives = |w: &str| words.contains(&w);
+        if gives("RL") || gives("RR") {
+            on = true;
+            continue;
+        }
+        if gives("R0") {
+            on = false;
+            continue;
+        }
+        if !on || head == "CC" {
+            continue;
+        }
+        let in_plane = match head {
+            "C" | "CR" | "CP" => true,
+            "L" => words[1..]
+                .iter()
+                .any(|w| ["X", "Y", "IX", "IY"].iter().any(|a| w.starts_with(a))),
+            _ => false,
+        };
+        if !in_plane {
+            count += 1;
+        }
+    }
+    count
 }
