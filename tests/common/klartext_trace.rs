@@ -18,7 +18,11 @@
 //! (200–209) called by `M99` on a positioning block or by `CYCL CALL` is read as its envelope
 //! along the tool axis: rapid to the set-up clearance above the surface (Q203 + Q200), feed to
 //! the depth (Q203 + Q201), rapid to the higher of the two clearances (Q200, Q204) — its pecks,
-//! chip breaks and dwells go up and down that line. `PLANE RESET` and cycle 19 without an angle
+//! chip breaks and dwells go up and down that line. The old cycle 1 PECKING (`1.1 DIST`
+//! set-up clearance, `1.2 DEPTH` hole depth, TNC 426/430 User's Manual "PECKING (Cycle 1)": the
+//! tool starts at the set-up clearance above the surface, drills at feed to the bottom and
+//! returns to the starting position at rapid) is read as feed from the start to
+//! start + sign(DEPTH)·(|DIST| + |DEPTH|), rapid back. `PLANE RESET` and cycle 19 without an angle
 //! tilt nothing; an `L` block without a coordinate moves nothing.
 //! `RL`/`RR` (tool radius compensation, until `R0`) offset the programmed contour in the
 //! working plane: the moves traced are the programmed ones, and [`plane_less_blocks_under_comp`]
@@ -49,6 +53,8 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
     let mut reading: Option<(u32, HashMap<u32, f64>)> = None;
     let mut preset: Option<f64> = None;
     let mut drill: Option<HashMap<u32, f64>> = None;
+    // Cycle 1 PECKING, when it is the cycle defined last: (DIST, DEPTH).
+    let mut pecking: Option<(Option<f64>, Option<f64>)> = None;
     for (n, raw) in text.lines().enumerate() {
         let line = n as u64 + 1;
         let was_continued = continued;
@@ -108,12 +114,20 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
                     }
                     continue;
                 }
+                if words.first() == Some(&"DEF") && number == "1" {
+                    drill = None;
+                    pecking_def(line, &words, &mut pecking)?;
+                    continue;
+                }
                 // Cycle 247 selects a datum preset; 200–209 define a drilling cycle.
                 let read = number
                     .parse::<u32>()
                     .ok()
                     .filter(|c| *c == 247 || (200..=209).contains(c));
                 if let (Some(&"DEF"), Some(c)) = (words.first(), read) {
+                    if c != 247 {
+                        pecking = None;
+                    }
                     let mut q = HashMap::new();
                     read_q(code, &mut q);
                     if continued {
@@ -122,6 +136,12 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
                         define(line, c, q, &mut preset, &mut drill)?;
                     }
                     continue;
+                }
+                if words.first() == Some(&"CALL") && words.len() == 1 {
+                    if let Some(p) = pecking {
+                        pecking_hole(line, p, &mut pos, &mut out)?;
+                        continue;
+                    }
                 }
                 if words.first() == Some(&"CALL") {
                     let Some(q) = &drill else {
@@ -233,6 +253,15 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
         }
         // An L block without a coordinate (`L M30`, `L R0 F AUTO`) moves nothing.
         if head == "L" && abs.iter().chain(&inc).all(|v| v.is_none()) && !machine {
+            // `L FMAX M99`: the cycle runs where the tool stands.
+            if let (true, Some(p)) = (call, pecking) {
+                pecking_hole(line, p, &mut pos, &mut out)?;
+            } else if call {
+                let Some(q) = &drill else {
+                    return err("M99 with no drilling cycle defined");
+                };
+                hole(line, q, &mut pos, &shift, &mut out)?;
+            }
             continue;
         }
         if machine {
@@ -354,7 +383,9 @@ pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
             arc,
         });
         pos = end.map(|v| (!v.is_nan()).then_some(v));
-        if call {
+        if let (true, Some(p)) = (call, pecking) {
+            pecking_hole(line, p, &mut pos, &mut out)?;
+        } else if call {
             let Some(q) = &drill else {
                 return err("M99 with no drilling cycle defined");
             };
@@ -494,4 +525,79 @@ pub fn plane_less_blocks_under_comp(text: &str) -> usize {
         }
     }
     count
+}
+
+/// A block of cycle 1 PECKING's definition: `1.0` starts it, `1.1 DIST…` (or `SET UP`) and
+/// `1.2 DEPTH…` give its levels; the plunging depth, dwell and feed move along the same line.
+fn pecking_def(
+    line: u64,
+    words: &[&str],
+    pecking: &mut Option<(Option<f64>, Option<f64>)>,
+) -> Result<(), String> {
+    let id = words.get(1).copied().unwrap_or("");
+    let value = |key: &str| -> Result<f64, String> {
+        let joined = words[2..].join(" ");
+        let at = joined
+            .find(key)
+            .ok_or(format!("line {line}: cycle 1 block without {key}"))?;
+        let text = joined[at + key.len()..].trim_start();
+        let num = text.split_whitespace().next().unwrap_or("");
+        num.parse()
+            .map_err(|_| format!("line {line}: cycle 1 {key} `{num}` is not followed"))
+    };
+    match id {
+        "1.0" => *pecking = Some((None, None)),
+        "1.1" => {
+            let d = value(if words.iter().any(|w| w.starts_with("DIST")) {
+                "DIST"
+            } else {
+                "SET UP"
+            })?;
+            pecking
+                .as_mut()
+                .ok_or(format!("line {line}: 1.1 before 1.0"))?
+                .0 = Some(d);
+        }
+        "1.2" => {
+            let d = value("DEPTH")?;
+            pecking
+                .as_mut()
+                .ok_or(format!("line {line}: 1.2 before 1.0"))?
+                .1 = Some(d);
+        }
+        "1.3" | "1.4" | "1.5" => {}
+        _ => return Err(format!("line {line}: cycle 1 block `{id}` is not followed")),
+    }
+    Ok(())
+}
+
+/// Cycle 1's hole at the current position: feed from the start to the bottom, rapid back.
+fn pecking_hole(
+    line: u64,
+    (dist, depth): (Option<f64>, Option<f64>),
+    pos: &mut [Option<f64>; 3],
+    out: &mut Vec<Seg>,
+) -> Result<(), String> {
+    let (Some(x), Some(y), Some(z), Some(dist), Some(depth)) =
+        (pos[0], pos[1], pos[2], dist, depth)
+    else {
+        return Err(format!("line {line}: a cycle 1 hole at an unknown position or without DIST and DEPTH is not followed"));
+    };
+    let bottom = z + depth.signum() * (dist.abs() + depth.abs());
+    let (top, low) = ([x, y, z], [x, y, bottom]);
+    out.push(Seg {
+        cut: true,
+        line,
+        start: top,
+        end: low,
+        arc: None,
+    });
+    out.push(Seg {
+        cut: false,
+        line,
+        start: low,
+        end: top,
+        arc: None,
+    });
+    Ok(())
 }

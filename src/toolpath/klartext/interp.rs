@@ -674,8 +674,10 @@ impl Kt<'_> {
     /// A machining cycle runs at the current position: refused if it may touch the zone; it
     /// leaves the tool-axis coordinate unknown.
     pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
-        if self.hole_call(n, col, word)?.is_some() {
-            self.lose_position(n, &[self.tool_axis, self.normal]);
+        if let Some(back) = self.hole_call(n, col, word)? {
+            if !back {
+                self.lose_position(n, &[self.tool_axis, self.normal]);
+            }
             return Ok(());
         }
         let mut p = self.pos;
