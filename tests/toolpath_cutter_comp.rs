@@ -1,4 +1,9 @@
-//! Cutter radius compensation (G41/G42) with a Z map under G17: the compensated contour keeps every plane coordinate and arc centre, only Z gets −E, no block without X/Y motion is written while compensation is on, and what errmap cannot keep exact is refused; LinuxCNC's rs274 checks the offset path.
+//! Cutter radius compensation (G41/G42, Klartext RL/RR) with a Z map under G17 / tool axis Z: the compensated contour keeps every plane coordinate and arc centre, only Z gets −E, no block without X/Y motion is written while compensation is on, and what errmap cannot keep exact is refused; LinuxCNC's rs274 checks the offset path, the Klartext reference tracer the programmed one.
+
+#[path = "common/klartext_trace.rs"]
+mod klartext_trace;
+#[path = "common/path_judge.rs"]
+mod path_judge;
 
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect};
@@ -497,4 +502,256 @@ fn a_piece_that_rounds_to_no_plane_motion_is_merged_into_the_next() {
     // By hand: the ramp ends at Z−1 − E(8, 0) = −1.028, the run after it at −1 − E(15, 0).
     assert!(out.contains("G1 X8.0000 Y0.0000 Z-1.0280\n"), "{out}");
     assert!(out.contains("G1 X15.0000 Y0.0000 Z-1.0350\n"), "{out}");
+}
+
+// ---------------------------------------------------------------------------------------
+// Klartext RL/RR: judged by the reference tracer (tests/common/klartext_trace.rs).
+
+/// E = 0.02 + 0.001·x + 0.0005·y mm along Z (or along `normal`), measured for x ≤ `x_max`.
+struct KtField {
+    normal: Axis,
+    flat: bool,
+    x_max: f64,
+}
+
+impl KtField {
+    fn e(&self, x: f64, y: f64) -> f64 {
+        if self.flat {
+            0.02
+        } else {
+            0.02 + 0.001 * x + 0.0005 * y
+        }
+    }
+}
+
+impl ErrorField for KtField {
+    fn normal(&self) -> Axis {
+        self.normal
+    }
+    fn error_mm(&self, u: f64, v: f64) -> Option<f64> {
+        (u.abs() <= 1000.0 && v.abs() <= 1000.0).then(|| self.e(u, v))
+    }
+    fn measured(&self, u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(u <= self.x_max)
+    }
+}
+
+const KT_TILTED: KtField = KtField {
+    normal: Axis::Z,
+    flat: false,
+    x_max: 1000.0,
+};
+
+fn kt(text: &str, field: &KtField) -> Result<String, String> {
+    let settings = CompensationSettings {
+        zone: Some((-2.0, 0.0)),
+        dialect: Some(Dialect::Heidenhain),
+        chord_tol: 0.001,
+        ..CompensationSettings::default()
+    };
+    compensate_gcode(text, Path::new("wall.h"), field, &settings)
+        .map(|(o, _)| o)
+        .map_err(|e| e.to_string())
+}
+
+/// A pocket wall at Z−1 under RL: RL entry line, a line, a half circle about CC (20, 10), a
+/// line, the R0 exit, all in the zone.
+const KT_WALL: &str = "0 BEGIN PGM WALL MM
+1 TOOL CALL 1 Z S3000
+2 L X-10 Y-5 Z+5 R0 FMAX
+3 L Z-1 F100
+4 L X+0 Y+0 RL F200
+5 L X+20 Y+0
+6 CC X+20 Y+10
+7 C X+20 Y+20 DR+
+8 L X+0 Y+20
+9 L X-10 Y+30 R0
+10 L Z+5 FMAX
+11 END PGM WALL MM
+";
+
+/// The programmed contour of KT_WALL in the plane, for the tilted-map check: the nearest point
+/// of the traced original cuts that move in XY, and that cut's Z there.
+fn on_original(orig: &[path_judge::Seg], p: [f64; 3]) -> (f64, f64) {
+    orig.iter()
+        .filter(|s| {
+            s.cut
+                && (s.arc.is_some() || (s.end[0] - s.start[0]).hypot(s.end[1] - s.start[1]) > 1e-9)
+        })
+        .map(|s| {
+            // Distance in the plane: the point lifted to the cut's Z.
+            let mut q = p;
+            q[2] = s.start[2];
+            (s.distance(&q), s.start[2])
+        })
+        .fold((f64::INFINITY, 0.0), |a, b| if b.0 < a.0 { b } else { a })
+}
+
+#[test]
+fn klartext_rl_contour_keeps_its_plane_path_and_arcs_and_gets_z_minus_e() {
+    let out = kt(KT_WALL, &KT_TILTED).unwrap();
+    println!("{out}");
+    let orig = klartext_trace::trace(KT_WALL).unwrap();
+    let new = klartext_trace::trace(&out).unwrap();
+    // Every output cut that moves in the plane: its points (ends and quarters) lie on the
+    // programmed contour in XY, at Z = −1 − E(x, y) within --chord-tol (+ the last written
+    // digit). The plunge (no plane motion) is judged apart.
+    let mut checked = 0;
+    for s in new.iter().filter(|s| s.cut) {
+        let plane_len = (s.end[0] - s.start[0]).hypot(s.end[1] - s.start[1]);
+        if s.arc.is_none() && plane_len < 1e-9 {
+            continue;
+        }
+        for t in [0.25, 0.5, 0.75, 1.0] {
+            let p = s.at(t);
+            let (d, z) = on_original(&orig, p);
+            assert!(
+                d < 2e-4,
+                "output line {} at {p:?} is {d} mm off the contour",
+                s.line
+            );
+            let want = z - KT_TILTED.e(p[0], p[1]);
+            assert!(
+                (p[2] - want).abs() <= 0.001 + 1e-4,
+                "output line {} at {p:?}: Z {} but −1 − E = {want}",
+                s.line,
+                p[2]
+            );
+            checked += 1;
+        }
+        if let Some(a) = &s.arc {
+            // Arc pieces turn about the programmed centre.
+            assert!((a.centre.0 - 20.0).abs() < 1e-9 && (a.centre.1 - 10.0).abs() < 1e-9);
+        }
+    }
+    assert!(checked > 20, "{checked}");
+    // The half circle is written as helical CP pieces about CC, never as chords.
+    assert!(out.contains(" CP IPA+"), "{out}");
+    assert!(new.iter().filter(|s| s.arc.is_some()).count() >= 2);
+    // The RL and R0 blocks stay one block each, with their words; no block without XY motion
+    // runs under RL that the original does not have.
+    assert!(
+        out.contains(" L X+0.0000 Y+0.0000 Z-1.0200 RL F200\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains(" L X-10.0000 Y+30.0000 Z-1.0250 R0\n"),
+        "{out}"
+    );
+    assert_eq!(klartext_trace::plane_less_blocks_under_comp(&out), 0);
+    // Blocks renumbered in order.
+    for (i, l) in out.lines().enumerate() {
+        assert!(l.starts_with(&format!("{i} ")), "{l}");
+    }
+}
+
+#[test]
+fn klartext_rl_contour_with_a_flat_map_passes_the_judge() {
+    let flat = KtField {
+        normal: Axis::Z,
+        flat: true,
+        x_max: 1000.0,
+    };
+    let out = kt(KT_WALL, &flat).unwrap();
+    let orig = klartext_trace::trace(KT_WALL).unwrap();
+    let new = klartext_trace::trace(&out).unwrap();
+    let v = path_judge::judge(&orig, &new, 0.02).unwrap();
+    assert!(v.points_checked > 5, "{v:?}");
+}
+
+#[test]
+fn klartext_steps_at_the_domain_edge_ride_on_the_next_piece_under_rl() {
+    // The line X0 → X80 leaves the measured domain at X50: the step back to nominal Z rides
+    // on the piece after it; then the return after the compensated arc rides on the R0 line.
+    let field = KtField {
+        normal: Axis::Z,
+        flat: false,
+        x_max: 50.0,
+    };
+    let text = "0 BEGIN PGM EDGE MM
+1 TOOL CALL 1 Z S3000
+2 L X-10 Y-5 Z-1 R0 FMAX
+3 L X+0 Y+0 RL F200
+4 L X+80 Y+0
+5 L X+80 Y+20 R0
+6 L Z+5 FMAX
+7 END PGM EDGE MM
+";
+    let out = kt(text, &field).unwrap();
+    println!("{out}");
+    assert_eq!(
+        klartext_trace::plane_less_blocks_under_comp(&out),
+        0,
+        "{out}"
+    );
+    let new = klartext_trace::trace(&out).unwrap();
+    // Along the line every written end is at −1 − E inside the domain and −1 outside.
+    let cuts: Vec<_> = new.iter().filter(|s| s.cut && s.end[1] == 0.0).collect();
+    assert!(cuts.len() >= 2);
+    for s in &cuts {
+        let (x, z) = (s.end[0], s.end[2]);
+        let want = if x <= 50.0 {
+            -1.0 - field.e(x, 0.0)
+        } else {
+            -1.0
+        };
+        assert!((z - want).abs() < 1e-4, "{s:?}");
+        assert!(
+            (s.end[0] - s.start[0]).abs() > 1e-6,
+            "a step without X/Y motion: {s:?}"
+        );
+    }
+    assert!(cuts.iter().any(|s| s.end[0] == 80.0));
+}
+
+#[test]
+fn klartext_what_rl_compensation_cannot_keep_exact_is_refused() {
+    // After a compensated cut under RL, an incremental Z move cannot carry the return.
+    let text = "0 BEGIN PGM R MM
+1 TOOL CALL 1 Z S3000
+2 L X-10 Y-5 Z-1 R0 FMAX
+3 L X+0 Y+0 RL F200
+4 L X+20 Y+0
+5 L IZ+5 FMAX
+6 L X+30 Y+0
+7 L X+40 Y+10 R0
+8 END PGM R MM
+";
+    let err = kt(text, &KT_TILTED).unwrap_err();
+    assert!(err.contains("wall.h:6"), "{err}");
+    assert!(
+        err.contains(
+            "block 5: a compensated cut under tool radius compensation RL (from block 3, line 4)"
+        ),
+        "{err}"
+    );
+    assert!(err.contains("cannot carry the return along Z"), "{err}");
+    // The map's normal is not the tool axis: X map, tool axis Z.
+    let x_map = KtField {
+        normal: Axis::X,
+        flat: true,
+        x_max: 1000.0,
+    };
+    let err = kt(KT_WALL, &x_map).unwrap_err();
+    assert!(
+        err.contains("offsets the contour in the working plane of tool axis Z, which holds the map's normal axis X"),
+        "{err}"
+    );
+    // A CR arc under RL in the zone: its centre is not the pole CC.
+    let cr = KT_WALL
+        .replace("6 CC X+20 Y+10\n", "6 L X+20 Y+0\n")
+        .replace("7 C X+20 Y+20 DR+", "7 CR X+20 Y+20 R+10 DR+");
+    let err = kt(&cr, &KT_TILTED).unwrap_err();
+    assert!(
+        err.contains("wall.h:8") && err.contains("arc CR under tool radius compensation RL"),
+        "{err}"
+    );
+    // RL switched on in the zone on a block crossing the domain edge cannot stay one block.
+    let edge = KtField {
+        normal: Axis::Z,
+        flat: false,
+        x_max: -5.0,
+    };
+    let err = kt(KT_WALL, &edge).unwrap_err();
+    assert!(err.contains("wall.h:5") && err.contains("this block starts tool radius compensation, so errmap must keep it one block, but it crosses the edge"), "{err}");
 }

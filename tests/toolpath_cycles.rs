@@ -1,5 +1,10 @@
 //! Drilling canned cycles: the position after G98/G99 holes is followed, and with `--compensate-holes` each hole whose bottom lies in the zone gets Z and R moved by −E at its own position (every later hole block of the series written with its own levels); LinuxCNC's rs274 checks the drilled depths.
 
+#[path = "common/klartext_trace.rs"]
+mod klartext_trace;
+#[path = "common/path_judge.rs"]
+mod path_judge;
+
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect};
 use std::path::Path;
@@ -218,6 +223,126 @@ fn after_g28_and_g53_only_the_named_axes_are_unknown() {
     let err = run(text, false).unwrap_err();
     assert!(
         err.contains("h.ngc:5") && err.contains("unknown since line 3"),
+        "{err}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Klartext cycle 1 PECKING: judged by the reference tracer (tests/common/klartext_trace.rs).
+
+/// Holes of cycle 1 (bottom at Z+25 − 25 − 10 = Z−10, in the zone −12…−8) by M99 on
+/// positioning blocks; the third is outside the measured domain.
+const PECKING: &str = "0 BEGIN PGM PECK MM
+1 TOOL CALL 1 Z S3000
+2 L X+10 Y+5 Z+25 FMAX
+3 CYCL DEF 1.0 PECKING
+4 CYCL DEF 1.1 DIST25.000
+5 CYCL DEF 1.2 DEPTH-10.000
+6 CYCL DEF 1.3 PLNGNG3.0
+7 CYCL DEF 1.4 DWELL0
+8 CYCL DEF 1.5 F229
+9 L FMAX M99
+10 L X+20 FMAX M99
+11 L X+150 FMAX M99
+12 L X+30 Y-5 Z+25 FMAX M99
+13 L Z+50 FMAX
+14 END PGM PECK MM
+";
+
+fn klartext(text: &str, field: &dyn ErrorField, holes: bool) -> Result<String, String> {
+    let settings = CompensationSettings {
+        zone: Some((-12.0, -8.0)),
+        dialect: Some(Dialect::Heidenhain),
+        compensate_holes: holes,
+        ..CompensationSettings::default()
+    };
+    compensate_gcode(text, Path::new("peck.h"), field, &settings)
+        .map(|(o, _)| o)
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn klartext_cycle_1_holes_start_from_z_minus_e_at_their_position() {
+    let out = klartext(PECKING, &Tilted, true).unwrap();
+    println!("{out}");
+    // By hand: E(10, 5) = 0.0325, E(20, 5) = 0.0425, E(30, −5) = 0.0475; X150 lies outside the
+    // measured domain: drilled from the nominal start after a return to Z+25.
+    assert!(out.contains(" L Z+24.9675 FMAX M99\n"), "{out}");
+    assert!(out.contains(" L X+20 Z+24.9575 FMAX M99\n"), "{out}");
+    assert!(
+        out.contains(" L Z+25.0000 FMAX\n") && out.contains(" L X+150 FMAX M99\n"),
+        "{out}"
+    );
+    assert!(out.contains(" L X+30 Y-5 Z+24.9525 FMAX M99\n"), "{out}");
+    // The definition is unchanged: DIST and DEPTH are relative to the start.
+    assert!(
+        out.contains("CYCL DEF 1.1 DIST25.000\n") && out.contains("CYCL DEF 1.2 DEPTH-10.000\n")
+    );
+    // The tracer (cycle 1 from the manual): every hole of the output is the original's at its
+    // X/Y, lowered by E there (or not at all outside the domain).
+    let orig = klartext_trace::trace(PECKING).unwrap();
+    let new = klartext_trace::trace(&out).unwrap();
+    let holes = |s: &[path_judge::Seg]| -> Vec<path_judge::Seg> {
+        s.iter().filter(|s| s.cut).cloned().collect()
+    };
+    let (a, b) = (holes(&orig), holes(&new));
+    assert_eq!(a.len(), 4);
+    assert_eq!(b.len(), 4);
+    for (o, w) in a.iter().zip(&b) {
+        let (x, y) = (o.end[0], o.end[1]);
+        let lowered = if x.abs() <= 100.0 { e(x, y) } else { 0.0 };
+        assert_eq!((w.end[0], w.end[1]), (x, y));
+        for (got, want) in [(w.start[2], o.start[2]), (w.end[2], o.end[2])] {
+            assert!((got - (want - lowered)).abs() < 1e-9, "{o:?} → {w:?}");
+        }
+        assert!((o.end[2] + 10.0).abs() < 1e-9, "the bottom is Z−10: {o:?}");
+    }
+}
+
+/// E = 0.02 mm along Z everywhere.
+struct Flat;
+
+impl ErrorField for Flat {
+    fn normal(&self) -> Axis {
+        Axis::Z
+    }
+    fn error_mm(&self, _u: f64, _v: f64) -> Option<f64> {
+        Some(0.02)
+    }
+    fn measured(&self, _u: f64, _v: f64, _margin: f64) -> Option<bool> {
+        Some(true)
+    }
+}
+
+#[test]
+fn klartext_cycle_1_with_a_flat_map_passes_the_judge_and_a_call_of_its_own_gets_a_z_block() {
+    let text = PECKING.replace("11 L X+150 FMAX M99\n", "11 L X+50 FMAX\n11 CYCL CALL\n");
+    let out = klartext(&text, &Flat, true).unwrap();
+    println!("{out}");
+    assert!(
+        out.contains(" L Z+24.9800 FMAX\n") && out.contains(" CYCL CALL\n"),
+        "{out}"
+    );
+    let orig = klartext_trace::trace(&text).unwrap();
+    let new = klartext_trace::trace(&out).unwrap();
+    let v = path_judge::judge(&orig, &new, 0.02).unwrap();
+    assert!(v.points_checked >= 4, "{v:?}");
+}
+
+#[test]
+fn klartext_cycle_1_holes_in_the_zone_are_refused_without_the_flag() {
+    let err = klartext(PECKING, &Tilted, false).unwrap_err();
+    assert!(err.contains("peck.h:10"), "{err}");
+    assert!(
+        err.contains("block 9: `M99` drills a hole of cycle 1 PECKING (block 3, line 4) whose bottom Z-10.0000 lies in the compensation zone, at X+10.0000 Y+5.0000"),
+        "{err}"
+    );
+    assert!(err.contains("--compensate-holes"), "{err}");
+    // DEPTH given by a parameter: the bottom is unknown.
+    let q = PECKING.replace("DEPTH-10.000", "DEPTH Q5");
+    let err = klartext(&q, &Tilted, true).unwrap_err();
+    assert!(
+        err.contains("peck.h:10") && err.contains("its 1.2 DEPTH is `Q5`, not a number"),
         "{err}"
     );
 }

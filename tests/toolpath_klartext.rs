@@ -346,8 +346,8 @@ const HEAD: &str = "0 BEGIN PGM T MM\n1 L X+0 Y+0 Z-1 R0 FMAX\n";
 #[test]
 fn every_refusal_in_the_table_is_triggered_with_its_message() {
     let cases: &[(&str, &[&str])] = &[
-        ("2 L X+10 RL F100\n", &["k.h:3", "RL", "radius compensation", "R0"]),
-        ("2 L X+1 RR F100\n3 L X+10\n", &["k.h:3", "RR"]),
+        ("2 L X+10 RL F100\n3 L IZ+1 FMAX\n", &["k.h:4", "RL", "radius compensation", "cannot carry the return"]),
+        ("2 L X+1 RR F100\n3 CR X+10 Y+0 R+5 DR+\n", &["k.h:4", "RR", "CP about the pole CC"]),
         ("2 CYCL DEF 10.0 ROTATION\n3 CYCL DEF 10.1 ROT+45\n4 L X+10 F100\n", &["k.h:5", "CYCL DEF 10 ROTATION", "ROT+0"]),
         ("2 CYCL DEF 8.0 MIRROR IMAGE\n3 CYCL DEF 8.1 X\n4 L X+10 F100\n", &["k.h:5", "MIRROR"]),
         ("2 CYCL DEF 11.0 SCALING\n3 CYCL DEF 11.1 SCL 0.5\n4 L X+10 F100\n", &["k.h:5", "SCALING"]),
@@ -477,8 +477,12 @@ fn the_cli_compensates_klartext_without_flags_and_refuses_with_exit_2() {
         std::fs::read_to_string(dir.join("out.h")).unwrap(),
         expected
     );
-    // Radius compensation on a cut in the zone: exit 2, file:line:column, nothing written.
-    std::fs::write(dir.join("rl.h"), program.replace("4 L X+20", "4 L X+20 RL")).unwrap();
+    // An arc CR under radius compensation in the zone: exit 2, file:line:column, nothing written.
+    std::fs::write(
+        dir.join("rl.h"),
+        program.replace("4 L X+20", "4 CR X+20 Y+10 R+5 DR+ RL"),
+    )
+    .unwrap();
     let out = common::errmap(
         dir,
         &["compensate", "--model", "model.json", "rl.h", "-o", "bad.h"],
@@ -1067,12 +1071,12 @@ fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
 fn a_huge_arc_far_from_the_map_is_judged_in_bounded_time() {
     // A circle of radius 2·10⁹ mm under RL, nowhere near the map: proving that it misses the
     // map means sampling it every few mm. errmap stops after its sample budget (a fuzz run hung
-    // in that sampling) and takes the arc as one that may touch, so the RL refusal stands, at
-    // once.
+    // in that sampling) and takes the arc as one that may touch; under RL its arc pieces would
+    // number more than a million, so it is refused at once.
     let text = "0 BEGIN PGM T MM\n1 L X+2000000000 Y+0 Z+50 R0 FMAX\n2 L Z-1 RL F100\n3 CC X+0 Y+0\n4 C X-2000000000 Y+0 DR+\n5 END PGM T MM\n";
     let started = std::time::Instant::now();
     let msg = refuse(text);
-    assert_msg(&msg, &["k.h:5", "RL"]);
+    assert_msg(&msg, &["k.h:5", "more than a million segments"]);
     // Not a timing assertion of performance: a hang would never get here.
     println!("refused in {:?}", started.elapsed());
 }

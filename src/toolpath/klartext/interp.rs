@@ -4,6 +4,7 @@ use super::super::arc::{Arc, Plane};
 use super::super::dialect::Motion;
 use super::super::TracedMove;
 use super::block::{Block, Value};
+use super::contour::Comp;
 use super::{Frame, Kt, Point};
 use crate::error::Result;
 
@@ -106,6 +107,12 @@ impl Kt<'_> {
         b: &Block,
         absolute_normal: bool,
     ) -> Result<()> {
+        if self.offset != 0.0 && !absolute_normal && self.comp_word().is_some() {
+            // Under RL/RR the return rides on the next move in the plane (or is refused).
+            let folded = self.fold_return(_n, content, b)?;
+            self.copy(folded.as_deref().unwrap_or(content), term, b);
+            return Ok(());
+        }
         if self.offset != 0.0 && !absolute_normal {
             // Before a rapid the return is a rapid too (the original's rapid starts there).
             self.return_step(term, b.head == "L" && b.has("FMAX"));
@@ -140,25 +147,39 @@ impl Kt<'_> {
 
     /// Radius compensation words of a path block: `R0` ends it, `RL`/`RR` start it.
     fn radius_words(&mut self, n: u64, b: &Block, radius_is_r: bool) {
+        self.radius_comp = self.radius_after(n, b, radius_is_r);
+    }
+
+    /// The radius compensation in force after a block's `R0`/`RL`/`RR` word.
+    fn radius_after(&self, n: u64, b: &Block, radius_is_r: bool) -> Option<(u64, String)> {
         if b.has("RL") || b.has("RR") {
             let w = if b.has("RL") { "RL" } else { "RR" };
-            self.radius_comp = Some((n, w.to_string()));
+            Some((n, w.to_string()))
         } else if !radius_is_r && b.word("R").and_then(|w| w.num()) == Some(0.0) {
-            self.radius_comp = None;
+            None
+        } else {
+            self.radius_comp.clone()
         }
     }
 
     /// A straight line or a circle: followed, compensated in the zone, or refused there.
     fn path(&mut self, n: u64, content: &str, term: &str, b: &Block) -> Result<()> {
         self.check_path_words(n, b)?;
-        self.radius_words(n, b, b.head == "CR");
+        // The compensation before the block stays in force while it is written (a return
+        // along the normal due before it rides on it), the block's own from its end.
+        let comp_after = self.radius_after(n, b, b.head == "CR");
+        let comp = self.comp_mode(&comp_after);
         let coordinates = has_coordinates(b);
         if b.head == "L" && !coordinates {
             // `L R0 F200 M3`: no motion.
             self.unchanged(n, content, term, b, false)?;
+            self.radius_comp = comp_after;
             return self.after_path_m(n, b);
         }
-        let mv = self.path_move(n, b)?;
+        let mut mv = self.path_move(n, b)?;
+        if mv.refusal.is_none() {
+            mv.refusal = self.comp_refusal(b, &comp_after, comp);
+        }
         let touch = self.may_touch(&self.touch_points(&mv));
         if let Some((l, col, word)) = self.corner.take() {
             if touch {
@@ -197,11 +218,14 @@ impl Kt<'_> {
                 .words
                 .iter()
                 .any(|w| w.addr == "M" && matches!(w.num(), Some(91.0 | 92.0)));
-        if mv.cutting && touch && mv.refusal.is_none() {
+        if mv.cutting && touch && mv.refusal.is_none() && comp != Comp::Off {
+            self.compensate_contour(n, content, term, b, &mv, comp)?;
+        } else if mv.cutting && touch && mv.refusal.is_none() {
             self.compensate_path(n, content, term, b, &mv)?;
         } else {
             self.unchanged(n, content, term, b, absolute_normal)?;
         }
+        self.radius_comp = comp_after;
         let lost: Vec<usize> = (0..3)
             .filter(|&i| mv.end[i].is_none() && self.pos[i].is_some())
             .collect();
@@ -479,18 +503,6 @@ impl Kt<'_> {
             };
             return Some((col, f.what.clone(), msg, hint));
         }
-        if let Some((l, w)) = &self.radius_comp {
-            let w = if b.has("RL") || b.has("RR") {
-                if b.has("RL") {
-                    "RL"
-                } else {
-                    "RR"
-                }
-            } else {
-                w.as_str()
-            };
-            return Some((b.word(w).map_or(col, |x| x.col), w.to_string(), format!("tool radius compensation {w} (from {}) is active on a cut in the compensation zone", self.at(*l)), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
-        }
         if b.head == "CT" {
             return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT));
         }
@@ -667,8 +679,10 @@ impl Kt<'_> {
     /// A machining cycle runs at the current position: refused if it may touch the zone; it
     /// leaves the tool-axis coordinate unknown.
     pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
-        if self.hole_call(n, col, word)?.is_some() {
-            self.lose_position(n, &[self.tool_axis, self.normal]);
+        if let Some(back) = self.hole_call(n, col, word)? {
+            if !back {
+                self.lose_position(n, &[self.tool_axis, self.normal]);
+            }
             return Ok(());
         }
         let mut p = self.pos;

@@ -6,6 +6,7 @@
 //! numbers stay sequential (labels are named by `LBL n`, never by block number).
 
 mod block;
+mod contour;
 mod cycles;
 mod holes;
 mod interp;
