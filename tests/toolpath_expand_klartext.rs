@@ -410,12 +410,12 @@ fn a_refusal_inside_a_called_label_names_its_line_block_and_the_call() {
 3 L Z+50 R0 FMAX M30
 4 LBL 2
 5 L Z-1 F100
-6 L X+10 RL
+6 CT X+10 Y+10
 7 LBL 0
 8 END PGM RL MM
 ";
     let msg = refuse(text);
-    assert_msg(&msg, &["t.h:7", "block 6:", "RL", "LBL 2 called on line 3"]);
+    assert_msg(&msg, &["t.h:7", "block 6:", "CT", "LBL 2 called on line 3"]);
 }
 
 #[test]
