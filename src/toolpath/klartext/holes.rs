@@ -59,17 +59,17 @@ impl Kt<'_> {
         if upper.contains("PAT") || upper.contains("POS") {
             return Ok(None);
         }
-        let (u, v) = self.plane_uv;
+        let (u, v) = self.m.plane_uv;
         // Holes along the map's normal only, in plain work coordinates, outside label bodies
         // (a label runs with whatever definition its caller left in force).
-        if self.tool_axis != self.normal
+        if self.tool_axis != self.m.normal
             || !self.frames.is_empty()
             || self.label.is_some()
             || cycle.number == 204
         {
             return Ok(None);
         }
-        let (Some(x), Some(y)) = (self.pos[u], self.pos[v]) else {
+        let (Some(x), Some(y)) = (self.m.pos[u], self.m.pos[v]) else {
             return Ok(None);
         };
         let hole = format!("cycle {} ({})", cycle.number, self.at(cycle.line));
@@ -84,8 +84,8 @@ impl Kt<'_> {
                         None => Some(format!("it has no {q}")),
                     })
                     .unwrap_or_default();
-                let mut p = self.pos;
-                p[self.normal] = None;
+                let mut p = self.m.pos;
+                p[self.m.normal] = None;
                 if !self.may_touch(&[p]) {
                     return Ok(Some(()));
                 }
@@ -96,9 +96,9 @@ impl Kt<'_> {
         let mut p = [0.0; 3];
         p[u] = x;
         p[v] = y;
-        p[self.normal] = bottom;
-        let e = self.error_at(&p);
-        if self.extrapolated.replace(false) {
+        p[self.m.normal] = bottom;
+        let e = self.m.error_at(&p);
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         let Some(e) = e else {
@@ -108,14 +108,14 @@ impl Kt<'_> {
             }
             return Ok(Some(()));
         };
-        if !self.settings.compensate_holes {
+        if !self.m.settings.compensate_holes {
             return Err(self.err(
                 n,
                 col,
                 word,
                 format!(
                     "`{word}` drills a hole of {hole} whose bottom {}{} lies in the compensation zone, at {}{} {}{}",
-                    ["X", "Y", "Z"][self.normal],
+                    ["X", "Y", "Z"][self.m.normal],
                     self.coord(bottom),
                     ["X", "Y", "Z"][u],
                     self.coord(x),
@@ -129,7 +129,7 @@ impl Kt<'_> {
         if self.hole_surface_out != Some(new_surface) {
             self.define_again(Some(new_surface));
         }
-        let e_mm = e.abs() * self.scale_mm();
+        let e_mm = e.abs() * self.m.scale_mm();
         self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
         self.report.points_compensated += 1;
         self.report.moves_changed += 1;
