@@ -20,10 +20,10 @@ use super::arc::Plane;
 use super::dialect::{self, Dialect, Frame, GCode, Motion, G};
 use super::expr::{eval, Params};
 use super::lexer::{self, Line, TokenKind, WordValue};
+use super::machine::Machine;
 use super::{CompensationReport, CompensationSettings, TracedMove};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
-use std::cell::Cell;
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::Path;
@@ -136,13 +136,9 @@ struct Block {
 struct Rewriter<'a> {
     text: &'a str,
     source: &'a Path,
-    field: &'a dyn ErrorField,
-    settings: &'a CompensationSettings,
-    normal: usize,
-    plane_uv: (usize, usize),
+    /// Position, units, shift, zone and the map (shared with the Klartext reader).
+    m: Machine<'a>,
     // Modal state of the original program.
-    pos: [Option<f64>; 3],
-    inches: bool,
     absolute: bool,
     arc_absolute: bool,
     plane: Plane,
@@ -156,8 +152,6 @@ struct Rewriter<'a> {
     cycle: Option<cycles::Cycle>,
     retract_to_r: Option<bool>,
     params: Params,
-    // Output state: the output position differs from `pos` only along the normal, by `offset`.
-    offset: f64,
     /// The modes at the start of the current line, for lines inserted before it.
     standing: Standing,
     out_motion: Option<MotionMode>,
@@ -167,18 +161,9 @@ struct Rewriter<'a> {
     subs: HashMap<String, SubInfo>,
     /// Most decimals in any coordinate word of the program (capped at 9).
     program_decimals: usize,
-    /// Line where the position became unknown, for messages.
-    unknown_since: Option<u64>,
     report: CompensationReport,
     out: String,
     dialect: Dialect,
-    /// Whether the program's units are known (a G20/G21 or equivalent, or `--units`).
-    units_known: bool,
-    /// The zone in the program's first units, until those are known; then `zone_mm`.
-    zone_first_units: Option<(f64, f64)>,
-    zone_mm: Option<(f64, f64)>,
-    /// Work coordinates = program coordinates + `shift` (G92, G52, Sinumerik TRANS), program units.
-    shift: [f64; 3],
     /// Fanuc G52 local offsets (part of `shift`).
     local: [f64; 3],
     /// States errmap does not follow, under which cuts in the zone are refused.
@@ -194,8 +179,6 @@ struct Rewriter<'a> {
     /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
     programs: u32,
     m99: Option<u64>,
-    /// Set by `error_at` when a point in the zone lies outside the measured domain.
-    extrapolated: Cell<bool>,
     /// Buffers kept from line to line: the words of a line, the points of a move and the
     /// segments written for it.
     words: Vec<W>,
@@ -243,18 +226,11 @@ impl<'a> Rewriter<'a> {
         let dialect = dialect::resolve(text, source, settings.dialect)?;
         refuse_klartext(text, source, dialect)?;
         let zone_mm = super::default_zone_mm(source, field, settings)?;
-        let normal_axis = field.normal();
-        let (u, v) = normal_axis.plane_axes();
         let units = settings.units;
         let mut rw = Rewriter {
             text,
             source,
-            field,
-            settings,
-            normal: normal_axis.index(),
-            plane_uv: (u.index(), v.index()),
-            pos: [None; 3],
-            inches: units == Some(super::Units::Inch),
+            m: Machine::new(field, settings, units == Some(super::Units::Inch), zone_mm),
             absolute: true,
             arc_absolute: false,
             plane: Plane::G17,
@@ -264,7 +240,6 @@ impl<'a> Rewriter<'a> {
             cycle: None,
             retract_to_r: None,
             params: Params::new(),
-            offset: 0.0,
             standing: Standing {
                 absolute: true,
                 inches: units == Some(super::Units::Inch),
@@ -275,15 +250,10 @@ impl<'a> Rewriter<'a> {
             blocks: Vec::new(),
             sub: None,
             subs: HashMap::new(),
-            unknown_since: None,
             program_decimals: 0,
             report: CompensationReport::default(),
             out: String::with_capacity(text.len() + text.len() / 4),
             dialect,
-            units_known: false,
-            zone_first_units: settings.zone,
-            zone_mm,
-            shift: [0.0; 3],
             local: [0.0; 3],
             frames: Vec::new(),
             unfollowed: Vec::new(),
@@ -292,7 +262,6 @@ impl<'a> Rewriter<'a> {
             flow: None,
             programs: 0,
             m99: None,
-            extrapolated: Cell::new(false),
             words: Vec::new(),
             emitted: Vec::new(),
             segments: rewrite::Segments::default(),
@@ -338,7 +307,7 @@ impl<'a> Rewriter<'a> {
             ));
         }
         self.report.dialect = Some(self.dialect);
-        self.report.zone_mm = self.zone_mm;
+        self.report.zone_mm = self.m.zone_mm;
         self.report.lines_out = self.out.bytes().filter(|&b| b == b'\n').count() as u64
             + u64::from(!self.out.is_empty() && !self.out.ends_with('\n'));
         Ok((self.out, self.report))
@@ -350,20 +319,10 @@ impl<'a> Rewriter<'a> {
         self.text.get(w.span.clone()).unwrap_or("").trim()
     }
 
-    /// Whether the map compensates at plane point (u, v) in program coordinates.
-    fn compensable(&self, u: f64, v: f64) -> bool {
-        let s = self.scale_mm();
-        let (u, v) = (
-            (u + self.shift[self.plane_uv.0]) * s,
-            (v + self.shift[self.plane_uv.1]) * s,
-        );
-        super::reach::compensable_mm(self.field, self.settings, u, v)
-    }
-
     /// Append a coordinate: at least 4 decimals in mm and 5 in inches, and as many as the
     /// program itself uses (so unchanged end points are written back exactly).
     fn push_coord(&self, buf: &mut String, v: f64) {
-        self.push_coord_in(buf, v, self.inches);
+        self.push_coord_in(buf, v, self.m.inches);
     }
 
     /// [`Self::push_coord`] for a line in the given units.
@@ -376,20 +335,12 @@ impl<'a> Rewriter<'a> {
     }
 
     fn decimals(&self) -> usize {
-        self.decimals_in(self.inches)
+        self.decimals_in(self.m.inches)
     }
 
     fn decimals_in(&self, inches: bool) -> usize {
         let d = if inches { 5 } else { 4 };
         d.max(self.program_decimals)
-    }
-
-    fn scale_mm(&self) -> f64 {
-        if self.inches {
-            25.4
-        } else {
-            1.0
-        }
     }
 
     /// An error at `word` (its first occurrence on the line gives the column).
@@ -424,33 +375,9 @@ impl<'a> Rewriter<'a> {
         self.out.push_str(&self.text[line.span.start..line.end]);
     }
 
-    /// E in program units at a point, if the point is in the zone and the map domain.
-    fn error_at(&self, p: &[f64; 3]) -> Option<f64> {
-        if let Some((lo, hi)) = self.zone_now() {
-            let n = p[self.normal];
-            if n < lo || n > hi {
-                return None;
-            }
-        }
-        let s = self.scale_mm();
-        let (u, v) = (
-            (p[self.plane_uv.0] + self.shift[self.plane_uv.0]) * s,
-            (p[self.plane_uv.1] + self.shift[self.plane_uv.1]) * s,
-        );
-        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
-            .map(|e_mm| e_mm / s)
-    }
-
     /// Could a path through these points (some coordinates unknown) touch the zone and domain?
     fn may_touch(&self, points: &[[Option<f64>; 3]]) -> bool {
-        super::reach::may_touch(
-            points,
-            self.normal,
-            self.plane_uv,
-            self.zone_now(),
-            self.settings.max_segment_in(self.inches),
-            |u, v| self.compensable(u, v),
-        )
+        self.m.may_touch(points)
     }
 
     /// One line: strict checks, then a dialect statement, an O-word, a subroutine body line
@@ -459,9 +386,9 @@ impl<'a> Rewriter<'a> {
         self.check_block(line)?;
         self.standing = Standing {
             absolute: self.absolute,
-            inches: self.inches,
-            normal_pos: self.pos[self.normal],
-            offset: self.offset,
+            inches: self.m.inches,
+            normal_pos: self.m.pos[self.m.normal],
+            offset: self.m.offset,
         };
         let keyword = line.tokens.iter().find_map(|t| match &t.kind {
             TokenKind::Keyword { name } => Some((name.as_str(), t.span.clone())),
@@ -603,7 +530,7 @@ impl<'a> Rewriter<'a> {
     /// A subroutine body line: classified where the subroutine is called, so only note whether
     /// it writes the normal axis (or a mode that changes it) and where it first moves.
     fn sub_body_line(&mut self, line: &Line, words: &[W]) {
-        let n = AXES[self.normal];
+        let n = AXES[self.m.normal];
         let writes = words.iter().filter(|w| w.letter == b'G').any(|w| {
             !matches!(
                 w.g(),

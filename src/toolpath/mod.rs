@@ -22,6 +22,7 @@ mod expr;
 mod gcode;
 mod klartext;
 pub mod lexer;
+mod machine;
 mod point;
 mod reach;
 pub mod zone_spec;

@@ -41,7 +41,7 @@ impl<'a> Rewriter<'a> {
 
     /// The active plane's tool axis is the map's normal (G17 with a Z map …).
     pub(super) fn tool_axis_is_normal(&self) -> bool {
-        self.plane.axes().2 == self.normal
+        self.plane.axes().2 == self.m.normal
     }
 
     /// Whether a move goes anywhere in the active plane (an arc always does; an unknown
@@ -124,13 +124,13 @@ impl<'a> Rewriter<'a> {
         segs.text.clear();
         segs.spans.clear();
         let last_e = self.count_compensated(&pieces);
-        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
-        out_pos[self.normal] += self.offset;
+        let mut out_pos = self.m.pos.map(|c| c.unwrap_or(0.0));
+        out_pos[self.m.normal] += self.m.offset;
         let centre = arc.filter(|_| in_plane).map(|a| a.centre);
         for (p, e) in &pieces {
             let mut q = *p;
             if let Some(e) = e {
-                q[self.normal] -= e;
+                q[self.m.normal] -= e;
             }
             self.contour_segment(q, centre, motion, in_plane, &mut out_pos, &mut segs);
         }
@@ -139,11 +139,11 @@ impl<'a> Rewriter<'a> {
         // piece too short to move in the plane as written was left out.
         let end_n = pieces
             .last()
-            .map_or(s[self.normal], |(p, _)| p[self.normal]);
-        let written_off = out_pos[self.normal] - end_n;
+            .map_or(s[self.m.normal], |(p, _)| p[self.m.normal]);
+        let written_off = out_pos[self.m.normal] - end_n;
         let half_digit = 0.5 * 10f64.powi(-(self.decimals() as i32));
         let e_last = last_e.unwrap_or(0.0);
-        self.offset = if (written_off + e_last).abs() <= half_digit {
+        self.m.offset = if (written_off + e_last).abs() <= half_digit {
             -e_last
         } else {
             written_off
@@ -188,7 +188,7 @@ impl<'a> Rewriter<'a> {
         let Some(&(end, Some(e_end))) = emitted.last() else {
             return Ok(());
         };
-        let n = self.normal;
+        let n = self.m.normal;
         // A step at the start (the output stood nominal) rides on the block as on any first
         // piece; what is checked is that E is linear enough along it.
         let Some(e_start) = emitted.first().and_then(|(_, e)| *e) else {
@@ -196,11 +196,11 @@ impl<'a> Rewriter<'a> {
         };
         let from = s[n] - e_start;
         let to = end[n] - e_end;
-        let tol = self.settings.chord_tol_in(self.inches);
+        let tol = self.m.settings.chord_tol_in(self.m.inches);
         for k in 0..=8 {
             let f = f64::from(k) / 8.0;
             let p = lerp(&s, &end, f);
-            let Some(e) = self.error_at(&p) else {
+            let Some(e) = self.m.error_at(&p) else {
                 return refuse("it leaves the zone or the measured domain".into());
             };
             let dev = (from + f * (to - from)) - (p[n] - e);
@@ -223,13 +223,14 @@ impl<'a> Rewriter<'a> {
         s: [f64; 3],
         pieces: &[([f64; 3], Option<f64>)],
     ) -> Result<Vec<([f64; 3], Option<f64>)>> {
-        let tol = self.settings.chord_tol_in(self.inches);
+        let tol = self.m.settings.chord_tol_in(self.m.inches);
         let mut out = Vec::with_capacity(pieces.len());
         // The output stands at P − E at the start only after a compensated cut that ended
         // there; otherwise the first piece carries the step and is not checked.
         let e_start = self
+            .m
             .error_at(&s)
-            .filter(|e| (e + self.offset).abs() <= 1e-12 * (1.0 + e.abs()));
+            .filter(|e| (e + self.m.offset).abs() <= 1e-12 * (1.0 + e.abs()));
         let mut prev = (s, e_start);
         for &piece in pieces {
             self.halve(line, arc, prev, piece, tol, 0, &mut out)?;
@@ -256,7 +257,8 @@ impl<'a> Rewriter<'a> {
         };
         let on = |f: f64| on_arc(arc, &a.0, &b.0, f);
         let fits = CHECKS.iter().all(|&f| {
-            self.error_at(&on(f))
+            self.m
+                .error_at(&on(f))
                 .is_some_and(|e| ((ea + f * (eb - ea)) - e).abs() <= tol)
         });
         if fits {
@@ -272,7 +274,7 @@ impl<'a> Rewriter<'a> {
             ));
         }
         let m = on(0.5);
-        let mid = (m, self.error_at(&m));
+        let mid = (m, self.m.error_at(&m));
         self.halve(line, arc, a, mid, tol, depth + 1, out)?;
         self.halve(line, arc, mid, b, tol, depth + 1, out)
     }
@@ -282,10 +284,10 @@ impl<'a> Rewriter<'a> {
     /// own; `None` when no return is due or the line cannot carry it (then `return_if_needed`
     /// refuses).
     pub(super) fn fold_return(&mut self, line: &Line, words: &[W]) -> Option<String> {
-        if self.offset == 0.0 || !self.comp_sensitive() {
+        if self.m.offset == 0.0 || !self.comp_sensitive() {
             return None;
         }
-        let n = AXES[self.normal];
+        let n = AXES[self.m.normal];
         let (a1, a2, _) = self.plane.axes();
         let plane_word = words
             .iter()
@@ -304,13 +306,13 @@ impl<'a> Rewriter<'a> {
             return None;
         }
         let value = if self.absolute {
-            self.pos[self.normal]?
+            self.m.pos[self.m.normal]?
         } else {
-            -self.offset
+            -self.m.offset
         };
         let mut text = format!(" {}", n as char);
         self.push_coord(&mut text, value);
-        self.offset = 0.0;
+        self.m.offset = 0.0;
         self.standing.offset = 0.0;
         self.report.returns_inserted += 1;
         Some(text)
@@ -324,7 +326,7 @@ impl<'a> Rewriter<'a> {
             .clone()
             .or_else(|| self.comp_transition.clone())
             .unwrap_or((0, "G41".into()));
-        let n = AXES[self.normal] as char;
+        let n = AXES[self.m.normal] as char;
         let at = self
             .text
             .get(line.span.clone())

@@ -105,8 +105,7 @@ impl<'a> Rewriter<'a> {
             }
             self.copy_line(line);
             self.out_motion = self.motion;
-            self.pos = [None; 3];
-            self.unknown_since = Some(line.number);
+            self.m.forget_position(line.number);
             self.cycle = Some(cyc);
             return Ok(());
         }
@@ -122,7 +121,7 @@ impl<'a> Rewriter<'a> {
                 self.report.moves_changed += 1;
                 if let Some(e) = e {
                     self.report.points_compensated += 1;
-                    let e_mm = e.abs() * self.scale_mm();
+                    let e_mm = e.abs() * self.m.scale_mm();
                     self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
                 }
             }
@@ -137,14 +136,14 @@ impl<'a> Rewriter<'a> {
         let mut after = end;
         after[ax] = if self.absolute { level } else { None };
         if after[a1].is_none() || after[a2].is_none() || after[ax].is_none() {
-            self.unknown_since = Some(line.number);
+            self.m.unknown_since = Some(line.number);
         }
         let e_here = match &hole {
             Hole::Write { e: Some(e), .. } if self.retract_to_r == Some(true) => *e,
             _ => 0.0,
         };
-        self.offset = -e_here;
-        self.pos = after;
+        self.m.offset = -e_here;
+        self.m.pos = after;
         self.cycle = Some(cyc);
         Ok(())
     }
@@ -166,7 +165,7 @@ impl<'a> Rewriter<'a> {
             && self.frames.is_empty()
             && self.flow.is_none()
             && self.blocks.is_empty()
-            && self.units_known
+            && self.m.units_known
             && !words.iter().any(|w| w.is_expr);
         let levels = match (known(bottom), cyc.r) {
             (Some(b), Some(r)) if plain => Some((b, r)),
@@ -193,18 +192,18 @@ impl<'a> Rewriter<'a> {
             ));
         };
         let (_, _, ax) = self.plane.axes();
-        if ax != self.normal {
+        if ax != self.m.normal {
             if !touches {
                 return Ok(Hole::Copy);
             }
             return Err(self.err(
                 line,
                 &name,
-                format!("canned cycle {name} drills along {} but the map's normal axis is {}", AXES[ax] as char, AXES[self.normal] as char),
+                format!("canned cycle {name} drills along {} but the map's normal axis is {}", AXES[ax] as char, AXES[self.m.normal] as char),
                 "drill along the map's normal (G17 for a Z map), or expand the cycle into G0/G1 moves, or move the zone away",
             ));
         }
-        let (n, (u, v)) = (self.normal, self.plane_uv);
+        let (n, (u, v)) = (self.m.normal, self.m.plane_uv);
         let depth = b[n];
         // A hole outside the measured domain or the zone keeps its levels (written out again
         // once the series has been rewritten).
@@ -213,10 +212,11 @@ impl<'a> Rewriter<'a> {
         } else {
             Hole::Copy
         };
-        if !self.compensable(b[u], b[v]) {
+        if !self.m.compensable(b[u], b[v]) {
             return Ok(keep);
         }
         if let Some((lo, hi)) = self
+            .m
             .zone_now()
             .filter(|(lo, hi)| depth < *lo || depth > *hi)
         {
@@ -230,7 +230,7 @@ impl<'a> Rewriter<'a> {
             }
             return Ok(keep);
         }
-        if !self.settings.compensate_holes {
+        if !self.m.settings.compensate_holes {
             return Err(self.err(
                 line,
                 &name,
@@ -238,7 +238,7 @@ impl<'a> Rewriter<'a> {
                 "pass --compensate-holes (job key [toolpaths] compensate_holes) to move each hole's Z and R by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away",
             ));
         }
-        Ok(match self.error_at(&b) {
+        Ok(match self.m.error_at(&b) {
             Some(e) => Hole::Write {
                 depth: depth - e,
                 r: r - e,

@@ -75,7 +75,7 @@ pub(super) fn first_jump(text: &str, line: &Line, dialect: Dialect) -> Option<(u
 impl<'a> Rewriter<'a> {
     /// A hint, with "or pass the program's --dialect" unless the dialect was given.
     pub(super) fn or_dialect(&self, hint: &str) -> String {
-        if self.settings.dialect.is_some() {
+        if self.m.settings.dialect.is_some() {
             hint.to_string()
         } else {
             format!("{hint}, or pass the program's --dialect")
@@ -84,28 +84,7 @@ impl<'a> Rewriter<'a> {
 
     /// The units became known (a unit code, or `--units`).
     pub(super) fn set_units_known(&mut self) {
-        self.units_known = true;
-    }
-
-    /// Fix the zone given in program units in mm, in the units in effect now: at the program's
-    /// first unit code, or its first move if that comes first.
-    pub(super) fn fix_zone(&mut self) {
-        if let Some((lo, hi)) = self.zone_first_units.take() {
-            let s = self.scale_mm();
-            self.zone_mm = Some((lo * s, hi * s));
-        }
-    }
-
-    /// The zone in current program coordinates (units and shift).
-    pub(super) fn zone_now(&self) -> Option<(f64, f64)> {
-        let s = self.scale_mm();
-        let (lo, hi) = match (self.zone_first_units, self.zone_mm) {
-            (Some(z), _) => z,
-            (None, Some((lo, hi))) => (lo / s, hi / s),
-            (None, None) => return None,
-        };
-        let d = self.shift[self.normal];
-        Some((lo - d, hi - d))
+        self.m.units_known = true;
     }
 
     pub(super) fn g(&self, code: GCode) -> Option<G> {
@@ -152,7 +131,7 @@ impl<'a> Rewriter<'a> {
         if self.dialect != Dialect::Fanuc {
             return Ok(None);
         }
-        let Some(numbers) = self.settings.fanuc_numbers else {
+        let Some(numbers) = self.m.settings.fanuc_numbers else {
             let t = self.wtext(first);
             return Err(self.err(
                 line,
@@ -161,7 +140,7 @@ impl<'a> Rewriter<'a> {
                 "pass --fanuc-numbers is-b (or is-a, is-c) or --fanuc-numbers calculator as the machine is set (job key [toolpaths] fanuc_numbers)",
             ));
         };
-        let unit = numbers.unit(self.inches);
+        let unit = numbers.unit(self.m.inches);
         Ok(Some(
             words
                 .iter()
@@ -178,13 +157,13 @@ impl<'a> Rewriter<'a> {
 
     /// Apply the modal G codes of a block (plane, units, distance modes, cutter compensation).
     pub(super) fn modal(&mut self, line: &Line, words: &[W]) {
-        let orig_inches = self.inches;
+        let orig_inches = self.m.inches;
         let mut units_word = false;
         for (code, g) in words.iter().filter_map(|w| w.g) {
             match g {
                 G::Plane(p) => self.plane = p,
                 G::Units(inches) => {
-                    self.inches = inches;
+                    self.m.inches = inches;
                     units_word = true;
                 }
                 G::Distance(a) => self.absolute = a,
@@ -202,20 +181,20 @@ impl<'a> Rewriter<'a> {
                 _ => {}
             }
         }
-        if self.inches != orig_inches {
+        if self.m.inches != orig_inches {
             // The machine stays put; its coordinates change unit.
-            let f = if self.inches { 1.0 / 25.4 } else { 25.4 };
-            for p in self.pos.iter_mut() {
+            let f = if self.m.inches { 1.0 / 25.4 } else { 25.4 };
+            for p in self.m.pos.iter_mut() {
                 *p = p.map(|v| v * f);
             }
-            for s in self.shift.iter_mut() {
+            for s in self.m.shift.iter_mut() {
                 *s *= f;
             }
-            self.offset *= f;
+            self.m.offset *= f;
         }
         if units_word {
             self.set_units_known();
-            self.fix_zone();
+            self.m.fix_zone();
         }
     }
 
@@ -269,8 +248,7 @@ impl<'a> Rewriter<'a> {
     /// and cuts in the zone under it are refused.
     fn select_offset(&mut self, line: &Line, id: String) {
         if self.active_offset.as_ref().is_some_and(|a| *a != id) {
-            self.pos = [None; 3];
-            self.unknown_since = Some(line.number);
+            self.m.forget_position(line.number);
         }
         self.active_offset = Some(id.clone());
         let no_offset = id
@@ -286,7 +264,7 @@ impl<'a> Rewriter<'a> {
                 self.frames.retain(|f| f.0 != Frame::WorkOffset);
                 self.first_offset = Some(id)
             }
-            Some(f) if *f == id || self.settings.same_part_per_offset => {
+            Some(f) if *f == id || self.m.settings.same_part_per_offset => {
                 self.frames.retain(|f| f.0 != Frame::WorkOffset)
             }
             Some(_) => self.frames.push((Frame::WorkOffset, line.number, id)),
@@ -321,12 +299,12 @@ impl<'a> Rewriter<'a> {
         let word = self.wtext(gw).to_string();
         match g {
             G::SetPosition => {
-                let mut shift = self.shift;
+                let mut shift = self.m.shift;
                 let mut known = true;
                 for (i, l) in AXES.iter().enumerate() {
                     if let Some(w) = find(*l) {
-                        match (self.pos[i], w.value) {
-                            (Some(p), Some(v)) => shift[i] = self.shift[i] + p - v,
+                        match (self.m.pos[i], w.value) {
+                            (Some(p), Some(v)) => shift[i] = self.m.shift[i] + p - v,
                             _ => known = false,
                         }
                     }
@@ -335,16 +313,15 @@ impl<'a> Rewriter<'a> {
                     self.set_shift(shift);
                 } else {
                     self.frames.push((Frame::Shift, line.number, word));
-                    self.pos = [None; 3];
-                    self.unknown_since = Some(line.number);
+                    self.m.forget_position(line.number);
                 }
             }
             G::Frame(Frame::Local) => {
-                let mut shift = self.shift;
+                let mut shift = self.m.shift;
                 for (i, l) in AXES.iter().enumerate() {
                     match find(*l).map(|w| w.value) {
                         Some(Some(v)) if self.dialect == Dialect::Fanuc => {
-                            shift[i] = self.shift[i] - self.local[i] + v;
+                            shift[i] = self.m.shift[i] - self.local[i] + v;
                             self.local[i] = v;
                         }
                         Some(Some(v)) => shift[i] = v,
@@ -381,16 +358,15 @@ impl<'a> Rewriter<'a> {
                 // others stay. With no axis word LinuxCNC sends every axis home.
                 let named: Vec<usize> = (0..3).filter(|&i| find(AXES[i]).is_some()).collect();
                 if named.is_empty() {
-                    self.pos = [None; 3];
+                    self.m.pos = [None; 3];
                 }
                 for i in named {
-                    self.pos[i] = None;
+                    self.m.pos[i] = None;
                 }
-                self.unknown_since = Some(line.number);
+                self.m.unknown_since = Some(line.number);
             }
             _ => {
-                self.pos = [None; 3];
-                self.unknown_since = Some(line.number);
+                self.m.forget_position(line.number);
             }
         }
         Ok(())
@@ -399,9 +375,9 @@ impl<'a> Rewriter<'a> {
     /// Change the shift between program and work coordinates; the machine stays put.
     pub(super) fn set_shift(&mut self, shift: [f64; 3]) {
         for (i, new) in shift.iter().enumerate() {
-            self.pos[i] = self.pos[i].map(|p| p + self.shift[i] - new);
+            self.m.pos[i] = self.m.pos[i].map(|p| p + self.m.shift[i] - new);
         }
-        self.shift = shift;
+        self.m.shift = shift;
     }
 
     /// Sinumerik programmable frames: TRANS/ATRANS are followed (a shift), ROT/SCALE/MIRROR
@@ -440,7 +416,7 @@ impl<'a> Rewriter<'a> {
             })?);
         }
         let bare = values.iter().all(|v| v.is_none());
-        let mut shift = self.shift;
+        let mut shift = self.m.shift;
         match name {
             _ if bare => {
                 shift = [0.0; 3];
@@ -503,9 +479,9 @@ impl<'a> Rewriter<'a> {
                 if self.dialect == Dialect::Heidenhain
                     && (upper.contains("G70") || upper.contains("G71"))
                 {
-                    self.inches = upper.contains("G70");
+                    self.m.inches = upper.contains("G70");
                     self.set_units_known();
-                    self.fix_zone();
+                    self.m.fix_zone();
                 }
                 Ok(false)
             }
@@ -696,8 +672,8 @@ impl<'a> Rewriter<'a> {
         if let Some(b) = self.blocks.pop() {
             for (i, w) in b.written.iter().enumerate() {
                 if *w {
-                    self.pos[i] = None;
-                    self.unknown_since = Some(line);
+                    self.m.pos[i] = None;
+                    self.m.unknown_since = Some(line);
                 }
             }
             if let Some(parent) = self.blocks.last_mut() {
@@ -799,11 +775,11 @@ impl<'a> Rewriter<'a> {
         let (writes_normal, first_move, external) = self.sub_summary(name);
         let moves = first_move.is_some() || external;
         if moves {
-            let mut p = self.pos;
+            let mut p = self.m.pos;
             if writes_normal || external {
-                p[self.normal] = None;
+                p[self.m.normal] = None;
             }
-            let (u, v) = self.plane_uv;
+            let (u, v) = self.m.plane_uv;
             p[u] = None;
             p[v] = None;
             if self.may_touch(&[p]) {
@@ -826,19 +802,19 @@ impl<'a> Rewriter<'a> {
             }
         }
         // After a call the plane position is unknown, and the normal too if the body writes it.
-        let (u, v) = self.plane_uv;
+        let (u, v) = self.m.plane_uv;
         if moves {
-            self.pos[u] = None;
-            self.pos[v] = None;
+            self.m.pos[u] = None;
+            self.m.pos[v] = None;
             for i in 0..3 {
-                if i != self.normal {
-                    self.pos[i] = None;
+                if i != self.m.normal {
+                    self.m.pos[i] = None;
                 }
             }
             if writes_normal || external {
-                self.pos[self.normal] = None;
+                self.m.pos[self.m.normal] = None;
             }
-            self.unknown_since = Some(line.number);
+            self.m.unknown_since = Some(line.number);
         }
         Ok(())
     }
@@ -850,12 +826,12 @@ impl<'a> Rewriter<'a> {
         kind: Frame,
         pts: &[[Option<f64>; 3]],
     ) -> Vec<[Option<f64>; 3]> {
-        let keep_normal = kind == Frame::Rotation && self.plane.axes().2 == self.normal;
+        let keep_normal = kind == Frame::Rotation && self.plane.axes().2 == self.m.normal;
         pts.iter()
             .map(|p| {
                 let mut q = [None; 3];
                 if keep_normal {
-                    q[self.normal] = p[self.normal];
+                    q[self.m.normal] = p[self.m.normal];
                 }
                 q
             })

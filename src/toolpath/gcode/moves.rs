@@ -96,7 +96,7 @@ impl<'a> Rewriter<'a> {
     /// group-0 code, no motion, a move errmap copies, or a move it compensates.
     pub(super) fn block(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
         self.check_g_words(line, words_in)?;
-        if self.offset != 0.0 && self.changes_offset(words_in) {
+        if self.m.offset != 0.0 && self.changes_offset(words_in) {
             // Back to the program's Z in the offset the cut was made in.
             self.return_if_needed(line, &[], true)?;
         }
@@ -168,7 +168,7 @@ impl<'a> Rewriter<'a> {
             self.copy_line(line);
             return Ok(());
         };
-        self.fix_zone();
+        self.m.fix_zone();
         let mv = self.classify(line, words, motion, g53);
         if motion.kind == Motion::Canned && !mv.block_delete && mv.polar.is_none() {
             if self.trace.is_some() {
@@ -262,7 +262,7 @@ impl<'a> Rewriter<'a> {
         }
         let t = self.wtext(l).to_string();
         // Never offer the flag the user already gave.
-        let hint = if self.settings.expand {
+        let hint = if self.m.settings.expand {
             "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file"
         } else {
             "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file and pass --expand"
@@ -284,7 +284,7 @@ impl<'a> Rewriter<'a> {
             .find(|w| is_axis(w.letter))
             .map(|w| self.wtext(w).to_string())
             .unwrap_or_else(|| "X".into());
-        let (message, hint) = match (self.dialect, self.settings.power_on_motion) {
+        let (message, hint) = match (self.dialect, self.m.settings.power_on_motion) {
             (Dialect::Linuxcnc, _) => (
                 format!("`{at}`: axis words with no motion mode in force (no G0, G1, G2, G3 before them); LinuxCNC stops here: \"Cannot use axis values without a g code that uses them\""),
                 "add G0 or G1 to this block (or to one before it)",
@@ -309,8 +309,8 @@ impl<'a> Rewriter<'a> {
 
     /// Start, end and the words of a move that bear on whether it can be compensated.
     fn classify<'w>(&self, line: &Line, words: &'w [W], motion: MotionMode, g53: bool) -> Move<'w> {
-        let start = self.pos;
-        let mut end = self.pos;
+        let start = self.m.pos;
+        let mut end = self.m.pos;
         for (i, l) in AXES.iter().enumerate() {
             if let Some(w) = words.iter().find(|w| w.letter == *l) {
                 end[i] = if g53 {
@@ -356,7 +356,7 @@ impl<'a> Rewriter<'a> {
         if !mv.cutting {
             return self.cycle_refusal(words, mv);
         }
-        if !self.units_known {
+        if !self.m.units_known {
             return Some(self.units_refusal(words));
         }
         self.context_refusal(mv)
@@ -487,7 +487,7 @@ impl<'a> Rewriter<'a> {
         let comp = self.cutter_comp.as_ref().or(self.comp_transition.as_ref());
         if let (Some((cl, code)), false) = (comp, self.tool_axis_is_normal()) {
             let plane = format!("{:?}", self.plane);
-            let n = AXES[self.normal] as char;
+            let n = AXES[self.m.normal] as char;
             return Some((
                 code.clone(),
                 format!("cutter radius compensation {code} (from line {cl}) offsets the contour in the {plane} plane, which holds the map's normal axis {n}: moving {n} by −E would change the contour the control offsets"),
@@ -523,7 +523,7 @@ impl<'a> Rewriter<'a> {
             return Some((
                 text,
                 format!("# parameters or [expressions] on a move in the compensation zone{reads}, whose value errmap does not carry into a rewritten move"),
-                if self.settings.expand {
+                if self.m.settings.expand {
                     "expand the program to plain numbers (or move the zone away)"
                 } else {
                     "pass --expand to run the program's own parameter values into plain numbers, or expand the program to plain numbers (or move the zone away)"
@@ -549,6 +549,7 @@ impl<'a> Rewriter<'a> {
         }
         if mv.start.iter().any(|c| c.is_none()) {
             let since = self
+                .m
                 .unknown_since
                 .map(|l| format!(" since line {l}"))
                 .unwrap_or_else(|| " (no absolute X, Y and Z since the program start)".into());
@@ -567,8 +568,8 @@ impl<'a> Rewriter<'a> {
         let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
             return Ok(());
         };
-        let k = self.scale_mm();
-        let shift = self.shift;
+        let k = self.m.scale_mm();
+        let shift = self.m.shift;
         let mm = |p: [f64; 3]| [0, 1, 2].map(|i| (p[i] + shift[i]) * k);
         let arc_mm = match mv.motion.kind {
             Motion::ArcCw | Motion::ArcCcw => {
@@ -600,7 +601,7 @@ impl<'a> Rewriter<'a> {
     /// A cut errmap compensates: nothing in the block or the state stands in the way.
     fn plain(&self, mv: &Move) -> bool {
         mv.cutting
-            && self.units_known
+            && self.m.units_known
             && self.frames.is_empty()
             && self.unfollowed.is_empty()
             && self.flow.is_none()
@@ -649,10 +650,10 @@ impl<'a> Rewriter<'a> {
             Motion::Linear => None,
             _ => Some(self.arc(line, words, s, e, cw)?),
         };
-        let step = self.settings.max_segment_in(self.inches);
+        let step = self.m.settings.max_segment_in(self.m.inches);
         // Under cutter compensation arc pieces are arcs: only length and quarter turns cut them.
         let tol = match mode {
-            CompMode::Off => self.settings.chord_tol_in(self.inches),
+            CompMode::Off => self.m.settings.chord_tol_in(self.m.inches),
             _ => f64::INFINITY,
         };
         let chords = self.chord_count(line, arc.as_ref(), &s, &e, step, tol)?;
@@ -665,13 +666,13 @@ impl<'a> Rewriter<'a> {
                 None => lerp(&s, &e, t),
                 Some(a) => a.point(t),
             };
-            let error_at = |p: &[f64; 3]| self.error_at(p);
+            let error_at = |p: &[f64; 3]| self.m.error_at(p);
             let complete = emit_curve(
                 Breaks::Fractions(chords),
                 &curve,
                 step,
-                self.zone_now(),
-                self.normal,
+                self.m.zone_now(),
+                self.m.normal,
                 &error_at,
                 self.points_within_output_limit(),
                 &mut emitted,
@@ -681,7 +682,7 @@ impl<'a> Rewriter<'a> {
                 return Err(self.output_limit_error(line));
             }
         }
-        if self.extrapolated.replace(false) {
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         let result = if emitted.iter().any(|(_, e)| e.is_some()) {
@@ -689,7 +690,7 @@ impl<'a> Rewriter<'a> {
                 CompMode::Off => self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion),
                 _ => self.rewrite_contour(line, words, &emitted, arc.as_ref(), mv.motion, s, mode),
             }
-            .map(|()| self.pos = e.map(Some))
+            .map(|()| self.m.pos = e.map(Some))
         } else {
             self.finish_unchanged(line, words, mv.end)
         };
@@ -809,10 +810,10 @@ impl<'a> Rewriter<'a> {
         words: &[W],
         group0: bool,
     ) -> Result<()> {
-        if self.offset == 0.0 {
+        if self.m.offset == 0.0 {
             return Ok(());
         }
-        let n = AXES[self.normal];
+        let n = AXES[self.m.normal];
         // A canned cycle's Z word is the hole bottom, and it retracts to its start: not a move
         // to an absolute normal coordinate. The line's own distance mode decides here.
         let absolute_normal = !group0
@@ -822,7 +823,7 @@ impl<'a> Rewriter<'a> {
                 .any(|w| w.letter == n && w.value.is_some() && w.abs.unwrap_or(self.absolute))
             && !words.iter().any(|w| w.g() == Some(G::Machine));
         if absolute_normal {
-            self.offset = 0.0;
+            self.m.offset = 0.0;
             return Ok(());
         }
         if self.comp_sensitive() {
@@ -852,7 +853,7 @@ impl<'a> Rewriter<'a> {
         self.out.push_str(&text);
         self.out.push_str(super::line_terminator(self.text, line));
         self.out_motion = Some(mode);
-        self.offset = 0.0;
+        self.m.offset = 0.0;
         self.standing.offset = 0.0;
         self.report.returns_inserted += 1;
         Ok(())
@@ -956,15 +957,15 @@ impl<'a> Rewriter<'a> {
             }
         }
         for (i, e) in end.iter().enumerate() {
-            if *e != self.pos[i] {
+            if *e != self.m.pos[i] {
                 if let Some(b) = self.blocks.last_mut() {
                     b.written[i] = true;
                 }
                 if e.is_none() {
-                    self.unknown_since = Some(line.number);
+                    self.m.unknown_since = Some(line.number);
                 }
             }
         }
-        self.pos = end;
+        self.m.pos = end;
     }
 }

@@ -32,7 +32,7 @@ impl<'a> Rewriter<'a> {
         self.segment_words(emitted, arc, motion, &mut segs);
         self.write_move(line, words, arc.is_some(), &mut segs);
         // Offset of the output along the normal at the end of the move.
-        self.offset = last_e.map_or(0.0, |e| -e);
+        self.m.offset = last_e.map_or(0.0, |e| -e);
         self.segments = segs;
         Ok(())
     }
@@ -61,7 +61,7 @@ impl<'a> Rewriter<'a> {
     /// Count the compensated points in the report; E of the last point.
     pub(super) fn count_compensated(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Option<f64> {
         for e in emitted.iter().filter_map(|(_, e)| *e) {
-            let e_mm = e.abs() * self.scale_mm();
+            let e_mm = e.abs() * self.m.scale_mm();
             if e_mm > self.report.max_abs_error_mm {
                 self.report.max_abs_error_mm = e_mm;
             }
@@ -80,10 +80,10 @@ impl<'a> Rewriter<'a> {
         segs: &mut Segments,
     ) {
         // Current output position: the original's, offset along the normal.
-        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
-        out_pos[self.normal] += self.offset;
+        let mut out_pos = self.m.pos.map(|c| c.unwrap_or(0.0));
+        out_pos[self.m.normal] += self.m.offset;
         // The targets that move the tool; the last one may be an arc piece.
-        let normal = self.normal;
+        let normal = self.m.normal;
         let target = |(p, e): &([f64; 3], Option<f64>)| {
             let mut q = *p;
             if let Some(e) = e {

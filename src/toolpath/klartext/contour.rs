@@ -98,11 +98,11 @@ impl Kt<'_> {
         } else {
             w.clone()
         };
-        if self.normal != self.tool_axis {
+        if self.m.normal != self.tool_axis {
             return Some((
                 word_col(&shown),
                 shown.clone(),
-                format!("tool radius compensation {w} (from {at}) offsets the contour in the working plane of tool axis {}, which holds the map's normal axis {}: moving {} by −E would change the contour the TNC offsets", AXES[self.tool_axis], AXES[self.normal], AXES[self.normal]),
+                format!("tool radius compensation {w} (from {at}) offsets the contour in the working plane of tool axis {}, which holds the map's normal axis {}: moving {} by −E would change the contour the TNC offsets", AXES[self.tool_axis], AXES[self.m.normal], AXES[self.m.normal]),
                 "compensate with the tool axis along the map's normal (TOOL CALL … Z for a Z map), or post the program as the tool-centre path (R0) for the zone, or move the zone away",
             ));
         }
@@ -129,7 +129,7 @@ impl Kt<'_> {
         let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
             return self.unchanged(n, content, term, b, false);
         };
-        let step = self.step();
+        let step = self.m.step();
         let (length, pieces) = match &mv.arc {
             None => (dist(&s, &e), 1),
             // Arc pieces are arcs: only length and quarter turns cut them.
@@ -154,7 +154,7 @@ impl Kt<'_> {
             // The end of a CP piece is set by an angle of four decimals.
             let angle_err =
                 a.r_start * (2.0 * 0.5 * 10f64.powi(-(ANGLE_DECIMALS as i32))).to_radians();
-            if angle_err > self.chord_tol() {
+            if angle_err > self.m.chord_tol() {
                 return Err(self.err(n, b.head_col, &b.head, format!("under tool radius compensation this arc must be written as CP pieces, whose end the TNC takes from an angle of {ANGLE_DECIMALS} decimals: on radius {:.4} that may leave the arc's end {angle_err:.6} away, more than --chord-tol", a.r_start), "raise --chord-tol, or post the arc as the tool-centre path (R0) for the zone"));
             }
         }
@@ -164,13 +164,13 @@ impl Kt<'_> {
                 None => lerp(&s, &e, t),
                 Some(a) => a.point(t),
             };
-            let error_at = |p: &[f64; 3]| self.error_at(p);
+            let error_at = |p: &[f64; 3]| self.m.error_at(p);
             let complete = emit_curve(
                 Breaks::Fractions(pieces),
                 &curve,
                 step,
-                self.zone_now(),
-                self.normal,
+                self.m.zone_now(),
+                self.m.normal,
                 &error_at,
                 1_000_000,
                 &mut emitted,
@@ -185,11 +185,11 @@ impl Kt<'_> {
                 ));
             }
         }
-        if self.extrapolated.replace(false) {
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         if !emitted.iter().any(|(_, e)| e.is_some()) {
-            let absolute = b.head == "L" && b.word(AXES[self.normal]).is_some();
+            let absolute = b.head == "L" && b.word(AXES[self.m.normal]).is_some();
             return self.unchanged(n, content, term, b, absolute);
         }
         let (a1, a2, _) = Plane::G17.axes();
@@ -278,16 +278,16 @@ impl Kt<'_> {
         else {
             return Ok(());
         };
-        let k = self.normal;
+        let k = self.m.normal;
         let (from, to) = (s[k] - e_start, end[k] - e_end);
         for i in 0..=8 {
             let f = f64::from(i) / 8.0;
             let p = lerp(&s, &end, f);
-            let Some(e) = self.error_at(&p) else {
+            let Some(e) = self.m.error_at(&p) else {
                 return refuse("it leaves the zone or the measured domain".into());
             };
             let dev = (from + f * (to - from)) - (p[k] - e);
-            if dev.abs() > self.chord_tol() {
+            if dev.abs() > self.m.chord_tol() {
                 return refuse(format!(
                     "as one block it strays {:.4} from P − E (more than --chord-tol)",
                     dev.abs()
@@ -311,8 +311,8 @@ impl Kt<'_> {
         // The output stands at P − E at the start only after a compensated cut that ended
         // there; otherwise the first piece carries the step and is not checked.
         let e_start = self
-            .error_at(&s)
-            .filter(|e| (e + self.offset).abs() <= 1e-12 * (1.0 + e.abs()));
+            .m.error_at(&s)
+            .filter(|e| (e + self.m.offset).abs() <= 1e-12 * (1.0 + e.abs()));
         let mut prev = (s, e_start);
         for &piece in pieces {
             self.halve(n, b, arc, prev, piece, 0, &mut out)?;
@@ -339,8 +339,8 @@ impl Kt<'_> {
         };
         let on = |f: f64| on_arc(arc, &a.0, &z.0, f);
         let fits = CHECKS.iter().all(|&f| {
-            self.error_at(&on(f))
-                .is_some_and(|e| ((ea + f * (ez - ea)) - e).abs() <= self.chord_tol())
+            self.m.error_at(&on(f))
+                .is_some_and(|e| ((ea + f * (ez - ea)) - e).abs() <= self.m.chord_tol())
         });
         if fits {
             out.push(z);
@@ -356,7 +356,7 @@ impl Kt<'_> {
             ));
         }
         let m = on(0.5);
-        let mid = (m, self.error_at(&m));
+        let mid = (m, self.m.error_at(&m));
         self.halve(n, b, arc, a, mid, depth + 1, out)?;
         self.halve(n, b, arc, mid, z, depth + 1, out)
     }
@@ -378,8 +378,8 @@ impl Kt<'_> {
             let p = 10f64.powi(d as i32);
             (v * p).round() / p
         };
-        let k = self.normal;
-        let mut out_n = written(s[k] + self.offset, d);
+        let k = self.m.normal;
+        let mut out_n = written(s[k] + self.m.offset, d);
         // Angles unwrapped along the arc from the start's, written to four decimals.
         let (c1, c2) = arc.map_or((0.0, 0.0), |a| a.centre);
         let angle = |p: &[f64; 3]| (p[1] - c2).atan2(p[0] - c1).to_degrees();
@@ -392,7 +392,7 @@ impl Kt<'_> {
             if let Some(e) = e {
                 q[k] -= e;
                 self.report.max_abs_error_mm =
-                    self.report.max_abs_error_mm.max(e.abs() * self.scale_mm());
+                    self.report.max_abs_error_mm.max(e.abs() * self.m.scale_mm());
                 self.report.points_compensated += 1;
             }
             last_e = *e;
@@ -486,7 +486,7 @@ impl Kt<'_> {
         let end_orig = pieces.last().map_or(s[k], |(p, _)| p[k]);
         let written_off = out_n - end_orig;
         let e_last = last_e.unwrap_or(0.0);
-        self.offset = if (written_off + e_last).abs() <= self.half_digit() {
+        self.m.offset = if (written_off + e_last).abs() <= self.half_digit() {
             -e_last
         } else {
             written_off
@@ -502,7 +502,7 @@ impl Kt<'_> {
         content: &str,
         b: &Block,
     ) -> Result<Option<String>> {
-        let k = self.normal;
+        let k = self.m.normal;
         let waits = match b.head.as_str() {
             "" | ";" | "*" => true,
             "CC" => !b.has(AXES[k]) && !b.has(&format!("I{}", AXES[k])),
@@ -535,7 +535,7 @@ impl Kt<'_> {
                 w.addr.trim_start_matches('I') == AXES[k]
                     || (w.addr == "M" && matches!(w.num(), Some(91.0 | 92.0 | 140.0)))
             });
-        let orig = self.pos[k];
+        let orig = self.m.pos[k];
         let insert_at = b
             .words
             .iter()
@@ -562,7 +562,7 @@ impl Kt<'_> {
         };
         let mut text = content.to_string();
         text.insert_str(at, &format!(" {}{}", AXES[k], self.coord(orig)));
-        self.offset = 0.0;
+        self.m.offset = 0.0;
         self.report.returns_inserted += 1;
         Ok(Some(text))
     }

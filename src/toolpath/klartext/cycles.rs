@@ -21,7 +21,7 @@ impl Kt<'_> {
             let (col, word) = (b.head_col, format!("CYCL {}", b.rest).trim().to_string());
             self.cycle_call(n, col, &word)?;
             if rest.contains("PAT") || rest.contains("POS") {
-                self.lose_position(n, &[0, 1, 2]);
+                self.m.lose_position(n, &[0, 1, 2]);
             }
             return Ok(());
         }
@@ -80,9 +80,9 @@ impl Kt<'_> {
         };
         let first = match (number, self.first_preset) {
             // Whether a cycle 7 shift survives a preset change is not in the manuals errmap has.
-            _ if self.shift != [0.0; 3] => Err("with a datum shift (cycle 7) in force"),
+            _ if self.m.shift != [0.0; 3] => Err("with a datum shift (cycle 7) in force"),
             // Identical parts, one per preset: the map applies in each preset's coordinates.
-            (Some(_), _) if self.settings.same_part_per_offset => Ok(true),
+            (Some(_), _) if self.m.settings.same_part_per_offset => Ok(true),
             (Some(p), Some(first)) => Ok(p == first),
             (Some(p), None) if !self.cut_seen => {
                 self.first_preset = Some(p);
@@ -109,7 +109,7 @@ impl Kt<'_> {
             });
         }
         self.unchanged(n, content, term, b, false)?;
-        self.lose_position(n, &[0, 1, 2]);
+        self.m.lose_position(n, &[0, 1, 2]);
         Ok(())
     }
 
@@ -121,7 +121,7 @@ impl Kt<'_> {
             v.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0)
         });
         if let Some(t) = t {
-            let mm = t * self.scale_mm();
+            let mm = t * self.m.scale_mm();
             if self.path_tolerance_mm.is_none_or(|(old, _)| mm > old) {
                 self.path_tolerance_mm = Some((mm, n));
             }
@@ -138,13 +138,13 @@ impl Kt<'_> {
             match (axis, w.num()) {
                 (Some(i), Some(v)) => {
                     let new = if w.addr.starts_with('I') {
-                        self.shift[i] + v
+                        self.m.shift[i] + v
                     } else {
                         v
                     };
-                    let delta = new - self.shift[i];
-                    self.shift[i] = new;
-                    self.pos[i] = self.pos[i].map(|p| p - delta);
+                    let delta = new - self.m.shift[i];
+                    self.m.shift[i] = new;
+                    self.m.pos[i] = self.m.pos[i].map(|p| p - delta);
                     self.centre[i] = self.centre[i].map(|p| p - delta);
                 }
                 _ => {
@@ -155,7 +155,7 @@ impl Kt<'_> {
                         what: format!("CYCL DEF 7 DATUM SHIFT {}", w.text),
                         normal: true,
                     });
-                    self.lose_position(n, &[0, 1, 2]);
+                    self.m.lose_position(n, &[0, 1, 2]);
                 }
             }
         }
@@ -166,7 +166,7 @@ impl Kt<'_> {
     /// `SCL 1`, all factors 1, all angles 0).
     fn transform(&mut self, n: u64, b: &Block, major: i64) {
         let params = || b.words.iter().skip(2);
-        let normal_letter = AXES[self.normal];
+        let normal_letter = AXES[self.m.normal];
         let (name, active, normal) = match major {
             8 => {
                 let axes: Vec<&str> = params()
@@ -181,7 +181,11 @@ impl Kt<'_> {
             }
             10 => {
                 let rot = params().find(|w| w.addr == "ROT").and_then(|w| w.num());
-                ("ROTATION", rot != Some(0.0), self.normal != self.tool_axis)
+                (
+                    "ROTATION",
+                    rot != Some(0.0),
+                    self.m.normal != self.tool_axis,
+                )
             }
             11 => {
                 let scl = params()

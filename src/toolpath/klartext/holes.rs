@@ -109,12 +109,12 @@ impl Kt<'_> {
         cycle: &HoleCycle,
         (x, y): (f64, f64),
     ) -> Result<Option<bool>> {
-        let k = self.normal;
+        let k = self.m.normal;
         let hole = format!("cycle 1 PECKING ({})", self.at(cycle.line));
         let (dist, depth) = match (&cycle.dist, &cycle.depth) {
             (Some(Ok(a)), Some(Ok(d))) if *d != 0.0 => (*a, *d),
             (a, d) => {
-                let mut p = self.pos;
+                let mut p = self.m.pos;
                 p[k] = None;
                 if !self.may_touch(&[p]) {
                     return Ok(Some(false));
@@ -130,8 +130,8 @@ impl Kt<'_> {
                 return Err(self.err(n, col, word, format!("`{word}` calls {hole}, which may drill in the compensation zone, and {what}: errmap cannot tell the hole's bottom"), "define cycle 1 with numbers for DIST and DEPTH, or move the zone away"));
             }
         };
-        let Some(start) = self.pos[k] else {
-            let mut p = self.pos;
+        let Some(start) = self.m.pos[k] else {
+            let mut p = self.m.pos;
             p[k] = None;
             if !self.may_touch(&[p]) {
                 return Ok(Some(false));
@@ -139,28 +139,28 @@ impl Kt<'_> {
             return Err(self.err(n, col, word, format!("`{word}` calls {hole} from an unknown {} position (cycle 1 drills relative to where the tool stands), and the hole may lie in the compensation zone", AXES[k]), "position the tool with an absolute Z before the call"));
         };
         let bottom = start + depth.signum() * (dist.abs() + depth.abs());
-        let (u, v) = self.plane_uv;
+        let (u, v) = self.m.plane_uv;
         let mut p = [0.0; 3];
         p[u] = x;
         p[v] = y;
         p[k] = bottom;
-        let e = self.error_at(&p);
-        if self.extrapolated.replace(false) {
+        let e = self.m.error_at(&p);
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         // The hole passes from the start down to the bottom: one that passes through the zone
         // with its bottom outside it is not compensated and refused (its walls would be).
         let (lo, hi) = (start.min(bottom), start.max(bottom));
         let through = self
-            .zone_now()
+            .m.zone_now()
             .is_some_and(|(zl, zh)| zl <= hi && zh >= lo && !(zl..=zh).contains(&bottom));
         let Some(e) = e else {
-            if through && self.compensable(x, y) {
+            if through && self.m.compensable(x, y) {
                 return Err(self.err(n, col, word, format!("`{word}` drills a hole of {hole} through the compensation zone, with its bottom {}{} outside it", AXES[k], self.coord(bottom)), "move the zone away, or split the hole"));
             }
             return Ok(Some(true));
         };
-        if !self.settings.compensate_holes {
+        if !self.m.settings.compensate_holes {
             return Err(self.err(
                 n,
                 col,
@@ -242,9 +242,9 @@ impl Kt<'_> {
             }
         }
         // The cycle ends back at its starting position: Z − E, the original's at Z.
-        self.pos[k] = Some(start);
-        self.offset = -e;
-        let e_mm = e.abs() * self.scale_mm();
+        self.m.pos[k] = Some(start);
+        self.m.offset = -e;
+        let e_mm = e.abs() * self.m.scale_mm();
         self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
         self.report.points_compensated += 1;
         self.report.moves_changed += 1;
@@ -265,17 +265,17 @@ impl Kt<'_> {
         if upper.contains("PAT") || upper.contains("POS") {
             return Ok(None);
         }
-        let (u, v) = self.plane_uv;
+        let (u, v) = self.m.plane_uv;
         // Holes along the map's normal only, in plain work coordinates, outside label bodies
         // (a label runs with whatever definition its caller left in force).
-        if self.tool_axis != self.normal
+        if self.tool_axis != self.m.normal
             || !self.frames.is_empty()
             || self.label.is_some()
             || cycle.number == 204
         {
             return Ok(None);
         }
-        let (Some(x), Some(y)) = (self.pos[u], self.pos[v]) else {
+        let (Some(x), Some(y)) = (self.m.pos[u], self.m.pos[v]) else {
             return Ok(None);
         };
         if cycle.number == 1 {
@@ -296,8 +296,8 @@ impl Kt<'_> {
                         None => Some(format!("it has no {q}")),
                     })
                     .unwrap_or_default();
-                let mut p = self.pos;
-                p[self.normal] = None;
+                let mut p = self.m.pos;
+                p[self.m.normal] = None;
                 if !self.may_touch(&[p]) {
                     return Ok(Some(false));
                 }
@@ -308,9 +308,9 @@ impl Kt<'_> {
         let mut p = [0.0; 3];
         p[u] = x;
         p[v] = y;
-        p[self.normal] = bottom;
-        let e = self.error_at(&p);
-        if self.extrapolated.replace(false) {
+        p[self.m.normal] = bottom;
+        let e = self.m.error_at(&p);
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         let Some(e) = e else {
@@ -320,14 +320,14 @@ impl Kt<'_> {
             }
             return Ok(Some(false));
         };
-        if !self.settings.compensate_holes {
+        if !self.m.settings.compensate_holes {
             return Err(self.err(
                 n,
                 col,
                 word,
                 format!(
                     "`{word}` drills a hole of {hole} whose bottom {}{} lies in the compensation zone, at {}{} {}{}",
-                    ["X", "Y", "Z"][self.normal],
+                    ["X", "Y", "Z"][self.m.normal],
                     self.coord(bottom),
                     ["X", "Y", "Z"][u],
                     self.coord(x),
@@ -341,7 +341,7 @@ impl Kt<'_> {
         if self.hole_surface_out != Some(new_surface) {
             self.define_again(Some(new_surface));
         }
-        let e_mm = e.abs() * self.scale_mm();
+        let e_mm = e.abs() * self.m.scale_mm();
         self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
         self.report.points_compensated += 1;
         self.report.moves_changed += 1;

@@ -90,7 +90,7 @@ impl Kt<'_> {
                     what,
                     normal: true,
                 });
-                self.lose_position(n, &[0, 1, 2]);
+                self.m.lose_position(n, &[0, 1, 2]);
                 self.unchanged(n, content, term, b, false)
             }
         }
@@ -107,17 +107,17 @@ impl Kt<'_> {
         b: &Block,
         absolute_normal: bool,
     ) -> Result<()> {
-        if self.offset != 0.0 && !absolute_normal && self.comp_word().is_some() {
+        if self.m.offset != 0.0 && !absolute_normal && self.comp_word().is_some() {
             // Under RL/RR the return rides on the next move in the plane (or is refused).
             let folded = self.fold_return(_n, content, b)?;
             self.copy(folded.as_deref().unwrap_or(content), term, b);
             return Ok(());
         }
-        if self.offset != 0.0 && !absolute_normal {
+        if self.m.offset != 0.0 && !absolute_normal {
             // Before a rapid the return is a rapid too (the original's rapid starts there).
             self.return_step(term, b.head == "L" && b.has("FMAX"));
         }
-        self.offset = if absolute_normal { 0.0 } else { self.offset };
+        self.m.offset = if absolute_normal { 0.0 } else { self.m.offset };
         self.copy(content, term, b);
         Ok(())
     }
@@ -203,7 +203,7 @@ impl Kt<'_> {
         }
         self.prev_touch = touch;
         self.cut_seen |= mv.cutting && touch;
-        if mv.cutting && (touch || !self.units_known) {
+        if mv.cutting && (touch || !self.m.units_known) {
             if let Some((col, word, msg, hint)) = mv.refusal.clone() {
                 return Err(self.err(n, col, &word, msg, hint));
             }
@@ -212,7 +212,8 @@ impl Kt<'_> {
             self.trace_move(b, &mv);
         }
         let absolute_normal = b.head == "L"
-            && b.word(AXES[self.normal]).is_some_and(|w| w.num().is_some())
+            && b.word(AXES[self.m.normal])
+                .is_some_and(|w| w.num().is_some())
             && self.frames.is_empty()
             && !b
                 .words
@@ -227,12 +228,12 @@ impl Kt<'_> {
         }
         self.radius_comp = comp_after;
         let lost: Vec<usize> = (0..3)
-            .filter(|&i| mv.end[i].is_none() && self.pos[i].is_some())
+            .filter(|&i| mv.end[i].is_none() && self.m.pos[i].is_some())
             .collect();
         if !lost.is_empty() {
-            self.lose_position(n, &lost);
+            self.m.lose_position(n, &lost);
         }
-        self.pos = mv.end;
+        self.m.pos = mv.end;
         self.after_path_m(n, b)
     }
 
@@ -297,7 +298,7 @@ impl Kt<'_> {
 
     /// Start, end, arc and what forbids compensating a path block.
     fn path_move(&self, n: u64, b: &Block) -> Result<PathMove> {
-        let start = self.pos;
+        let start = self.m.pos;
         let mut end = self.end_point(b, start);
         let machine = b
             .words
@@ -339,7 +340,7 @@ impl Kt<'_> {
     fn touch_points(&self, mv: &PathMove) -> Vec<Point> {
         let mut pts = vec![mv.start, mv.end];
         if let Some(a) = &mv.arc {
-            let k = a.chords(self.chord_tol(), self.step()).min(100_000);
+            let k = a.chords(self.m.chord_tol(), self.m.step()).min(100_000);
             pts = (0..=k)
                 .map(|i| a.point(i as f64 / k as f64).map(Some))
                 .collect();
@@ -444,7 +445,7 @@ impl Kt<'_> {
         let (a1, a2, _) = plane.axes();
         let r_start = (s[a1] - centre.0).hypot(s[a2] - centre.1);
         let r_end = (e[a1] - centre.0).hypot(e[a2] - centre.1);
-        let tol = C_END_TOLERANCE_MM / self.scale_mm();
+        let tol = C_END_TOLERANCE_MM / self.m.scale_mm();
         let bad = |m: String| {
             self.err(
                 n,
@@ -479,7 +480,7 @@ impl Kt<'_> {
     /// The program's state forbids compensating a cut here.
     fn context_refusal(&self, b: &Block) -> Option<Refusal> {
         let col = b.head_col;
-        if !self.units_known {
+        if !self.m.units_known {
             return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), "begin the program with `0 BEGIN PGM name MM` (or INCH), or pass --units mm|inch"));
         }
         if let Some((l, w)) = &self.label {
@@ -492,7 +493,7 @@ impl Kt<'_> {
                 "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
                 "rot" => (format!("rotary axis {} ({at}) stands away from 0, where errmap takes the map to be measured: the part is turned, and this cut may lie in the compensation zone", f.what), "compensate the cuts of each rotary position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away"),
                 "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
-                "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), if self.settings.same_part_per_offset || f.what.contains("cannot read") {
+                "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), if self.m.settings.same_part_per_offset || f.what.contains("cannot read") {
                     "select the program's first preset again (CYCL DEF 247 with its Q339 as a number) before the cuts in the zone, or compensate this part with a map measured in this preset"
                 } else {
                     "select the program's first preset again (CYCL DEF 247 with its Q339) before the cuts in the zone; for identical parts, one per preset, pass --same-part-per-offset to apply the map in each preset's coordinates"
@@ -560,6 +561,7 @@ impl Kt<'_> {
         }
         if start.iter().any(Option::is_none) {
             let since = self
+                .m
                 .unknown_since
                 .map(|l| format!(" since {}", self.at(l)))
                 .unwrap_or_else(|| " (no X, Y and Z since the program start)".into());
@@ -573,8 +575,8 @@ impl Kt<'_> {
         let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
             return;
         };
-        let k = self.scale_mm();
-        let shift = self.shift;
+        let k = self.m.scale_mm();
+        let shift = self.m.shift;
         let mm = |p: [f64; 3]| [0, 1, 2].map(|i| (p[i] + shift[i]) * k);
         let kind = match (&mv.arc, mv.cutting) {
             (Some(a), _) if a.sweep < 0.0 => Motion::ArcCw,
@@ -633,7 +635,7 @@ impl Kt<'_> {
             .iter()
             .any(|w| w.addr == "M" && w.num() == Some(140.0))
         {
-            self.lose_position(n, &[self.tool_axis]);
+            self.m.lose_position(n, &[self.tool_axis]);
         }
         self.rotary_positions(n, b);
         if let Some(w) = b
@@ -681,14 +683,14 @@ impl Kt<'_> {
     pub(super) fn cycle_call(&mut self, n: u64, col: usize, word: &str) -> Result<()> {
         if let Some(back) = self.hole_call(n, col, word)? {
             if !back {
-                self.lose_position(n, &[self.tool_axis, self.normal]);
+                self.m.lose_position(n, &[self.tool_axis, self.m.normal]);
             }
             return Ok(());
         }
-        let mut p = self.pos;
+        let mut p = self.m.pos;
         p[self.tool_axis] = None;
-        p[self.normal] = None;
-        if self.may_touch(&[self.pos, p]) {
+        p[self.m.normal] = None;
+        if self.may_touch(&[self.m.pos, p]) {
             let cycle = match self.machining_cycle {
                 Some((c, l)) if c >= 0 => format!(" of cycle {c} ({})", self.at(l)),
                 _ => String::new(),
@@ -701,7 +703,7 @@ impl Kt<'_> {
                 "expand the cycle into L moves with your CAM post (or move the zone away)",
             ));
         }
-        self.lose_position(n, &[self.tool_axis, self.normal]);
+        self.m.lose_position(n, &[self.tool_axis, self.m.normal]);
         Ok(())
     }
 
@@ -726,7 +728,7 @@ impl Kt<'_> {
             }
         }
         if b.words.is_empty() {
-            self.centre = self.pos;
+            self.centre = self.m.pos;
             self.cc_plane = None;
         } else {
             // The CC's two axes give the plane of the circles about it (ZX: 0° along +Z,
@@ -738,7 +740,7 @@ impl Kt<'_> {
                 _ => None,
             };
             self.cc_plane = plane;
-            let c = self.end_point(b, self.pos);
+            let c = self.end_point(b, self.m.pos);
             let (a1, a2, _) = self.circle_plane().axes();
             let given = |i: usize| b.has(AXES[i]) || b.has(&format!("I{}", AXES[i]));
             for i in [a1, a2] {
@@ -794,20 +796,20 @@ impl Kt<'_> {
             return self.line(n, content, term, &plain);
         }
         if path {
-            let mut end = self.end_point(b, self.pos);
+            let mut end = self.end_point(b, self.m.pos);
             let (a1, a2, _) = self.circle_plane().axes();
             if b.head != "L" {
                 end[a1] = None;
                 end[a2] = None;
             }
             let cutting = !b.has("FMAX");
-            self.prev_touch = self.may_touch(&[self.pos, end]);
+            self.prev_touch = self.may_touch(&[self.m.pos, end]);
             if cutting && self.prev_touch {
                 return Err(self.err(n, 1, "/", format!("block skip `/` on a cut that may lie in the compensation zone: whether the TNC runs `{} {}` depends on the block-skip switch", b.head, b.rest), "remove the `/` from cuts in the zone (or the block), or move the zone away"));
             }
             self.unchanged(n, content, term, b, false)?;
-            let moved: Vec<usize> = (0..3).filter(|&i| end[i] != self.pos[i]).collect();
-            self.lose_position(n, &moved);
+            let moved: Vec<usize> = (0..3).filter(|&i| end[i] != self.m.pos[i]).collect();
+            self.m.lose_position(n, &moved);
             if b.has("RL") || b.has("RR") || b.has("R") {
                 self.radius_comp = Some((
                     n,
@@ -823,7 +825,7 @@ impl Kt<'_> {
             what,
             normal: true,
         });
-        self.lose_position(n, &[0, 1, 2]);
+        self.m.lose_position(n, &[0, 1, 2]);
         self.unchanged(n, content, term, b, false)
     }
 
@@ -836,7 +838,7 @@ impl Kt<'_> {
             "APPR" | "DEP" => ("an approach/departure function (APPR/DEP)", "post the approach with explicit L and C blocks, R0, for the zone (or move the zone away)"),
             _ => ("FK free contour programming", "post the contour as L and C/CR blocks for the zone (or move the zone away)"),
         };
-        let start = self.pos;
+        let start = self.m.pos;
         let mut end = self.end_point(b, start);
         let (a1, a2, ax) = self.plane().axes();
         end[a1] = None;
@@ -852,8 +854,8 @@ impl Kt<'_> {
         }
         self.corner = None;
         self.unchanged(n, content, term, b, false)?;
-        self.pos = end;
-        self.lose_position(n, &[]);
+        self.m.pos = end;
+        self.m.lose_position(n, &[]);
         Ok(())
     }
 
@@ -872,7 +874,7 @@ impl Kt<'_> {
     /// After a label entry or a call: the position is unknown, and so are the frames and the
     /// radius compensation when the program has any.
     fn enter_unknown(&mut self, n: u64, what: &str) {
-        self.lose_position(n, &[0, 1, 2]);
+        self.m.lose_position(n, &[0, 1, 2]);
         self.centre = [None; 3];
         self.prev_touch = true;
         if self.program_transforms {
@@ -915,7 +917,7 @@ impl Kt<'_> {
                 }
             }
             self.unchanged(n, content, term, b, false)?;
-            self.lose_position(n, &[0, 1, 2]);
+            self.m.lose_position(n, &[0, 1, 2]);
             return Ok(());
         }
         self.copy(content, term, b);

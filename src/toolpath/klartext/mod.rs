@@ -14,11 +14,11 @@ mod polar;
 mod rewrite;
 
 use super::dialect::{self, Dialect};
+use super::machine::Machine;
 use super::{CompensationReport, CompensationSettings, TracedMove, Units};
 use crate::error::{Error, Location, Result};
 use crate::geom::ErrorField;
 use block::Block;
-use std::cell::Cell;
 use std::path::Path;
 
 /// A point of the original program, some coordinates unknown.
@@ -85,25 +85,15 @@ struct Frame {
 /// The interpreter's state while reading the program, and the output it writes.
 struct Kt<'a> {
     source: &'a Path,
-    field: &'a dyn ErrorField,
-    settings: &'a CompensationSettings,
-    normal: usize,
-    plane_uv: (usize, usize),
-    /// The original program's position (program coordinates, program units).
-    pos: Point,
+    /// Position, units, shift, zone and the map (shared with the G-code reader).
+    m: Machine<'a>,
     /// Circle centre / pole (coordinates of its plane).
     centre: Point,
     /// The plane of the last CC block's two axes (`None`: the working plane).
     cc_plane: Option<super::arc::Plane>,
-    inches: bool,
-    units_known: bool,
-    /// The zone in program units and work coordinates.
-    zone: Option<(f64, f64)>,
     /// Tool axis from `TOOL CALL` (index; Z by default).
     tool_axis: usize,
     radius_comp: Option<(u64, String)>,
-    /// Work coordinates = program coordinates + `shift` (cycle 7), program units.
-    shift: [f64; 3],
     frames: Vec<Frame>,
     /// The label body being read (`LBL n` … `LBL 0`).
     label: Option<(u64, String)>,
@@ -115,12 +105,7 @@ struct Kt<'a> {
     program_radius_comp: bool,
     /// The previous contour element may lie in the zone.
     prev_touch: bool,
-    /// Where the position became unknown, for messages.
-    unknown_since: Option<u64>,
-    /// Output offset along the normal: the output position differs from `pos` by it.
-    offset: f64,
     decimals: usize,
-    extrapolated: Cell<bool>,
     report: CompensationReport,
     out: Vec<OutLine>,
     out_bytes: usize,
@@ -198,42 +183,29 @@ impl<'a> Kt<'a> {
             };
         let zone_mm = super::default_zone_mm(source, field, settings)?;
         let inches = units == Some(Units::Inch);
-        let s = if inches { 25.4 } else { 1.0 };
-        let zone = settings
-            .zone
-            .or_else(|| zone_mm.map(|(lo, hi)| (lo / s, hi / s)));
-        let normal = field.normal();
-        let (u, v) = normal.plane_axes();
+        let mut m = Machine::new(field, settings, inches, zone_mm);
+        // The header gives the units before any block: the zone is fixed in them at once.
+        m.units_known = units.is_some();
+        m.fix_zone();
         let report = CompensationReport {
-            zone_mm: zone.map(|(lo, hi)| (lo * s, hi * s)),
+            zone_mm: m.zone_mm,
             dialect: Some(Dialect::Heidenhain),
             ..CompensationReport::default()
         };
         Ok(Kt {
             source,
-            field,
-            settings,
-            normal: normal.index(),
-            plane_uv: (u.index(), v.index()),
-            pos: [None; 3],
+            m,
             centre: [None; 3],
             cc_plane: None,
-            inches,
-            units_known: units.is_some(),
-            zone,
             tool_axis: 2,
             radius_comp: None,
-            shift: [0.0; 3],
             frames: Vec::new(),
             label: None,
             corner: None,
             program_transforms: false,
             program_radius_comp: false,
             prev_touch: false,
-            unknown_since: None,
-            offset: 0.0,
             decimals: program_decimals(text).max(if inches { 5 } else { 4 }),
-            extrapolated: Cell::new(false),
             report,
             out: Vec::new(),
             out_bytes: 0,
@@ -471,43 +443,6 @@ impl<'a> Kt<'a> {
         )
     }
 
-    fn scale_mm(&self) -> f64 {
-        if self.inches {
-            25.4
-        } else {
-            1.0
-        }
-    }
-
-    /// The zone in current program coordinates (after the datum shift).
-    fn zone_now(&self) -> Option<(f64, f64)> {
-        let d = self.shift[self.normal];
-        self.zone.map(|(lo, hi)| (lo - d, hi - d))
-    }
-
-    /// Whether the map compensates at plane point (u, v) in program coordinates.
-    fn compensable(&self, u: f64, v: f64) -> bool {
-        let s = self.scale_mm();
-        let (iu, iv) = self.plane_uv;
-        let (u, v) = ((u + self.shift[iu]) * s, (v + self.shift[iv]) * s);
-        super::reach::compensable_mm(self.field, self.settings, u, v)
-    }
-
-    /// E in program units at a point, if the point is in the zone and the measured domain.
-    fn error_at(&self, p: &[f64; 3]) -> Option<f64> {
-        if let Some((lo, hi)) = self.zone_now() {
-            let n = p[self.normal];
-            if n < lo || n > hi {
-                return None;
-            }
-        }
-        let s = self.scale_mm();
-        let (iu, iv) = self.plane_uv;
-        let (u, v) = ((p[iu] + self.shift[iu]) * s, (p[iv] + self.shift[iv]) * s);
-        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
-            .map(|e_mm| e_mm / s)
-    }
-
     /// Could a path through these points (some coordinates unknown) touch the zone and the
     /// measured domain? Under an active frame the plane coordinates (and the normal one when
     /// the frame may move it) are unknown.
@@ -521,29 +456,13 @@ impl<'a> Kt<'a> {
                 .map(|p| {
                     let mut q = [None; 3];
                     if !normal_moves {
-                        q[self.normal] = p[self.normal];
+                        q[self.m.normal] = p[self.m.normal];
                     }
                     q
                 })
                 .collect()
         };
-        super::reach::may_touch(
-            &framed,
-            self.normal,
-            self.plane_uv,
-            self.zone_now(),
-            self.step(),
-            |u, v| self.compensable(u, v),
-        )
-    }
-
-    /// Longest segment in program units.
-    fn step(&self) -> f64 {
-        self.settings.max_segment / self.scale_mm()
-    }
-
-    fn chord_tol(&self) -> f64 {
-        self.settings.chord_tol / self.scale_mm()
+        self.m.may_touch(&framed)
     }
 
     /// Coordinate text with sign: `+10.0000`, `-2.5000`.
@@ -553,19 +472,6 @@ impl<'a> Kt<'a> {
             t
         } else {
             format!("+{t}")
-        }
-    }
-
-    /// Forget the position (a block errmap does not follow moved the tool somewhere).
-    fn lose_position(&mut self, line: u64, axes: &[usize]) {
-        for &i in axes {
-            if self.pos[i].is_some() {
-                self.pos[i] = None;
-                self.unknown_since = Some(line);
-            }
-        }
-        if self.unknown_since.is_none() {
-            self.unknown_since = Some(line);
         }
     }
 }

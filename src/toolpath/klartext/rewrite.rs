@@ -29,12 +29,12 @@ impl Kt<'_> {
         let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
             return self.unchanged(n, content, term, b, false);
         };
-        let step = self.step();
+        let step = self.m.step();
         let (length, chords) = match &mv.arc {
             None => (dist(&s, &e), 1),
             Some(a) => (
                 a.sweep.abs() * a.r_start.max(a.r_end),
-                a.chords(self.chord_tol(), step),
+                a.chords(self.m.chord_tol(), step),
             ),
         };
         if !length.is_finite() || length / step > 1e6 || chords >= 1_000_000 {
@@ -52,7 +52,7 @@ impl Kt<'_> {
                 None => lerp(&s, &e, t),
                 Some(a) => a.point(t),
             };
-            let error_at = |p: &[f64; 3]| self.error_at(p);
+            let error_at = |p: &[f64; 3]| self.m.error_at(p);
             // Each piece is an `L X… Y… Z…` block of at least MIN_PIECE_BYTES: stop as soon as
             // the pieces outnumber what the output limit has room for.
             let limit = crate::io::safety::max_output_bytes();
@@ -61,8 +61,8 @@ impl Kt<'_> {
                 Breaks::Fractions(chords),
                 &curve,
                 step,
-                self.zone_now(),
-                self.normal,
+                self.m.zone_now(),
+                self.m.normal,
                 &error_at,
                 usize::try_from(room).unwrap_or(usize::MAX),
                 &mut emitted,
@@ -80,11 +80,11 @@ impl Kt<'_> {
                 ));
             }
         }
-        if self.extrapolated.replace(false) {
+        if self.m.extrapolated.replace(false) {
             self.report.moves_outside_domain += 1;
         }
         if !emitted.iter().any(|(_, e)| e.is_some()) {
-            let absolute = b.head == "L" && b.word(AXES[self.normal]).is_some();
+            let absolute = b.head == "L" && b.word(AXES[self.m.normal]).is_some();
             return self.unchanged(n, content, term, b, absolute);
         }
         self.write_pieces(content, term, b, &emitted);
@@ -134,14 +134,14 @@ impl Kt<'_> {
             self.report.moves_split += 1;
         }
         self.report.segments_emitted += targets.len() as u64;
-        self.offset = emitted.last().and_then(|(_, e)| *e).map_or(0.0, |e| -e);
+        self.m.offset = emitted.last().and_then(|(_, e)| *e).map_or(0.0, |e| -e);
     }
 
     /// The targets P' = P − E of the emitted points, leaving out those that round onto the
     /// position before them (no zero-length moves); counts the compensated points.
     fn targets(&mut self, emitted: &[([f64; 3], Option<f64>)]) -> Vec<[f64; 3]> {
-        let mut out_pos = self.pos.map(|c| c.unwrap_or(0.0));
-        out_pos[self.normal] += self.offset;
+        let mut out_pos = self.m.pos.map(|c| c.unwrap_or(0.0));
+        out_pos[self.m.normal] += self.m.offset;
         let d = self.decimals;
         let written = |v: f64| {
             let p = 10f64.powi(d as i32);
@@ -152,8 +152,8 @@ impl Kt<'_> {
         for (p, e) in emitted {
             let mut q = *p;
             if let Some(e) = e {
-                q[self.normal] -= e;
-                let e_mm = e.abs() * self.scale_mm();
+                q[self.m.normal] -= e;
+                let e_mm = e.abs() * self.m.scale_mm();
                 self.report.max_abs_error_mm = self.report.max_abs_error_mm.max(e_mm);
                 self.report.points_compensated += 1;
             }
@@ -219,13 +219,13 @@ impl Kt<'_> {
 
     /// `L Z…` (`FMAX` before a rapid) back to the original normal coordinate after a cut that ended compensated.
     pub(super) fn return_step(&mut self, term: &str, rapid: bool) {
-        let Some(orig) = self.pos[self.normal] else {
+        let Some(orig) = self.m.pos[self.m.normal] else {
             return;
         };
         let fmax = if rapid { " FMAX" } else { "" };
-        let body = format!(" L {}{}{fmax}", AXES[self.normal], self.coord(orig));
+        let body = format!(" L {}{}{fmax}", AXES[self.m.normal], self.coord(orig));
         self.push_block(body, term);
-        self.offset = 0.0;
+        self.m.offset = 0.0;
         self.report.returns_inserted += 1;
     }
 }
