@@ -115,9 +115,7 @@ pub fn parse<F: Copy + PartialEq>(spec: &str, table: &FieldTable<F>) -> Result<V
         };
         let column = match value.parse::<usize>() {
             Ok(0) => {
-                return Err(table.spec_error(format!(
-                    "'{key}=0': columns are numbered from 1"
-                )))
+                return Err(table.spec_error(format!("'{key}=0': columns are numbered from 1")))
             }
             Ok(i) => ColumnRef::Index(i),
             Err(_) => ColumnRef::Name(value.to_string()),
@@ -149,12 +147,9 @@ pub fn find<F>(headers: &[String], e: &Entry<F>) -> Option<(usize, Conversion)> 
         (Some((_, conv)), Some(i)) => Some((i, *conv)),
         _ => match &e.column {
             ColumnRef::Index(i) => by_text(&i.to_string()).map(|c| (c, Conversion::IDENTITY)),
-            ColumnRef::Name(n) => by_name(n).map(|c| {
-                (
-                    c,
-                    e.unit.as_ref().map_or(Conversion::IDENTITY, |u| u.1),
-                )
-            }),
+            ColumnRef::Name(n) => {
+                by_name(n).map(|c| (c, e.unit.as_ref().map_or(Conversion::IDENTITY, |u| u.1)))
+            }
         },
     }
 }

@@ -140,7 +140,10 @@ pub(super) fn map_table(table: &CsvTable, map: &ColumnMap) -> Result<CsvTable> {
         .iter()
         .map(|e| shared::resolve(table, e, &TABLE).map(|(c, conv)| (e, c, conv)))
         .collect::<Result<_>>()?;
-    let mut headers: Vec<String> = resolved.iter().map(|r| canonical(r.0.field).to_string()).collect();
+    let mut headers: Vec<String> = resolved
+        .iter()
+        .map(|r| canonical(r.0.field).to_string())
+        .collect();
     let infer_runs = !map.entries.iter().any(|e| e.field == Field::Run);
     if infer_runs {
         headers.push("run".into());

@@ -190,7 +190,11 @@ pub(super) fn read_ply(path: &Path, spec: &ProbeSpec) -> Result<Vec<Row>> {
     for n in 0..vertex.count {
         let start = body.byte;
         let line = body.instance(vertex, Some((n, vertex.count)))?;
-        let measured_mm = [body.values[xyz[0]], body.values[xyz[1]], body.values[xyz[2]]];
+        let measured_mm = [
+            body.values[xyz[0]],
+            body.values[xyz[1]],
+            body.values[xyz[2]],
+        ];
         let (place, row_line) = if encoding == Encoding::Ascii {
             (Place::line(path, line), line)
         } else {
@@ -228,10 +232,7 @@ pub(super) fn read_ply(path: &Path, spec: &ProbeSpec) -> Result<Vec<Row>> {
 }
 
 /// The header: encoding, elements, lines and bytes it takes.
-fn header(
-    path: &Path,
-    reader: &mut impl BufRead,
-) -> Result<(Encoding, Vec<Element>, u64, u64)> {
+fn header(path: &Path, reader: &mut impl BufRead) -> Result<(Encoding, Vec<Element>, u64, u64)> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut bytes = 0u64;
@@ -253,7 +254,9 @@ fn header(
         line_no += 1;
         let text = String::from_utf8_lossy(&buf);
         let words: Vec<&str> = text.split_whitespace().collect();
-        let bad = |message: String, hint: &str| Error::input(Location::line(path, line_no), message, hint);
+        let bad = |message: String, hint: &str| {
+            Error::input(Location::line(path, line_no), message, hint)
+        };
         if line_no == 1 {
             if words != ["ply"] {
                 return Err(bad(
@@ -342,12 +345,10 @@ fn header(
                 }
             }
             Some("end_header") => break,
-            Some(other) => {
-                return Err(bad(
-                    format!("'{other}' is not a PLY header keyword"),
-                    "the header has format, comment, obj_info, element, property and end_header lines",
-                ))
-            }
+            Some(other) => return Err(bad(
+                format!("'{other}' is not a PLY header keyword"),
+                "the header has format, comment, obj_info, element, property and end_header lines",
+            )),
         }
     }
     let encoding = encoding.ok_or_else(|| {
@@ -393,10 +394,9 @@ impl<R: BufRead> Body<'_, R> {
                 Some(count_type) => {
                     let count = self.scalar(count_type, start, &what)?;
                     if !(count >= 0.0 && count <= 1e6) {
-                        return Err(self.binary_error(
-                            start,
-                            format!("{what}: a list of {count} items"),
-                        ));
+                        return Err(
+                            self.binary_error(start, format!("{what}: a list of {count} items"))
+                        );
                     }
                     for _ in 0..count as u64 {
                         self.scalar(p.kind, start, &what)?;

@@ -74,12 +74,16 @@ impl ProbeColumns {
         ] {
             let n = group.iter().filter(|&&f| has(f)).count();
             if n != 0 && n != 3 {
-                return Err(TABLE.spec_error(format!(
-                    "map all three of {names} or none of them"
-                )));
+                return Err(TABLE.spec_error(format!("map all three of {names} or none of them")));
             }
         }
         Ok(ProbeColumns { entries })
+    }
+
+    /// The mapped columns as written, for messages.
+    pub(super) fn columns_named(&self) -> String {
+        let named: Vec<&str> = self.entries.iter().map(|e| e.text.as_str()).collect();
+        named.join(", ")
     }
 
     pub(super) fn entry(&self, field: Field) -> Option<&Entry<Field>> {

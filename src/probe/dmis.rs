@@ -50,7 +50,13 @@ pub(super) fn read(path: &Path, spec: &ProbeSpec) -> Result<(Vec<Row>, usize)> {
             skipped += 1;
             continue;
         }
-        let point = point(path, line, &label, &definition["FEAT/".len()..], mm_per_unit)?;
+        let point = point(
+            path,
+            line,
+            &label,
+            &definition["FEAT/".len()..],
+            mm_per_unit,
+        )?;
         if actual {
             actuals.push(point);
         } else {
@@ -265,8 +271,14 @@ mod tests {
     #[test]
     fn comments_and_labels_split() {
         assert_eq!(strip_comment("F(A)=FEAT/POINT $$ note"), "F(A)=FEAT/POINT ");
-        assert_eq!(strip_comment("DMISMN/'a $$ b',05.2"), "DMISMN/'a $$ b',05.2");
-        assert_eq!(strip_comment("F(A)=FEAT/POINT,CART,$"), "F(A)=FEAT/POINT,CART,$");
+        assert_eq!(
+            strip_comment("DMISMN/'a $$ b',05.2"),
+            "DMISMN/'a $$ b',05.2"
+        );
+        assert_eq!(
+            strip_comment("F(A)=FEAT/POINT,CART,$"),
+            "F(A)=FEAT/POINT,CART,$"
+        );
         let (label, rest) = split_label("FA(PT 1) = FEAT/POINT,CART").unwrap();
         assert_eq!((label.as_str(), rest), ("PT 1", "FEAT/POINT,CART"));
         assert!(split_label("MEAS/POINT,F(PT1),1").is_none());

@@ -212,7 +212,10 @@ fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
         (None, Some(map)) => CsvTable::read_with_header(
             path,
             HeaderAt::First(&|cells: &[String]| map.is_header(cells)),
-            "check the names in the column mapping against the export's header, or give its line with --header-line N (header_line in the job)",
+            &format!(
+                "no line names all of the mapped columns ({}): check each name against the export's header as written, or give the header's line with --header-line N (header_line in the job) to see which is missing",
+                map.columns_named()
+            ),
         ),
         (None, None) => CsvTable::read(path),
     }
@@ -304,7 +307,12 @@ fn mapped_columns(table: &CsvTable, map: &ProbeColumns, spec: &ProbeSpec) -> Res
         _ => None,
     };
     if nominal.is_none() {
-        check_plane(&table.path, table.header_line, spec, "the mapping has no nx,ny,nz")?;
+        check_plane(
+            &table.path,
+            table.header_line,
+            spec,
+            "the mapping has no nx,ny,nz",
+        )?;
     }
     Ok(Columns {
         measured,
@@ -589,7 +597,12 @@ fn check_deviation_along(
 }
 
 /// Refuses a point whose nominal lies outside `domain` (grown by [`DOMAIN_TOLERANCE_MM`]).
-fn check_in_domain(place: &Place, nominal_mm: [f64; 3], domain: &Domain, normal: Axis) -> Result<()> {
+fn check_in_domain(
+    place: &Place,
+    nominal_mm: [f64; 3],
+    domain: &Domain,
+    normal: Axis,
+) -> Result<()> {
     let (ua, va) = normal.plane_axes();
     let (u, v) = (nominal_mm[ua.index()], nominal_mm[va.index()]);
     let grown = Domain {
