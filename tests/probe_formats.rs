@@ -626,3 +626,50 @@ fn the_shared_mapping_keeps_linear_messages() {
     assert!(e.to_string().contains("--columns target=COLUMN"), "{e}");
     let _ = Path::new("");
 }
+
+#[test]
+fn the_data_samples_of_every_format_hold_the_same_points() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/probe-formats");
+    let cmm = spec(Some(VISION_MAP), Some(5.0));
+    let plane = spec(None, Some(5.0));
+    let reads = [
+        read_probe_file(&dir.join("cmm-export.csv"), &cmm).unwrap(),
+        read_probe_file(&dir.join("plate.dmi"), &spec(None, None)).unwrap(),
+        read_probe_file(&dir.join("scan.xyz"), &plane).unwrap(),
+        read_probe_file(&dir.join("scan.ply"), &plane).unwrap(),
+    ];
+    assert_eq!(reads[0].preamble_lines, 1);
+    // 10 × 10 probes, two measured twice and averaged.
+    for r in &reads {
+        assert_eq!(r.set.points.len(), 100, "{}", r.set.path.display());
+        let rows: u32 = r.set.points.iter().map(|p| p.repeats).sum();
+        assert_eq!(rows, 102, "{}", r.set.path.display());
+    }
+    // The first point of the export, by hand: P001 at (25, 25), z 5.0009 → E = 0.9 µm.
+    let text = std::fs::read_to_string(dir.join("cmm-export.csv")).unwrap();
+    let row: Vec<f64> = text
+        .lines()
+        .nth(2)
+        .unwrap()
+        .split(',')
+        .skip(1)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let e_um = (row[2] - 5.0) * 1000.0;
+    for r in &reads {
+        let p = &r.set.points[0];
+        assert_eq!((p.u_mm, p.v_mm), (row[0], row[1]));
+        assert!((p.e_um - e_um).abs() < 1e-9, "{} {}", p.e_um, e_um);
+    }
+    for k in 0..100 {
+        for r in &reads[1..] {
+            let (a, b) = (&reads[0].set.points[k], &r.set.points[k]);
+            assert_eq!((a.u_mm, a.v_mm), (b.u_mm, b.v_mm));
+            assert!(
+                (a.e_um - b.e_um).abs() < 1e-9,
+                "{} point {k}",
+                r.set.path.display()
+            );
+        }
+    }
+}
