@@ -393,7 +393,7 @@ impl<R: BufRead> Body<'_, R> {
                 }
                 Some(count_type) => {
                     let count = self.scalar(count_type, start, &what)?;
-                    if !(count >= 0.0 && count <= 1e6) {
+                    if !(0.0..=1e6).contains(&count) {
                         return Err(
                             self.binary_error(start, format!("{what}: a list of {count} items"))
                         );
