@@ -1,5 +1,6 @@
 //! File plumbing shared by every module: atomic writes that obey the output safety rules, and a streaming CSV table reader that keeps line numbers for error messages.
 
+pub mod columns;
 pub mod lines;
 pub mod safety;
 
@@ -115,7 +116,20 @@ pub struct CsvTable {
     pub path: PathBuf,
     pub headers: Vec<String>,
     pub rows: Vec<CsvRow>,
+    /// 1-based line of the header (1 unless lines before it were skipped).
+    pub header_line: u64,
+    /// Lines with text before the header that were skipped (an instrument's date, title or
+    /// program name); blank and `#` lines are not counted.
+    pub preamble_lines: usize,
     index: HashMap<String, usize>,
+}
+
+/// Where the header of a CSV export is.
+pub enum HeaderAt<'a> {
+    /// This 1-based line.
+    Line(u64),
+    /// The first line (not blank, not `#`) whose cells satisfy the test.
+    First(&'a dyn Fn(&[String]) -> bool),
 }
 
 /// One record of a [`CsvTable`].
@@ -143,8 +157,70 @@ impl CsvTable {
         Self::from_reader(path, text.as_bytes())
     }
 
+    /// Read a CSV export whose header is not on its first line: the lines before the header
+    /// are skipped and counted ([`CsvTable::preamble_lines`]); from the header on the file is
+    /// read as [`CsvTable::read`] reads it, line numbers counting from the file's start. The
+    /// file is streamed once.
+    pub fn read_with_header(path: &Path, at: HeaderAt, missing_hint: &str) -> Result<CsvTable> {
+        use std::io::BufRead;
+        let file = open(path)?;
+        let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+        let mut line = Vec::new();
+        let mut number = 0u64;
+        let mut preamble = 0usize;
+        loop {
+            line.clear();
+            let n = reader
+                .read_until(b'\n', &mut line)
+                .map_err(|e| Error::read(path, e))?;
+            if n == 0 {
+                let message = match at {
+                    HeaderAt::Line(want) => {
+                        format!("the file has {number} lines, so line {want} cannot be its header")
+                    }
+                    HeaderAt::First(_) => {
+                        "no line of the file names every mapped column".to_string()
+                    }
+                };
+                return Err(Error::input(Location::file(path), message, missing_hint));
+            }
+            number += 1;
+            let cells = header_cells(&line);
+            let has_text = !(cells.iter().all(|c| c.is_empty())
+                || line.trim_ascii_start().first() == Some(&CSV_COMMENT));
+            let found = match at {
+                HeaderAt::Line(want) => number == want,
+                HeaderAt::First(test) => has_text && test(&cells),
+            };
+            if found {
+                break;
+            }
+            if has_text {
+                preamble += 1;
+            }
+        }
+        let rest = std::io::Read::chain(std::io::Cursor::new(line), reader);
+        let mut table = Self::from_reader_at(path, rest, number - 1)?;
+        table.preamble_lines = preamble;
+        Ok(table)
+    }
+
     /// Parse CSV from a reader; `path` is only used in messages.
     pub fn from_reader(path: &Path, source: impl std::io::Read) -> Result<CsvTable> {
+        Self::from_reader_at(path, source, 0)
+    }
+
+    /// [`CsvTable::from_reader`] for a stream that starts after `skipped` lines of its file:
+    /// every line number is counted from the file's start.
+    fn from_reader_at(path: &Path, source: impl std::io::Read, skipped: u64) -> Result<CsvTable> {
+        let csv_error = |path: &Path, e: csv::Error| -> Error {
+            let mut err = csv_error(path, e);
+            if let Error::Input { location, .. } = &mut err {
+                location.line = location.line.map(|l| l + skipped);
+            }
+            err
+        };
+        let header_line = skipped + 1;
         let (tracked, lines) = lines::track(source);
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -160,7 +236,7 @@ impl CsvTable {
             .collect();
         if headers.iter().all(|h| h.is_empty()) {
             return Err(Error::input(
-                Location::line(path, 1),
+                Location::line(path, header_line),
                 "the file has no header line",
                 "the first line must name the columns (see the file format in the docs)",
             ));
@@ -169,7 +245,7 @@ impl CsvTable {
         for (i, h) in headers.iter().enumerate() {
             if index.insert(h.clone(), i).is_some() {
                 return Err(Error::input(
-                    Location::cell(path, 1, h.clone()),
+                    Location::cell(path, header_line, h.clone()),
                     format!("column '{h}' appears twice in the header"),
                     "keep one column of each name",
                 ));
@@ -187,7 +263,7 @@ impl CsvTable {
             // before the record: step over them from the record's byte offset.
             let line = record
                 .position()
-                .map(|p| lines.line_of_record(p.byte(), Some(CSV_COMMENT)))
+                .map(|p| lines.line_of_record(p.byte(), Some(CSV_COMMENT)) + skipped)
                 .unwrap_or(0);
             if record.iter().all(|f| f.is_empty()) {
                 continue;
@@ -211,6 +287,8 @@ impl CsvTable {
             path: path.to_path_buf(),
             headers,
             rows,
+            header_line,
+            preamble_lines: 0,
             index,
         })
     }
@@ -232,6 +310,8 @@ impl CsvTable {
             path: path.to_path_buf(),
             headers,
             rows,
+            header_line: 1,
+            preamble_lines: 0,
             index,
         })
     }
@@ -245,7 +325,7 @@ impl CsvTable {
     pub fn require(&self, name: &str) -> Result<usize> {
         self.column(name).ok_or_else(|| {
             Error::input(
-                Location::line(&self.path, 1),
+                Location::line(&self.path, self.header_line),
                 format!(
                     "missing column '{name}' (header has: {})",
                     self.headers.join(",")
@@ -260,7 +340,7 @@ impl CsvTable {
         for h in &self.headers {
             if !allowed.contains(&h.as_str()) {
                 return Err(Error::input(
-                    Location::cell(&self.path, 1, h.clone()),
+                    Location::cell(&self.path, self.header_line, h.clone()),
                     format!("unknown column '{h}'"),
                     format!("allowed columns are: {}", allowed.join(",")),
                 ));
@@ -317,6 +397,24 @@ impl CsvTable {
             None => Location::line(&self.path, row.line),
         };
         Error::input(location, message, hint)
+    }
+}
+
+/// The trimmed cells of one line as the CSV reader would split it (quotes honoured; a line
+/// the reader cannot split has no cells).
+fn header_cells(line: &[u8]) -> Vec<String> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(line);
+    let mut record = csv::StringRecord::new();
+    match reader.read_record(&mut record) {
+        Ok(true) => record
+            .iter()
+            .map(|c| c.trim_start_matches('\u{feff}').to_string())
+            .collect(),
+        _ => Vec::new(),
     }
 }
 

@@ -20,6 +20,7 @@ fn plane_spec(z_mm: f64) -> ProbeSpec {
         nominal_plane_mm: Some(z_mm),
         domain: None,
         max_deviation_mm: 1e6,
+        ..ProbeSpec::default()
     }
 }
 

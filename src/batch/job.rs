@@ -32,6 +32,14 @@ pub struct Job {
     /// Plausibility bound, mm: a probe deviation or map value beyond it is an error that
     /// names the likely unit slip.
     pub max_deviation_mm: f64,
+    /// Column mapping of the probe files when they are an instrument's CSV export
+    /// (`x=X,y=Y,z=Z[um],i=I,j=J,k=K,id=POINT`, as `--columns`; docs/probe-files.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub columns: Option<String>,
+    /// 1-based line of the probe files' header (default: the first line, or with `columns`
+    /// the first line naming every mapped column).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub header_line: Option<u64>,
     pub clean: CleanConfig,
     pub interp: InterpConfig,
     pub model: ModelConfig,
@@ -53,6 +61,8 @@ impl Default for Job {
             grid_step_mm: 5.0,
             output: None,
             max_deviation_mm: crate::probe::DEFAULT_MAX_DEVIATION_MM,
+            columns: None,
+            header_line: None,
             clean: CleanConfig::default(),
             interp: InterpConfig::default(),
             model: ModelConfig::default(),
@@ -323,6 +333,26 @@ impl Job {
                     "give the nominal coordinate in mm",
                 ));
             }
+        }
+        if let Some(text) = &self.columns {
+            match crate::probe::ProbeColumns::parse(text) {
+                Ok(_) => {}
+                Err(Error::Usage { message, .. }) => {
+                    return Err(bad(
+                        "columns",
+                        message,
+                        "write columns = \"x=COLUMN,y=COLUMN,z=COLUMN[,i=…,j=…,k=…][,id=COLUMN]\" (see docs/probe-files.md)",
+                    ))
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        if self.header_line == Some(0) {
+            return Err(bad(
+                "header_line",
+                "0: lines are numbered from 1".into(),
+                "give the 1-based line of the header, as an editor shows it",
+            ));
         }
         if let Some([a, b, c, d]) = self.domain {
             let finite = [a, b, c, d].iter().all(|x| x.is_finite());

@@ -246,6 +246,8 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
             spacing_mm: job.interp.spacing_mm,
             model,
             max_deviation_mm: job.max_deviation_mm,
+            columns: job.columns.clone(),
+            header_line: job.header_line,
             reduce_inputs: true,
         },
         parts,

@@ -39,6 +39,10 @@ pub struct Settings {
     pub model: ModelConfig,
     /// Plausibility bound of probe deviations and map values, mm.
     pub max_deviation_mm: f64,
+    /// Column mapping of the probe files (CSV exports), see [`ProbeSpec::columns`].
+    pub columns: Option<String>,
+    /// 1-based header line of the probe files, see [`ProbeSpec::header_line`].
+    pub header_line: Option<u64>,
     /// Write each part's `reduce.json` (batch runs: the shards' input to the reduce).
     pub reduce_inputs: bool,
 }
@@ -104,6 +108,7 @@ struct Prepared {
     input: PartInput,
     points: usize,
     repeats_averaged: usize,
+    preamble_lines: usize,
     clean: Vec<ProbePoint>,
     rejected: Vec<Rejected>,
     sigma_um: f64,
@@ -170,9 +175,11 @@ fn prepare(
         nominal_plane_mm: s.nominal_plane_mm,
         domain: s.domain,
         max_deviation_mm: s.max_deviation_mm,
+        columns: s.columns.clone(),
+        header_line: s.header_line,
     };
-    let set = match probe::read_probes(&input.probe_file, &spec) {
-        Ok(set) => set,
+    let (set, preamble_lines) = match probe::read_probe_file(&input.probe_file, &spec) {
+        Ok(read) => (read.set, read.preamble_lines),
         Err(e) => return Err(Box::new((input, e))),
     };
     let cleaned = match probe::reject_gross_errors(&set, s.k_sigma) {
@@ -189,6 +196,7 @@ fn prepare(
     Ok(Prepared {
         points: set.points.len(),
         repeats_averaged: (rows as usize).saturating_sub(set.points.len()),
+        preamble_lines,
         clean: cleaned.clean,
         rejected: cleaned.rejected,
         sigma_um: cleaned.sigma_um,
@@ -1187,6 +1195,7 @@ fn part_summary(
         ok: true,
         points: p.prep.points,
         repeats_averaged: p.prep.repeats_averaged,
+        preamble_lines: p.prep.preamble_lines,
         rejected: p.prep.rejected.len(),
         sigma_um: Some(p.prep.sigma_um),
         holdout_points: p.prep.holdout.len(),
@@ -1262,6 +1271,8 @@ mod tests {
             seed: Some(1),
             backend: crate::nn::Backend::CpuReference,
             max_deviation_mm: 1.0,
+            columns: None,
+            header_line: None,
         }
         .plan()
         .unwrap();

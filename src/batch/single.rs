@@ -28,6 +28,10 @@ pub struct MapRequest {
     pub seed: Option<u64>,
     pub backend: Backend,
     pub max_deviation_mm: f64,
+    /// Column mapping of the probe file (a CSV export), see [`crate::probe::ProbeSpec::columns`].
+    pub columns: Option<String>,
+    /// 1-based header line of the probe file.
+    pub header_line: Option<u64>,
 }
 
 impl MapRequest {
@@ -59,6 +63,15 @@ impl MapRequest {
             }
         }
         let model = self.model()?;
+        if let Some(text) = &self.columns {
+            crate::probe::ProbeColumns::parse(text)?;
+        }
+        if self.header_line == Some(0) {
+            return Err(Error::usage(
+                "--header-line 0: lines are numbered from 1",
+                "give the 1-based line of the header, as an editor shows it",
+            ));
+        }
         crate::probe::validate_max_deviation(self.max_deviation_mm, "--max-deviation-mm")?;
         for (flag, v) in [
             ("--grid-step", self.grid_step_mm),
@@ -88,6 +101,8 @@ impl MapRequest {
                 spacing_mm: self.spacing_mm,
                 model,
                 max_deviation_mm: self.max_deviation_mm,
+                columns: self.columns.clone(),
+                header_line: self.header_line,
                 reduce_inputs: false,
             },
             parts: vec![PartInput {

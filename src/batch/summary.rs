@@ -15,6 +15,10 @@ pub struct PartSummary {
     pub points: usize,
     /// Rows that were repeats of another row's nominal point, averaged into it.
     pub repeats_averaged: usize,
+    /// Lines with text before a CSV export's header (date, title, program name), skipped;
+    /// absent when none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub preamble_lines: usize,
     pub rejected: usize,
     /// Robust σ of the leave-one-out residuals of the clean points, µm.
     pub sigma_um: Option<f64>,
@@ -60,6 +64,7 @@ impl PartSummary {
             ok: false,
             points: 0,
             repeats_averaged: 0,
+            preamble_lines: 0,
             rejected: 0,
             sigma_um: None,
             holdout_points: 0,
@@ -76,6 +81,10 @@ impl PartSummary {
             error: Some(error.report()),
         }
     }
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// One compensated toolpath.

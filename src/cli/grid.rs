@@ -10,7 +10,8 @@ use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 pub struct GridArgs {
-    /// The probe file (CSV: x_mm,y_mm,z_mm, optional nx_mm,ny_mm,nz_mm and id).
+    /// The probe file (CSV: x_mm,y_mm,z_mm, optional nx_mm,ny_mm,nz_mm and id; a CSV export
+    /// with --columns; DMIS .dmi/.dms/.dmis; point cloud .xyz/.ply).
     pub probes: PathBuf,
     /// Interpolation method.
     #[arg(long, value_enum, default_value_t = Method::NaturalNeighbour)]
@@ -37,6 +38,15 @@ pub struct GridArgs {
     /// slip (µm or inches written as mm).
     #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
     pub max_deviation_mm: f64,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… with fields x,y,z (required),
+    /// nx,ny,nz, i,j,k (the point's surface normal), id; COLUMN a header name or 1-based number,
+    /// unit mm, um, m or in (e.g. x=X,y=Y,z=Z[um],i=I,j=J,k=K,id=POINT). Unmapped columns are
+    /// ignored; the header is the first line naming every mapped column.
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
+    /// 1-based line of the CSV header (lines before it are skipped and counted).
+    #[arg(long, value_name = "N")]
+    pub header_line: Option<u64>,
 }
 
 pub fn run(args: GridArgs, _globals: Globals) -> Result<i32> {
@@ -49,11 +59,26 @@ pub fn run(args: GridArgs, _globals: Globals) -> Result<i32> {
         normal: args.normal,
         nominal_plane_mm: args.nominal_plane,
         max_deviation_mm: args.max_deviation_mm,
+        columns: args.columns,
+        header_line: args.header_line,
     };
     let done = grid_probes(&req, &args.output)?;
     let grid = done.grid;
+    let mut skipped = String::new();
+    if done.preamble_lines > 0 {
+        skipped.push_str(&format!(
+            " ({} line(s) before the header skipped)",
+            done.preamble_lines
+        ));
+    }
+    if done.skipped_features > 0 {
+        skipped.push_str(&format!(
+            " ({} DMIS feature(s) other than points skipped)",
+            done.skipped_features
+        ));
+    }
     info!(
-        "errmap grid: {} probe points → {} of {} nodes ({} × {}, step {} mm) inside their hull, {} → {}",
+        "errmap grid: {} probe points{skipped} → {} of {} nodes ({} × {}, step {} mm) inside their hull, {} → {}",
         done.points,
         done.inside,
         grid.len(),

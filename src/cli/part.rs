@@ -43,7 +43,8 @@ pub struct BatchArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct MapArgs {
-    /// The probe file (CSV: x_mm,y_mm,z_mm [,nx_mm,ny_mm,nz_mm] [,id]).
+    /// The probe file (CSV: x_mm,y_mm,z_mm [,nx_mm,ny_mm,nz_mm] [,id], or a CSV export with
+    /// --columns, DMIS .dmi/.dms/.dmis, point cloud .xyz/.ply).
     pub probes: PathBuf,
     /// Output folder (map.csv, map.png, model.json, clean.csv, rejected.csv, summary.json).
     #[arg(long, value_name = "DIR", required_unless_present = "old_out")]
@@ -90,6 +91,15 @@ pub struct MapArgs {
     /// likely unit slip.
     #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
     pub max_deviation_mm: f64,
+    /// Read an instrument's CSV export: FIELD=COLUMN[unit],… with fields x,y,z (required),
+    /// nx,ny,nz, i,j,k (the point's surface normal), id; COLUMN a header name or 1-based number,
+    /// unit mm, um, m or in (e.g. x=X,y=Y,z=Z[um],i=I,j=J,k=K,id=POINT). Unmapped columns are
+    /// ignored; the header is the first line naming every mapped column.
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
+    /// 1-based line of the CSV header (lines before it are skipped and counted).
+    #[arg(long, value_name = "N")]
+    pub header_line: Option<u64>,
     /// Print the summary as one JSON document.
     #[arg(long)]
     pub json: bool,
@@ -197,6 +207,8 @@ pub fn run_map(args: MapArgs, globals: Globals) -> Result<i32> {
         seed: args.seed,
         backend: args.backend,
         max_deviation_mm: args.max_deviation_mm,
+        columns: args.columns,
+        header_line: args.header_line,
     }
     .plan()?;
     errmap::io::safety::confine_to(&out_dir)?;

@@ -52,6 +52,10 @@ pub struct SynthWebPlateArgs {
     /// job.toml).
     #[arg(long, value_name = "N")]
     pub warm_epochs: Option<u32>,
+    /// How each probe file is written: csv (errmap's columns), cmm-csv (a date line, then
+    /// POINT,X,Y,Z,I,J,K; the job gets `columns`), dmis, xyz or ply (binary).
+    #[arg(long, value_enum, default_value = "csv")]
+    pub probe_format: web_plate::ProbeFileFormat,
     /// Family name written into job.toml.
     #[arg(long, value_name = "NAME", default_value = "web-plate")]
     pub family: String,
@@ -75,6 +79,7 @@ pub fn run(args: SynthWebPlateArgs, _globals: Globals) -> Result<i32> {
         nominal_columns: args.nominal_columns,
         epochs: args.epochs,
         warm_epochs: args.warm_epochs,
+        probe_format: args.probe_format,
         ..WebPlateSpec::default()
     };
     let command = std::iter::once("errmap".to_string())

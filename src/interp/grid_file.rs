@@ -4,7 +4,7 @@
 use super::{resample, Grid, Method, Surface};
 use crate::error::{Error, Location, Result};
 use crate::geom::{Axis, Domain};
-use crate::probe::{read_probes, ProbeSpec};
+use crate::probe::{read_probe_file, ProbeSpec};
 use std::path::{Path, PathBuf};
 
 /// What to interpolate and how.
@@ -18,6 +18,10 @@ pub struct GridRequest {
     pub normal: Axis,
     pub nominal_plane_mm: Option<f64>,
     pub max_deviation_mm: f64,
+    /// Column mapping of a CSV export, see [`ProbeSpec::columns`].
+    pub columns: Option<String>,
+    /// 1-based header line of a CSV export, see [`ProbeSpec::header_line`].
+    pub header_line: Option<u64>,
 }
 
 /// What [`grid_probes`] wrote.
@@ -25,6 +29,10 @@ pub struct GridRequest {
 pub struct GridOutcome {
     /// Probe points read (repeats averaged).
     pub points: usize,
+    /// Lines before a CSV export's header, skipped.
+    pub preamble_lines: usize,
+    /// DMIS features other than points, skipped.
+    pub skipped_features: usize,
     /// Nodes inside the probes' hull (the rows written).
     pub inside: usize,
     pub grid: Grid,
@@ -48,8 +56,11 @@ pub fn grid_probes(req: &GridRequest, output: &Path) -> Result<GridOutcome> {
         nominal_plane_mm: req.nominal_plane_mm,
         domain: req.domain,
         max_deviation_mm: req.max_deviation_mm,
+        columns: req.columns.clone(),
+        header_line: req.header_line,
     };
-    let set = read_probes(&req.probes, &spec)?;
+    let read = read_probe_file(&req.probes, &spec)?;
+    let set = read.set;
     let domain = req
         .domain
         .or_else(|| set.bounding_box())
@@ -66,6 +77,8 @@ pub fn grid_probes(req: &GridRequest, output: &Path) -> Result<GridOutcome> {
     let inside = write_grid_csv(output, &grid, &values, req.normal.plane_axes())?;
     Ok(GridOutcome {
         points: set.points.len(),
+        preamble_lines: read.preamble_lines,
+        skipped_features: read.skipped_features,
         inside,
         grid,
     })

@@ -9,7 +9,8 @@
 //! `humidity`, `material_temp`, `time`. Other columns of the export are ignored.
 
 use crate::direction::Direction;
-use crate::error::{Error, Location, Result};
+use crate::error::{Error, Result};
+use crate::io::columns::{self as shared, Conversion, Entry, FieldTable, Units};
 use crate::io::{CsvRow, CsvTable};
 
 /// One mapped field.
@@ -27,27 +28,36 @@ enum Field {
     Time,
 }
 
-const FIELDS: &[(&str, Field, &str)] = &[
-    ("run", Field::Run, "run"),
-    ("direction", Field::Direction, "direction"),
-    ("target", Field::Target, "target_mm"),
-    ("actual", Field::Actual, "actual_mm"),
-    ("deviation", Field::Deviation, "deviation_um"),
-    ("air_temp", Field::AirTemp, "air_temp_c"),
-    ("pressure", Field::Pressure, "pressure_kpa"),
-    ("humidity", Field::Humidity, "humidity_pct"),
-    ("material_temp", Field::MaterialTemp, "material_temp_c"),
-    ("time", Field::Time, "time_s"),
+const FIELDS: &[(&str, Field)] = &[
+    ("run", Field::Run),
+    ("direction", Field::Direction),
+    ("target", Field::Target),
+    ("actual", Field::Actual),
+    ("deviation", Field::Deviation),
+    ("air_temp", Field::AirTemp),
+    ("pressure", Field::Pressure),
+    ("humidity", Field::Humidity),
+    ("material_temp", Field::MaterialTemp),
+    ("time", Field::Time),
 ];
 
-/// A value in `unit` → the run file's unit: `v * scale + offset`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Conversion {
-    scale: f64,
-    offset: f64,
+/// The run file's column of a field.
+fn canonical(field: Field) -> &'static str {
+    match field {
+        Field::Run => "run",
+        Field::Direction => "direction",
+        Field::Target => "target_mm",
+        Field::Actual => "actual_mm",
+        Field::Deviation => "deviation_um",
+        Field::AirTemp => "air_temp_c",
+        Field::Pressure => "pressure_kpa",
+        Field::Humidity => "humidity_pct",
+        Field::MaterialTemp => "material_temp_c",
+        Field::Time => "time_s",
+    }
 }
 
-fn units(field: Field) -> &'static [(&'static str, f64, f64)] {
+fn units(field: Field) -> Units {
     match field {
         Field::Target | Field::Actual => &[
             ("mm", 1.0, 0.0),
@@ -89,100 +99,31 @@ fn units(field: Field) -> &'static [(&'static str, f64, f64)] {
     }
 }
 
-/// Where a field's column is, as given.
-#[derive(Debug, Clone, PartialEq)]
-enum ColumnRef {
-    Name(String),
-    Index(usize),
-}
-
-/// One `FIELD=COLUMN[unit]` of a mapping.
-#[derive(Debug, Clone, PartialEq)]
-struct Entry {
-    field: Field,
-    canonical: &'static str,
-    column: ColumnRef,
-    /// The text after `=`, for messages.
-    text: String,
-    /// A unit in brackets at the end of the text, if it names a unit of the field.
-    unit: Option<(String, Conversion)>,
-}
+const TABLE: FieldTable<Field> = FieldTable {
+    fields: FIELDS,
+    units,
+    usage: "write --columns target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)",
+    flag: "--columns",
+};
 
 /// A parsed `--columns` mapping.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColumnMap {
-    entries: Vec<Entry>,
-}
-
-fn spec_error(message: String) -> Error {
-    Error::usage(
-        message,
-        "write --columns target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)",
-    )
-}
-
-/// `text` split into (column, unit) when it ends with `[unit]`.
-fn split_unit(text: &str) -> Option<(&str, &str)> {
-    let body = text.strip_suffix(']')?;
-    let open = body.rfind('[')?;
-    Some((body[..open].trim(), body[open + 1..].trim()))
+    entries: Vec<Entry<Field>>,
 }
 
 impl ColumnMap {
     /// Parse `FIELD=COLUMN[unit],…`.
     pub fn parse(spec: &str) -> Result<ColumnMap> {
-        let mut entries: Vec<Entry> = Vec::new();
-        for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-            let (key, value) = part
-                .split_once('=')
-                .ok_or_else(|| spec_error(format!("'{part}' is not FIELD=COLUMN")))?;
-            let key = key.trim().to_ascii_lowercase();
-            let &(_, field, canonical) = FIELDS.iter().find(|f| f.0 == key).ok_or_else(|| {
-                let names: Vec<&str> = FIELDS.iter().map(|f| f.0).collect();
-                spec_error(format!(
-                    "'{key}' is not a field (fields: {})",
-                    names.join(", ")
-                ))
-            })?;
-            if entries.iter().any(|e| e.field == field) {
-                return Err(spec_error(format!("'{key}' is mapped twice")));
-            }
-            let value = value.trim();
-            if value.is_empty() {
-                return Err(spec_error(format!("'{key}=' names no column")));
-            }
-            let unit = match split_unit(value) {
-                Some((_, u)) => units(field)
-                    .iter()
-                    .find(|(name, ..)| *name == u)
-                    .map(|&(name, scale, offset)| (name.to_string(), Conversion { scale, offset })),
-                None => None,
-            };
-            let column = match value.parse::<usize>() {
-                Ok(0) => {
-                    return Err(spec_error(format!(
-                        "'{key}=0': columns are numbered from 1"
-                    )))
-                }
-                Ok(i) => ColumnRef::Index(i),
-                Err(_) => ColumnRef::Name(value.to_string()),
-            };
-            entries.push(Entry {
-                field,
-                canonical,
-                column,
-                text: value.to_string(),
-                unit,
-            });
-        }
+        let entries = shared::parse(spec, &TABLE)?;
         let has = |f: Field| entries.iter().any(|e| e.field == f);
         for (f, name) in [(Field::Target, "target"), (Field::Direction, "direction")] {
             if !has(f) {
-                return Err(spec_error(format!("the mapping has no '{name}'")));
+                return Err(TABLE.spec_error(format!("the mapping has no '{name}'")));
             }
         }
         if has(Field::Actual) == has(Field::Deviation) {
-            return Err(spec_error(
+            return Err(TABLE.spec_error(
                 "the mapping needs exactly one of 'actual' (position) or 'deviation' (actual - target)"
                     .into(),
             ));
@@ -191,73 +132,18 @@ impl ColumnMap {
     }
 }
 
-/// Resolve an entry to (column index, conversion) in `table`; a missing column names the file,
-/// the header line and the mapping.
-fn resolve(table: &CsvTable, e: &Entry) -> Result<(usize, Conversion)> {
-    let plain = Conversion {
-        scale: 1.0,
-        offset: 0.0,
-    };
-    let by_text = |text: &str| -> Option<usize> {
-        match text.parse::<usize>() {
-            Ok(i) if i >= 1 && i <= table.headers.len() => Some(i - 1),
-            Ok(_) => None,
-            Err(_) => table.column(text),
-        }
-    };
-    // `Error[mm]` with a column `Error`: the unit is declared; else the whole text is a header.
-    let before_unit = split_unit(&e.text).map(|(c, _)| c);
-    let found = match (&e.unit, before_unit.and_then(by_text)) {
-        (Some((_, conv)), Some(i)) => Some((i, *conv)),
-        _ => match &e.column {
-            ColumnRef::Index(i) => by_text(&i.to_string()).map(|c| (c, plain)),
-            ColumnRef::Name(n) => table
-                .column(n)
-                .map(|c| (c, e.unit.as_ref().map_or(plain, |u| u.1))),
-        },
-    };
-    if let (None, Some((_, u))) = (&found, split_unit(&e.text)) {
-        if e.unit.is_none() && table.column(&e.text).is_none() {
-            let known: Vec<&str> = units(e.field).iter().map(|u| u.0).collect();
-            return Err(spec_error(format!(
-                "'{u}' in '{}' is not a unit errmap knows for this field (known: {})",
-                e.text,
-                if known.is_empty() {
-                    "none, the field has no unit".to_string()
-                } else {
-                    known.join(", ")
-                }
-            )));
-        }
-    }
-    found.ok_or_else(|| {
-        let column = match &e.column {
-            ColumnRef::Index(i) => format!("#{i}"),
-            ColumnRef::Name(n) => n.clone(),
-        };
-        Error::input(
-            Location::cell(&table.path, 1, column),
-            format!(
-                "the mapped column '{}' for '{}' is not in the file (header has {} columns: {})",
-                e.text,
-                FIELDS.iter().find(|f| f.1 == e.field).map_or("", |f| f.0),
-                table.headers.len(),
-                table.headers.join(",")
-            ),
-            "fix --columns: name a header exactly as written, or give its 1-based number",
-        )
-    })
-}
-
 /// The export mapped onto a run file's columns and units; numbers are converted here, so every
 /// bad value is reported at the export's own line and column.
 pub(super) fn map_table(table: &CsvTable, map: &ColumnMap) -> Result<CsvTable> {
-    let resolved: Vec<(&Entry, usize, Conversion)> = map
+    let resolved: Vec<(&Entry<Field>, usize, Conversion)> = map
         .entries
         .iter()
-        .map(|e| resolve(table, e).map(|(c, conv)| (e, c, conv)))
+        .map(|e| shared::resolve(table, e, &TABLE).map(|(c, conv)| (e, c, conv)))
         .collect::<Result<_>>()?;
-    let mut headers: Vec<String> = resolved.iter().map(|r| r.0.canonical.to_string()).collect();
+    let mut headers: Vec<String> = resolved
+        .iter()
+        .map(|r| canonical(r.0.field).to_string())
+        .collect();
     let infer_runs = !map.entries.iter().any(|e| e.field == Field::Run);
     if infer_runs {
         headers.push("run".into());
@@ -305,7 +191,7 @@ fn cell(
         _ if text.is_empty() => String::new(),
         _ => {
             let v = table.f64(row, c)?;
-            format!("{}", v * conv.scale + conv.offset)
+            format!("{}", conv.apply(v))
         }
     })
 }
@@ -313,7 +199,7 @@ fn cell(
 /// Number the passes in file order: a pass ends where the direction changes or a target comes
 /// again; run k is the k-th pass of its direction.
 fn number_passes(
-    resolved: &[(&Entry, usize, Conversion)],
+    resolved: &[(&Entry<Field>, usize, Conversion)],
     rows: &mut [(u64, Vec<String>)],
 ) -> Result<()> {
     let pos = |f: Field| resolved.iter().position(|r| r.0.field == f);
@@ -345,6 +231,7 @@ fn number_passes(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::columns::ColumnRef;
 
     #[test]
     fn a_mapping_parses_names_indices_and_units() {

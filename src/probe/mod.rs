@@ -2,18 +2,26 @@
 //!
 //! A probe file is a CSV with a header: measured `x_mm,y_mm,z_mm`, the nominal point either as
 //! `nx_mm,ny_mm,nz_mm` per row or as one nominal plane along the normal axis
-//! ([`ProbeSpec::nominal_plane_mm`]), and an optional `id`. The error of a point is
-//! `E = measured − nominal` along the normal axis, in µm; the map coordinates `(u, v)` are the
-//! nominal coordinates along the two plane axes ([`Axis::plane_axes`]). See `docs/probe-files.md`.
+//! ([`ProbeSpec::nominal_plane_mm`]), and an optional `id`; or an instrument's CSV export read
+//! through a column mapping, DMIS output, or an XYZ / PLY point cloud ([`ProbeFormat`]). The
+//! error of a point is `E = measured − nominal` along the normal axis, or along the point's
+//! vector where the file gives one, in µm; the map coordinates `(u, v)` are the nominal
+//! coordinates along the two plane axes ([`Axis::plane_axes`]). See `docs/probe-files.md`.
 
 mod clean;
+mod cloud;
+mod columns;
+mod dmis;
 mod read;
 
 pub use clean::{
     reject_gross_errors, Cleaned, Rejected, DEFAULT_K_SIGMA, MIN_POINTS_TO_JUDGE, SIGMA_FLOOR_UM,
 };
+pub use columns::ProbeColumns;
 pub use read::{
-    read_probes, read_table, COLLINEAR_RELATIVE_TOLERANCE, PROBE_COLUMNS, REPEAT_TOLERANCE_MM,
+    detect_format, read_probe_file, read_probes, read_table, ProbeFormat, ProbeRead,
+    COLLINEAR_RELATIVE_TOLERANCE, MAX_VECTOR_ANGLE_DEG, PROBE_COLUMNS, REPEAT_TOLERANCE_MM,
+    VECTOR_NORM_TOLERANCE,
 };
 
 use crate::error::{Error, Result};
@@ -34,6 +42,12 @@ pub struct ProbeSpec {
     /// Plausibility bound: a deviation |measured − nominal| along the normal above this is an
     /// error that names the likely unit slip (default [`DEFAULT_MAX_DEVIATION_MM`]).
     pub max_deviation_mm: f64,
+    /// A column mapping for an instrument's CSV export (`x=X,y=Y,z=Z[um],…`, see
+    /// [`ProbeColumns`]); `None`: errmap's own columns.
+    pub columns: Option<String>,
+    /// 1-based line of a CSV file's header; `None`: the first line, or with a mapping the
+    /// first line naming every mapped column.
+    pub header_line: Option<u64>,
 }
 
 impl Default for ProbeSpec {
@@ -43,6 +57,8 @@ impl Default for ProbeSpec {
             nominal_plane_mm: None,
             domain: None,
             max_deviation_mm: DEFAULT_MAX_DEVIATION_MM,
+            columns: None,
+            header_line: None,
         }
     }
 }

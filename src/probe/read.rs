@@ -1,12 +1,14 @@
-//! Reading and validating probe files: columns, numbers, nominal, plausibility, domain; repeats of one nominal point merged; points that span no surface refused.
+//! Reading and validating probe files: the format, columns (errmap's or mapped), numbers, nominal, vectors, plausibility, domain; repeats of one nominal point merged; points that span no surface refused.
 
 use std::collections::HashMap;
 use std::path::Path;
 
+use super::columns::ProbeColumns;
 use super::{unit_slip_hint, ProbePoint, ProbeSet, ProbeSpec};
 use crate::error::{Error, Location, Result};
 use crate::geom::{Axis, Domain};
-use crate::io::{CsvRow, CsvTable};
+use crate::io::columns::{self as shared_columns, Conversion};
+use crate::io::{CsvRow, CsvTable, HeaderAt};
 
 /// Columns a probe file may have.
 pub const PROBE_COLUMNS: [&str; 7] = ["id", "x_mm", "y_mm", "z_mm", "nx_mm", "ny_mm", "nz_mm"];
@@ -22,40 +24,238 @@ pub const COLLINEAR_RELATIVE_TOLERANCE: f64 = 1e-6;
 const DOMAIN_TOLERANCE_MM: f64 = 1e-9;
 
 /// One row as read, before repeats are merged.
-struct Row {
-    id: Option<String>,
-    line: u64,
-    measured_mm: [f64; 3],
-    nominal_mm: [f64; 3],
+pub(super) struct Row {
+    pub(super) id: Option<String>,
+    pub(super) line: u64,
+    pub(super) measured_mm: [f64; 3],
+    pub(super) nominal_mm: [f64; 3],
+    /// Error of the row, µm: along the normal axis, or along the row's vector.
+    pub(super) e_um: f64,
 }
+
+/// A row's numbers as a reader found them, before the checks.
+pub(super) struct RawPoint {
+    pub(super) id: Option<String>,
+    pub(super) line: u64,
+    pub(super) measured_mm: [f64; 3],
+    pub(super) nominal_mm: [f64; 3],
+    /// The nominal surface normal (i, j, k) as written, if the file gives one.
+    pub(super) vector: Option<[f64; 3]>,
+}
+
+/// Where a row's problems are reported: the row, the measured coordinate along the normal,
+/// the vector, and a prefix for the message (a binary file's byte offset).
+pub(super) struct Place {
+    pub(super) row: Location,
+    pub(super) normal: Location,
+    pub(super) vector: Location,
+    pub(super) prefix: String,
+}
+
+impl Place {
+    /// Every problem at one line.
+    pub(super) fn line(path: &Path, line: u64) -> Place {
+        Place {
+            row: Location::line(path, line),
+            normal: Location::line(path, line),
+            vector: Location::line(path, line),
+            prefix: String::new(),
+        }
+    }
+}
+
+/// The point vectors (i, j, k) are unit vectors within this (|n| − 1); a CMM writes direction
+/// cosines to 4–6 decimals, angles or a zero vector are far off.
+pub const VECTOR_NORM_TOLERANCE: f64 = 0.01;
+
+/// Largest angle, degrees, between a point's vector and the map's normal axis (either sense).
+pub const MAX_VECTOR_ANGLE_DEG: f64 = 5.0;
 
 /// Read and validate a probe file: columns, numbers, nominal, domain; repeats of one nominal
 /// point (same nominal within [`REPEAT_TOLERANCE_MM`], or same `id`) are averaged. Points keep
-/// the order of their first row.
+/// the order of their first row. The format follows from the file ([`detect_format`]).
 pub fn read_probes(path: &Path, spec: &ProbeSpec) -> Result<ProbeSet> {
-    let table = CsvTable::read(path)?;
-    read_table(&table, spec)
+    read_probe_file(path, spec).map(|r| r.set)
 }
 
-/// [`read_probes`] on a table already read.
-pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
-    let path = &table.path;
-    table.reject_unknown(&PROBE_COLUMNS)?;
-    let columns = Columns {
-        measured: [
-            table.require("x_mm")?,
-            table.require("y_mm")?,
-            table.require("z_mm")?,
-        ],
-        nominal: nominal_columns(table, spec)?,
-        id: table.column("id"),
+/// What [`read_probe_file`] read besides the points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProbeRead {
+    pub set: ProbeSet,
+    pub format: ProbeFormat,
+    /// Lines with text before a CSV export's header, skipped.
+    pub preamble_lines: usize,
+    /// DMIS features other than points (planes, circles …), skipped.
+    pub skipped_features: usize,
+}
+
+/// [`read_probes`] with what was skipped on the way.
+pub fn read_probe_file(path: &Path, spec: &ProbeSpec) -> Result<ProbeRead> {
+    let format = detect_format(path)?;
+    if format != ProbeFormat::Csv {
+        let given = match (&spec.columns, spec.header_line) {
+            (Some(_), _) => Some("a column mapping (--columns)"),
+            (None, Some(_)) => Some("a header line (--header-line)"),
+            (None, None) => None,
+        };
+        if let Some(given) = given {
+            return Err(Error::usage(
+                format!(
+                    "{} is a {} file: {given} applies to CSV probe files only",
+                    path.display(),
+                    format.name()
+                ),
+                "leave the column mapping and header line out for DMIS, XYZ and PLY files",
+            ));
+        }
+    }
+    let (rows, preamble_lines, skipped_features) = match format {
+        ProbeFormat::Csv => {
+            let table = read_csv(path, spec)?;
+            (csv_rows(&table, spec)?, table.preamble_lines, 0)
+        }
+        ProbeFormat::Dmis => {
+            let (rows, skipped) = super::dmis::read(path, spec)?;
+            (rows, 0, skipped)
+        }
+        ProbeFormat::Xyz => (super::cloud::read_xyz(path, spec)?, 0, 0),
+        ProbeFormat::Ply => (super::cloud::read_ply(path, spec)?, 0, 0),
     };
-    let rows = table
+    Ok(ProbeRead {
+        set: finish(path, &rows, spec)?,
+        format,
+        preamble_lines,
+        skipped_features,
+    })
+}
+
+/// The formats a probe file may have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProbeFormat {
+    /// errmap's columns, or an export read through a column mapping.
+    Csv,
+    /// DMIS (ISO 22093) output: `F(label)=FEAT/POINT,…` nominals and `FA(label)=…` actuals.
+    Dmis,
+    /// ASCII point cloud: `x y z` per line.
+    Xyz,
+    /// PLY point cloud (ASCII or binary).
+    Ply,
+}
+
+impl ProbeFormat {
+    pub fn name(self) -> &'static str {
+        match self {
+            ProbeFormat::Csv => "CSV",
+            ProbeFormat::Dmis => "DMIS",
+            ProbeFormat::Xyz => "XYZ",
+            ProbeFormat::Ply => "PLY",
+        }
+    }
+}
+
+/// The format of a probe file: by extension (`.dmi`, `.dms`, `.dmis`; `.ply`; `.xyz`), else by
+/// content (a PLY file starts with the line `ply`; a DMIS file's first line that is not blank
+/// or a `$$` comment starts with `DMISMN/`, `F(` or `FA(`), else CSV.
+pub fn detect_format(path: &Path) -> Result<ProbeFormat> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("dmi" | "dms" | "dmis") => return Ok(ProbeFormat::Dmis),
+        Some("ply") => return Ok(ProbeFormat::Ply),
+        Some("xyz") => return Ok(ProbeFormat::Xyz),
+        _ => {}
+    }
+    let mut head = Vec::with_capacity(4096);
+    {
+        use std::io::Read;
+        let file = crate::io::open(path)?;
+        file.take(4096)
+            .read_to_end(&mut head)
+            .map_err(|e| Error::read(path, e))?;
+    }
+    if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
+        return Ok(ProbeFormat::Ply);
+    }
+    let text = String::from_utf8_lossy(&head);
+    let first = text
+        .lines()
+        .map(|l| l.trim_start_matches('\u{feff}').trim())
+        .find(|l| !l.is_empty() && !l.starts_with("$$"));
+    if let Some(line) = first {
+        let upper = line.to_ascii_uppercase();
+        if upper.starts_with("DMISMN/") || upper.starts_with("F(") || upper.starts_with("FA(") {
+            return Ok(ProbeFormat::Dmis);
+        }
+    }
+    Ok(ProbeFormat::Csv)
+}
+
+/// A CSV probe file: from its first line, or from the header the mapping or
+/// `--header-line` finds.
+fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
+    let columns = spec
+        .columns
+        .as_deref()
+        .map(ProbeColumns::parse)
+        .transpose()?;
+    match (spec.header_line, &columns) {
+        (Some(0), _) => Err(Error::usage(
+            "--header-line 0: lines are numbered from 1",
+            "give the 1-based line of the header, as an editor shows it",
+        )),
+        (Some(n), _) => CsvTable::read_with_header(
+            path,
+            HeaderAt::Line(n),
+            "give the 1-based line of the header (--header-line, or header_line in the job)",
+        ),
+        (None, Some(map)) => CsvTable::read_with_header(
+            path,
+            HeaderAt::First(&|cells: &[String]| map.is_header(cells)),
+            &format!(
+                "no line names all of the mapped columns ({}): check each name against the export's header as written, or give the header's line with --header-line N (header_line in the job) to see which is missing",
+                map.columns_named()
+            ),
+        ),
+        (None, None) => CsvTable::read(path),
+    }
+}
+
+/// [`read_probes`] on a table already read (CSV, errmap's columns or `spec.columns`).
+pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
+    let rows = csv_rows(table, spec)?;
+    finish(&table.path, &rows, spec)
+}
+
+/// The checked rows of a CSV table.
+fn csv_rows(table: &CsvTable, spec: &ProbeSpec) -> Result<Vec<Row>> {
+    let columns = match spec.columns.as_deref() {
+        Some(text) => mapped_columns(table, &ProbeColumns::parse(text)?, spec)?,
+        None => {
+            table.reject_unknown(&PROBE_COLUMNS)?;
+            let plain = |c| (c, Conversion::IDENTITY);
+            Columns {
+                measured: [
+                    plain(table.require("x_mm")?),
+                    plain(table.require("y_mm")?),
+                    plain(table.require("z_mm")?),
+                ],
+                nominal: nominal_columns(table, spec)?.map(|cols| cols.map(plain)),
+                vector: None,
+                id: table.column("id"),
+            }
+        }
+    };
+    table
         .rows
         .iter()
         .map(|row| read_row(table, row, &columns, spec))
-        .collect::<Result<Vec<Row>>>()?;
-    let points = merge_repeats(&rows, spec.normal);
+        .collect()
+}
+
+/// Refuses fewer than 3 points after averaging and points on one line; the set otherwise.
+fn finish(path: &Path, rows: &[Row], spec: &ProbeSpec) -> Result<ProbeSet> {
+    let points = merge_repeats(rows, spec.normal);
     if points.len() < 3 {
         return Err(Error::input(
             Location::file(path),
@@ -70,20 +270,76 @@ pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
     let (ua, va) = spec.normal.plane_axes();
     check_not_collinear(path, &points, ua, va)?;
     Ok(ProbeSet {
-        path: path.clone(),
+        path: path.to_path_buf(),
         normal: spec.normal,
         points,
     })
 }
 
-/// Where a probe file's fields are: measured and nominal `[x, y, z]`, and `id`.
+/// Where a probe file's fields are (with the unit conversion of each coordinate): measured and
+/// nominal `[x, y, z]`, the vector `[i, j, k]`, and `id`.
 struct Columns {
-    measured: [usize; 3],
+    measured: [(usize, Conversion); 3],
     /// `None`: the nominal is the spec's nominal plane.
-    nominal: Option<[usize; 3]>,
+    nominal: Option<[(usize, Conversion); 3]>,
+    vector: Option<[usize; 3]>,
     id: Option<usize>,
 }
 
+/// The columns of a mapped export; with no nominal mapped, the spec must give a nominal plane.
+fn mapped_columns(table: &CsvTable, map: &ProbeColumns, spec: &ProbeSpec) -> Result<Columns> {
+    use super::columns::Field;
+    let at = |f: Field| -> Result<Option<(usize, Conversion)>> {
+        map.entry(f)
+            .map(|e| shared_columns::resolve(table, e, &super::columns::TABLE))
+            .transpose()
+    };
+    let need = |f: Field| -> Result<(usize, Conversion)> {
+        at(f)?.ok_or_else(|| Error::Internal("a parsed probe mapping lacks x, y or z".into()))
+    };
+    let measured = [need(Field::X)?, need(Field::Y)?, need(Field::Z)?];
+    let nominal = match (at(Field::Nx)?, at(Field::Ny)?, at(Field::Nz)?) {
+        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+        _ => None,
+    };
+    let vector = match (at(Field::I)?, at(Field::J)?, at(Field::K)?) {
+        (Some(a), Some(b), Some(c)) => Some([a.0, b.0, c.0]),
+        _ => None,
+    };
+    if nominal.is_none() {
+        check_plane(
+            &table.path,
+            table.header_line,
+            spec,
+            "the mapping has no nx,ny,nz",
+        )?;
+    }
+    Ok(Columns {
+        measured,
+        nominal,
+        vector,
+        id: at(Field::Id)?.map(|c| c.0),
+    })
+}
+
+/// A file without nominal points needs a finite nominal plane; `what` says what is missing.
+pub(super) fn check_plane(path: &Path, line: u64, spec: &ProbeSpec, what: &str) -> Result<f64> {
+    match spec.nominal_plane_mm {
+        None => Err(Error::input(
+            Location::line(path, line),
+            format!("no nominal: {what} and no nominal plane was given"),
+            format!(
+                "give the nominal {} of the surface (--nominal-plane MM, or `nominal_plane_mm` in the job)",
+                spec.normal.name()
+            ),
+        )),
+        Some(plane) if !plane.is_finite() => Err(Error::usage(
+            format!("nominal plane {plane} mm is not a finite number"),
+            "give the nominal coordinate of the surface in mm, e.g. 30",
+        )),
+        Some(plane) => Ok(plane),
+    }
+}
 /// The nominal columns (all three or none); with none, the spec must give a finite nominal
 /// plane.
 fn nominal_columns(table: &CsvTable, spec: &ProbeSpec) -> Result<Option<[usize; 3]>> {
@@ -110,7 +366,7 @@ fn nominal_columns(table: &CsvTable, spec: &ProbeSpec) -> Result<Option<[usize; 
                 .filter(|n| !present.contains(n))
                 .collect();
             return Err(Error::input(
-                Location::line(path, 1),
+                Location::line(path, table.header_line),
                 format!(
                     "nominal columns are incomplete: {} present, {} missing",
                     present.join(","),
@@ -122,7 +378,7 @@ fn nominal_columns(table: &CsvTable, spec: &ProbeSpec) -> Result<Option<[usize; 
     }
     match spec.nominal_plane_mm {
         None => Err(Error::input(
-            Location::line(path, 1),
+            Location::line(path, table.header_line),
             "no nominal: the file has no nx_mm,ny_mm,nz_mm columns and no nominal plane was given",
             format!(
                 "add nominal columns, or give the nominal {} of the surface (--nominal-plane MM, or `nominal_plane_mm` in the job)",
@@ -137,61 +393,140 @@ fn nominal_columns(table: &CsvTable, spec: &ProbeSpec) -> Result<Option<[usize; 
     }
 }
 
-/// One data row: its numbers, checked against the plausibility bound and the domain.
+/// One data row of a CSV table: its numbers (converted to mm), then [`point_row`].
 fn read_row(table: &CsvTable, row: &CsvRow, columns: &Columns, spec: &ProbeSpec) -> Result<Row> {
     let mut measured_mm = [0.0; 3];
-    for (k, &c) in columns.measured.iter().enumerate() {
-        measured_mm[k] = table.f64(row, c)?;
+    for (k, &(c, conv)) in columns.measured.iter().enumerate() {
+        measured_mm[k] = conv.apply(table.f64(row, c)?);
     }
     let nominal_mm = match columns.nominal {
         Some(cols) => {
             let mut nominal = [0.0; 3];
-            for (k, &c) in cols.iter().enumerate() {
-                nominal[k] = table.f64(row, c)?;
+            for (k, &(c, conv)) in cols.iter().enumerate() {
+                nominal[k] = conv.apply(table.f64(row, c)?);
             }
             nominal
         }
-        None => {
-            let mut nominal = measured_mm;
-            nominal[spec.normal.index()] = spec.nominal_plane_mm.unwrap_or(0.0);
-            nominal
-        }
+        None => plane_nominal(measured_mm, spec),
     };
-    let normal_col = columns.measured[spec.normal.index()];
-    check_deviation(table, row, normal_col, measured_mm, nominal_mm, spec)?;
-    if let Some(domain) = &spec.domain {
-        check_in_domain(table, row, nominal_mm, domain, spec.normal)?;
-    }
+    let vector = match columns.vector {
+        Some(cols) => {
+            let mut v = [0.0; 3];
+            for (k, &c) in cols.iter().enumerate() {
+                v[k] = table.f64(row, c)?;
+            }
+            Some(v)
+        }
+        None => None,
+    };
     let id = columns
         .id
         .map(|c| table.text(row, c).to_string())
         .filter(|s| !s.is_empty());
-    Ok(Row {
+    let normal_col = columns.measured[spec.normal.index()].0;
+    let place = Place {
+        row: Location::line(&table.path, row.line),
+        normal: Location::cell(&table.path, row.line, table.headers[normal_col].clone()),
+        vector: Location::line(&table.path, row.line),
+        prefix: String::new(),
+    };
+    let raw = RawPoint {
         id,
         line: row.line,
         measured_mm,
         nominal_mm,
+        vector,
+    };
+    point_row(raw, &place, spec)
+}
+
+/// The nominal of a point of a file without nominal points: the measured point with its
+/// coordinate along the normal set to the nominal plane.
+pub(super) fn plane_nominal(measured_mm: [f64; 3], spec: &ProbeSpec) -> [f64; 3] {
+    let mut nominal = measured_mm;
+    nominal[spec.normal.index()] = spec.nominal_plane_mm.unwrap_or(0.0);
+    nominal
+}
+
+/// A point checked: its vector (a unit vector within [`VECTOR_NORM_TOLERANCE`], within
+/// [`MAX_VECTOR_ANGLE_DEG`] of the normal axis), its error against the plausibility bound, its
+/// nominal against the domain.
+pub(super) fn point_row(raw: RawPoint, place: &Place, spec: &ProbeSpec) -> Result<Row> {
+    let e_mm = match raw.vector {
+        None => check_deviation(place, raw.measured_mm, raw.nominal_mm, spec)?,
+        Some(v) => {
+            let unit = check_vector(place, v, spec.normal)?;
+            check_deviation_along(place, raw.measured_mm, raw.nominal_mm, unit, spec)?
+        }
+    };
+    if let Some(domain) = &spec.domain {
+        check_in_domain(place, raw.nominal_mm, domain, spec.normal)?;
+    }
+    Ok(Row {
+        id: raw.id,
+        line: raw.line,
+        measured_mm: raw.measured_mm,
+        nominal_mm: raw.nominal_mm,
+        e_um: e_mm * 1000.0,
     })
 }
 
+/// The point's vector as a unit vector pointing to the + side of the normal axis; refused when
+/// it is not a unit vector or is more than [`MAX_VECTOR_ANGLE_DEG`] off the axis.
+fn check_vector(place: &Place, v: [f64; 3], normal: Axis) -> Result<[f64; 3]> {
+    let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let [i, j, k] = v;
+    if !(norm.is_finite() && (norm - 1.0).abs() <= VECTOR_NORM_TOLERANCE) {
+        return Err(Error::input(
+            place.vector.clone(),
+            format!(
+                "{}the vector ({i}, {j}, {k}) has length {norm}, not 1 (within {VECTOR_NORM_TOLERANCE})",
+                place.prefix
+            ),
+            "i, j, k are the direction cosines of the nominal surface normal (e.g. 0,0,1 on a floor); export cosines, not angles, and no zero vector",
+        ));
+    }
+    let unit = [i / norm, j / norm, k / norm];
+    let along = unit[normal.index()];
+    let angle_deg = along.abs().clamp(0.0, 1.0).acos().to_degrees();
+    if angle_deg > MAX_VECTOR_ANGLE_DEG {
+        let nearest = [Axis::X, Axis::Y, Axis::Z]
+            .into_iter()
+            .max_by(|a, b| unit[a.index()].abs().total_cmp(&unit[b.index()].abs()))
+            .unwrap_or(normal);
+        return Err(Error::input(
+            place.vector.clone(),
+            format!(
+                "{}the vector ({i}, {j}, {k}) is {angle_deg:.1}° from the normal axis {} (at most {MAX_VECTOR_ANGLE_DEG}°)",
+                place.prefix,
+                normal.name()
+            ),
+            format!(
+                "the map's normal axis must be the surface normal: the vector is nearest to {} (--normal {}), or the point is not on this surface",
+                nearest.name(),
+                nearest.name()
+            ),
+        ));
+    }
+    Ok(if along < 0.0 { unit.map(|c| -c) } else { unit })
+}
+
 /// Refuses a deviation along the normal that µm cannot represent or that is beyond the
-/// spec's plausibility bound (naming the likely unit slip).
+/// spec's plausibility bound (naming the likely unit slip); the deviation in mm.
 fn check_deviation(
-    table: &CsvTable,
-    row: &CsvRow,
-    normal_col: usize,
+    place: &Place,
     measured_mm: [f64; 3],
     nominal_mm: [f64; 3],
     spec: &ProbeSpec,
-) -> Result<()> {
+) -> Result<f64> {
     let n = spec.normal.index();
     // Two finite coordinates near ±f64::MAX can still differ by more than f64 holds.
     if !((measured_mm[n] - nominal_mm[n]) * 1000.0).is_finite() {
-        return Err(table.error_at(
-            row,
-            Some(normal_col),
+        return Err(Error::input(
+            place.normal.clone(),
             format!(
-                "the deviation {} − {} mm along {} is too large to represent in µm",
+                "{}the deviation {} − {} mm along {} is too large to represent in µm",
+                place.prefix,
                 measured_mm[n],
                 nominal_mm[n],
                 spec.normal.name()
@@ -201,11 +536,11 @@ fn check_deviation(
     }
     let deviation_mm = measured_mm[n] - nominal_mm[n];
     if deviation_mm.abs() > spec.max_deviation_mm {
-        return Err(table.error_at(
-            row,
-            Some(normal_col),
+        return Err(Error::input(
+            place.normal.clone(),
             format!(
-                "the deviation {deviation_mm} mm along {} (measured {} − nominal {}) is beyond the plausibility bound of {} mm",
+                "{}the deviation {deviation_mm} mm along {} (measured {} − nominal {}) is beyond the plausibility bound of {} mm",
+                place.prefix,
                 spec.normal.name(),
                 measured_mm[n],
                 nominal_mm[n],
@@ -219,13 +554,51 @@ fn check_deviation(
             ),
         ));
     }
-    Ok(())
+    Ok(deviation_mm)
+}
+
+/// [`check_deviation`] for the deviation along a point's unit vector: (measured − nominal) · n̂.
+fn check_deviation_along(
+    place: &Place,
+    measured_mm: [f64; 3],
+    nominal_mm: [f64; 3],
+    unit: [f64; 3],
+    spec: &ProbeSpec,
+) -> Result<f64> {
+    let d: Vec<f64> = (0..3).map(|k| measured_mm[k] - nominal_mm[k]).collect();
+    let deviation_mm = d[0] * unit[0] + d[1] * unit[1] + d[2] * unit[2];
+    if !(deviation_mm * 1000.0).is_finite() {
+        return Err(Error::input(
+            place.normal.clone(),
+            format!(
+                "{}the deviation along the point's vector is too large to represent in µm",
+                place.prefix
+            ),
+            "check the units: probe coordinates are in mm",
+        ));
+    }
+    if deviation_mm.abs() > spec.max_deviation_mm {
+        let n = spec.normal.index();
+        return Err(Error::input(
+            place.normal.clone(),
+            format!(
+                "{}the deviation {deviation_mm} mm along the point's vector (measured − nominal = ({}, {}, {}) mm) is beyond the plausibility bound of {} mm",
+                place.prefix, d[0], d[1], d[2], spec.max_deviation_mm
+            ),
+            unit_slip_hint(
+                measured_mm[n],
+                nominal_mm[n],
+                spec.max_deviation_mm,
+                "--max-deviation-mm, or max_deviation_mm in the job",
+            ),
+        ));
+    }
+    Ok(deviation_mm)
 }
 
 /// Refuses a point whose nominal lies outside `domain` (grown by [`DOMAIN_TOLERANCE_MM`]).
 fn check_in_domain(
-    table: &CsvTable,
-    row: &CsvRow,
+    place: &Place,
     nominal_mm: [f64; 3],
     domain: &Domain,
     normal: Axis,
@@ -242,12 +615,11 @@ fn check_in_domain(
         return Ok(());
     }
     let (un, vn) = (ua.name(), va.name());
-    Err(table.error_at(
-        row,
-        None,
+    Err(Error::input(
+        place.row.clone(),
         format!(
-            "point ({un} {u}, {vn} {v}) mm is outside the domain {un} {}..{}, {vn} {}..{} mm",
-            domain.u_min_mm, domain.u_max_mm, domain.v_min_mm, domain.v_max_mm
+            "{}point ({un} {u}, {vn} {v}) mm is outside the domain {un} {}..{}, {vn} {}..{} mm",
+            place.prefix, domain.u_min_mm, domain.u_max_mm, domain.v_min_mm, domain.v_max_mm
         ),
         "widen the domain or remove the point (is it from another part or set-up?)",
     ))
@@ -349,7 +721,6 @@ fn neighbours(by_cell: &HashMap<[i64; 3], Vec<usize>>, c: [i64; 3]) -> Vec<usize
 
 /// The point of one group of rows: coordinates and error averaged, the spread of the error.
 fn average_point(rows: &[Row], members: &[usize], normal: Axis) -> ProbePoint {
-    let n = normal.index();
     let (ua, va) = normal.plane_axes();
     let count = members.len() as f64;
     let mut measured_mm = [0.0; 3];
@@ -360,10 +731,7 @@ fn average_point(rows: &[Row], members: &[usize], normal: Axis) -> ProbePoint {
             nominal_mm[k] += rows[i].nominal_mm[k] / count;
         }
     }
-    let errors_um: Vec<f64> = members
-        .iter()
-        .map(|&i| (rows[i].measured_mm[n] - rows[i].nominal_mm[n]) * 1000.0)
-        .collect();
+    let errors_um: Vec<f64> = members.iter().map(|&i| rows[i].e_um).collect();
     let e_um = errors_um.iter().sum::<f64>() / count;
     let spread_um = if members.len() > 1 {
         (errors_um.iter().map(|e| (e - e_um).powi(2)).sum::<f64>() / (count - 1.0)).sqrt()

@@ -64,7 +64,46 @@ pub struct WebPlateSpec {
     /// `Some(n)`: the job starts each part from the family network and trains it n steps
     /// (`warm_start = "family"`).
     pub warm_epochs: Option<u32>,
+    /// How each part's probe file is written (errmap's CSV unless asked otherwise).
+    #[serde(default, skip_serializing_if = "ProbeFileFormat::is_csv")]
+    pub probe_format: ProbeFileFormat,
 }
+
+/// How the generator writes a part's probe file: errmap's CSV, or as an instrument would.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProbeFileFormat {
+    /// `id,x_mm,y_mm,z_mm` (errmap's columns).
+    #[default]
+    Csv,
+    /// A CMM's CSV export: a date line, then `POINT,X,Y,Z,I,J,K` (read with `columns`).
+    CmmCsv,
+    /// DMIS output: `F(P001)=FEAT/POINT,CART,…` nominals, then `FA(P001)=…` actuals.
+    Dmis,
+    /// ASCII point cloud `x y z`.
+    Xyz,
+    /// Binary little-endian PLY point cloud, double x, y, z.
+    Ply,
+}
+
+impl ProbeFileFormat {
+    fn is_csv(&self) -> bool {
+        *self == ProbeFileFormat::Csv
+    }
+
+    /// The probe file's extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            ProbeFileFormat::Csv | ProbeFileFormat::CmmCsv => "csv",
+            ProbeFileFormat::Dmis => "dmi",
+            ProbeFileFormat::Xyz => "xyz",
+            ProbeFileFormat::Ply => "ply",
+        }
+    }
+}
+
+/// The column mapping of the CMM export [`ProbeFileFormat::CmmCsv`].
+pub const CMM_CSV_COLUMNS: &str = "x=X,y=Y,z=Z,i=I,j=J,k=K,id=POINT";
 
 impl Default for WebPlateSpec {
     fn default() -> Self {
@@ -84,6 +123,7 @@ impl Default for WebPlateSpec {
             nominal_columns: false,
             epochs: 400,
             warm_epochs: None,
+            probe_format: ProbeFileFormat::Csv,
         }
     }
 }
@@ -328,8 +368,12 @@ pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Genera
             &mut rng,
             &mut outliers,
         );
-        let path = probes_dir.join(format!("{}.csv", truth.part));
-        io::write_atomic_bytes(&path, text.as_bytes())?;
+        let path = probes_dir.join(format!("{}.{}", truth.part, spec.probe_format.extension()));
+        let bytes = match spec.probe_format {
+            ProbeFileFormat::Csv => text.into_bytes(),
+            format => instrument_file(spec, &truth.part, &text, format),
+        };
+        io::write_atomic_bytes(&path, &bytes)?;
         probe_files.push(path);
         parts.push(truth);
     }
@@ -432,6 +476,78 @@ fn probe_csv(
     text
 }
 
+/// A part's probe file as an instrument writes it, from the rows of its errmap CSV `csv`
+/// (`id,x,y,z[,nx,ny,nz]`, numbers as written there, so every format carries the same values).
+fn instrument_file(spec: &WebPlateSpec, part: &str, csv: &str, format: ProbeFileFormat) -> Vec<u8> {
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').take(4).collect())
+        .collect();
+    let z0 = format!("{:.4}", spec.floor_z_mm);
+    let mut out = String::new();
+    match format {
+        ProbeFileFormat::Csv => return csv.as_bytes().to_vec(),
+        ProbeFileFormat::CmmCsv => {
+            let _ = writeln!(
+                out,
+                "Flatness export {} {part}, seed {}",
+                spec.family, spec.seed
+            );
+            out.push_str("POINT,X,Y,Z,I,J,K\n");
+            for r in &rows {
+                let _ = writeln!(out, "{},{},{},{},0,0,1", r[0], r[1], r[2], r[3]);
+            }
+        }
+        ProbeFileFormat::Dmis => {
+            let _ = writeln!(out, "DMISMN/'{} {part}',05.2", spec.family);
+            out.push_str("UNITS/MM,ANGDEC\n$$ nominals\n");
+            let mut seen: Vec<&str> = Vec::new();
+            for r in &rows {
+                if !seen.contains(&r[0]) {
+                    seen.push(r[0]);
+                    let _ = writeln!(
+                        out,
+                        "F({})=FEAT/POINT,CART,{},{},{z0},0,0,1",
+                        r[0], r[1], r[2]
+                    );
+                }
+            }
+            out.push_str("$$ actuals (a point measured twice has two)\n");
+            for r in &rows {
+                let _ = writeln!(
+                    out,
+                    "FA({})=FEAT/POINT,CART,{},{},{},0,0,1",
+                    r[0], r[1], r[2], r[3]
+                );
+            }
+            out.push_str("ENDFIL\n");
+        }
+        ProbeFileFormat::Xyz => {
+            let _ = writeln!(out, "# {} {part}: x y z, mm", spec.family);
+            for r in &rows {
+                let _ = writeln!(out, "{} {} {}", r[1], r[2], r[3]);
+            }
+        }
+        ProbeFileFormat::Ply => {
+            let mut bytes = format!(
+                "ply\nformat binary_little_endian 1.0\ncomment {} {part}, mm\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nend_header\n",
+                spec.family,
+                rows.len()
+            )
+            .into_bytes();
+            for r in &rows {
+                for v in &r[1..4] {
+                    let v: f64 = v.parse().unwrap_or(f64::NAN);
+                    bytes.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            return bytes;
+        }
+    }
+    out.into_bytes()
+}
+
 /// `truth.json`, `outliers.csv`, `finish.ngc`, `job.toml` and `README.md` of the family.
 fn write_family_files(spec: &WebPlateSpec, out: &Path, truth: &Truth, command: &str) -> Result<()> {
     io::write_json(&out.join("truth.json"), truth)?;
@@ -525,17 +641,21 @@ pub fn job_toml(spec: &WebPlateSpec) -> String {
         spec.origin_y_mm + spec.size_y_mm - WALL_MM,
     );
     let z = spec.floor_z_mm;
-    let nominal = if spec.nominal_columns {
+    let mut nominal = if spec.nominal_columns {
         "# nominal coordinates are per point (nx_mm,ny_mm,nz_mm columns)\n".to_string()
     } else {
         format!("nominal_plane_mm = {z:?}\n")
     };
+    if spec.probe_format == ProbeFileFormat::CmmCsv {
+        nominal.push_str(&format!("columns = \"{CMM_CSV_COLUMNS}\"\n"));
+    }
+    let probes = format!("probes/*.{}", spec.probe_format.extension());
     format!(
         "# Part family: the thin-walled web plate of seed 001 (generated by `errmap synth web-plate`).\n\
          family = \"{family}\"\n\
          normal = \"z\"\n\
          {nominal}\
-         probes = \"probes/*.csv\"\n\
+         probes = \"{probes}\"\n\
          # The web floor inside the walls; x_min, y_min, x_max, y_max in mm.\n\
          domain = [{x0}, {y0}, {x1}, {y1}]\n\
          grid_step_mm = 5.0\n\
