@@ -8,7 +8,7 @@
 use std::io::BufRead;
 use std::path::Path;
 
-use super::read::{check_plane, plane_nominal, point_row, Place, RawPoint, Row};
+use super::point::{check_plane, plane_nominal, point_row, Place, RawPoint, Row};
 use super::ProbeSpec;
 use crate::error::{Error, Location, Result};
 

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::io::BufRead;
 use std::path::Path;
 
-use super::read::{point_row, Place, RawPoint, Row};
+use super::point::{point_row, Place, RawPoint, Row};
 use super::ProbeSpec;
 use crate::error::{Error, Location, Result};
 

@@ -12,6 +12,7 @@ mod clean;
 mod cloud;
 mod columns;
 mod dmis;
+mod point;
 mod read;
 
 pub use clean::{

@@ -165,6 +165,34 @@ impl Arc {
         let n_quarter = (sweep / (PI / 2.0)).ceil();
         n_tol.max(n_len).max(n_quarter).clamp(1.0, 1e7) as usize
     }
+
+    /// The point at fraction `f` of the piece of this arc from `a` to `b` (both on it, less
+    /// than a full turn apart in its direction): angle and radius interpolated, the third axis
+    /// linear.
+    pub(crate) fn point_between(&self, a: &[f64; 3], b: &[f64; 3], f: f64) -> [f64; 3] {
+        let (a1, a2, ax) = self.plane.axes();
+        let (c1, c2) = self.centre;
+        let (ta, tb) = (
+            (a[a2] - c2).atan2(a[a1] - c1),
+            (b[a2] - c2).atan2(b[a1] - c1),
+        );
+        let tau = std::f64::consts::TAU;
+        let sweep = if self.sweep >= 0.0 {
+            (tb - ta).rem_euclid(tau)
+        } else {
+            -(ta - tb).rem_euclid(tau)
+        };
+        let (ra, rb) = (
+            (a[a1] - c1).hypot(a[a2] - c2),
+            (b[a1] - c1).hypot(b[a2] - c2),
+        );
+        let (t, r) = (ta + f * sweep, ra + f * (rb - ra));
+        let mut p = [0.0; 3];
+        p[a1] = c1 + r * t.cos();
+        p[a2] = c2 + r * t.sin();
+        p[ax] = a[ax] + f * (b[ax] - a[ax]);
+        p
+    }
 }
 
 #[cfg(test)]

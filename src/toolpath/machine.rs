@@ -5,6 +5,7 @@
 //! inside the zone and the measured domain), [`Machine::may_touch`] (could a path through
 //! partly known points reach them) and [`Machine::lose_position`].
 
+use super::arc::Arc;
 use super::reach::{self, MaybePoint};
 use super::CompensationSettings;
 use crate::geom::ErrorField;
@@ -12,6 +13,16 @@ use std::cell::Cell;
 
 /// Millimetres per inch.
 const MM_PER_INCH: f64 = 25.4;
+
+/// A point of a rewritten path (program units) and E there (`None`: left nominal).
+pub(crate) type Emitted = ([f64; 3], Option<f64>);
+
+/// Most times one arc piece under cutter radius compensation is halved before errmap refuses
+/// (2¹² pieces: a map that bends that sharply along an arc is not one errmap follows).
+const MAX_HALVINGS: u32 = 12;
+
+/// Fractions of a piece where its tool-axis coordinate is checked against P − E.
+const CHECKS: [f64; 3] = [0.25, 0.5, 0.75];
 
 /// Position, units, datum shift and zone of the program being read, and the map it is
 /// compensated with.
@@ -165,5 +176,61 @@ impl<'a> Machine<'a> {
         if self.unknown_since.is_none() {
             self.unknown_since = Some(line);
         }
+    }
+
+    /// The pieces of an arc under cutter radius compensation, where the arc must stay arcs:
+    /// each helical piece (end point and E, from `start`) is halved until E along it stays
+    /// within the chord tolerance of the linear change of E between its ends. `None` when a
+    /// piece needs more than [`MAX_HALVINGS`] halvings (the caller refuses in its dialect).
+    pub fn helical_pieces(
+        &self,
+        arc: &Arc,
+        start: [f64; 3],
+        pieces: &[Emitted],
+    ) -> Option<Vec<Emitted>> {
+        let mut out = Vec::with_capacity(pieces.len());
+        // The output stands at P − E at the start only after a compensated cut that ended
+        // there; otherwise the first piece carries the step and is not checked.
+        let e_start = self
+            .error_at(&start)
+            .filter(|e| (e + self.offset).abs() <= 1e-12 * (1.0 + e.abs()));
+        let mut prev = (start, e_start);
+        for &piece in pieces {
+            self.halve(arc, prev, piece, 0, &mut out)?;
+            prev = piece;
+        }
+        Some(out)
+    }
+
+    /// Push the points of the arc piece from `a` to `z` (z included), halving it as needed.
+    fn halve(
+        &self,
+        arc: &Arc,
+        a: Emitted,
+        z: Emitted,
+        depth: u32,
+        out: &mut Vec<Emitted>,
+    ) -> Option<()> {
+        let (Some(ea), Some(ez)) = (a.1, z.1) else {
+            out.push(z);
+            return Some(());
+        };
+        let tol = self.chord_tol();
+        let on = |f: f64| arc.point_between(&a.0, &z.0, f);
+        let fits = CHECKS.iter().all(|&f| {
+            self.error_at(&on(f))
+                .is_some_and(|e| ((ea + f * (ez - ea)) - e).abs() <= tol)
+        });
+        if fits {
+            out.push(z);
+            return Some(());
+        }
+        if depth >= MAX_HALVINGS {
+            return None;
+        }
+        let m = on(0.5);
+        let mid = (m, self.error_at(&m));
+        self.halve(arc, a, mid, depth + 1, out)?;
+        self.halve(arc, mid, z, depth + 1, out)
     }
 }

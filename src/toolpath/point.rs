@@ -13,3 +13,8 @@ pub(crate) fn lerp(a: &[f64; 3], b: &[f64; 3], t: f64) -> [f64; 3] {
         a[2] + t * (b[2] - a[2]),
     ]
 }
+
+/// The point when every coordinate of it is known.
+pub(crate) fn known(p: [Option<f64>; 3]) -> Option<[f64; 3]> {
+    Some([p[0]?, p[1]?, p[2]?])
+}

@@ -13,13 +13,6 @@ use super::super::lexer::{Line, TokenKind};
 use super::{lerp, MotionMode, Rewriter, AXES, W};
 use crate::error::{Error, Result};
 
-/// How often a helical piece is halved while its tool-axis coordinate strays more than
-/// `chord_tol` from P − E in between its ends.
-const MAX_HALVINGS: u32 = 12;
-
-/// Fractions of a piece where its tool-axis coordinate is checked against P − E.
-const CHECKS: [f64; 3] = [0.25, 0.5, 0.75];
-
 /// How a cut relates to cutter radius compensation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum CompMode {
@@ -107,7 +100,14 @@ impl<'a> Rewriter<'a> {
             }
         }
         if let Some(a) = arc.filter(|_| in_plane && mode == CompMode::Contour) {
-            pieces = self.halve_helices(line, a, s, &pieces)?;
+            pieces = self.m.helical_pieces(a, s, &pieces).ok_or_else(|| {
+                self.err(
+                    line,
+                    "X",
+                    "under cutter radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
+                    "raise --chord-tol, or post the arc as the tool-centre path (G40)",
+                )
+            })?;
         }
         if pieces.len() > 1 {
             if let Some(w) = words.iter().find(|w| w.letter == b'D') {
@@ -214,71 +214,6 @@ impl<'a> Rewriter<'a> {
         Ok(())
     }
 
-    /// Arc pieces whose two ends are compensated, halved until the helix (tool-axis coordinate
-    /// linear in angle) stays within `chord_tol` of P − E at the check points.
-    fn halve_helices(
-        &self,
-        line: &Line,
-        arc: &Arc,
-        s: [f64; 3],
-        pieces: &[([f64; 3], Option<f64>)],
-    ) -> Result<Vec<([f64; 3], Option<f64>)>> {
-        let tol = self.m.settings.chord_tol_in(self.m.inches);
-        let mut out = Vec::with_capacity(pieces.len());
-        // The output stands at P − E at the start only after a compensated cut that ended
-        // there; otherwise the first piece carries the step and is not checked.
-        let e_start = self
-            .m
-            .error_at(&s)
-            .filter(|e| (e + self.m.offset).abs() <= 1e-12 * (1.0 + e.abs()));
-        let mut prev = (s, e_start);
-        for &piece in pieces {
-            self.halve(line, arc, prev, piece, tol, 0, &mut out)?;
-            prev = piece;
-        }
-        Ok(out)
-    }
-
-    /// Push the points of the piece from `a` to `b` (b included), halving it as needed.
-    #[allow(clippy::too_many_arguments)]
-    fn halve(
-        &self,
-        line: &Line,
-        arc: &Arc,
-        a: ([f64; 3], Option<f64>),
-        b: ([f64; 3], Option<f64>),
-        tol: f64,
-        depth: u32,
-        out: &mut Vec<([f64; 3], Option<f64>)>,
-    ) -> Result<()> {
-        let (Some(ea), Some(eb)) = (a.1, b.1) else {
-            out.push(b);
-            return Ok(());
-        };
-        let on = |f: f64| on_arc(arc, &a.0, &b.0, f);
-        let fits = CHECKS.iter().all(|&f| {
-            self.m
-                .error_at(&on(f))
-                .is_some_and(|e| ((ea + f * (eb - ea)) - e).abs() <= tol)
-        });
-        if fits {
-            out.push(b);
-            return Ok(());
-        }
-        if depth >= MAX_HALVINGS {
-            return Err(self.err(
-                line,
-                "X",
-                "under cutter radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
-                "raise --chord-tol, or post the arc as the tool-centre path (G40)",
-            ));
-        }
-        let m = on(0.5);
-        let mid = (m, self.m.error_at(&m));
-        self.halve(line, arc, a, mid, tol, depth + 1, out)?;
-        self.halve(line, arc, mid, b, tol, depth + 1, out)
-    }
-
     /// The text to append to an unchanged move under cutter radius compensation that carries
     /// the return along the normal (` Z…`, in the line's own modes), instead of a block of its
     /// own; `None` when no return is due or the line cannot carry it (then `return_if_needed`
@@ -343,33 +278,6 @@ impl<'a> Rewriter<'a> {
             &format!("give this line an absolute {n}, or a move in the plane, or end the contour above the zone before it"),
         )
     }
-}
-
-/// The point at fraction `f` of the arc piece from `a` to `b` (both on `arc`, less than half a
-/// turn apart in its direction): angle and radius interpolated, the third axis linear.
-fn on_arc(arc: &Arc, a: &[f64; 3], b: &[f64; 3], f: f64) -> [f64; 3] {
-    let (a1, a2, ax) = arc.plane.axes();
-    let (c1, c2) = arc.centre;
-    let (ta, tb) = (
-        (a[a2] - c2).atan2(a[a1] - c1),
-        (b[a2] - c2).atan2(b[a1] - c1),
-    );
-    let tau = std::f64::consts::TAU;
-    let sweep = if arc.sweep >= 0.0 {
-        (tb - ta).rem_euclid(tau)
-    } else {
-        -(ta - tb).rem_euclid(tau)
-    };
-    let (ra, rb) = (
-        (a[a1] - c1).hypot(a[a2] - c2),
-        (b[a1] - c1).hypot(b[a2] - c2),
-    );
-    let (t, r) = (ta + f * sweep, ra + f * (rb - ra));
-    let mut p = [0.0; 3];
-    p[a1] = c1 + r * t.cos();
-    p[a2] = c2 + r * t.sin();
-    p[ax] = a[ax] + f * (b[ax] - a[ax]);
-    p
 }
 
 /// `/` at the start of a line: the control may skip it.

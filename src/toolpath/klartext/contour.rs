@@ -17,32 +17,14 @@ use crate::error::Result;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
-/// How often a helical piece is halved while its tool-axis coordinate strays more than
-/// `chord_tol` from P − E in between its ends.
-const MAX_HALVINGS: u32 = 12;
-
-/// Fractions of a piece where its tool-axis coordinate is checked against P − E.
-const CHECKS: [f64; 3] = [0.25, 0.5, 0.75];
-
 /// Decimals of an angle the TNC accepts (PA/IPA: ±99 999.9999°).
 const ANGLE_DECIMALS: usize = 4;
 
 /// M functions that act at the end of their block: they go with the last piece.
 const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
 
-/// How a cut relates to tool radius compensation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Comp {
-    /// No compensation: chords and steps as everywhere else.
-    Off,
-    /// RL/RR in force before and after the block: pieces that all move in the plane.
-    Contour,
-    /// The block switches RL/RR on or changes it, or ends it with R0: one block.
-    Transition,
-}
-
-/// A written point: P (the original's), and E there if compensated.
-type Emitted = ([f64; 3], Option<f64>);
+use super::super::machine::Emitted;
+use super::Comp;
 
 impl Kt<'_> {
     /// `RL` or `RR` when that compensation is known to be in force.
@@ -219,7 +201,15 @@ impl Kt<'_> {
             }
         }
         if let Some(a) = mv.arc.as_ref().filter(|_| in_plane) {
-            chosen = self.halve_helices(n, b, a, s, &chosen)?;
+            chosen = self.m.helical_pieces(a, s, &chosen).ok_or_else(|| {
+                self.err(
+                    n,
+                    b.head_col,
+                    &b.head,
+                    "under tool radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
+                    "raise --chord-tol, or post the arc as the tool-centre path (R0)",
+                )
+            })?;
         }
         self.write_contour(
             content,
@@ -295,72 +285,6 @@ impl Kt<'_> {
             }
         }
         Ok(())
-    }
-
-    /// Arc pieces whose two ends are compensated, halved until the helix (tool-axis coordinate
-    /// linear in angle) stays within `chord_tol` of P − E at the check points.
-    fn halve_helices(
-        &self,
-        n: u64,
-        b: &Block,
-        arc: &Arc,
-        s: [f64; 3],
-        pieces: &[Emitted],
-    ) -> Result<Vec<Emitted>> {
-        let mut out = Vec::with_capacity(pieces.len());
-        // The output stands at P − E at the start only after a compensated cut that ended
-        // there; otherwise the first piece carries the step and is not checked.
-        let e_start = self
-            .m
-            .error_at(&s)
-            .filter(|e| (e + self.m.offset).abs() <= 1e-12 * (1.0 + e.abs()));
-        let mut prev = (s, e_start);
-        for &piece in pieces {
-            self.halve(n, b, arc, prev, piece, 0, &mut out)?;
-            prev = piece;
-        }
-        Ok(out)
-    }
-
-    /// Push the points of the piece from `a` to `z` (z included), halving it as needed.
-    #[allow(clippy::too_many_arguments)]
-    fn halve(
-        &self,
-        n: u64,
-        b: &Block,
-        arc: &Arc,
-        a: Emitted,
-        z: Emitted,
-        depth: u32,
-        out: &mut Vec<Emitted>,
-    ) -> Result<()> {
-        let (Some(ea), Some(ez)) = (a.1, z.1) else {
-            out.push(z);
-            return Ok(());
-        };
-        let on = |f: f64| on_arc(arc, &a.0, &z.0, f);
-        let fits = CHECKS.iter().all(|&f| {
-            self.m
-                .error_at(&on(f))
-                .is_some_and(|e| ((ea + f * (ez - ea)) - e).abs() <= self.m.chord_tol())
-        });
-        if fits {
-            out.push(z);
-            return Ok(());
-        }
-        if depth >= MAX_HALVINGS {
-            return Err(self.err(
-                n,
-                b.head_col,
-                &b.head,
-                "under tool radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
-                "raise --chord-tol, or post the arc as the tool-centre path (R0)",
-            ));
-        }
-        let m = on(0.5);
-        let mid = (m, self.m.error_at(&m));
-        self.halve(n, b, arc, a, mid, depth + 1, out)?;
-        self.halve(n, b, arc, mid, z, depth + 1, out)
     }
 
     /// Write the pieces: `L X… Y… Z…` for a line, `CP IPA… IZ… DR±` about CC for an arc; the
@@ -580,31 +504,4 @@ fn signed(v: f64, d: usize) -> String {
     } else {
         format!("+{t}")
     }
-}
-
-/// The point at fraction `f` of the arc piece from `a` to `b` (both on `arc`, less than a full
-/// turn apart in its direction): angle and radius interpolated, the third axis linear.
-fn on_arc(arc: &Arc, a: &[f64; 3], b: &[f64; 3], f: f64) -> [f64; 3] {
-    let (a1, a2, ax) = arc.plane.axes();
-    let (c1, c2) = arc.centre;
-    let (ta, tb) = (
-        (a[a2] - c2).atan2(a[a1] - c1),
-        (b[a2] - c2).atan2(b[a1] - c1),
-    );
-    let tau = std::f64::consts::TAU;
-    let sweep = if arc.sweep >= 0.0 {
-        (tb - ta).rem_euclid(tau)
-    } else {
-        -(ta - tb).rem_euclid(tau)
-    };
-    let (ra, rb) = (
-        (a[a1] - c1).hypot(a[a2] - c2),
-        (b[a1] - c1).hypot(b[a2] - c2),
-    );
-    let (t, r) = (ta + f * sweep, ra + f * (rb - ra));
-    let mut p = [0.0; 3];
-    p[a1] = c1 + r * t.cos();
-    p[a2] = c2 + r * t.sin();
-    p[ax] = a[ax] + f * (b[ax] - a[ax]);
-    p
 }

@@ -4,7 +4,7 @@ use super::super::arc::{Arc, Plane};
 use super::super::dialect::Motion;
 use super::super::TracedMove;
 use super::block::{Block, Value};
-use super::contour::Comp;
+use super::Comp;
 use super::{Frame, Kt, Point};
 use crate::error::Result;
 
@@ -948,7 +948,4 @@ pub(super) fn is_m_block(head: &str) -> bool {
     super::block::is_m_head(head)
 }
 
-/// All three coordinates, if known.
-pub(super) fn known(p: Point) -> Option<[f64; 3]> {
-    Some([p[0]?, p[1]?, p[2]?])
-}
+pub(super) use super::super::point::known;

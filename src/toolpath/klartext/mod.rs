@@ -60,6 +60,17 @@ pub(crate) fn applies(text: &str, source: &Path, given: Option<Dialect>) -> bool
         && dialect::resolve(text, source, given).ok() == Some(Dialect::Heidenhain)
 }
 
+/// How a cut relates to tool radius compensation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Comp {
+    /// No compensation: chords and steps as everywhere else.
+    Off,
+    /// RL/RR in force before and after the block: pieces that all move in the plane.
+    Contour,
+    /// The block switches RL/RR on or changes it, or ends it with R0: one block.
+    Transition,
+}
+
 /// A line of the output: `before` + `number` + `after` + `term`; numbered lines are renumbered
 /// when the output has a different number of blocks than the input.
 #[derive(Debug)]
