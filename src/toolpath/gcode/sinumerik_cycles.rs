@@ -233,7 +233,9 @@ fn absolute_or_relative(
     match (call.arg(abs), call.arg(rel)) {
         (a, Arg::Num(r)) if *r != 0.0 => {
             if *r < 0.0 {
-                return Err(format!("{rel_name} {r} has a sign (the manual gives it without)"));
+                return Err(format!(
+                    "{rel_name} {r} has a sign (the manual gives it without)"
+                ));
             }
             let depth = rfp - r;
             match a {
@@ -413,7 +415,9 @@ impl<'a> Rewriter<'a> {
             Err(self.err(
                 line,
                 &name,
-                format!("standard cycle {name} in the compensation zone cannot be compensated: {why}"),
+                format!(
+                    "standard cycle {name} in the compensation zone cannot be compensated: {why}"
+                ),
                 hint,
             ))
         };

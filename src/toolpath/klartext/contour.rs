@@ -311,7 +311,8 @@ impl Kt<'_> {
         // The output stands at P − E at the start only after a compensated cut that ended
         // there; otherwise the first piece carries the step and is not checked.
         let e_start = self
-            .m.error_at(&s)
+            .m
+            .error_at(&s)
             .filter(|e| (e + self.m.offset).abs() <= 1e-12 * (1.0 + e.abs()));
         let mut prev = (s, e_start);
         for &piece in pieces {
@@ -339,7 +340,8 @@ impl Kt<'_> {
         };
         let on = |f: f64| on_arc(arc, &a.0, &z.0, f);
         let fits = CHECKS.iter().all(|&f| {
-            self.m.error_at(&on(f))
+            self.m
+                .error_at(&on(f))
                 .is_some_and(|e| ((ea + f * (ez - ea)) - e).abs() <= self.m.chord_tol())
         });
         if fits {
@@ -391,8 +393,10 @@ impl Kt<'_> {
             let mut q = *p;
             if let Some(e) = e {
                 q[k] -= e;
-                self.report.max_abs_error_mm =
-                    self.report.max_abs_error_mm.max(e.abs() * self.m.scale_mm());
+                self.report.max_abs_error_mm = self
+                    .report
+                    .max_abs_error_mm
+                    .max(e.abs() * self.m.scale_mm());
                 self.report.points_compensated += 1;
             }
             last_e = *e;

@@ -152,7 +152,8 @@ impl Kt<'_> {
         // with its bottom outside it is not compensated and refused (its walls would be).
         let (lo, hi) = (start.min(bottom), start.max(bottom));
         let through = self
-            .m.zone_now()
+            .m
+            .zone_now()
             .is_some_and(|(zl, zh)| zl <= hi && zh >= lo && !(zl..=zh).contains(&bottom));
         let Some(e) = e else {
             if through && self.m.compensable(x, y) {
