@@ -327,7 +327,7 @@ impl<'a> Rewriter<'a> {
             return Err(self.err(
                 line,
                 &call.name,
-                format!("under `MCALL {}` (line {}) every block with path motion drills a hole, and errmap would write this block as other blocks (a compensated cut or a return to the original path)", call.text, call.line),
+                format!("under `MCALL {}` (line {}) every block with path motion drills a hole (the canned cycle runs after it), and errmap would write this block as other blocks (a compensated cut or a return to the original path)", call.text, call.line),
                 "end the modal call (MCALL) before the cuts in the compensation zone, or move the zone away",
             ));
         }
@@ -416,7 +416,7 @@ impl<'a> Rewriter<'a> {
                 line,
                 &name,
                 format!(
-                    "standard cycle {name} in the compensation zone cannot be compensated: {why}"
+                    "canned cycle {name} in the compensation zone cannot be compensated: {why}"
                 ),
                 hint,
             ))
@@ -478,7 +478,7 @@ impl<'a> Rewriter<'a> {
             return Err(self.err(
                 line,
                 &name,
-                format!("standard cycle {name}: the hole at {}{} {}{} ends at {}{} in the compensation zone; errmap moves a hole's RFP and DP by −E only when asked", AXES[a1] as char, b[a1], AXES[a2] as char, b[a2], AXES[ax] as char, l.bottom),
+                format!("canned cycle {name}: the hole at {}{} {}{} ends at {}{} in the compensation zone; errmap moves a hole's RFP and DP by −E only when asked", AXES[a1] as char, b[a1], AXES[a2] as char, b[a2], AXES[ax] as char, l.bottom),
                 "pass --compensate-holes (job key [toolpaths] compensate_holes) to move each hole's RFP and DP by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away",
             ));
         }
