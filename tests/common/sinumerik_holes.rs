@@ -61,7 +61,7 @@ fn hole(pos: [f64; 3], name: &str, args: &[String]) -> Result<Hole, String> {
     let others = args
         .iter()
         .enumerate()
-        .filter(|(i, _)| ![1, 3].contains(i) && !(name == "CYCLE83" && *i == 5))
+        .filter(|(i, _)| !([1, 3].contains(i) || (name == "CYCLE83" && *i == 5)))
         .map(|(_, a)| a.clone())
         .collect();
     Ok(Hole {
