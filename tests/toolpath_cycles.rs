@@ -4,6 +4,8 @@
 mod klartext_trace;
 #[path = "common/path_judge.rs"]
 mod path_judge;
+#[path = "common/sinumerik_holes.rs"]
+mod sinumerik_holes;
 
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect};
@@ -345,4 +347,201 @@ fn klartext_cycle_1_holes_in_the_zone_are_refused_without_the_flag() {
         err.contains("peck.h:10") && err.contains("its 1.2 DEPTH is `Q5`, not a number"),
         "{err}"
     );
+}
+
+// --- Sinumerik standard cycles (CYCLE81–89, CYCLE840, MCALL, CYCLE832) ---
+
+fn sinumerik(
+    text: &str,
+    holes: bool,
+) -> Result<(String, errmap::toolpath::CompensationReport), String> {
+    let s = CompensationSettings {
+        dialect: Some(Dialect::Sinumerik),
+        ..settings(holes)
+    };
+    compensate_gcode(text, Path::new("h.mpf"), &Tilted, &s).map_err(|e| e.to_string())
+}
+
+/// The judge: the output drills the original's holes at the same positions in the same order,
+/// each bottom and RFP moved by −E at its X, Y when `in_zone` says so (bottom in [−2, 0] and
+/// inside the measured domain), RTP and every other argument as written; the positioning blocks
+/// reach the same points.
+fn judge_holes(original: &str, output: &str) {
+    let a = sinumerik_holes::read(original).expect("original read");
+    let b = sinumerik_holes::read(output).expect("output read");
+    assert_eq!(a.positions.len(), b.positions.len(), "{output}");
+    for (p, q) in a.positions.iter().zip(&b.positions) {
+        for i in 0..3 {
+            assert!(
+                (p[i].is_nan() && q[i].is_nan()) || (p[i] - q[i]).abs() < 1e-9,
+                "{p:?} {q:?}\n{output}"
+            );
+        }
+    }
+    assert_eq!(a.holes.len(), b.holes.len(), "{output}");
+    for (h, k) in a.holes.iter().zip(&b.holes) {
+        let in_zone = (-2.0..=0.0).contains(&h.bottom) && h.x.abs() <= 100.0 && h.y.abs() <= 100.0;
+        let want = if in_zone { e(h.x, h.y) } else { 0.0 };
+        assert_eq!(
+            (h.x, h.y, &h.cycle, h.rtp),
+            (k.x, k.y, &k.cycle, k.rtp),
+            "{output}"
+        );
+        assert!(
+            (k.bottom - (h.bottom - want)).abs() < 1e-4,
+            "{h:?} {k:?}\n{output}"
+        );
+        assert!(
+            (k.rfp - (h.rfp - want)).abs() < 1e-4,
+            "{h:?} {k:?}\n{output}"
+        );
+        assert_eq!(h.others, k.others, "{output}");
+    }
+}
+
+/// Holes at Z−1 (in the zone [−2, 0]) under one modal call; (150, 5) is outside the domain.
+const MCALL_HOLES: &str = "G17 G90 G71
+G0 X0 Y0 Z10
+MCALL CYCLE81(10, 0, 2, -1, 0)
+G0 X10 Y5
+X20 Y5
+X150 Y5
+X30 Y-5 ; last
+MCALL
+G0 Z50
+M30
+";
+
+#[test]
+fn sinumerik_mcall_cycle81_drills_each_hole_with_its_own_e() {
+    let (out, rep) = sinumerik(MCALL_HOLES, true).unwrap();
+    println!("{out}");
+    judge_holes(MCALL_HOLES, &out);
+    // E differs per hole (sloped map): each compensated hole has a modal call of its own,
+    // and the program's call is in force again after it.
+    assert!(out.contains("MCALL CYCLE81(10, -0.0325, 2, -1.0325, 0)\nG0 X10 Y5\nMCALL CYCLE81(10, 0, 2, -1, 0)\n"), "{out}");
+    assert!(
+        out.contains("MCALL CYCLE81(10, 0, 2, -1, 0)\nX150 Y5\n"),
+        "{out}"
+    );
+    assert_eq!(rep.points_compensated, 3);
+    assert!((rep.max_abs_error_mm - e(30.0, -5.0)).abs() < 1e-9);
+}
+
+#[test]
+fn sinumerik_direct_cycle81_in_and_out_of_the_zone() {
+    let text =
+        "G17 G90 G71\nG0 X10 Y5 Z10\nCYCLE81(10, 0, 2, -1)\nG0 X40 Y5\nCYCLE81(10, 5, 2, 3)\nM30\n";
+    let (out, _) = sinumerik(text, true).unwrap();
+    println!("{out}");
+    judge_holes(text, &out);
+    assert!(
+        out.contains("\nCYCLE81(10, -0.0325, 2, -1.0325)\n"),
+        "{out}"
+    );
+    // The second hole ends at Z3, above the zone: as written.
+    assert!(out.contains("\nCYCLE81(10, 5, 2, 3)\n"), "{out}");
+}
+
+#[test]
+fn sinumerik_cycle83_with_dpr_moves_rfp_and_keeps_dpr() {
+    // DPR 1 below RFP 0: bottom Z−1; DP empty stays empty, FDPR relative stays.
+    let text = "G17 G90 G71\nG0 X20 Y10 Z10\nCYCLE83(10, 0, 2, , 1, , 0.5, 0.2, 0, 0, 1, 0)\nM30\n";
+    let (out, _) = sinumerik(text, true).unwrap();
+    println!("{out}");
+    judge_holes(text, &out);
+    let rfp = -e(20.0, 10.0);
+    assert!(
+        out.contains(&format!(
+            "CYCLE83(10, {rfp:.4}, 2, , 1, , 0.5, 0.2, 0, 0, 1, 0)"
+        )),
+        "{out}"
+    );
+}
+
+#[test]
+fn sinumerik_holes_outside_the_zone_are_copied_byte_for_byte() {
+    let text = MCALL_HOLES
+        .replace("(10, 0, 2, -1, 0)", "(10, 5, 2, 3, 0)")
+        .replace('\n', "\r\n");
+    let (out, rep) = sinumerik(&text, false).unwrap();
+    assert_eq!(out, text);
+    assert_eq!(rep.moves_changed, 0);
+}
+
+#[test]
+fn sinumerik_cycles_in_the_zone_are_refused_where_errmap_cannot_be_exact() {
+    // No flag: the hole, its line and the flag named.
+    let err = sinumerik(MCALL_HOLES, false).unwrap_err();
+    assert!(err.contains("h.mpf:4"), "{err}");
+    assert!(
+        err.contains("CYCLE81: the hole at X10 Y5 ends at Z-1 in the compensation zone"),
+        "{err}"
+    );
+    assert!(err.contains("--compensate-holes"), "{err}");
+    let refused = |text: &str, phrase: &str| {
+        let err = sinumerik(text, true).unwrap_err();
+        assert!(err.contains(phrase), "{phrase}: {err}");
+        assert!(!err.contains("pass --compensate-holes"), "{err}");
+    };
+    let head = "G17 G90 G71\nG0 X10 Y5 Z10\n";
+    // A parameter that is not a number.
+    refused(
+        &format!("{head}R1=-1\nCYCLE81(10, 0, 2, R1)\n"),
+        "`R1` is not a plain number",
+    );
+    // RTP in the zone.
+    refused(
+        &format!("{head}CYCLE81(-0.5, -0.8, 0.1, -1)\n"),
+        "retraction plane RTP -0.5",
+    );
+    // G91.
+    refused(&format!("{head}G91\nCYCLE81(10, 0, 2, -1)\n"), "under G91");
+    // A mode of the 840D sl form errmap does not follow.
+    refused(
+        &format!("{head}CYCLE81(10, 0, 2, -1, 0, 0, 1)\n"),
+        "selects a mode",
+    );
+    // DP and DPR that disagree.
+    refused(
+        &format!("{head}CYCLE81(10, 0, 2, -1, 3)\n"),
+        "give different depths",
+    );
+    // A cut in the zone under MCALL would be split into blocks that each drill.
+    refused(
+        &format!("{head}MCALL CYCLE81(10, 0, 2, -1)\nG1 Z-1 F100\n"),
+        "every block with path motion drills",
+    );
+    // Another cycle is not followed (as before).
+    let err = sinumerik(
+        &format!("{head}CYCLE800(1, \"TC\", 0, 57, 0, 0, 0, 0, 0, 0, 0, 0, 0, -1)\nG1 Z-1\n"),
+        true,
+    )
+    .unwrap_err();
+    assert!(err.contains("CYCLE800"), "{err}");
+    let err = sinumerik(&format!("{head}MCALL POCKET3(10, 0, 2, -1)\n"), true).unwrap_err();
+    assert!(err.contains("MCALL POCKET3"), "{err}");
+}
+
+#[test]
+fn sinumerik_cycle832_tolerance_is_noted_when_larger_than_e() {
+    let text =
+        "G17 G90 G71\nCYCLE832(0.1, 0, 1)\nG0 X10 Y5 Z10\nG1 Z-1 F100\nG1 X20\nCYCLE832()\nM30\n";
+    let (out, rep) = sinumerik(text, false).unwrap();
+    assert!(
+        out.contains("\nCYCLE832(0.1, 0, 1)\n") && out.contains("\nCYCLE832()\n"),
+        "{out}"
+    );
+    assert_eq!(rep.notes.len(), 1, "{rep:?}");
+    assert!(
+        rep.notes[0].contains("CYCLE832 tolerance 0.1 mm (line 2)"),
+        "{}",
+        rep.notes[0]
+    );
+    // Largest |E| applied is 0.0425 mm (at X20 Y5): a tolerance of 0.01 mm is not noted, nor a
+    // deselection.
+    let (_, rep) = sinumerik(&text.replace("0.1, 0, 1", "0.01, 0, 1"), false).unwrap();
+    assert!(rep.notes.is_empty(), "{rep:?}");
+    let (_, rep) = sinumerik(&text.replace("0.1, 0, 1", "0, 0, 1"), false).unwrap();
+    assert!(rep.notes.is_empty(), "{rep:?}");
 }

@@ -10,6 +10,7 @@ mod format;
 mod modal;
 mod moves;
 mod rewrite;
+mod sinumerik_cycles;
 
 pub(crate) use emit::{dist, emit_curve, emit_points, lerp, Breaks};
 use format::{coordinate_decimals, decimal_units, push_units};
@@ -151,6 +152,10 @@ struct Rewriter<'a> {
     /// level; `None` before either).
     cycle: Option<cycles::Cycle>,
     retract_to_r: Option<bool>,
+    /// Sinumerik `MCALL CYCLE8x(…)` in force: every block with path motion drills it.
+    mcall: Option<sinumerik_cycles::Call>,
+    /// The largest `CYCLE832` path tolerance of the program (mm) and its line.
+    path_tolerance_mm: Option<(f64, u64)>,
     params: Params,
     /// The modes at the start of the current line, for lines inserted before it.
     standing: Standing,
@@ -239,6 +244,8 @@ impl<'a> Rewriter<'a> {
             comp_transition: None,
             cycle: None,
             retract_to_r: None,
+            mcall: None,
+            path_tolerance_mm: None,
             params: Params::new(),
             standing: Standing {
                 absolute: true,
@@ -306,6 +313,7 @@ impl<'a> Rewriter<'a> {
                 "compensate the main program with the subprogram expanded into it",
             ));
         }
+        self.tolerance_note();
         self.report.dialect = Some(self.dialect);
         self.report.zone_mm = self.m.zone_mm;
         self.report.lines_out = self.out.bytes().filter(|&b| b == b'\n').count() as u64
@@ -395,6 +403,12 @@ impl<'a> Rewriter<'a> {
             _ => None,
         });
         if let Some((name, span)) = keyword {
+            if self.dialect == Dialect::Sinumerik && matches!(name, "CYCLE" | "MCALL") {
+                let body = self.text.get(span.clone()).unwrap_or("");
+                if self.siemens_cycle(line, name, body)? {
+                    return Ok(());
+                }
+            }
             if !self.keyword(line, name, span)? {
                 // A statement errmap follows without moving (a label, a jump, a loop, a frame):
                 // the output returns to the original first, so what follows (perhaps many

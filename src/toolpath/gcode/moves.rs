@@ -96,6 +96,8 @@ impl<'a> Rewriter<'a> {
     /// group-0 code, no motion, a move errmap copies, or a move it compensates.
     pub(super) fn block(&mut self, line: &Line, words_in: &[W]) -> Result<()> {
         self.check_g_words(line, words_in)?;
+        // Where this block's output begins (a Sinumerik modal cycle call wraps it).
+        let out_start = self.out.len();
         if self.m.offset != 0.0 && self.changes_offset(words_in) {
             // Back to the program's Z in the offset the cut was made in.
             self.return_if_needed(line, &[], true)?;
@@ -132,6 +134,9 @@ impl<'a> Rewriter<'a> {
         });
         // Group 0 codes that take axis words (G10, G28, G30, G92…): no cutting move on the line.
         if let Some((gw, _, g)) = group0 {
+            if words.iter().any(|w| is_axis(w.letter)) {
+                self.modal_hole_unknown(line)?;
+            }
             self.return_if_needed(line, words, true)?;
             self.group0(line, words, gw, g)?;
             self.sync_out_motion(words);
@@ -199,7 +204,8 @@ impl<'a> Rewriter<'a> {
             // The start-up or cancel block of cutter radius compensation has run.
             self.comp_transition = None;
         }
-        result
+        result?;
+        self.modal_hole(line, out_start)
     }
 
     /// Rotary axes (and the parallel axes U V W): the map is taken as measured with every such
