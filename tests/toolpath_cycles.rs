@@ -545,3 +545,48 @@ fn sinumerik_cycle832_tolerance_is_noted_when_larger_than_e() {
     let (_, rep) = sinumerik(&text.replace("0.1, 0, 1", "0, 0, 1"), false).unwrap();
     assert!(rep.notes.is_empty(), "{rep:?}");
 }
+
+#[test]
+fn sinumerik_mcall_holes_placed_by_a_loop_are_compensated_with_expand() {
+    // The hole positions come from an R-parameter loop; --expand runs it and leaves the modal
+    // cycle call to the rewriter. Judged against the same holes written out by hand.
+    let text = "G17 G90 G71
+R1=10
+G0 X0 Y0 Z10
+MCALL CYCLE81(R1, 0, 2, -1, 0)
+R2=10
+WHILE R2<=30
+G0 X=R2 Y5
+R2=R2+10
+ENDWHILE
+MCALL
+G0 Z50
+M30
+";
+    let by_hand = "G17 G90 G71
+G0 X0 Y0 Z10
+MCALL CYCLE81(10., 0, 2, -1, 0)
+G0 X10 Y5
+G0 X20 Y5
+G0 X30 Y5
+MCALL
+G0 Z50
+M30
+";
+    let s = CompensationSettings {
+        dialect: Some(Dialect::Sinumerik),
+        expand: true,
+        ..settings(true)
+    };
+    let (out, rep) =
+        compensate_gcode(text, Path::new("h.mpf"), &Tilted, &s).unwrap_or_else(|e| panic!("{e}"));
+    println!("{out}");
+    judge_holes(by_hand, &out);
+    assert_eq!(rep.points_compensated, 3, "{out}");
+    // Without --expand the loop is refused, offering the flag.
+    let s = CompensationSettings { expand: false, ..s };
+    let err = compensate_gcode(text, Path::new("h.mpf"), &Tilted, &s)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--expand"), "{err}");
+}

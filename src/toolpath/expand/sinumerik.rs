@@ -53,6 +53,7 @@ const INSTRUCTIONS: &[&str] = &[
     "SPOSA",
     "SETMS",
     "FNORM",
+    "MCALL",
     "FLIN",
     "FCUB",
     "CUT2D",
@@ -617,6 +618,9 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
             format!("`{body}`: errmap's --expand does not run {kw}"),
             "write the program with IF/GOTO or loops, or move the zone away",
         )),
+        // A modal call of a standard cycle (`MCALL CYCLE81(…)`) or its end (bare `MCALL`) is
+        // the rewriter's to follow or refuse; a modal call of any other program is a call.
+        "MCALL" if rest_t.is_empty() || is_cycle(&upper_word(rest_t).0) => items(p, declared),
         "CALL" | "PCALL" | "EXTCALL" | "MCALL" => Err(bad(
             &kw,
             format!(

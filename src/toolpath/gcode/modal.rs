@@ -500,7 +500,7 @@ impl<'a> Rewriter<'a> {
             (
                 Dialect::Sinumerik,
                 "MSG" | "SOFT" | "BRISK" | "FFWON" | "FFWOF" | "CFC" | "CFTCP" | "CFIN" | "COMPCAD" | "COMPCURV"
-                | "COMPON" | "COMPOF" | "CYCLE832" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA" | "FNORM"
+                | "COMPON" | "COMPOF" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA" | "FNORM"
                 | "G642" | "G641",
             ) => Ok(true),
             (Dialect::Sinumerik, _) if is_label(body) => Ok(false),
