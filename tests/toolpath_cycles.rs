@@ -347,6 +347,19 @@ fn klartext_cycle_1_holes_in_the_zone_are_refused_without_the_flag() {
         err.contains("peck.h:10") && err.contains("its 1.2 DEPTH is `Q5`, not a number"),
         "{err}"
     );
+    // A block errmap cannot read before the holes (a post's `CYCLE DEF` for `CYCL DEF`) is
+    // named as the cause, not the cycle.
+    let typo = PECKING.replace(
+        "8 CYCL DEF 1.5 F229\n",
+        "8 CYCL DEF 1.5 F229\n8 CYCLE DEF 9.0 DWELL TIME\n",
+    );
+    let err = klartext(&typo, &Tilted, true).unwrap_err();
+    assert!(
+        err.contains(
+            "`CYCLE DEF 9.0 DWELL TIME` (block 8, line 10) is a function errmap does not follow"
+        ) && err.contains("cycle call `M99` of cycle 1"),
+        "{err}"
+    );
 }
 
 // --- Sinumerik standard cycles (CYCLE81–89, CYCLE840, MCALL, CYCLE832) ---

@@ -695,6 +695,22 @@ impl Kt<'_> {
                 Some((c, l)) if c >= 0 => format!(" of cycle {c} ({})", self.at(l)),
                 _ => String::new(),
             };
+            // A drilling cycle errmap follows is refused here only under a frame or function
+            // it does not follow: name that, the real cause.
+            if let (Some(_), Some(f)) = (&self.hole_cycle, self.frames.last()) {
+                let what = if f.cycle == "?" {
+                    "is a function errmap does not follow (it may move or transform the coordinates)"
+                } else {
+                    "transforms the coordinates, which errmap does not follow"
+                };
+                return Err(self.err(
+                    n,
+                    col,
+                    word,
+                    format!("`{}` ({}) {what}, and the cycle call `{word}`{cycle} after it may drill in the compensation zone", f.what, self.at(f.line)),
+                    "post the program without that block before the holes in the zone (or move the zone away)",
+                ));
+            }
             return Err(self.err(
                 n,
                 col,
