@@ -357,7 +357,7 @@ fn klartext_cycle_1_holes_in_the_zone_are_refused_without_the_flag() {
     assert!(
         err.contains(
             "`CYCLE DEF 9.0 DWELL TIME` (block 8, line 10) is a function errmap does not follow"
-        ) && err.contains("cycle call `M99` of cycle 1"),
+        ) && err.contains("the call `M99` of cycle 1"),
         "{err}"
     );
 }

@@ -647,3 +647,55 @@ fn coordinates_are_fixed_point_without_minus_zero() {
     assert_eq!(format_coord(-1.014, false), "-1.0140");
     assert_eq!(format_coord(1e20, false), "100000000000000000000.0000");
 }
+
+#[test]
+fn sinumerik_trafoof_is_copied_and_supa_is_a_machine_coordinate_block() {
+    let s = settings(Dialect::Sinumerik);
+    // TRAFOOF switches off a transformation errmap does not follow anyway; SUPA G0 is a rapid
+    // in machine coordinates, after which the position is unknown until X, Y and Z are given.
+    let text = "G17 G90 G71\nTRAFOOF\nSUPA G0 Z0 D0\nG0 X10 Y0 Z5\nG1 Z-1 F100\nX20\nM30\n";
+    let (out, rep) = run(text, &field(), &s);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(&lines[..4], &text.lines().collect::<Vec<_>>()[..4], "{out}");
+    // The plunge ends at Z−1 − E(10) = −1.02; the cut to X20 ends at −1 − E(20) = −1.03.
+    let z_at = |x: f64| {
+        lines
+            .iter()
+            .rev()
+            .find(|l| l.contains("Z") && word(l, "X").is_none_or(|v| (v - x).abs() < 1e-9))
+            .and_then(|l| word(l, "Z"))
+    };
+    assert!((z_at(20.0).unwrap() + 1.03).abs() < 1e-9, "{out}");
+    assert!(rep.moves_changed >= 2, "{out}");
+    // A cut right after SUPA starts from an unknown point: refused.
+    let text = "G17 G90 G71\nG0 X10 Y0 Z5\nSUPA G0 Z0\nG1 X20 F100\nM30\n";
+    let err = refuse(text, &field(), &s);
+    assert!(err.contains("start point of this move is unknown"), "{err}");
+    // A cut in machine coordinates is refused naming SUPA.
+    let text = "G17 G90 G71\nG0 X10 Y0 Z5\nG1 Z-1 F100\nSUPA G1 X20\nM30\n";
+    let err = refuse(text, &field(), &s);
+    assert!(
+        err.contains("t.nc:4") && err.contains("SUPA machine-coordinate cutting move"),
+        "{err}"
+    );
+}
+
+#[test]
+fn sinumerik_motion_words_after_an_instruction_on_the_same_block_are_read() {
+    // `SOFT G1 Z-1` plunges: the words after SOFT move the tool (errmap once read the block as
+    // SOFT alone, kept Z at 5 and wrote the next cut 6 mm too high).
+    let s = settings(Dialect::Sinumerik);
+    let text = "G17 G90 G71\nG0 X10 Y0 Z5\nSOFT G1 Z-1 F100\nG1 X20\nM30\n";
+    let (out, _) = run(text, &field(), &s);
+    let last_cut = out
+        .lines()
+        .rfind(|l| word(l, "X").is_some_and(|x| (x - 20.0).abs() < 1e-9))
+        .unwrap_or_else(|| panic!("{out}"));
+    // Z −1 − E(20) = −1 − 0.03.
+    assert!((word(last_cut, "Z").unwrap() + 1.03).abs() < 1e-9, "{out}");
+    assert!(out.lines().nth(2).unwrap().starts_with("SOFT G1 "), "{out}");
+    // An instruction that moves or transforms still ends the block's reading: refused.
+    let text = "G17 G90 G71\nG0 X10 Y0 Z5\nSOFT TRAORI\nG1 Z-1 F100\nM30\n";
+    let err = refuse(text, &field(), &s);
+    assert!(err.contains("TRAORI"), "{err}");
+}

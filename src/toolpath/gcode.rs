@@ -179,6 +179,8 @@ struct Rewriter<'a> {
     first_offset: Option<String>,
     /// The work offset selected now (`G55`, `G54.1 P3`), `None` before the first selection.
     active_offset: Option<String>,
+    /// The line of a Sinumerik `SUPA` block: its coordinates are machine coordinates (as G53).
+    machine_block: Option<u64>,
     /// A jump (`GOTO`, Sinumerik flow control): any cut in the zone is refused.
     flow: Option<(u64, String)>,
     /// Fanuc: O-number headers seen, and the line of an `M99` in the main program.
@@ -267,6 +269,7 @@ impl<'a> Rewriter<'a> {
             first_offset: None,
             active_offset: None,
             flow: None,
+            machine_block: None,
             programs: 0,
             m99: None,
             words: Vec::new(),
@@ -398,11 +401,13 @@ impl<'a> Rewriter<'a> {
             normal_pos: self.m.pos[self.m.normal],
             offset: self.m.offset,
         };
-        let keyword = line.tokens.iter().find_map(|t| match &t.kind {
+        // Every instruction of the block in turn: one errmap follows without moving ends the
+        // line here (copied); harmless ones let the block's words be read as usual.
+        let keywords = line.tokens.iter().filter_map(|t| match &t.kind {
             TokenKind::Keyword { name } => Some((name.as_str(), t.span.clone())),
             _ => None,
         });
-        if let Some((name, span)) = keyword {
+        for (name, span) in keywords {
             if self.dialect == Dialect::Sinumerik && matches!(name, "CYCLE" | "MCALL") {
                 let body = self.text.get(span.clone()).unwrap_or("");
                 if self.siemens_cycle(line, name, body)? {

@@ -548,6 +548,12 @@ fn siemens_address(name: &[u8]) -> Option<u8> {
 }
 
 /// One Sinumerik token starting at a non-space `i` (`run` is the end of its letter run).
+/// Sinumerik instructions that take no argument and may share their block with motion words.
+const SIEMENS_BARE: [&str; 15] = [
+    "SOFT", "BRISK", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "COMPCAD", "COMPCURV", "COMPON",
+    "COMPOF", "FNORM", "STOPRE", "TRAFOOF", "SUPA",
+];
+
 fn lex_siemens(b: &[u8], i: usize, run: usize, end: usize) -> (TokenKind, usize) {
     let c = b[i];
     if !c.is_ascii_alphabetic() {
@@ -588,6 +594,16 @@ fn lex_siemens(b: &[u8], i: usize, run: usize, end: usize) -> (TokenKind, usize)
         return (TokenKind::Word { letter, value }, ve.max(eq + 1));
     }
     if run - i >= 2 {
+        // An instruction without arguments is its name alone: the words after it on the
+        // block (`SUPA G0 Z0`, `SOFT G1 X10`) are lexed as words.
+        if SIEMENS_BARE
+            .iter()
+            .any(|k| k.as_bytes().eq_ignore_ascii_case(&b[i..run]))
+            && (run == end || !b[run].is_ascii_alphanumeric() && b[run] != b'(' && b[run] != b'_')
+        {
+            let name = String::from_utf8_lossy(&b[i..run]).to_ascii_uppercase();
+            return (TokenKind::Keyword { name }, run);
+        }
         return keyword(b, i, run, end);
     }
     if c == b'R' || c == b'r' {

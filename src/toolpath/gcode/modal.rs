@@ -503,6 +503,14 @@ impl<'a> Rewriter<'a> {
                 | "COMPON" | "COMPOF" | "STOPRE" | "DEF" | "WORKPIECE" | "SPOS" | "SPOSA" | "FNORM"
                 | "G642" | "G641",
             ) => Ok(true),
+            // TRAFOOF switches a kinematic transformation off: errmap follows none (TRAORI and
+            // the others are refused), so after it the machine is as errmap takes it to be.
+            (Dialect::Sinumerik, "TRAFOOF") => Ok(true),
+            // SUPA: the block's coordinates are machine coordinates, frames suppressed, as G53.
+            (Dialect::Sinumerik, "SUPA") => {
+                self.machine_block = Some(line.number);
+                Ok(true)
+            }
             (Dialect::Sinumerik, _) if is_label(body) => Ok(false),
             (Dialect::Sinumerik, _) if self.flow.as_ref().is_some_and(|(l, _)| *l <= line.number) => Ok(false),
             _ => refuse(

@@ -28,6 +28,8 @@ struct Move<'w> {
     /// G1, G2 or G3 (not a rapid, cycle, probe or special move).
     cutting: bool,
     g53: bool,
+    /// How the block says it is in machine coordinates: `G53`, or Sinumerik `SUPA`.
+    machine_word: &'static str,
     polar: Option<&'w W>,
     expr: Option<&'w W>,
     other_axis: Option<&'w W>,
@@ -143,7 +145,7 @@ impl<'a> Rewriter<'a> {
             self.copy_line(line);
             return Ok(());
         }
-        let g53 = gs().any(|(_, _, g)| g == G::Machine);
+        let g53 = gs().any(|(_, _, g)| g == G::Machine) || self.machine_block == Some(line.number);
         let arc_words = words
             .iter()
             .any(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R'));
@@ -348,6 +350,11 @@ impl<'a> Rewriter<'a> {
             end,
             cutting: matches!(motion.kind, Motion::Linear | Motion::ArcCw | Motion::ArcCcw),
             g53,
+            machine_word: if self.machine_block == Some(line.number) {
+                "SUPA"
+            } else {
+                "G53"
+            },
             polar,
             expr: words.iter().find(|w| w.is_expr),
             other_axis: words
@@ -547,9 +554,10 @@ impl<'a> Rewriter<'a> {
             ));
         }
         if mv.g53 {
+            let word = mv.machine_word;
             return Some((
-                "G53".into(),
-                "G53 machine-coordinate cutting move in the compensation zone".into(),
+                word.into(),
+                format!("{word} machine-coordinate cutting move in the compensation zone"),
                 "program the cut in work coordinates",
             ));
         }

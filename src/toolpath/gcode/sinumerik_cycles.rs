@@ -294,6 +294,14 @@ impl<'a> Rewriter<'a> {
             self.copy_line(line);
             return Ok(true);
         }
+        if call.number == 800 {
+            return Err(self.err(
+                line,
+                "CYCLE800",
+                format!("`{}`: CYCLE800 swivels the working plane or aligns the tool (5-axis swivel cycle), which errmap does not follow", body.trim()),
+                "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without CYCLE800, or move the zone away",
+            ));
+        }
         if !call.drills() {
             return Ok(false);
         }

@@ -707,7 +707,7 @@ impl Kt<'_> {
                     n,
                     col,
                     word,
-                    format!("`{}` ({}) {what}, and the cycle call `{word}`{cycle} after it may drill in the compensation zone", f.what, self.at(f.line)),
+                    format!("`{}` ({}) {what}, and the call `{word}`{cycle} after it may drill in the compensation zone", f.what, self.at(f.line)),
                     "post the program without that block before the holes in the zone (or move the zone away)",
                 ));
             }
