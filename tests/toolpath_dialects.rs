@@ -698,4 +698,18 @@ fn sinumerik_motion_words_after_an_instruction_on_the_same_block_are_read() {
     let text = "G17 G90 G71\nG0 X10 Y0 Z5\nSOFT TRAORI\nG1 Z-1 F100\nM30\n";
     let err = refuse(text, &field(), &s);
     assert!(err.contains("TRAORI"), "{err}");
+    // Words after an instruction with an argument (read to the end of the block) are refused,
+    // never dropped.
+    for block in ["SPOS=0 G1 Z-1 F100", "MSG(\"plunge\") G1 Z-1 F100"] {
+        let text = format!("G17 G90 G71\nG0 X10 Y0 Z5\n{block}\nG1 X20\nM30\n");
+        let err = refuse(&text, &field(), &s);
+        assert!(
+            err.contains("t.nc:3") && err.contains("words after the instruction"),
+            "{err}"
+        );
+    }
+    // Alone on its block, or with only its argument and a comment, it is copied.
+    let text = "G17 G90 G71\nMSG(\"a (b) c\") ; note\nSPOS=0\nG0 X10 Y0 Z5\nG1 Z-1 F100\nM30\n";
+    let (out, _) = run(text, &field(), &s);
+    assert!(out.contains("MSG(\"a (b) c\") ; note\nSPOS=0\n"), "{out}");
 }

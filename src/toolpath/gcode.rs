@@ -414,7 +414,21 @@ impl<'a> Rewriter<'a> {
                     return Ok(());
                 }
             }
-            if !self.keyword(line, name, span)? {
+            let body = self.text.get(span.clone()).unwrap_or("");
+            let harmless = self.keyword(line, name, span)?;
+            if let (true, Dialect::Sinumerik, Some(rest)) =
+                (harmless, self.dialect, words_after_instruction(body))
+            {
+                if name != "DEF" {
+                    return Err(self.err(
+                        line,
+                        rest,
+                        format!("`{}`: words after the instruction {name} and its argument on the same block, which errmap does not read there", body.trim()),
+                        "put the instruction in a block of its own",
+                    ));
+                }
+            }
+            if !harmless {
                 // A statement errmap follows without moving (a label, a jump, a loop, a frame):
                 // the output returns to the original first, so what follows (perhaps many
                 // times) starts where the original does. The `%` of a program's start or end
@@ -618,4 +632,46 @@ fn line_terminator<'t>(text: &'t str, line: &Line) -> &'t str {
         }
         t => t,
     }
+}
+
+/// The text after a Sinumerik instruction and its own argument (`MSG("…")`, `SPOS=0`), if the
+/// block goes on: the lexer reads an instruction with an argument to the end of its block, so
+/// words there would not be read as words.
+fn words_after_instruction(body: &str) -> Option<&str> {
+    let b = body.as_bytes();
+    let mut i = 0;
+    while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+        i += 1;
+    }
+    let skip_spaces = |mut j: usize| {
+        while j < b.len() && (b[j] == b' ' || b[j] == b'\t') {
+            j += 1;
+        }
+        j
+    };
+    let mut j = skip_spaces(i);
+    let (mut depth, mut quote) = (0i32, false);
+    if j < b.len() && (b[j] == b'(' || b[j] == b'=') {
+        if b[j] == b'=' {
+            j = skip_spaces(j + 1);
+        }
+        while j < b.len() {
+            match b[j] {
+                b'"' => quote = !quote,
+                b'(' | b'[' if !quote => depth += 1,
+                b')' | b']' if !quote => {
+                    depth -= 1;
+                    if depth == 0 && b.get(j + 1).is_none_or(|c| *c == b' ' || *c == b'\t') {
+                        j += 1;
+                        break;
+                    }
+                }
+                b' ' | b'\t' | b';' if depth <= 0 && !quote => break,
+                _ => {}
+            }
+            j += 1;
+        }
+    }
+    let rest = body.get(skip_spaces(j)..)?.split(';').next()?.trim();
+    (!rest.is_empty()).then_some(rest)
 }
