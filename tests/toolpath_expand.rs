@@ -1004,3 +1004,132 @@ fn sinumerik_hostile_lines_are_refused_not_a_panic() {
     );
     assert!(compensate_gcode(&deep, Path::new("t.mpf"), &Flat20, &sin_settings(true)).is_err());
 }
+
+// Sinumerik subprograms of the same file: `PROC NAME(REAL A, …)` after the main program's M30,
+// called `NAME(a, b)`; judged as above (the reference tracer runs the PROC calls from the Job
+// Planning manual's "Subprogram technique"), with the cut ends also worked out by hand.
+
+#[test]
+fn sinumerik_a_local_proc_called_twice_with_real_arguments() {
+    let text = "G71 G90 G17
+R1=0
+G0 X0 Y0 Z5
+G1 Z-1 F100
+SLOT(10, 2.5)
+SLOT(20.5, R1+4)
+G1 X=R1
+G0 Z5
+M30
+PROC SLOT(REAL XE, REAL YE)
+DEF REAL H
+H=YE*2
+G1 X=XE Y=YE
+G1 Y=H
+R1=R1+1
+M17
+";
+    let (cuts, out) = sin_judged(text);
+    // By hand: SLOT(10, 2.5) cuts to (10, 2.5) then Y = 2·2.5; R1 is global, so the second
+    // call gets YE = 1 + 4 = 5 and after both calls R1 = 2.
+    close(
+        &cuts,
+        &[
+            [0.0, 0.0, -1.0],
+            [10.0, 2.5, -1.0],
+            [10.0, 5.0, -1.0],
+            [20.5, 5.0, -1.0],
+            [20.5, 10.0, -1.0],
+            [2.0, 10.0, -1.0],
+        ],
+    );
+    let upper = out.to_ascii_uppercase();
+    assert!(
+        !upper.contains("PROC") && !upper.contains("SLOT") && !upper.contains("M17"),
+        "{out}"
+    );
+    assert!(upper.contains("M30"), "{out}");
+}
+
+#[test]
+fn sinumerik_nested_proc_calls_with_a_left_out_argument() {
+    let text = "G71 G90 G17
+G0 X0 Y0 Z5
+G1 Z-1 F100
+OUTER(5)
+G0 Z5
+M30
+PROC OUTER(REAL D)
+INNER(D, 1.4)
+INNER(D*2, )
+RET
+PROC INNER(REAL A, INT B)
+G1 X=A Y=B
+";
+    // By hand: INNER(5, 1.4) cuts to (5, 1) (INT rounds); INNER(10, ) to (10, 0) (a left-out
+    // parameter is 0); INNER returns at the next PROC or the end of the file.
+    let (cuts, _) = sin_judged(text);
+    close(
+        &cuts,
+        &[[0.0, 0.0, -1.0], [5.0, 1.0, -1.0], [10.0, 0.0, -1.0]],
+    );
+}
+
+#[test]
+fn sinumerik_a_refusal_inside_a_proc_names_its_line_and_the_call() {
+    // A value the run does not know, refused by the run itself.
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nCUTS(2)\nM30\nPROC CUTS(REAL A)\nG1 X=A\nG1 Y=R9\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &[
+            "t.mpf:8",
+            "(R9)",
+            "R9 is read before the program sets it",
+            "(in CUTS called on line 4)",
+        ],
+    );
+    // An instruction the rewriter refuses in the flattened program, mapped back through the
+    // calls: the innermost first.
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nOUTER\nM30\nPROC OUTER\nG1 X1\nCUTS(2)\nM17\nPROC CUTS(REAL A)\nG1 X=A\nTRAFOOF\nG1 Y1\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &[
+            "t.mpf:12",
+            "TRAFOOF",
+            "(in CUTS called on line 8, in OUTER called on line 4)",
+        ],
+    );
+}
+
+#[test]
+fn sinumerik_a_recursive_proc_call_is_refused() {
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nR1=0\nAGAIN\nM30\nPROC AGAIN\nR1=R1+1\nG1 X=R1\nIF R1<3\nAGAIN\nENDIF\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &[
+            "t.mpf:11",
+            "(AGAIN)",
+            "recursive",
+            "(in AGAIN called on line 5)",
+        ],
+    );
+}
+
+#[test]
+fn sinumerik_a_var_parameter_is_refused_at_the_call() {
+    let text = "G71 G90 G17\nDEF REAL W\nG0 X0 Y0 Z5\nG1 Z-1 F100\nSETW(W)\nG1 X=W\nM30\nPROC SETW(VAR REAL C)\nC=5\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(
+        &msg,
+        &["t.mpf:5", "(SETW)", "VAR", "call-by-reference", "line 8"],
+    );
+}
+
+#[test]
+fn sinumerik_a_call_of_a_proc_not_in_the_file_is_still_refused_as_missing() {
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nSLOT(1)\nOTHER(2)\nM30\nPROC SLOT(REAL A)\nG1 X=A\nM17\n";
+    let msg = sin_refuse(text, &sin_settings(true));
+    assert_msg(&msg, &["t.mpf:5", "OTHER", "which is not in this file"]);
+}

@@ -162,7 +162,11 @@ pub fn r_brackets(text: &str) -> String {
 /// `GOTOC` to labels or block numbers, `IF cond GOTOx`, `IF/ELSE/ENDIF`, `WHILE/ENDWHILE`,
 /// `FOR/ENDFOR`, `REPEAT/UNTIL`, `LOOP/ENDLOOP`, `REPEAT label [label] P=n`, `REPEATB label P=n`,
 /// arithmetic with the manual's operator priority and functions in degrees; G0/G1 in G90 with
-/// X/Y/Z, G70/G71/G700/G710. Anything else that could move or shift the axes is declined.
+/// X/Y/Z, G70/G71/G700/G710; subprograms `PROC NAME(REAL A, INT B, BOOL C)` written after the
+/// main program's end and called `NAME(a, , c)` or `NAME` (Job Planning, "Subprogram technique":
+/// parameters by value, one left out is 0; the subprogram's `DEF` variables are its own, R
+/// parameters global; M17 or RET returns). Anything else that could move or shift the axes is
+/// declined.
 pub mod reference {
     use super::super::path_judge::Seg;
     use std::collections::HashMap;
@@ -504,9 +508,92 @@ pub mod reference {
         Ok(map)
     }
 
+    /// A subprogram of the file: first line of its body, line after its last, parameters
+    /// (name, whether INT).
+    struct Sub {
+        body: usize,
+        end: usize,
+        params: Vec<(String, bool)>,
+    }
+
+    /// The PROCs after the main program's end (a line holding M30, M2, M17 or RET).
+    fn subs(lines: &[Line]) -> Result<HashMap<String, Sub>, String> {
+        let ends = |code: &str| {
+            code == "RET"
+                || code
+                    .split(|c: char| !c.is_ascii_alphanumeric())
+                    .any(|w| ["M30", "M2", "M02", "M17"].contains(&w))
+        };
+        let mut starts = Vec::new();
+        let mut ended = false;
+        for (i, l) in lines.iter().enumerate() {
+            if ended && l.code.starts_with("PROC ") {
+                starts.push(i);
+            }
+            ended = ended || ends(&l.code);
+        }
+        let mut out = HashMap::new();
+        for (k, &i) in starts.iter().enumerate() {
+            let head = lines[i].code[5..].trim();
+            let (name, list) = match head.split_once('(') {
+                Some((n, r)) => (n.trim(), r.split(')').next().unwrap_or("")),
+                None => (head, ""),
+            };
+            let mut params = Vec::new();
+            for p in list.split(',').filter(|p| !p.trim().is_empty()) {
+                let (ty, n) = p.trim().split_once(' ').ok_or("parameter type")?;
+                if !["REAL", "INT", "BOOL"].contains(&ty) {
+                    return Err(format!(
+                        "parameter `{p}` is not read by the reference tracer"
+                    ));
+                }
+                params.push((n.trim().to_string(), ty == "INT"));
+            }
+            let end = starts.get(k + 1).copied().unwrap_or(lines.len());
+            out.insert(
+                name.to_string(),
+                Sub {
+                    body: i + 1,
+                    end,
+                    params,
+                },
+            );
+        }
+        Ok(out)
+    }
+
+    /// Split at commas outside parentheses.
+    fn args(s: &str) -> Vec<&str> {
+        let (mut depth, mut from, mut out) = (0, 0, Vec::new());
+        for (i, c) in s.char_indices() {
+            match c {
+                '(' | '[' => depth += 1,
+                ')' | ']' => depth -= 1,
+                ',' if depth == 0 => {
+                    out.push(&s[from..i]);
+                    from = i + 1;
+                }
+                _ => {}
+            }
+        }
+        out.push(&s[from..]);
+        out
+    }
+
+    /// A call in progress: where it returns to and what it hid of the caller.
+    struct Frame {
+        ret: usize,
+        end: usize,
+        v: HashMap<String, f64>,
+        ints: Vec<String>,
+        sections: Vec<(usize, usize, u64, usize)>,
+    }
+
     pub fn trace(text: &str) -> Result<Vec<Seg>, String> {
         let lines: Vec<Line> = text.lines().map(parse_line).collect();
         let pairs = structures(&lines)?;
+        let subs = subs(&lines)?;
+        let mut calls: Vec<Frame> = Vec::new();
         let find = |target: &str, from: usize, dir: &str| -> Option<usize> {
             let hit = |l: &Line| match target.strip_prefix('N').and_then(|d| d.parse::<u64>().ok())
             {
@@ -533,12 +620,72 @@ pub mod reference {
         let mut sections: Vec<(usize, usize, u64, usize)> = Vec::new();
         let mut pc = 0usize;
         let mut steps = 0u64;
-        while pc < lines.len() {
+        while pc < lines.len() || !calls.is_empty() {
             steps += 1;
             if steps > STEPS {
                 return Err("too many steps (an endless loop?)".into());
             }
+            // The end of a subprogram's lines, M17 or RET: back after the call.
+            let returning = |calls: &mut Vec<Frame>,
+                             st: &mut St,
+                             sections: &mut Vec<(usize, usize, u64, usize)>|
+             -> Option<usize> {
+                let f = calls.pop()?;
+                st.v = f.v;
+                st.ints = f.ints;
+                *sections = f.sections;
+                Some(f.ret)
+            };
+            if calls.last().is_some_and(|f| pc >= f.end) {
+                pc = returning(&mut calls, &mut st, &mut sections).unwrap_or(pc);
+                continue;
+            }
             let code = lines[pc].code.clone();
+            let name_end = code
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(code.len());
+            if let Some(sub) = subs.get(&code[..name_end]) {
+                let after = code[name_end..].trim();
+                let given: Vec<&str> = match after.strip_prefix('(') {
+                    Some(a) => args(a.strip_suffix(')').ok_or("call `)`")?)
+                        .into_iter()
+                        .filter(|_| !a.trim_end_matches(')').trim().is_empty())
+                        .collect(),
+                    None if after.is_empty() => Vec::new(),
+                    None => return Err(format!("line {}: call with other words", pc + 1)),
+                };
+                if given.len() > sub.params.len() || calls.len() > 16 {
+                    return Err(format!("line {}: bad call", pc + 1));
+                }
+                let mut v = HashMap::new();
+                let mut ints = Vec::new();
+                for (k, (n, int)) in sub.params.iter().enumerate() {
+                    let a = given.get(k).map_or("", |a| a.trim());
+                    let x = if a.is_empty() { 0.0 } else { st.eval(a)? };
+                    v.insert(n.clone(), if *int { x.round() } else { x });
+                    if *int {
+                        ints.push(n.clone());
+                    }
+                }
+                calls.push(Frame {
+                    ret: pc + 1,
+                    end: sub.end,
+                    v: std::mem::replace(&mut st.v, v),
+                    ints: std::mem::replace(&mut st.ints, ints),
+                    sections: std::mem::take(&mut sections),
+                });
+                pc = sub.body;
+                continue;
+            }
+            if code == "RET" {
+                match returning(&mut calls, &mut st, &mut sections) {
+                    Some(r) => {
+                        pc = r;
+                        continue;
+                    }
+                    None => break,
+                }
+            }
             let (first, rest) = code.split_once(' ').unwrap_or((code.as_str(), ""));
             let rest = rest.trim();
             let mut next = pc + 1;
@@ -740,7 +887,13 @@ pub mod reference {
                 }
             }
             if end {
-                break;
+                match returning(&mut calls, &mut st, &mut sections) {
+                    Some(r) => {
+                        pc = r;
+                        continue;
+                    }
+                    None => break,
+                }
             }
             if next == pc + 1 {
                 while let Some(s) = sections.last_mut() {

@@ -5,12 +5,14 @@
 //! toward the program end, `GOTOB` toward its start, `GOTO` forward then backward, `GOTOC` like
 //! `GOTO` without an alarm when the target is missing. An R parameter keeps the value left on
 //! the controller, so one read before the program sets it is refused; `DEF` variables start at 0.
-//! Any name that is neither an instruction nor a variable of the program is a subprogram call,
-//! of a program not in this file.
+//! Any name that is neither an instruction nor a variable of the program is a subprogram call:
+//! of a `PROC` defined in this file after the main program's end (run, its call-by-value
+//! parameters and `DEF` variables local to the call, R parameters shared), else of a program not
+//! in this file (refused).
 
 mod expr;
 
-use super::{format_value, Flat, MAX_ITERATIONS};
+use super::{format_value, Flat, MAX_CALL_DEPTH, MAX_ITERATIONS};
 use crate::error::{Error, Location, Result};
 use expr::{Env, X};
 use std::collections::HashMap;
@@ -241,6 +243,11 @@ enum Stmt {
     /// count, and whether it is `REPEATB` (one block).
     Section(String, Option<String>, X, bool),
     Ret,
+    /// A call of a `PROC` of this file: its name and, when written `NAME(…)`, each argument's
+    /// text and value (`None`: left out, 0 per the manual).
+    Call(String, Option<Vec<(String, Option<X>)>>),
+    /// The `PROC` line of a subprogram defined after the main program's end.
+    ProcStart(String),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -489,10 +496,16 @@ struct Program<'a> {
     numbers: HashMap<u64, Vec<usize>>,
     /// DEF variables declared anywhere (a name is a variable, not a call, from its DEF on).
     declared: HashMap<String, Kind>,
+    /// The PROCs defined after the main program's end, by name.
+    procs: HashMap<String, Proc>,
 }
 
 /// Compile one line's body.
-fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result<Stmt, Bad> {
+fn compile(
+    p: &Parts<'_>,
+    declared: &HashMap<String, Kind>,
+    procs: &HashMap<String, Proc>,
+) -> std::result::Result<Stmt, Bad> {
     let body = p.body;
     if body.is_empty() {
         return Ok(if p.number.is_some() || p.label.is_some() {
@@ -620,7 +633,19 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
         )),
         // A modal call of a standard cycle (`MCALL CYCLE81(…)`) or its end (bare `MCALL`) is
         // the rewriter's to follow or refuse; a modal call of any other program is a call.
-        "MCALL" if rest_t.is_empty() || is_cycle(&upper_word(rest_t).0) => items(p, declared),
+        "MCALL" if rest_t.is_empty() || is_cycle(&upper_word(rest_t).0) => {
+            items(p, declared, procs)
+        }
+        // `CALL "NAME"` of a PROC of this file without parameters (CALL gives none).
+        "CALL" if quoted_proc(rest_t, procs).is_some() => {
+            let name = quoted_proc(rest_t, procs).unwrap_or_default();
+            Ok(Stmt::Call(name, None))
+        }
+        "CALL" | "PCALL" | "EXTCALL" | "MCALL" if quoted_proc(rest_t, procs).is_some() || procs.contains_key(&upper_word(rest_t).0) => Err(bad(
+            &kw,
+            format!("`{body}`: errmap's --expand does not run {kw} of a subprogram (it runs a call of a PROC of this file written `NAME(…)` or `CALL \"NAME\"` on a block of its own)"),
+            "call the subprogram by its name on a block of its own, or move the zone away",
+        )),
         "CALL" | "PCALL" | "EXTCALL" | "MCALL" => Err(bad(
             &kw,
             format!(
@@ -628,8 +653,154 @@ fn compile(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Resu
             ),
             "compensate a program with the called program written out in it, or move the zone away",
         )),
-        _ => items(p, declared),
+        _ if procs.contains_key(&kw) => call(&kw, rest, body),
+        _ => items(p, declared, procs),
     }
+}
+
+/// `"NAME"` (quoted, as `CALL` writes it) when NAME is a PROC of this file.
+fn quoted_proc(rest: &str, procs: &HashMap<String, Proc>) -> Option<String> {
+    let name = rest
+        .strip_prefix('"')?
+        .strip_suffix('"')?
+        .to_ascii_uppercase();
+    procs.contains_key(&name).then_some(name)
+}
+
+/// A call of a PROC of this file, alone on its block: `NAME` or `NAME(a, , c)`.
+fn call(name: &str, rest: &str, body: &str) -> std::result::Result<Stmt, Bad> {
+    let rest = rest.trim();
+    if rest.is_empty() {
+        return Ok(Stmt::Call(name.to_string(), None));
+    }
+    let alone = || {
+        bad(
+            name,
+            format!("`{body}` calls the subprogram {name} of this file with other words on its block (a repetition `P`, or words errmap does not place before or after the call)"),
+            "write the call alone on its block, or move the zone away",
+        )
+    };
+    let Some(inner_and_after) = rest.strip_prefix('(') else {
+        return Err(alone());
+    };
+    let (mut depth, mut quote, mut close) = (1i32, false, None);
+    for (i, c) in inner_and_after.char_indices() {
+        match c {
+            '"' => quote = !quote,
+            '(' if !quote => depth += 1,
+            ')' if !quote => {
+                depth -= 1;
+                if depth == 0 {
+                    close = Some(i);
+                    break;
+                }
+            }
+            _ => {}
+        }
+    }
+    let Some(close) = close else {
+        return Err(expr_err(rest, "`)` missing".into()));
+    };
+    if !inner_and_after[close + 1..].trim().is_empty() {
+        return Err(alone());
+    }
+    let inner = &inner_and_after[..close];
+    let mut args = Vec::new();
+    if !inner.trim().is_empty() {
+        for a in split_commas(inner) {
+            let t = a.trim();
+            let value = if t.is_empty() {
+                None
+            } else {
+                Some(parse_cond(t)?)
+            };
+            args.push((t.to_string(), value));
+        }
+    }
+    Ok(Stmt::Call(name.to_string(), Some(args)))
+}
+
+/// A subprogram defined in this file after the main program's end: `PROC NAME(REAL A, …)` up
+/// to the next PROC or the end of the file.
+struct Proc {
+    /// Index of its PROC line, and of the line after its last.
+    line: usize,
+    end: usize,
+    /// Its call-by-value parameters, or why a call of it is refused.
+    params: std::result::Result<Vec<(String, Kind)>, Bad>,
+}
+
+/// The parameters of `PROC NAME(…) …` (`rest` after the name): REAL, INT and BOOL by value;
+/// `VAR` (call by reference), arrays and other types refused; after `)` only DISPLOF/DISPLON/
+/// SBLOF (SAVE restores the caller's modal G functions at the return, which errmap does not
+/// follow).
+fn proc_params(name: &str, rest: &str) -> std::result::Result<Vec<(String, Kind)>, Bad> {
+    let head = format!("PROC {name}{rest}");
+    let head = head.trim();
+    let rest = rest.trim();
+    let (inner, after) = match rest.strip_prefix('(') {
+        Some(r) => match r.find(')') {
+            Some(c) => (&r[..c], &r[c + 1..]),
+            None => return Err(bad("PROC", format!("`{head}`: `)` missing"), "")),
+        },
+        None => ("", rest),
+    };
+    for w in after.split(|c: char| c.is_whitespace() || c == ',') {
+        let w = w.to_ascii_uppercase();
+        if !w.is_empty() && !["DISPLOF", "DISPLON", "SBLOF"].contains(&w.as_str()) {
+            return Err(bad(
+                &w,
+                format!("`{head}`: errmap's --expand does not run a PROC with {w}"),
+                "remove it from the PROC line, or move the zone away",
+            ));
+        }
+    }
+    let mut out = Vec::new();
+    if inner.trim().is_empty() {
+        return Ok(out);
+    }
+    for part in split_commas(inner) {
+        let words: Vec<String> = part
+            .split_whitespace()
+            .map(|w| w.to_ascii_uppercase())
+            .collect();
+        if words.first().map(String::as_str) == Some("VAR") {
+            return Err(bad(
+                "VAR",
+                format!("`{head}`: `{}` is a call-by-reference parameter (VAR), which errmap's --expand does not run", part.trim()),
+                "pass the value by value (without VAR) and return results in R parameters, or move the zone away",
+            ));
+        }
+        let kind = match words.first().map(String::as_str) {
+            Some("REAL") => Kind::Real,
+            Some("INT") => Kind::Int,
+            Some("BOOL") => Kind::Bool,
+            _ => {
+                return Err(bad(
+                    "PROC",
+                    format!("`{head}`: the parameter `{}` is not of type REAL, INT or BOOL, which errmap's --expand runs", part.trim()),
+                    "use REAL, INT or BOOL parameters, or move the zone away",
+                ))
+            }
+        };
+        let pname = words.get(1).cloned().unwrap_or_default();
+        if words.len() != 2
+            || pname.starts_with('$')
+            || ident_end(&pname, 0) != pname.len()
+            || !pname.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_')
+        {
+            return Err(bad(
+                "PROC",
+                format!(
+                    "`{head}`: `{}` is not a parameter errmap's --expand runs (arrays are not)",
+                    part.trim()
+                ),
+                "use single REAL, INT or BOOL parameters, or move the zone away",
+            ));
+        }
+        out.push((pname, kind));
+    }
+    Ok(out)
 }
 
 /// The control-flow statements (never copied).
@@ -639,7 +810,11 @@ const FLOW: &[&str] = &[
 ];
 
 /// A block of words, values and instructions; assignments to variables alone on their block.
-fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result<Stmt, Bad> {
+fn items(
+    p: &Parts<'_>,
+    declared: &HashMap<String, Kind>,
+    procs: &HashMap<String, Proc>,
+) -> std::result::Result<Stmt, Bad> {
     let body = p.body;
     let base = p.body_start;
     let b = body.as_bytes();
@@ -789,6 +964,8 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
                 }
             } else if INSTRUCTIONS.contains(&upper.as_str()) {
                 out.push(Item::Text(base + start..base + close));
+            } else if procs.contains_key(&upper) {
+                return Err(call_among_words(&upper, body));
             } else {
                 return Err(call_refusal(name, whole));
             }
@@ -822,6 +999,9 @@ fn items(p: &Parts<'_>, declared: &HashMap<String, Kind>) -> std::result::Result
             i = j;
             continue;
         }
+        if procs.contains_key(&upper) {
+            return Err(call_among_words(&upper, body));
+        }
         return Err(call_refusal(name, name));
     }
     if !assigns.is_empty() {
@@ -849,6 +1029,15 @@ fn call_refusal(name: &str, whole: &str) -> Bad {
         name,
         format!("`{}` calls the subprogram {upper}{note}, which is not in this file: errmap cannot see its moves", whole.trim()),
         "compensate a program with the subprogram written out in it (or post the program without subprogram calls), or move the zone away",
+    )
+}
+
+/// A call of a PROC of this file on a block with other words.
+fn call_among_words(name: &str, body: &str) -> Bad {
+    bad(
+        name,
+        format!("`{body}` calls the subprogram {name} of this file on a block with other words, whose order errmap does not reproduce"),
+        "write the call alone on its block, or move the zone away",
     )
 }
 
@@ -890,6 +1079,24 @@ struct Run<'a> {
     sections: Vec<Section>,
     flat: Flat,
     iterations: u64,
+    /// The call chain of the lines run now (0: the main program).
+    chain: u32,
+    /// The calls of PROCs in progress, innermost last.
+    frames: Vec<Frame>,
+    /// The lines of the program unit run now (the main program or a PROC's body): jumps and
+    /// section labels are searched in it.
+    range: (usize, usize),
+}
+
+/// A PROC call in progress: what its return restores.
+struct Frame {
+    name: String,
+    /// The call's line.
+    call: usize,
+    vars: HashMap<String, (Kind, f64)>,
+    sections: Vec<Section>,
+    chain: u32,
+    range: (usize, usize),
 }
 
 struct Vars<'r> {
@@ -936,7 +1143,56 @@ pub(super) fn flatten(text: &str, source: &Path, trial: bool) -> Result<Option<F
             }
         }
     }
-    let stmts: Vec<_> = parts.iter().map(|p| compile(p, &declared)).collect();
+    // PROCs after the main program's end (a line with M30/M2/M17 or RET before them): the
+    // subprograms of this file, each up to the next PROC or the end of the file.
+    let mut procs: HashMap<String, Proc> = HashMap::new();
+    let mut starts = Vec::new();
+    let mut ended = false;
+    for (i, p) in parts.iter().enumerate() {
+        let (kw, rest) = upper_word(p.body);
+        if kw == "PROC" && ended {
+            let (name, after) = upper_word(rest.trim_start());
+            if !name.is_empty() {
+                starts.push((i, name, after));
+            }
+        }
+        ended = ended || ends(p) || (kw == "RET" && rest.trim().is_empty());
+    }
+    for (k, (i, name, after)) in starts.iter().enumerate() {
+        let end = starts.get(k + 1).map_or(parts.len(), |s| s.0);
+        let mut params = proc_params(name, after);
+        if let Ok(list) = &params {
+            for (n, kind) in list {
+                declared.entry(n.clone()).or_insert(*kind);
+            }
+        }
+        if let Some(first) = procs.get(name) {
+            params = Err(bad(
+                name,
+                format!(
+                    "the subprogram {name} is defined twice in this file (lines {} and {})",
+                    lines[first.line].1, lines[*i].1
+                ),
+                "name each PROC once",
+            ));
+        }
+        procs.insert(
+            name.clone(),
+            Proc {
+                line: *i,
+                end,
+                params,
+            },
+        );
+    }
+    let main_end = starts.first().map_or(parts.len(), |s| s.0);
+    let mut stmts: Vec<_> = parts
+        .iter()
+        .map(|p| compile(p, &declared, &procs))
+        .collect();
+    for (i, name, _) in &starts {
+        stmts[*i] = Ok(Stmt::ProcStart(name.clone()));
+    }
     if !has_flow(&stmts) {
         return Ok(None);
     }
@@ -963,6 +1219,7 @@ pub(super) fn flatten(text: &str, source: &Path, trial: bool) -> Result<Option<F
         labels,
         numbers,
         declared,
+        procs,
     };
     prog.pair();
     let mut run = Run {
@@ -973,6 +1230,9 @@ pub(super) fn flatten(text: &str, source: &Path, trial: bool) -> Result<Option<F
         sections: Vec::new(),
         flat: Flat::new(text.len() * 2, trial),
         iterations: 0,
+        chain: 0,
+        frames: Vec::new(),
+        range: (0, main_end),
     };
     run.run()?;
     Ok(Some(run.flat))
@@ -1066,7 +1326,7 @@ impl Run<'_> {
                 number,
                 format!("{} ({word})", content[..at].chars().count() + 1),
             ),
-            message,
+            format!("{message}{}", self.flat.calls(self.chain)),
             hint,
         )
     }
@@ -1165,6 +1425,13 @@ impl Run<'_> {
             Target::Label(l) => self.prog.labels.get(l).unwrap_or(&empty),
             Target::Number(n) => self.prog.numbers.get(n).unwrap_or(&empty),
         };
+        // Only the program unit run now (the main program or this PROC) is searched.
+        let (lo, hi) = self.range;
+        let found: Vec<usize> = found
+            .iter()
+            .copied()
+            .filter(|t| (lo..hi).contains(t))
+            .collect();
         if let (Target::Label(l), true) = (&j.target, found.len() > 1) {
             return Err(self.err(
                 pc,
@@ -1222,7 +1489,17 @@ impl Run<'_> {
     fn run(&mut self) -> Result<()> {
         let stmts = std::mem::take(&mut self.prog.stmts);
         let mut pc = 0usize;
-        while pc < stmts.len() {
+        while pc < stmts.len() || !self.frames.is_empty() {
+            if !self.frames.is_empty() && pc >= self.range.1 {
+                // A PROC's last line run without M17/RET: it returns.
+                match self.ret()? {
+                    Some(n) => {
+                        pc = n;
+                        continue;
+                    }
+                    None => break,
+                }
+            }
             let (content, line_no) = self.prog.lines[pc];
             let stmt = match &stmts[pc] {
                 Ok(s) => s,
@@ -1238,15 +1515,28 @@ impl Run<'_> {
             let mut next = pc + 1;
             match stmt {
                 Stmt::Copy => {
-                    self.flat.push(self.prog.source, line_no, 0, content)?;
                     if ends(&self.prog.parts[pc]) {
-                        return Ok(());
+                        if self.frames.is_empty() {
+                            self.flat.push(self.prog.source, line_no, 0, content)?;
+                            return Ok(());
+                        }
+                        self.end_of_call(pc, content)?;
+                        match self.ret()? {
+                            Some(n) => next = n,
+                            None => return Ok(()),
+                        }
+                    } else {
+                        self.flat
+                            .push(self.prog.source, line_no, self.chain, content)?;
                     }
                 }
                 Stmt::Skip => {}
                 Stmt::Block(items) => {
                     if self.block(pc, items)? {
-                        return Ok(());
+                        match self.ret()? {
+                            Some(n) => next = n,
+                            None => return Ok(()),
+                        }
                     }
                 }
                 Stmt::Assign(list) => {
@@ -1346,28 +1636,208 @@ impl Run<'_> {
                 Stmt::Section(first, last, count, single) => {
                     next = self.section(pc, first, last.as_deref(), count, *single)?;
                 }
-                Stmt::Ret => return Ok(()),
+                Stmt::Ret => match self.ret()? {
+                    Some(n) => next = n,
+                    None => return Ok(()),
+                },
+                Stmt::ProcStart(name) => {
+                    if self.frames.is_empty() {
+                        return Err(self.err(
+                            pc,
+                            "PROC",
+                            format!("the main program runs on into the subprogram {name} defined on this line without ending"),
+                            "end the main program with M30 before the PROC definitions",
+                        ));
+                    }
+                    match self.ret()? {
+                        Some(n) => next = n,
+                        None => return Ok(()),
+                    }
+                }
+                Stmt::Call(name, args) => {
+                    next = self.call(pc, name, args.as_deref())?;
+                }
             }
             // The end of a repeated section: again, or back after its REPEAT.
             if next == pc + 1 {
-                while let Some(s) = self.sections.last_mut() {
-                    if s.end != pc {
-                        break;
-                    }
-                    s.left -= 1;
-                    if s.left > 0 {
-                        let start = s.start;
-                        self.turn(pc, start)?;
-                        next = start;
-                        break;
-                    }
-                    next = s.ret;
-                    self.sections.pop();
-                }
+                next = self.after(pc)?;
             }
             pc = next;
         }
         Ok(())
+    }
+
+    /// The line to run after line `pc` ran to its end: the start of a repeated section again,
+    /// back after its REPEAT, or the next line.
+    fn after(&mut self, pc: usize) -> Result<usize> {
+        let mut next = pc + 1;
+        while let Some(s) = self.sections.last_mut() {
+            if s.end != pc {
+                break;
+            }
+            s.left -= 1;
+            if s.left > 0 {
+                let start = s.start;
+                self.turn(pc, start)?;
+                next = start;
+                break;
+            }
+            next = s.ret;
+            self.sections.pop();
+        }
+        Ok(next)
+    }
+
+    /// Run a call of a PROC of this file from line `pc`: its parameters bound (by value, each
+    /// argument evaluated in the caller; one left out is 0, per the manual's "incomplete
+    /// parameter transfer"), as the only local variables of the call; returns its first line.
+    fn call(
+        &mut self,
+        pc: usize,
+        name: &str,
+        args: Option<&[(String, Option<X>)]>,
+    ) -> Result<usize> {
+        let content = self.prog.lines[pc].0.trim();
+        let Some(proc) = self.prog.procs.get(name) else {
+            return Err(Error::Internal(format!("no PROC {name}")));
+        };
+        let (line, end) = (proc.line, proc.end);
+        let params = match &proc.params {
+            Ok(p) => p.clone(),
+            Err((_, m, h)) => {
+                let def_line = self.prog.lines[line].1;
+                let h = if h.is_empty() {
+                    "write the PROC line as the SINUMERIK programming manual gives it, or move the zone away"
+                } else {
+                    h
+                };
+                return Err(self.err(
+                    pc,
+                    name,
+                    format!("`{content}` calls {name} (PROC on line {def_line}): {m}"),
+                    h,
+                ));
+            }
+        };
+        if self.frames.iter().any(|f| f.name == name) {
+            return Err(self.err(
+                pc,
+                name,
+                format!("`{content}` calls {name} while {name} runs (a recursive call), which errmap's --expand does not run"),
+                "write the repetition as a loop, or move the zone away",
+            ));
+        }
+        if self.frames.len() >= MAX_CALL_DEPTH {
+            return Err(self.err(
+                pc,
+                name,
+                format!("`{content}`: subprogram calls nested deeper than {MAX_CALL_DEPTH} levels"),
+                "check the calls",
+            ));
+        }
+        let args = match args {
+            Some(a) => a,
+            None if params.is_empty() => &[][..],
+            None => {
+                return Err(self.err(
+                    pc,
+                    name,
+                    format!("`{content}` calls {name} without its parameter list, which errmap's --expand does not run"),
+                    &format!("write the arguments, e.g. {name}(…), or move the zone away"),
+                ))
+            }
+        };
+        if args.len() > params.len() {
+            return Err(self.err(
+                pc,
+                name,
+                format!(
+                    "`{content}` gives {} arguments to {name}, which takes {}, so the controller raises an alarm",
+                    args.len(),
+                    params.len()
+                ),
+                "fix the call's arguments",
+            ));
+        }
+        let mut values = Vec::new();
+        for (text, e) in args {
+            values.push(match e {
+                Some(e) => self.value(pc, text, e)?,
+                None => 0.0,
+            });
+        }
+        let mut vars = HashMap::new();
+        for (k, (pname, kind)) in params.iter().enumerate() {
+            let v = values.get(k).copied().unwrap_or(0.0);
+            // INT keeps the rounded value, BOOL whether it is not 0 (as an assignment).
+            let v = match kind {
+                Kind::Real => v,
+                Kind::Int => v.round(),
+                Kind::Bool => f64::from(u8::from(v != 0.0)),
+            };
+            vars.insert(pname.clone(), (*kind, v));
+        }
+        let line_no = self.prog.lines[pc].1;
+        let chain = self.flat.chain(self.chain, line_no, name.to_string());
+        self.frames.push(Frame {
+            name: name.to_string(),
+            call: pc,
+            vars: std::mem::replace(&mut self.vars, vars),
+            sections: std::mem::take(&mut self.sections),
+            chain: self.chain,
+            range: self.range,
+        });
+        self.chain = chain;
+        self.range = (line + 1, end);
+        Ok(line + 1)
+    }
+
+    /// Return from the innermost PROC call: the line after the call (or the start of a section
+    /// the call ends), `None` in the main program (its end).
+    fn ret(&mut self) -> Result<Option<usize>> {
+        let Some(f) = self.frames.pop() else {
+            return Ok(None);
+        };
+        self.vars = f.vars;
+        self.sections = f.sections;
+        self.chain = f.chain;
+        self.range = f.range;
+        self.after(f.call).map(Some)
+    }
+
+    /// A line ending a PROC call: M17 returns (the line is written without it); M2/M30 in a
+    /// subprogram is refused.
+    fn end_of_call(&mut self, pc: usize, text: &str) -> Result<()> {
+        let (code, comment) = text.split_at(comment_start(text));
+        let mut kept = Vec::new();
+        for w in code.split_whitespace() {
+            let u = w.to_ascii_uppercase();
+            if ["M30", "M2", "M02"].contains(&u.as_str()) {
+                return Err(self.err(
+                    pc,
+                    w,
+                    format!("`{}` ends the program inside a subprogram, which errmap's --expand does not run (whether it returns or ends is not confirmed in the manual)", text.trim()),
+                    "end the subprogram with M17 or RET, or move the zone away",
+                ));
+            }
+            if u != "M17" {
+                kept.push(w);
+            }
+        }
+        let only_number = kept.len() == 1
+            && kept[0].len() > 1
+            && kept[0].starts_with(['N', 'n'])
+            && kept[0][1..].bytes().all(|c| c.is_ascii_digit());
+        if kept.is_empty() || only_number {
+            return Ok(());
+        }
+        let mut out = kept.join(" ");
+        if !comment.is_empty() {
+            out.push(' ');
+            out.push_str(comment);
+        }
+        let line_no = self.prog.lines[pc].1;
+        self.flat.push(self.prog.source, line_no, self.chain, &out)
     }
 
     fn partner(&self, pc: usize) -> Result<usize> {
@@ -1433,7 +1903,7 @@ impl Run<'_> {
                     .prog
                     .labels
                     .get(l)
-                    .and_then(|v| v.iter().copied().find(|&t| t >= start));
+                    .and_then(|v| v.iter().copied().find(|&t| t >= start && t < self.range.1));
                 match found {
                     Some(e) => e,
                     None => {
@@ -1550,10 +2020,15 @@ impl Run<'_> {
             out.push_str(words);
         }
         let end = ends(parts);
+        if end && !self.frames.is_empty() {
+            self.end_of_call(pc, &out)?;
+            return Ok(true);
+        }
         if out.trim().is_empty() || (parts.number.is_some() && words.is_empty()) {
             return Ok(end);
         }
-        self.flat.push(self.prog.source, line_no, 0, &out)?;
+        self.flat
+            .push(self.prog.source, line_no, self.chain, &out)?;
         Ok(end)
     }
 }
