@@ -91,6 +91,8 @@ fn a_cmm_export_with_a_date_line_reads_with_one_mapping() {
         e.contains("flat.csv:2: 7 fields, but the header names 1 columns"),
         "{e}"
     );
+    // … and the hint points to the mapping.
+    assert!(e.contains("--columns x=…,y=…,z=…"), "{e}");
 }
 
 #[test]

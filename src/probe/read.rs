@@ -168,7 +168,20 @@ fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
                 map.columns_named()
             ),
         ),
-        (None, None) => CsvTable::read(path),
+        (None, None) => CsvTable::read(path).map_err(|e| match e {
+            // A row wider than the header: most often an instrument export whose first lines
+            // (a date, a title) come before its real header.
+            Error::Input {
+                location,
+                message,
+                hint,
+            } if message.contains("but the header names") => Error::Input {
+                location,
+                message,
+                hint: format!("{hint}; if the file is an instrument export with lines before its header, name its columns with --columns x=…,y=…,z=… (the header is then found), or give its line with --header-line N"),
+            },
+            e => e,
+        }),
     }
 }
 
