@@ -12,9 +12,6 @@ use std::collections::{BTreeMap, BTreeSet};
 /// The test fails on any other cycle, and on a listed one that is gone (so the list stays
 /// exact).
 const KNOWN: &[(&str, &[&str])] = &[
-    // `errmap grid` reads probe files from interp; probe's gross-error check uses interp's
-    // neighbour gradients.
-    ("", &["interp", "probe"]),
     // The batch writes its report page; the page reads the batch's manifest and summary.
     ("", &["batch", "report"]),
 ];

@@ -2,8 +2,8 @@
 
 use super::Globals;
 use errmap::geom::Axis;
-use errmap::interp::grid_file::{grid_probes, GridRequest};
 use errmap::interp::Method;
+use errmap::map::grid_file::{grid_probes, GridRequest};
 use errmap::probe::parse_domain;
 use errmap::Result;
 use std::path::PathBuf;

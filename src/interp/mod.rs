@@ -17,7 +17,7 @@
 //! triangulation so spade's walk hint and interpolation buffers stay local to one thread).
 
 mod gradient;
-pub mod grid_file;
+
 pub mod kriging;
 mod sweep;
 

@@ -6,6 +6,8 @@
 //!   normal z; the plane's two axes otherwise).
 //! - [`family_stats`] gives the family mean and standard-deviation maps.
 
+pub mod grid_file;
+
 use crate::error::{Error, Location, Result};
 use crate::geom::{Axis, Domain, ErrorField};
 use crate::interp::Grid;

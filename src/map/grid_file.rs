@@ -1,9 +1,9 @@
 //! `errmap grid`: probe points interpolated onto a grid without a network, written as CSV
 //! (`<u>_mm,<v>_mm,e_um`, nodes outside the probes' convex hull left out).
 
-use super::{resample, Grid, Method, Surface};
 use crate::error::{Error, Location, Result};
 use crate::geom::{Axis, Domain};
+use crate::interp::{resample, Grid, Method, Surface};
 use crate::probe::{read_probe_file, ProbeSpec};
 use std::path::{Path, PathBuf};
 
