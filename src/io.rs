@@ -3,6 +3,7 @@
 pub mod columns;
 pub mod lines;
 pub mod safety;
+pub mod stamp;
 
 use crate::error::{Error, Location, Result};
 use std::collections::HashMap;

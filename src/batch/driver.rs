@@ -242,12 +242,12 @@ fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
     // The summary as `errmap report` will read it back (JSON parsing may round the last
     // digit), so that both give the same bytes.
     let summary = BatchSummary::read(&dir.join("summary.json"))?;
-    let html = crate::report::run::render_run(&crate::report::run::RunInput {
+    let html = super::run_page::render_run(&super::run_page::RunInput {
         dir,
         manifest: m,
         summary: &summary,
     })?;
-    let name = crate::report::run::REPORT_FILE;
+    let name = super::run_page::REPORT_FILE;
     crate::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
     m.files
         .insert(name.to_string(), manifest::sha256_bytes(html.as_bytes()));

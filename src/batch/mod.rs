@@ -2,12 +2,14 @@
 
 pub mod commit;
 pub mod driver;
+pub mod folder_report;
 pub mod job;
 pub mod k8s;
 pub mod manifest;
 mod part_record;
 pub mod reduce;
 pub mod run;
+pub mod run_page;
 pub mod single;
 pub mod slurm;
 pub mod summary;

@@ -2,7 +2,8 @@
 
 use super::Globals;
 use errmap::batch::manifest::{sha256_bytes, RunManifest};
-use errmap::report::{build::render_path, pdf::print_pdf, run::REPORT_FILE};
+use errmap::batch::{folder_report::render_path, run_page::REPORT_FILE};
+use errmap::report::pdf::print_pdf;
 use errmap::{Error, Result};
 use std::path::{Path, PathBuf};
 

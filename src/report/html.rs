@@ -214,6 +214,15 @@ impl Page {
     }
 }
 
+/// A JSON value as table text: strings bare, numbers and arrays as JSON.
+pub fn json_text(v: &serde_json::Value) -> String {
+    match v {
+        serde_json::Value::String(t) => t.clone(),
+        serde_json::Value::Null => "-".into(),
+        other => other.to_string(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

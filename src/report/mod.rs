@@ -1,10 +1,8 @@
 //! Pictures and reports: the shared chart plumbing (fonts, PNG output), the heatmaps and charts built on it, and the self-contained `report.html`.
 
-pub mod build;
 pub mod chart;
 pub mod colormap;
 pub mod heatmap;
 pub mod html;
 pub mod pdf;
 pub mod result;
-pub mod run;

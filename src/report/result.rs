@@ -4,8 +4,8 @@
 //! and `circular -o` write one such file beside their chart, so that `errmap report FOLDER`
 //! can build a report from what the analysis wrote (docs/report.md).
 
+use super::html::json_text;
 use super::html::{self, figure_cell, num, para, png_figure, pre, table, Cell, Page};
-use super::run::json_text;
 use crate::error::{Error, Location, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -81,7 +81,7 @@ pub fn write_result(path: &Path, spec: &ResultSpec, result: &impl Serialize) -> 
     let dir = folder_of(path);
     let mut inputs = BTreeMap::new();
     for f in spec.inputs {
-        inputs.insert(f.to_path_buf(), crate::batch::manifest::sha256_file(f)?);
+        inputs.insert(f.to_path_buf(), crate::io::stamp::sha256_file(f)?);
     }
     let table = match spec.table {
         Some(t) => Some((t.display().to_string(), crate::io::read_text(t)?)),
@@ -92,7 +92,7 @@ pub fn write_result(path: &Path, spec: &ResultSpec, result: &impl Serialize) -> 
         kind: spec.kind.into(),
         title: spec.title.clone(),
         errmap_version: env!("CARGO_PKG_VERSION").into(),
-        created_utc: crate::batch::manifest::utc_now(),
+        created_utc: crate::io::stamp::utc_now(),
         inputs,
         charts: spec.charts.iter().map(|c| relative_to(&dir, c)).collect(),
         table,

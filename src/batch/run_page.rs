@@ -3,10 +3,10 @@
 //! Everything shown comes from the run folder (`run.json`, `summary.json`, the part and family
 //! files), so the same run always gives the same bytes; the date is the run's, from `run.json`.
 
-use super::html::{self, figure_cell, num, para, png_figure, table, Cell, Page};
-use crate::batch::manifest::RunManifest;
-use crate::batch::summary::{BatchSummary, PartSummary};
+use super::manifest::RunManifest;
+use super::summary::{BatchSummary, PartSummary};
 use crate::error::{Error, Location, Result};
+use crate::report::html::{self, figure_cell, json_text, num, para, png_figure, table, Cell, Page};
 use std::path::Path;
 
 /// File name of the report in a run's folder.
@@ -132,7 +132,7 @@ fn picture(dir: &Path, rel: &str, caption: &str) -> Result<String> {
     Ok(png_figure(&bytes, rel, caption))
 }
 
-fn family_section(input: &RunInput, f: &crate::batch::summary::FamilySummary) -> Result<String> {
+fn family_section(input: &RunInput, f: &super::summary::FamilySummary) -> Result<String> {
     let rows = vec![
         vec![
             Cell::text("parts in the family"),
@@ -246,15 +246,6 @@ fn toolpath_section(s: &BatchSummary) -> String {
         }
     }
     body
-}
-
-/// A JSON value as table text: strings bare, numbers and arrays as JSON.
-pub fn json_text(v: &serde_json::Value) -> String {
-    match v {
-        serde_json::Value::String(t) => t.clone(),
-        serde_json::Value::Null => "-".into(),
-        other => other.to_string(),
-    }
 }
 
 /// The last `n` components of a path, joined with `/` (a run's own file, wherever it lies).

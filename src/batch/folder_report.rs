@@ -1,10 +1,10 @@
 //! Which report a folder gets: a batch run's (it has `run.json`) or its analysis results' (`*.json` of format `errmap-result/1`).
 
-use super::result::{read_result, render_results, results_in};
-use super::run::{render_run, RunInput};
-use crate::batch::manifest::{RunManifest, RUN_MANIFEST};
-use crate::batch::summary::BatchSummary;
+use super::manifest::{RunManifest, RUN_MANIFEST};
+use super::run_page::{render_run, RunInput};
+use super::summary::BatchSummary;
 use crate::error::{Error, Result};
+use crate::report::result::{read_result, render_results, results_in};
 use std::path::Path;
 
 /// The report of `source`: a batch run's folder, a folder of analysis results, or one
