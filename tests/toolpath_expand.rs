@@ -1090,13 +1090,13 @@ fn sinumerik_a_refusal_inside_a_proc_names_its_line_and_the_call() {
     );
     // An instruction the rewriter refuses in the flattened program, mapped back through the
     // calls: the innermost first.
-    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nOUTER\nM30\nPROC OUTER\nG1 X1\nCUTS(2)\nM17\nPROC CUTS(REAL A)\nG1 X=A\nTRAFOOF\nG1 Y1\nM17\n";
+    let text = "G71 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F100\nOUTER\nM30\nPROC OUTER\nG1 X1\nCUTS(2)\nM17\nPROC CUTS(REAL A)\nG1 X=A\nTRAORI\nG1 Y1\nM17\n";
     let msg = sin_refuse(text, &sin_settings(true));
     assert_msg(
         &msg,
         &[
             "t.mpf:12",
-            "TRAFOOF",
+            "TRAORI",
             "(in CUTS called on line 8, in OUTER called on line 4)",
         ],
     );
