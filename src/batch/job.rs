@@ -155,6 +155,8 @@ pub struct ToolpathConfig {
     pub chord_tol_mm: f64,
     /// `family` or `part`.
     pub map: MapChoice,
+    /// Use a map that removes less than 10 % of E at its held-out points (refused otherwise).
+    pub allow_weak_map: bool,
 }
 
 impl Default for ToolpathConfig {
@@ -176,6 +178,7 @@ impl Default for ToolpathConfig {
             max_segment_mm: 5.0,
             chord_tol_mm: 0.005,
             map: MapChoice::Family,
+            allow_weak_map: false,
         }
     }
 }

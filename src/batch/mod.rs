@@ -228,6 +228,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
             same_part_per_offset: job.toolpaths.same_part_per_offset,
         },
         per_part: job.toolpaths.map == MapChoice::Part,
+        allow_weak_map: job.toolpaths.allow_weak_map,
     });
     // A shard sees only some parts, so family maps (and toolpaths compensated with the family
     // map) come from an unsharded run; each shard maps its own parts and per-part toolpaths.

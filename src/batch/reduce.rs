@@ -99,7 +99,7 @@ pub fn reduce_family(
     if let Some(tp) = toolpaths.filter(|tp| !tp.per_part) {
         for f in &tp.files {
             out.toolpaths
-                .push(compensate_one(f, dir, "family", &model, &tp.settings));
+                .push(compensate_one(f, dir, "family", &model, tp));
         }
     }
     Ok(out)

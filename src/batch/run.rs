@@ -12,7 +12,7 @@ use super::train_step::{train_all, Role};
 use crate::error::{Error, Result};
 use crate::geom::{Axis, Domain};
 use crate::interp::{self, Grid, Method, Surface};
-use crate::map::{family_stats, ErrorMap, FittedModel};
+use crate::map::{family_stats, Benefit, ErrorMap, FittedModel};
 use crate::nn::stop::Holdout;
 use crate::nn::{Mlp, ModelConfig, Normalisation, Trainer, TrainingSet};
 use crate::probe::{self, ProbePoint, ProbeSpec, Rejected};
@@ -62,6 +62,9 @@ pub struct ToolpathPlan {
     pub settings: crate::toolpath::CompensationSettings,
     /// `true`: each part's map (outputs in the part's folder); `false`: the family map.
     pub per_part: bool,
+    /// Use maps that remove less than [`crate::map::MIN_BENEFIT_SHARE`] of E at their
+    /// held-out points (job key `[toolpaths] allow_weak_map`).
+    pub allow_weak_map: bool,
 }
 
 /// A whole run.
@@ -770,12 +773,28 @@ fn deliver_part(
         Some(k) => (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k)),
         None => (map, model),
     };
+    // The delivered surface's own hold-out figure: the kriging's when it is delivered.
+    let delivered_rmse_um = if model.kriging.is_some() {
+        p.kriging_holdout_rmse_um
+    } else {
+        holdout_rmse_um
+    };
+    let benefit = holdout_e_rms(p)
+        .zip(delivered_rmse_um)
+        .and_then(|(e, r)| Benefit::from_rms(e, r));
+    let model = model.with_benefit(benefit);
     let stopping = timing.map(PartTiming::stopping);
     let axes = s.normal.plane_axes();
     match write_part(p, &map, &model, holdout_rmse_um, stopping, s, axes) {
         Ok(summary) => (summary, Some((map, model, part_marks(p)))),
         Err(e) => (failed_part(&p.prep.input, &e), None),
     }
+}
+
+/// RMS of E (about zero) at the part's held-out points, µm; `None` without any.
+fn holdout_e_rms(p: &Interpolated) -> Option<f64> {
+    let e: Vec<f64> = p.prep.holdout.iter().map(|&i| p.prep.clean[i].e_um).collect();
+    crate::map::rms_um(&e)
 }
 
 /// RMS of a hold-out network's misses at the part's held-out points, µm.
@@ -856,13 +875,13 @@ fn compensate_toolpaths(
         for m in maps {
             if let Some(dir) = &m.dir {
                 for f in &tp.files {
-                    toolpaths.push(compensate_one(f, dir, &m.name, &m.model, &tp.settings));
+                    toolpaths.push(compensate_one(f, dir, &m.name, &m.model, tp));
                 }
             }
         }
     } else if let (Some(model), Some(dir)) = (family_model, &plan.family_dir) {
         for f in &tp.files {
-            toolpaths.push(compensate_one(f, dir, "family", model, &tp.settings));
+            toolpaths.push(compensate_one(f, dir, "family", model, tp));
         }
     }
     toolpaths
@@ -1005,10 +1024,19 @@ pub(crate) fn compensate_one(
     dir: &Path,
     map_name: &str,
     model: &FittedModel,
-    settings: &crate::toolpath::CompensationSettings,
+    tp: &ToolpathPlan,
 ) -> ToolpathSummary {
     let output = dir.join(compensated_name(input));
-    match crate::toolpath::compensate_file(input, &output, model, settings) {
+    // A weak map is refused before the program is read; one without figures is used as before.
+    let model_file = dir.join("model.json");
+    let checked = model
+        .check_benefit(
+            tp.allow_weak_map,
+            "set [toolpaths] allow_weak_map = true in the job",
+            &model_file,
+        )
+        .and_then(|_| crate::toolpath::compensate_file(input, &output, model, &tp.settings));
+    match checked {
         Ok(report) => ToolpathSummary {
             input: input.to_path_buf(),
             output,
@@ -1150,7 +1178,7 @@ fn write_part(
         "E (µm)",
         &acc.extrapolated,
     )?;
-    let summary = part_summary(p, holdout_rmse_um, stopping, &acc);
+    let summary = part_summary(p, holdout_rmse_um, model.benefit, stopping, &acc);
     crate::io::write_json(&dir.join("summary.json"), &summary)?;
     Ok(summary)
 }
@@ -1185,6 +1213,7 @@ impl Accuracy {
 fn part_summary(
     p: &Interpolated,
     holdout_rmse_um: Option<f64>,
+    benefit: Option<Benefit>,
     stopping: Option<Stopping>,
     acc: &Accuracy,
 ) -> PartSummary {
@@ -1202,6 +1231,8 @@ fn part_summary(
         holdout_rmse_um,
         kriging_holdout_rmse_um: p.kriging_holdout_rmse_um,
         better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
+        holdout_e_rms_um: benefit.map(|b| b.holdout_e_rms_um),
+        benefit_share: benefit.map(|b| b.share),
         rms_um: Some(acc.rms_um),
         pv_um: Some(acc.pv_um),
         extrapolated_fraction: Some(

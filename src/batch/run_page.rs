@@ -154,6 +154,11 @@ fn family_section(input: &RunInput, f: &super::summary::FamilySummary) -> Result
             figure_cell("family.std_max_um", Some(f.std_max_um), 2),
             Cell::text("largest standard deviation of the parts' maps at one grid node"),
         ],
+        vec![
+            Cell::text("benefit share"),
+            figure_cell("family.benefit_share", None, 3),
+            Cell::text("unknown: the family map has no held-out points to judge it by"),
+        ],
     ];
     let mut body = table(&["figure", "value", "definition"], &rows);
     body.push_str(&picture(
@@ -297,6 +302,8 @@ fn part_section(input: &RunInput, p: &PartSummary) -> Result<String> {
         f("holdout_points", "hold-out points", Some(p.holdout_points as f64), 0, "clean points held out of the first fit"),
         f("holdout_rmse_um", "hold-out RMSE (network), µm", p.holdout_rmse_um, 3, "RMS of held-out probe value − network fitted without them: the accuracy of the map"),
         f("kriging_holdout_rmse_um", "hold-out RMSE (kriging), µm", p.kriging_holdout_rmse_um, 3, "the same for the kriging baseline (Matérn 5/2 + nugget, maximum likelihood) on the same points"),
+        f("holdout_e_rms_um", "hold-out E RMS, µm", p.holdout_e_rms_um, 3, "RMS about 0 of E at the held-out points: what compensation there has to remove"),
+        f("benefit_share", "benefit share", p.benefit_share, 3, "1 − (delivered map's hold-out RMSE) / (hold-out E RMS): the share of E the map removes; below 0.10 compensate refuses the map"),
         f("rms_um", "map RMS, µm", p.rms_um, 2, "RMS about 0 of the map over the grid nodes in the measured domain (the probes' hull)"),
         f("pv_um", "map PV, µm", p.pv_um, 2, "peak-to-valley of the map over the same nodes"),
     ];

@@ -33,6 +33,12 @@ pub struct PartSummary {
     /// `network` or `kriging`: the lower hold-out RMSE (a tie goes to the network).
     #[serde(default)]
     pub better_fit: Option<String>,
+    /// RMS of E (about zero) at the held-out points, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_e_rms_um: Option<f64>,
+    /// Share of E the delivered map removes there: 1 − (its hold-out RMSE) / `holdout_e_rms_um`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub benefit_share: Option<f64>,
     /// RMS (about 0) and peak-to-valley of the map over the grid nodes in the measured domain
     /// (the probes' hull), µm.
     pub rms_um: Option<f64>,
@@ -71,6 +77,8 @@ impl PartSummary {
             holdout_rmse_um: None,
             kriging_holdout_rmse_um: None,
             better_fit: None,
+            holdout_e_rms_um: None,
+            benefit_share: None,
             rms_um: None,
             pv_um: None,
             extrapolated_fraction: None,
@@ -155,23 +163,24 @@ impl BatchSummary {
         })
     }
 
-    /// The short table: part, points, rejected, hold-out RMS µm, PV µm (and errors).
+    /// The short table: part, points, rejected, hold-out RMS µm, PV µm, benefit % (and errors).
     pub fn table(&self) -> String {
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |x| format!("{x:.d$}"));
         let mut s = format!(
-            "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8}\n",
-            "part", "points", "rejected", "hold-out RMS µm", "RMS µm", "PV µm"
+            "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10}\n",
+            "part", "points", "rejected", "hold-out RMS µm", "RMS µm", "PV µm", "benefit %"
         );
         for p in &self.parts {
             if p.ok {
                 s.push_str(&format!(
-                    "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8}\n",
+                    "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10}\n",
                     p.part,
                     p.points,
                     p.rejected,
                     opt(p.holdout_rmse_um, 2),
                     opt(p.rms_um, 2),
-                    opt(p.pv_um, 2)
+                    opt(p.pv_um, 2),
+                    opt(p.benefit_share.map(|b| b * 100.0), 1)
                 ));
             } else {
                 s.push_str(&format!(
@@ -189,7 +198,7 @@ impl BatchSummary {
         }
         if let Some(f) = &self.family_map {
             s.push_str(&format!(
-                "family of {} parts: mean map RMS {:.2} µm, PV {:.2} µm; part-to-part std up to {:.2} µm\n",
+                "family of {} parts: mean map RMS {:.2} µm, PV {:.2} µm; part-to-part std up to {:.2} µm; benefit unknown (the family map has no held-out points)\n",
                 f.parts, f.mean_rms_um, f.mean_pv_um, f.std_max_um
             ));
         }

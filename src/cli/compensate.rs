@@ -88,6 +88,10 @@ pub struct CompensateArgs {
     /// (it would move the tool by that much; almost always a unit slip).
     #[arg(long, value_name = "MM", default_value_t = errmap::probe::DEFAULT_MAX_DEVIATION_MM)]
     pub max_deviation_mm: f64,
+    /// Use a map that removes less than 10 % of E at its held-out points (refused otherwise:
+    /// the surface's scatter is noise).
+    #[arg(long)]
+    pub allow_weak_map: bool,
 }
 
 pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
@@ -110,6 +114,11 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     let model = errmap::map::FittedModel::read(&args.model)?;
     model.check_plausible(args.max_deviation_mm, &args.model)?;
+    if let Some(warning) =
+        model.check_benefit(args.allow_weak_map, "pass --allow-weak-map", &args.model)?
+    {
+        super::terminal::warn(&format!("warning: {warning}"));
+    }
     errmap::io::safety::protect(&args.input);
     let report = compensate_file(&args.input, &args.output, &model, &settings)?;
     if args.json {

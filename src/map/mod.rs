@@ -46,6 +46,56 @@ pub struct FittedModel {
     /// Nominal extent `[min, max]` of the probed surface along the normal, mm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface_mm: Option<[f64; 2]>,
+    /// What the delivered map removes at the held-out probe points. Absent in maps written
+    /// before errmap recorded it, and in maps without held-out points (the family map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub benefit: Option<Benefit>,
+}
+
+/// Below this share of E removed at the held-out points, `errmap compensate` refuses a map
+/// unless `--allow-weak-map` (the scatter it would "correct" is noise).
+pub const MIN_BENEFIT_SHARE: f64 = 0.10;
+
+/// A map's benefit, judged at points its hold-out fit never saw.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Benefit {
+    /// RMS of E (about zero) at the held-out probe points, µm.
+    pub holdout_e_rms_um: f64,
+    /// RMS of what remains after compensation there (E − hold-out map), µm.
+    pub holdout_residual_rms_um: f64,
+    /// 1 − residual RMS / E RMS: the share of E the map removes.
+    pub share: f64,
+}
+
+/// RMS of values (about zero), µm; `None` for none.
+pub fn rms_um(values: &[f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    Some((values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
+}
+
+/// share = 1 − residual RMS / E RMS; `None` when E's RMS is zero or a figure is not finite.
+pub fn benefit_share(holdout_e_rms_um: f64, holdout_residual_rms_um: f64) -> Option<f64> {
+    let share = 1.0 - holdout_residual_rms_um / holdout_e_rms_um;
+    (holdout_e_rms_um > 0.0 && share.is_finite()).then_some(share)
+}
+
+impl Benefit {
+    /// From E and the residual after compensation at the held-out points (µm each).
+    pub fn of(holdout_e_um: &[f64], holdout_residual_um: &[f64]) -> Option<Benefit> {
+        Benefit::from_rms(rms_um(holdout_e_um)?, rms_um(holdout_residual_um)?)
+    }
+
+    /// From the two RMS figures, µm; `None` when the share is undefined.
+    pub fn from_rms(e: f64, r: f64) -> Option<Benefit> {
+        Some(Benefit {
+            holdout_e_rms_um: e,
+            holdout_residual_rms_um: r,
+            share: benefit_share(e, r)?,
+        })
+    }
 }
 
 impl FittedModel {
@@ -66,7 +116,45 @@ impl FittedModel {
             kriging: None,
             hull_mm: None,
             surface_mm: None,
+            benefit: None,
         }
+    }
+
+    /// Record the map's benefit at the held-out points.
+    pub fn with_benefit(mut self, benefit: Option<Benefit>) -> Self {
+        self.benefit = benefit;
+        self
+    }
+
+    /// Refuse a map that removes less than [`MIN_BENEFIT_SHARE`] of E at its held-out points
+    /// (unless `allow_weak`; `how_to_allow` names the flag or job key that allows it in the
+    /// hint). A map without the figures is used: the returned warning says so.
+    pub fn check_benefit(
+        &self,
+        allow_weak: bool,
+        how_to_allow: &str,
+        path: &Path,
+    ) -> Result<Option<String>> {
+        let Some(b) = self.benefit else {
+            return Ok(Some(format!(
+                "benefit unknown: {} was written before errmap recorded it (or has no held-out points); it is used as before",
+                path.display()
+            )));
+        };
+        if allow_weak || b.share >= MIN_BENEFIT_SHARE {
+            return Ok(None);
+        }
+        Err(Error::input(
+            Location::file(path),
+            format!(
+                "the map removes {:.1} % of E at its held-out points (RMS of E {:.3} µm, after compensation {:.3} µm), below the {:.0} % a map must remove to be used",
+                b.share * 100.0,
+                b.holdout_e_rms_um,
+                b.holdout_residual_rms_um,
+                MIN_BENEFIT_SHARE * 100.0
+            ),
+            format!("the surface's scatter is mostly noise: compensating with it moves the tool for nothing; {how_to_allow} to use it anyway"),
+        ))
     }
 
     /// The same model delivering `kriging` instead of the network.
@@ -565,5 +653,46 @@ mod tests {
             err.contains("mean.csv:4") && err.contains("regular grid"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn benefit_share_by_hand() {
+        // E at 4 held-out points: 3, −3, 4, −4 µm → RMS √((9+9+16+16)/4) = √12.5.
+        // Residuals after compensation 1, −1, 1, −1 µm → RMS 1. share = 1 − 1/√12.5 ≈ 0.71716.
+        let b = Benefit::of(&[3.0, -3.0, 4.0, -4.0], &[1.0, -1.0, 1.0, -1.0]).unwrap();
+        assert!((b.holdout_e_rms_um - 12.5_f64.sqrt()).abs() < 1e-12);
+        assert_eq!(b.holdout_residual_rms_um, 1.0);
+        assert!((b.share - 0.717_157_287_525_381).abs() < 1e-12, "{}", b.share);
+        // A map as wrong as the scatter itself removes nothing; a worse one removes less.
+        assert_eq!(benefit_share(2.0, 2.0), Some(0.0));
+        assert_eq!(benefit_share(2.0, 3.0), Some(-0.5));
+        // No held-out points, or E identically zero: undefined, not invented.
+        assert_eq!(Benefit::of(&[], &[]), None);
+        assert_eq!(benefit_share(0.0, 0.0), None);
+        assert_eq!(benefit_share(0.0, 1.0), None);
+    }
+
+    #[test]
+    fn weak_maps_are_refused_unless_allowed() {
+        let path = Path::new("p01/model.json");
+        let mut m = tiny_model();
+        let warning = m.check_benefit(false, "pass --allow-weak-map", path).unwrap();
+        assert!(warning.unwrap().starts_with("benefit unknown"));
+        m.benefit = Benefit::from_rms(2.0, 1.9);
+        let err = m
+            .check_benefit(false, "pass --allow-weak-map", path)
+            .unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("5.0 %") && text.contains("2.000 µm") && text.contains("1.900 µm"),
+            "{text}"
+        );
+        assert!(text.contains("--allow-weak-map"), "{text}");
+        assert_eq!(
+            m.check_benefit(true, "pass --allow-weak-map", path).unwrap(),
+            None
+        );
+        m.benefit = Benefit::from_rms(2.0, 1.5);
+        assert_eq!(m.check_benefit(false, "", path).unwrap(), None);
     }
 }
