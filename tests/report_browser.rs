@@ -329,6 +329,8 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
             "holdout_points",
             "holdout_rmse_um",
             "kriging_holdout_rmse_um",
+            "holdout_e_rms_um",
+            "benefit_share",
             "rms_um",
             "pv_um",
         ] {
@@ -346,7 +348,7 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
         );
         checked += 1;
     }
-    assert_eq!(checked, parts.len() * 8 + 4);
+    assert_eq!(checked, parts.len() * 10 + 4);
     // Printed to PDF.
     let bytes = base64::engine::general_purpose::STANDARD
         .decode(pdf["data"].as_str().unwrap())

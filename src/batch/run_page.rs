@@ -418,6 +418,7 @@ mod tests {
                 {"part": part, "probe_file": "probes/p<1>&.csv", "ok": true, "points": 144,
                  "repeats_averaged": 2, "rejected": 1, "sigma_um": 1.25, "holdout_points": 14,
                  "holdout_rmse_um": 1.19, "kriging_holdout_rmse_um": 1.2, "better_fit": "network",
+                 "holdout_e_rms_um": 14.2, "benefit_share": 0.916,
                  "rms_um": 16.6, "pv_um": 30.7, "output_dir": null, "error": null},
                 {"part": "bad", "probe_file": "probes/bad.csv", "ok": false, "points": 0,
                  "repeats_averaged": 0, "rejected": 0, "sigma_um": null, "holdout_points": 0,
@@ -472,6 +473,10 @@ mod tests {
             html.contains("data-figure=\"p&lt;1&gt;&amp;.holdout_rmse_um\" data-value=\"1.19\"")
         );
         assert!(html.contains("data-figure=\"family.std_max_um\" data-value=\"2.5\""));
+        // The benefit: the part's share as given; the family's stated unknown, not invented.
+        assert!(html.contains("data-figure=\"p&lt;1&gt;&amp;.benefit_share\" data-value=\"0.916\""));
+        assert!(!html.contains("data-figure=\"family.benefit_share\" data-value"));
+        assert!(html.contains("unknown: the family map has no held-out points"));
         assert!(html.contains("|r| &gt; k·σ = 3·1.250 = 3.750 µm"), "{html}");
         assert!(html.contains("moves_changed") && html.contains("family/finish-compensated.ngc"));
         assert!(html.contains("FAILED: no &lt;points&gt;"));
