@@ -161,7 +161,10 @@ fn a_map_of_a_structured_surface_is_used() {
         _ => part["holdout_rmse_um"].as_f64().unwrap(),
     };
     let e_rms = part["holdout_e_rms_um"].as_f64().unwrap();
-    assert!((share - (1.0 - delivered / e_rms)).abs() < 1e-12, "{summary}");
+    assert!(
+        (share - (1.0 - delivered / e_rms)).abs() < 1e-12,
+        "{summary}"
+    );
     let model = read_json(&d.join("web/model.json"));
     let hull = model["hull_mm"].as_array().unwrap();
     let n = hull.len() as f64;

@@ -793,7 +793,12 @@ fn deliver_part(
 
 /// RMS of E (about zero) at the part's held-out points, µm; `None` without any.
 fn holdout_e_rms(p: &Interpolated) -> Option<f64> {
-    let e: Vec<f64> = p.prep.holdout.iter().map(|&i| p.prep.clean[i].e_um).collect();
+    let e: Vec<f64> = p
+        .prep
+        .holdout
+        .iter()
+        .map(|&i| p.prep.clean[i].e_um)
+        .collect();
     crate::map::rms_um(&e)
 }
 

@@ -662,7 +662,11 @@ mod tests {
         let b = Benefit::of(&[3.0, -3.0, 4.0, -4.0], &[1.0, -1.0, 1.0, -1.0]).unwrap();
         assert!((b.holdout_e_rms_um - 12.5_f64.sqrt()).abs() < 1e-12);
         assert_eq!(b.holdout_residual_rms_um, 1.0);
-        assert!((b.share - 0.717_157_287_525_381).abs() < 1e-12, "{}", b.share);
+        assert!(
+            (b.share - 0.717_157_287_525_381).abs() < 1e-12,
+            "{}",
+            b.share
+        );
         // A map as wrong as the scatter itself removes nothing; a worse one removes less.
         assert_eq!(benefit_share(2.0, 2.0), Some(0.0));
         assert_eq!(benefit_share(2.0, 3.0), Some(-0.5));
@@ -676,7 +680,9 @@ mod tests {
     fn weak_maps_are_refused_unless_allowed() {
         let path = Path::new("p01/model.json");
         let mut m = tiny_model();
-        let warning = m.check_benefit(false, "pass --allow-weak-map", path).unwrap();
+        let warning = m
+            .check_benefit(false, "pass --allow-weak-map", path)
+            .unwrap();
         assert!(warning.unwrap().starts_with("benefit unknown"));
         m.benefit = Benefit::from_rms(2.0, 1.9);
         let err = m
@@ -689,7 +695,8 @@ mod tests {
         );
         assert!(text.contains("--allow-weak-map"), "{text}");
         assert_eq!(
-            m.check_benefit(true, "pass --allow-weak-map", path).unwrap(),
+            m.check_benefit(true, "pass --allow-weak-map", path)
+                .unwrap(),
             None
         );
         m.benefit = Benefit::from_rms(2.0, 1.5);
