@@ -114,13 +114,14 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
     errmap::probe::validate_max_deviation(args.max_deviation_mm, "--max-deviation-mm")?;
     let model = errmap::map::FittedModel::read(&args.model)?;
     model.check_plausible(args.max_deviation_mm, &args.model)?;
-    if let Some(warning) =
-        model.check_benefit(args.allow_weak_map, "pass --allow-weak-map", &args.model)?
-    {
-        super::terminal::warn(&format!("warning: {warning}"));
-    }
+    let benefit_warning =
+        model.check_benefit(args.allow_weak_map, "pass --allow-weak-map", &args.model)?;
     errmap::io::safety::protect(&args.input);
     let report = compensate_file(&args.input, &args.output, &model, &settings)?;
+    // Said once the map was used: a refused program's message stays the only line.
+    if let Some(warning) = benefit_warning {
+        super::terminal::warn(&format!("warning: {warning}"));
+    }
     if args.json {
         let doc = errmap::toolpath::CompensationDocument {
             input: &args.input,
