@@ -606,6 +606,37 @@ fn the_cli_reads_an_export_with_columns_and_a_batch_job_with_the_key() {
     assert_eq!(part["ok"], true, "{part}");
     assert_eq!(part["points"], 36, "{part}");
     assert_eq!(part["preamble_lines"], 1, "{part}");
+    assert!(part.get("skipped_features").is_none(), "{part}");
+    // A batch of a DMIS file: its plane (nominal and actual) is skipped and counted.
+    std::fs::create_dir(d.join("dmis")).unwrap();
+    let mut dmis =
+        String::from("DMISMN/'plate',05.2\nUNITS/MM\nF(PL1)=FEAT/PLANE,CART,0,0,10,0,0,1\n");
+    let mut actual = String::new();
+    let mut n = 0;
+    for j in 0..6 {
+        for i in 0..6 {
+            n += 1;
+            let (x, y) = (i as f64 * 20.0, j as f64 * 20.0);
+            let z = 10.0 + (1.0 + 0.1 * x + 0.2 * y) / 1000.0;
+            dmis.push_str(&format!("F(P{n})=FEAT/POINT,CART,{x},{y},10,0,0,1\n"));
+            actual.push_str(&format!("FA(P{n})=FEAT/POINT,CART,{x},{y},{z},0,0,1\n"));
+        }
+    }
+    dmis.push_str(&actual);
+    dmis.push_str("FA(PL1)=FEAT/PLANE,CART,0,0,10.001,0,0,1\nENDFIL\n");
+    std::fs::write(d.join("dmis/p1.dmi"), &dmis).unwrap();
+    std::fs::write(
+        d.join("dmis.toml"),
+        "family = \"dmis\"\nprobes = \"dmis/*.dmi\"\ngrid_step_mm = 10.0\n\
+         [model]\nepochs = 20\nbackend = \"cpu-reference\"\nwarm_start = \"none\"\n",
+    )
+    .unwrap();
+    let run = errmap(d, &["batch", "dmis.toml", "--out-dir", "out3", "--json"]);
+    run.expect_code(0);
+    let summary: serde_json::Value = serde_json::from_str(&run.stdout).expect("summary JSON");
+    let part = &summary["parts"][0];
+    assert_eq!(part["points"], 36, "{part}");
+    assert_eq!(part["skipped_features"], 2, "{part}");
     // A bad key value is refused with the job's key.
     std::fs::write(
         d.join("bad.toml"),

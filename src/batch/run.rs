@@ -112,6 +112,7 @@ struct Prepared {
     points: usize,
     repeats_averaged: usize,
     preamble_lines: usize,
+    skipped_features: usize,
     clean: Vec<ProbePoint>,
     rejected: Vec<Rejected>,
     sigma_um: f64,
@@ -181,10 +182,11 @@ fn prepare(
         columns: s.columns.clone(),
         header_line: s.header_line,
     };
-    let (set, preamble_lines) = match probe::read_probe_file(&input.probe_file, &spec) {
-        Ok(read) => (read.set, read.preamble_lines),
-        Err(e) => return Err(Box::new((input, e))),
-    };
+    let (set, preamble_lines, skipped_features) =
+        match probe::read_probe_file(&input.probe_file, &spec) {
+            Ok(read) => (read.set, read.preamble_lines, read.skipped_features),
+            Err(e) => return Err(Box::new((input, e))),
+        };
     let cleaned = match probe::reject_gross_errors(&set, s.k_sigma) {
         Ok(c) => c,
         Err(e) => return Err(Box::new((input, e))),
@@ -200,6 +202,7 @@ fn prepare(
         points: set.points.len(),
         repeats_averaged: (rows as usize).saturating_sub(set.points.len()),
         preamble_lines,
+        skipped_features,
         clean: cleaned.clean,
         rejected: cleaned.rejected,
         sigma_um: cleaned.sigma_um,
@@ -1230,6 +1233,7 @@ fn part_summary(
         points: p.prep.points,
         repeats_averaged: p.prep.repeats_averaged,
         preamble_lines: p.prep.preamble_lines,
+        skipped_features: p.prep.skipped_features,
         rejected: p.prep.rejected.len(),
         sigma_um: Some(p.prep.sigma_um),
         holdout_points: p.prep.holdout.len(),

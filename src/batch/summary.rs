@@ -19,6 +19,9 @@ pub struct PartSummary {
     /// absent when none.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub preamble_lines: usize,
+    /// DMIS features that are not points (planes, circles …), skipped; absent when none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub skipped_features: usize,
     pub rejected: usize,
     /// Robust σ of the leave-one-out residuals of the clean points, µm.
     pub sigma_um: Option<f64>,
@@ -71,6 +74,7 @@ impl PartSummary {
             points: 0,
             repeats_averaged: 0,
             preamble_lines: 0,
+            skipped_features: 0,
             rejected: 0,
             sigma_um: None,
             holdout_points: 0,
