@@ -62,6 +62,30 @@ pub(crate) trait Env {
 /// Deepest nesting compiled; deeper is refused so a hostile line cannot overflow the stack.
 const MAX_NESTING: usize = 64;
 
+/// How deep an expression parser has nested (brackets, unary operators, operator levels): past
+/// [`MAX_NESTING`] the expression is refused, so a hostile one cannot exhaust the stack. Shared
+/// by the Fanuc/LinuxCNC and the Sinumerik parsers.
+#[derive(Debug, Default)]
+pub(crate) struct Nesting(usize);
+
+impl Nesting {
+    /// One level deeper, refused past [`MAX_NESTING`].
+    pub(crate) fn enter(&mut self) -> Result<(), String> {
+        self.0 += 1;
+        if self.0 > MAX_NESTING {
+            return Err(format!(
+                "an expression nested deeper than {MAX_NESTING} levels"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Back one level.
+    pub(crate) fn leave(&mut self) {
+        self.0 -= 1;
+    }
+}
+
 /// Compile `text` (a word value, an assignment's right side or a condition in brackets).
 pub(crate) fn parse(text: &str, rules: Rules) -> Result<Expr, String> {
     let toks = tokenize(text)?;
@@ -69,7 +93,7 @@ pub(crate) fn parse(text: &str, rules: Rules) -> Result<Expr, String> {
         toks,
         at: 0,
         rules,
-        depth: 0,
+        depth: Nesting::default(),
     };
     let e = p.top()?;
     if p.at != p.toks.len() {
@@ -170,7 +194,7 @@ struct Parser {
     toks: Vec<Tok>,
     at: usize,
     rules: Rules,
-    depth: usize,
+    depth: Nesting,
 }
 
 const FUNCTIONS: [&str; 16] = [
@@ -225,18 +249,8 @@ impl Parser {
         self.binary(1)
     }
 
-    fn deeper(&mut self) -> Result<(), String> {
-        self.depth += 1;
-        if self.depth > MAX_NESTING {
-            return Err(format!(
-                "an expression nested deeper than {MAX_NESTING} levels"
-            ));
-        }
-        Ok(())
-    }
-
     fn binary(&mut self, min: u8) -> Result<Expr, String> {
-        self.deeper()?;
+        self.depth.enter()?;
         let mut left = self.unary()?;
         while let Some(op) = self.word_op() {
             let l = self.level(op);
@@ -248,7 +262,7 @@ impl Parser {
             let right = self.binary(l + 1)?;
             left = Expr::Bin(op, Box::new(left), Box::new(right));
         }
-        self.depth -= 1;
+        self.depth.leave();
         Ok(left)
     }
 
@@ -256,16 +270,16 @@ impl Parser {
         match self.peek() {
             Some(Tok::Op(b'-')) => {
                 self.at += 1;
-                self.deeper()?;
+                self.depth.enter()?;
                 let e = self.unary()?;
-                self.depth -= 1;
+                self.depth.leave();
                 Ok(Expr::Neg(Box::new(e)))
             }
             Some(Tok::Op(b'+')) => {
                 self.at += 1;
-                self.deeper()?;
+                self.depth.enter()?;
                 let e = self.unary();
-                self.depth -= 1;
+                self.depth.leave();
                 e
             }
             _ => self.atom(),
@@ -308,9 +322,9 @@ impl Parser {
                         Var::Named(n)
                     }
                     Some(Tok::Open) | Some(Tok::Hash) => {
-                        self.deeper()?;
+                        self.depth.enter()?;
                         let e = self.atom()?;
-                        self.depth -= 1;
+                        self.depth.leave();
                         Var::Indirect(Box::new(e))
                     }
                     _ => return Err("`#` without a parameter number".into()),
@@ -330,13 +344,13 @@ impl Parser {
                 }
             }
             Tok::Word(w) if FUNCTIONS.contains(&w.as_str()) => {
-                self.deeper()?;
+                self.depth.enter()?;
                 let arg = if w == "ATAN" && self.toks.get(self.at + 1).is_some() {
                     self.bracket_or_pair()?
                 } else {
                     (self.bracket()?, None)
                 };
-                self.depth -= 1;
+                self.depth.leave();
                 match (w.as_str(), arg) {
                     ("ATAN", (a, Some(b))) => Ok(Expr::Atan2(Box::new(a), Box::new(b))),
                     (_, (a, None)) => Ok(Expr::Func(w, Box::new(a))),

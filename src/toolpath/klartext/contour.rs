@@ -9,9 +9,9 @@
 //! or `CP` block is the arc's own centre.
 
 use super::super::arc::{Arc, Plane};
-use super::super::gcode::{dist, emit_curve, lerp, Breaks};
+use super::super::gcode::{emit_curve, lerp, Breaks};
 use super::block::{Block, Word};
-use super::interp::{known, PathMove, Refusal};
+use super::interp::{PathMove, Refusal};
 use super::Kt;
 use crate::error::Result;
 
@@ -108,27 +108,18 @@ impl Kt<'_> {
         mv: &PathMove,
         mode: Comp,
     ) -> Result<()> {
-        let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
+        // Arc pieces are arcs: only length and quarter turns cut them.
+        let Some((s, e, pieces)) = self.bounded_ends(
+            n,
+            b,
+            mv,
+            f64::INFINITY,
+            "check the coordinates and units, or raise --max-segment",
+        )?
+        else {
             return self.unchanged(n, content, term, b, false);
         };
         let step = self.m.step();
-        let (length, pieces) = match &mv.arc {
-            None => (dist(&s, &e), 1),
-            // Arc pieces are arcs: only length and quarter turns cut them.
-            Some(a) => (
-                a.sweep.abs() * a.r_start.max(a.r_end),
-                a.chords(f64::INFINITY, step),
-            ),
-        };
-        if !length.is_finite() || length / step > 1e6 || pieces >= 1_000_000 {
-            return Err(self.err(
-                n,
-                b.head_col,
-                &b.head,
-                format!("this move ({length:.6e} program units) would need more than a million segments"),
-                "check the coordinates and units, or raise --max-segment",
-            ));
-        }
         if let Some(a) = &mv.arc {
             if (a.r_start - a.r_end).abs() > self.half_digit() {
                 return Err(self.err(n, b.head_col, &b.head, format!("under tool radius compensation this arc must stay arcs, written as CP about CC, whose radius cannot change; its end lies {:.4} off the circle through its start", (a.r_start - a.r_end).abs()), "put the end point on the circle about CC, or post the arc as the tool-centre path (R0) for the zone"));

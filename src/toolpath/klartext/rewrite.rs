@@ -8,6 +8,9 @@ use crate::error::Result;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
+/// A cut's known start and end (program units) and how many pieces it needs.
+pub(super) type BoundedCut = ([f64; 3], [f64; 3], usize);
+
 /// The fewest bytes a written piece takes: `L X0.0000 Y0.0000 Z0.0000` and a newline (every
 /// piece writes the three axes with at least four decimals).
 const MIN_PIECE_BYTES: u64 = 26;
@@ -16,6 +19,41 @@ const MIN_PIECE_BYTES: u64 = 26;
 const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
 
 impl Kt<'_> {
+    /// A cut's start, end and piece count when both ends are known (`None`: copy it unchanged), refused when it
+    /// would need a million pieces or more: lines cut every `--max-segment`, arcs also at
+    /// `chord_tol` (infinite under radius compensation, where only length and quarter turns
+    /// cut them).
+    pub(super) fn bounded_ends(
+        &self,
+        n: u64,
+        b: &Block,
+        mv: &PathMove,
+        chord_tol: f64,
+        hint: &str,
+    ) -> Result<Option<BoundedCut>> {
+        let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
+            return Ok(None);
+        };
+        let step = self.m.step();
+        let (length, pieces) = match &mv.arc {
+            None => (dist(&s, &e), 1),
+            Some(a) => (
+                a.sweep.abs() * a.r_start.max(a.r_end),
+                a.chords(chord_tol, step),
+            ),
+        };
+        if !length.is_finite() || length / step > 1e6 || pieces >= 1_000_000 {
+            return Err(self.err(
+                n,
+                b.head_col,
+                &b.head,
+                format!("this move ({length:.6e} program units) would need more than a million segments"),
+                hint,
+            ));
+        }
+        Ok(Some((s, e, pieces)))
+    }
+
     /// Compensate a cut whose start is known and which nothing forbids: its points every
     /// `max_segment` (arcs within the chord tolerance) and at the zone and domain edges.
     pub(super) fn compensate_path(
@@ -26,26 +64,17 @@ impl Kt<'_> {
         b: &Block,
         mv: &PathMove,
     ) -> Result<()> {
-        let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
+        let Some((s, e, chords)) = self.bounded_ends(
+            n,
+            b,
+            mv,
+            self.m.chord_tol(),
+            "check the coordinates and units, or raise --max-segment / --chord-tol",
+        )?
+        else {
             return self.unchanged(n, content, term, b, false);
         };
         let step = self.m.step();
-        let (length, chords) = match &mv.arc {
-            None => (dist(&s, &e), 1),
-            Some(a) => (
-                a.sweep.abs() * a.r_start.max(a.r_end),
-                a.chords(self.m.chord_tol(), step),
-            ),
-        };
-        if !length.is_finite() || length / step > 1e6 || chords >= 1_000_000 {
-            return Err(self.err(
-                n,
-                b.head_col,
-                &b.head,
-                format!("this move ({length:.6e} program units) would need more than a million segments"),
-                "check the coordinates and units, or raise --max-segment / --chord-tol",
-            ));
-        }
         let mut emitted = Vec::new();
         {
             let curve = |t: f64| match &mv.arc {

@@ -5,6 +5,8 @@
 //! last. So `R1>5 AND R2<3` reads as `R1 > (5 AND R2) < 3`: a comparison next to a logical
 //! operator or another comparison without parentheses is refused, not guessed.
 
+use super::super::eval::Nesting;
+
 /// A binary operator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum B {
@@ -168,12 +170,10 @@ fn tokenize(text: &str) -> Vec<(T, usize)> {
 }
 
 /// Deepest nesting parsed; deeper is refused so a hostile line cannot overflow the stack.
-const MAX_NESTING: usize = 64;
-
 struct P<'t> {
     toks: &'t [(T, usize)],
     at: usize,
-    depth: usize,
+    depth: Nesting,
 }
 
 /// Parse an expression from the start of `text`: the expression and the byte offset where it
@@ -183,7 +183,7 @@ pub(super) fn parse_prefix(text: &str) -> Result<(X, usize), String> {
     let mut p = P {
         toks: &toks,
         at: 0,
-        depth: 0,
+        depth: Nesting::default(),
     };
     let e = p.binary(1)?;
     let end = toks.get(p.at).map_or(text.len(), |t| t.1);
@@ -237,18 +237,8 @@ impl P<'_> {
         })
     }
 
-    fn deeper(&mut self) -> Result<(), String> {
-        self.depth += 1;
-        if self.depth > MAX_NESTING {
-            return Err(format!(
-                "an expression nested deeper than {MAX_NESTING} levels"
-            ));
-        }
-        Ok(())
-    }
-
     fn binary(&mut self, min: u8) -> Result<X, String> {
-        self.deeper()?;
+        self.depth.enter()?;
         let mut left = self.unary()?;
         while let Some(op) = self.op() {
             let l = op.level();
@@ -271,7 +261,7 @@ impl P<'_> {
             }
             left = X::Bin(op, Box::new(left), Box::new(right));
         }
-        self.depth -= 1;
+        self.depth.leave();
         Ok(left)
     }
 
@@ -284,9 +274,9 @@ impl P<'_> {
             _ => return self.atom(),
         };
         self.at += 1;
-        self.deeper()?;
+        self.depth.enter()?;
         let e = self.unary()?;
-        self.depth -= 1;
+        self.depth.leave();
         Ok(wrap(Box::new(e)))
     }
 
@@ -309,9 +299,9 @@ impl P<'_> {
             T::Num(v) => Ok(X::Num(v)),
             T::Str(s) => Ok(X::Str(s)),
             T::Sym("(") => {
-                self.deeper()?;
+                self.depth.enter()?;
                 let e = self.binary(1)?;
-                self.depth -= 1;
+                self.depth.leave();
                 self.expect(")")?;
                 Ok(X::Paren(Box::new(e)))
             }
@@ -330,9 +320,9 @@ impl P<'_> {
                     }
                     if n.is_empty() && self.peek() == Some(&T::Sym("[")) {
                         self.at += 1;
-                        self.deeper()?;
+                        self.depth.enter()?;
                         let e = self.binary(1)?;
-                        self.depth -= 1;
+                        self.depth.leave();
                         self.expect("]")?;
                         return Ok(X::R(Box::new(e)));
                     }
@@ -361,9 +351,9 @@ impl P<'_> {
             return Ok(out);
         }
         loop {
-            self.deeper()?;
+            self.depth.enter()?;
             out.push(self.binary(1)?);
-            self.depth -= 1;
+            self.depth.leave();
             match self.peek() {
                 Some(T::Sym(",")) => self.at += 1,
                 Some(T::Sym(s)) if *s == close => {
