@@ -7,29 +7,19 @@
 //! - Thermal error: cold/warm difference and the composite geometric + thermal model.
 //! - Rotary axes: double-vector angular error, axis location and tables.
 //! - Circular tests (ISO 230-4): circular deviation, hysteresis and a diagnosis of axis errors.
+//!
+//! This crate gathers the workspace's library crates under one name, one module per area, so a
+//! program (and errmap's own binary and tests) writes `errmap::toolpath::…` whichever crate
+//! holds it; docs/architecture.md draws the crates and what each owns.
 #![forbid(unsafe_code)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-pub mod backend;
-pub mod batch;
-pub mod circular;
-pub mod controller;
-pub mod direction;
-pub mod error;
-pub mod geom;
-pub mod gpu;
-pub mod interp;
-pub mod io;
-pub mod linear;
-pub mod map;
-pub mod nn;
-pub mod numeric;
-pub mod probe;
-pub mod progress;
-pub mod report;
-pub mod rotary;
-pub mod synth;
-pub mod thermal;
-pub mod toolpath;
+pub use errmap_batch as batch;
+pub use errmap_core::{direction, error, geom, io, numeric, progress};
+pub use errmap_maps::{backend, gpu, interp, map, nn, probe};
+pub use errmap_metrology::{circular, controller, linear, rotary, thermal};
+pub use errmap_report as report;
+pub use errmap_synth as synth;
+pub use errmap_toolpath as toolpath;
 
 pub use error::{Error, Location, Result};

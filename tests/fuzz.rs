@@ -381,8 +381,7 @@ fn probe_csv() {
 
 #[test]
 fn linear_run_csv() {
-    use clap::ValueEnum;
-    let standards = errmap::linear::Standard::value_variants();
+    let standards = &errmap::linear::Standard::ALL;
     fuzz("linear_run_csv", "runs", 2, |data, _| {
         let Ok(file) = errmap::linear::parse_runs(Path::new("runs.csv"), &text(data)) else {
             return;

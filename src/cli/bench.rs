@@ -25,7 +25,7 @@ pub struct TrainingArgs {
     pub epochs: u32,
     /// auto: the fastest this machine has; gpu: any GPU adapter (software included);
     /// cpu: the fast CPU trainer; cpu-reference: the slow reference trainer.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_parser = super::choices::Backend::parser(), default_value = "auto")]
     pub backend: Backend,
     /// Network size: neurons in each hidden layer, comma-separated.
     #[arg(

@@ -14,7 +14,7 @@ pub struct CircularArgs {
     #[arg(long, value_name = "MM")]
     pub radius: f64,
     /// Plane of the circle: its first and second axis (xy: X, Y; yz: Y, Z; zx: Z, X).
-    #[arg(long, value_enum, default_value = "xy")]
+    #[arg(long, value_parser = super::choices::Plane::parser(), default_value = "xy")]
     pub plane: Plane,
     /// Programmed feed; needed to give the servo mismatch in ms.
     #[arg(long, value_name = "MM_PER_MIN")]

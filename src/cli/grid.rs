@@ -14,7 +14,7 @@ pub struct GridArgs {
     /// with --columns; DMIS .dmi/.dms/.dmis; point cloud .xyz/.ply).
     pub probes: PathBuf,
     /// Interpolation method.
-    #[arg(long, value_enum, default_value_t = Method::NaturalNeighbour)]
+    #[arg(long, value_parser = super::choices::Method::parser(), default_value = "natural-neighbour")]
     pub method: Method,
     /// Grid step in mm.
     #[arg(long, value_name = "MM")]

@@ -30,7 +30,7 @@ pub struct CorrectionArgs {
     #[arg(long)]
     pub correct_air: bool,
     /// Air equation for --correct-air.
-    #[arg(long, value_enum, default_value = "ciddor")]
+    #[arg(long, value_parser = super::choices::AirFormula::parser(), default_value = "ciddor")]
     pub air_formula: AirFormula,
     /// Vacuum wavelength of the laser (nm) for --correct-air.
     #[arg(long, default_value_t = HENE_WAVELENGTH_NM)]
@@ -65,7 +65,7 @@ pub struct TableOptionArgs {
 #[derive(Debug, Clone, clap::Args)]
 pub struct ControllerArgs {
     /// Fanuc control series whose parameter ranges are checked (0i-F or 30i-B).
-    #[arg(long, value_enum, default_value = "0i-F")]
+    #[arg(long, value_parser = super::choices::FanucSeries::parser(), default_value = "0i-F")]
     pub fanuc_series: FanucSeries,
     /// Fanuc pitch-error compensation magnification (parameter 3623), 1 ... 100.
     #[arg(long, default_value_t = 1)]
@@ -80,7 +80,7 @@ pub struct AnalyzeArgs {
     /// Run file (CSV): run,direction,target_mm, actual_mm or deviation_um, optional environment.
     pub runs: PathBuf,
     /// Evaluation standard.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::Standard::parser())]
     pub standard: Standard,
     /// Read an instrument's CSV export: FIELD=COLUMN[unit],… e.g.
     /// target=Position,deviation=Error[mm],direction=Dir (see docs/linear.md).
@@ -101,7 +101,7 @@ pub struct AnalyzeArgs {
     #[arg(long, value_name = "FILE")]
     pub apply_table: Option<PathBuf>,
     /// Format of --apply-table (default: recognised from the content).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::TableFormat::parser())]
     pub table_format: Option<TableFormat>,
     #[command(flatten)]
     pub table_options: TableOptionArgs,
@@ -125,7 +125,7 @@ pub struct AirIndexArgs {
     #[arg(long, default_value_t = DEFAULT_CO2_PPM)]
     pub co2_ppm: f64,
     /// Equation.
-    #[arg(long, value_enum, default_value = "ciddor")]
+    #[arg(long, value_parser = super::choices::AirFormula::parser(), default_value = "ciddor")]
     pub formula: AirFormula,
     /// Print one JSON document on stdout.
     #[arg(long)]
@@ -146,7 +146,7 @@ pub struct TableArgs {
     /// Run file (CSV).
     pub runs: PathBuf,
     /// Controller format.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::TableFormat::parser())]
     pub format: TableFormat,
     /// Read an instrument's CSV export: FIELD=COLUMN[unit],… (see `analyze --columns`).
     #[arg(long, value_name = "MAP")]

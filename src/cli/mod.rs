@@ -27,6 +27,7 @@ macro_rules! info {
 }
 
 mod bench;
+mod choices;
 mod circular;
 mod compensate;
 mod deprecated;

@@ -14,7 +14,7 @@ pub struct BatchArgs {
     /// The job manifest (TOML; every key in docs/job.md).
     pub job: PathBuf,
     /// Trainer: auto (the fastest this machine has, measured once; see docs/gpu.md), gpu (any adapter, software included; fails without one), cpu (fast CPU trainer) or cpu-reference; overrides [model] backend.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::Backend::parser())]
     pub backend: Option<Backend>,
     /// Map only shard INDEX of COUNT (0-based): the parts at positions INDEX, INDEX+COUNT, … of the sorted probe files.
     #[arg(long, value_name = "INDEX/COUNT")]
@@ -70,7 +70,7 @@ pub struct MapArgs {
     #[arg(long, value_name = "MM", default_value_t = 5.0)]
     pub grid_step: f64,
     /// Interpolation method of the training set.
-    #[arg(long, value_enum, default_value_t = Method::NaturalNeighbour)]
+    #[arg(long, value_parser = super::choices::Method::parser(), default_value = "natural-neighbour")]
     pub method: Method,
     /// Spacing of the training set, mm.
     #[arg(long, value_name = "MM", default_value_t = 10.0)]
@@ -85,7 +85,7 @@ pub struct MapArgs {
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
     /// Trainer: auto, gpu, cpu or cpu-reference (see errmap batch --help).
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_parser = super::choices::Backend::parser(), default_value = "auto")]
     pub backend: Backend,
     /// Plausibility bound, mm: a probe deviation or map value beyond it is an error naming the
     /// likely unit slip.
@@ -117,7 +117,7 @@ pub struct MergeArgs {
     #[arg(long, value_name = "JOB.toml")]
     pub job: Option<PathBuf>,
     /// Trainer of the family network: pass the shards' --backend (it is part of the job hash).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::Backend::parser())]
     pub backend: Option<Backend>,
     /// Wait up to this many seconds for shards that have not committed yet.
     #[arg(long, value_name = "SECONDS")]

@@ -67,7 +67,7 @@ pub struct AnalyzeArgs {
     pub chart: Option<PathBuf>,
     /// Sign of the errors in the text, JSON and chart: errmap = commanded − measured (α − β),
     /// calibrator = measured − commanded (β − α, as ISO 230-2 and rotary calibrators report).
-    #[arg(long, value_enum, default_value = "errmap")]
+    #[arg(long, value_parser = super::choices::Sign::parser(), default_value = "errmap")]
     pub sign: Sign,
 }
 
@@ -76,7 +76,7 @@ pub struct TableArgs {
     #[command(flatten)]
     pub measurement: MeasurementArgs,
     /// Table format.
-    #[arg(long, value_enum, default_value = "csv")]
+    #[arg(long, value_parser = super::choices::TableFormat::parser(), default_value = "csv")]
     pub format: TableFormat,
     /// Output file.
     #[arg(long, short = 'o', value_name = "FILE")]

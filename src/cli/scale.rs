@@ -34,7 +34,7 @@ pub struct SlurmArgs {
     )]
     pub old_out: Option<PathBuf>,
     /// Trainer for every task and the merge (recorded in the job hash).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::Backend::parser())]
     pub backend: Option<Backend>,
     /// The errmap binary on the nodes (default: this one).
     #[arg(long, value_name = "PATH")]
@@ -78,7 +78,7 @@ pub struct K8sArgs {
     )]
     pub old_out: Option<PathBuf>,
     /// Trainer for every shard and the merge.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choices::Backend::parser())]
     pub backend: Option<Backend>,
     /// Seconds the merge Job waits for the shards.
     #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]

@@ -54,7 +54,7 @@ pub struct SynthWebPlateArgs {
     pub warm_epochs: Option<u32>,
     /// How each probe file is written: csv (errmap's columns), cmm-csv (a date line, then
     /// POINT,X,Y,Z,I,J,K; the job gets `columns`), dmis, xyz or ply (binary).
-    #[arg(long, value_enum, default_value = "csv")]
+    #[arg(long, value_parser = super::choices::ProbeFileFormat::parser(), default_value = "csv")]
     pub probe_format: web_plate::ProbeFileFormat,
     /// Family name written into job.toml.
     #[arg(long, value_name = "NAME", default_value = "web-plate")]

@@ -177,7 +177,7 @@ pub struct EvaluateArgs {
     #[arg(required = true)]
     pub campaigns: Vec<PathBuf>,
     /// Evaluation standard.
-    #[arg(long, value_enum, default_value = "iso230-2:2014")]
+    #[arg(long, value_parser = super::choices::Standard::parser(), default_value = "iso230-2:2014")]
     pub standard: Standard,
     /// Output folder for evaluate.csv, evaluate.png and evaluate.json (default: the model's folder).
     #[arg(long, value_name = "DIR")]

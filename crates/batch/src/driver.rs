@@ -1,0 +1,751 @@
+//! A job run from start to commit (`errmap batch`) and the reduce of a sharded job (`errmap merge`): staging, `--resume`, the manifest, the family rebuilt from the shards.
+
+use super::commit::{self, Staging};
+use super::manifest::{self, RunManifest, RUN_MANIFEST};
+use super::reduce::{self, PartReduce, REDUCE_FILE};
+use super::summary::{BatchSummary, PartSummary};
+use super::{plan_job, BatchOptions, JobFile, Shard};
+use errmap_core::error::{Error, Location, Result};
+use errmap_core::progress::Reporter;
+use errmap_maps::nn::Trainer;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A committed run: its summary and folder, and which parts `--resume` kept.
+#[derive(Debug)]
+pub struct JobRun {
+    pub summary: BatchSummary,
+    pub folder: PathBuf,
+    pub reused: Vec<String>,
+}
+
+/// The job as the run sees it: `--backend` applied.
+fn effective_job(file: &JobFile, opts_backend: Option<errmap_maps::nn::Backend>) -> JobFile {
+    let mut file = file.clone();
+    if let Some(b) = opts_backend {
+        file.job.model.backend = b;
+    }
+    file
+}
+
+/// Sharding and `--resume` put parts mapped by different processes into one family: they
+/// must share one domain, which only the job can fix.
+fn require_domain(file: &JobFile, what: &str) -> Result<()> {
+    if file.job.domain.is_none() {
+        return Err(Error::input(
+            Location::cell(&file.path, 1, "domain"),
+            format!("{what} needs a fixed map domain, and the job has no `domain`"),
+            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job; an unsharded run prints the probes' box as domain_mm in summary.json",
+        ));
+    }
+    Ok(())
+}
+
+/// Every input of the job: probe files, toolpaths and the job file itself.
+fn job_inputs(file: &JobFile) -> Result<Vec<PathBuf>> {
+    let mut inputs = file.probe_files()?;
+    inputs.extend(file.toolpath_files());
+    inputs.push(file.path.clone());
+    Ok(inputs)
+}
+
+/// `p` with the prefix `from` replaced by `to`.
+fn relocate(p: &mut PathBuf, from: &Path, to: &Path) {
+    if let Ok(rest) = p.strip_prefix(from) {
+        *p = to.join(rest);
+    }
+}
+
+fn relocate_summary(summary: &mut BatchSummary, from: &Path, to: &Path) {
+    for p in &mut summary.parts {
+        if let Some(d) = &mut p.output_dir {
+            relocate(d, from, to);
+        }
+    }
+    if let Some(f) = &mut summary.family_map {
+        relocate(&mut f.output_dir, from, to);
+    }
+    for t in &mut summary.toolpaths {
+        relocate(&mut t.output, from, to);
+    }
+}
+
+/// Run a job (or one shard of it) into its folder and commit it: the run is written into a
+/// staging folder, `run.json` last, and the staging folder then replaces the old folder.
+pub fn run_job(
+    file: &JobFile,
+    opts: &BatchOptions,
+    trainer: &dyn Trainer,
+    reporter: &dyn Reporter,
+) -> Result<JobRun> {
+    let file = effective_job(file, opts.backend);
+    require_shared_domain(&file, opts)?;
+    let probe_files = file.probe_files()?;
+    let job_hash = manifest::job_hash(&file.job, &probe_files, &file.base_dir())?;
+    let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
+    let target = match opts.shard {
+        Some(s) => out.join(s.folder_name()),
+        None => out.clone(),
+    };
+    let inputs = job_inputs(&file)?;
+    commit::check_inputs_outside(&out, &inputs)?;
+    let previous = if opts.resume {
+        RunManifest::read(&target)?.filter(|m| m.job_hash == job_hash)
+    } else {
+        None
+    };
+    let input_hashes = manifest::hash_inputs(&inputs)?;
+    let staging = Staging::begin(&target)?;
+    let folders = RunFolders {
+        staging: staging.path().to_path_buf(),
+        target,
+    };
+    let (plan, reused) = plan_resumed(&file, opts, &folders, previous.as_ref(), &input_hashes)?;
+    let mut summary = super::execute(&plan, trainer, reporter)?;
+    relocate_summary(&mut summary, &folders.staging, &folders.target);
+    for p in summary.parts.iter().filter(|p| p.ok) {
+        errmap_core::io::write_json(&folders.staging.join(&p.part).join("summary.json"), p)?;
+    }
+    if !reused.is_empty() {
+        add_reused(
+            &mut summary,
+            &file,
+            &folders.target,
+            &folders.staging,
+            &reused,
+        )?;
+        if opts.shard.is_none() {
+            reduce_resumed_family(&mut summary, &file, opts, &folders, trainer)?;
+        }
+    }
+    let kind = if opts.shard.is_some() {
+        "shard"
+    } else {
+        "batch"
+    };
+    let sealed = Sealed {
+        kind,
+        job_hash,
+        input_hashes,
+        reused: &reused,
+    };
+    seal_run(&file, &folders.staging, &summary, sealed)?;
+    staging.commit()?;
+    Ok(JobRun {
+        summary,
+        folder: folders.target,
+        reused,
+    })
+}
+
+/// Sharding and `--resume` put parts mapped by different processes into one family.
+fn require_shared_domain(file: &JobFile, opts: &BatchOptions) -> Result<()> {
+    if let Some(s) = opts.shard {
+        require_domain(file, &format!("--shard {}/{}", s.index, s.count))?;
+    }
+    if opts.resume {
+        require_domain(file, "--resume")?;
+    }
+    Ok(())
+}
+
+/// Where a run is written (`staging`) and the folder it then replaces (`target`).
+struct RunFolders {
+    staging: PathBuf,
+    target: PathBuf,
+}
+
+/// The plan of the parts left to map after `--resume` kept those of the previous run that
+/// still match (hard-linked into the staging folder), and the names of the kept parts.
+fn plan_resumed(
+    file: &JobFile,
+    opts: &BatchOptions,
+    folders: &RunFolders,
+    previous: Option<&RunManifest>,
+    input_hashes: &BTreeMap<PathBuf, String>,
+) -> Result<(super::Plan, Vec<String>)> {
+    let mut plan = plan_job(file, opts, &folders.staging)?;
+    let reused = match previous {
+        Some(prev) => reuse_parts(prev, &folders.target, &folders.staging, &plan, input_hashes)?,
+        None => Vec::new(),
+    };
+    let all_parts = plan.parts.clone();
+    plan.parts.retain(|p| !reused.contains(&p.name));
+    if !reused.is_empty() {
+        // The family needs every part: the reduce builds it after the run. Parts that start
+        // from the family network get it rebuilt from every part, as the whole run builds it.
+        plan.family_dir = None;
+        if plan.family_parts.is_empty() {
+            plan.family_parts = all_parts;
+        }
+    }
+    Ok((plan, reused))
+}
+
+/// The family of a resumed unsharded run, rebuilt from every part's reduce inputs.
+fn reduce_resumed_family(
+    summary: &mut BatchSummary,
+    file: &JobFile,
+    opts: &BatchOptions,
+    folders: &RunFolders,
+    trainer: &dyn Trainer,
+) -> Result<()> {
+    let dir = &folders.staging;
+    let full = plan_job(file, opts, dir)?;
+    let parts = read_reduce_parts(summary, dir, None)?;
+    let outcome = reduce::reduce_family(
+        &parts,
+        &full.settings,
+        &domain_of(file)?,
+        &dir.join("family"),
+        full.toolpaths.as_ref(),
+        trainer,
+    )?;
+    summary.family_map = outcome.family;
+    summary.toolpaths.extend(outcome.toolpaths);
+    relocate_summary(summary, dir, &folders.target);
+    Ok(())
+}
+
+/// What a run's manifest records besides its files.
+struct Sealed<'a> {
+    kind: &'a str,
+    job_hash: String,
+    input_hashes: BTreeMap<PathBuf, String>,
+    reused: &'a [String],
+}
+
+/// The run's last files in its staging folder: `summary.json`, the timing, `report.html` and
+/// `run.json` (last: it vouches for the rest).
+fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) -> Result<()> {
+    errmap_core::io::write_json(&dir.join("summary.json"), summary)?;
+    if let Some(timing) = &summary.timing {
+        timing.write(dir)?;
+    }
+    let files = manifest::hash_tree(dir)?;
+    let mut m = RunManifest::build(
+        files,
+        sealed.kind,
+        sealed.job_hash,
+        summary,
+        sealed.input_hashes,
+        sealed.reused,
+    )?;
+    m.metadata = file.job.metadata_json();
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(dir, &mut m)?;
+    m.write(dir)
+}
+
+/// Write `report.html` into the run's folder and list it in the manifest (before `run.json`).
+fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
+    // The summary as `errmap report` will read it back (JSON parsing may round the last
+    // digit), so that both give the same bytes.
+    let summary = BatchSummary::read(&dir.join("summary.json"))?;
+    let html = super::run_page::render_run(&super::run_page::RunInput {
+        dir,
+        manifest: m,
+        summary: &summary,
+    })?;
+    let name = super::run_page::REPORT_FILE;
+    errmap_core::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
+    m.files
+        .insert(name.to_string(), manifest::sha256_bytes(html.as_bytes()));
+    Ok(())
+}
+
+fn domain_of(file: &JobFile) -> Result<errmap_core::geom::Domain> {
+    file.job
+        .domain()
+        .ok_or_else(|| Error::Internal("the job's domain was checked above".into()))
+}
+
+/// Parts of the previous run kept by `--resume` (hard-linked, or copied, into the staging
+/// folder): same probe file, same input hash, mapped, every output unchanged. Nothing is kept
+/// when a toolpath or the job file changed.
+fn reuse_parts(
+    prev: &RunManifest,
+    target: &Path,
+    staging: &Path,
+    plan: &super::Plan,
+    input_hashes: &BTreeMap<PathBuf, String>,
+) -> Result<Vec<String>> {
+    let others_same = input_hashes
+        .iter()
+        .filter(|(f, _)| !plan.parts.iter().any(|p| &p.probe_file == *f))
+        .all(|(f, h)| prev.inputs.get(f) == Some(h));
+    if !others_same {
+        return Ok(Vec::new());
+    }
+    let mut reused = Vec::new();
+    for part in &plan.parts {
+        let Some(rec) = prev.parts.iter().find(|r| r.part == part.name) else {
+            continue;
+        };
+        let same_input = rec.probe_file == part.probe_file
+            && input_hashes.get(&part.probe_file) == Some(&rec.input_sha256);
+        if rec.ok && same_input && RunManifest::outputs_match(target, rec) {
+            for rel in rec.outputs.keys() {
+                let (from, to) = (target.join(rel), staging.join(rel));
+                if let Some(parent) = to.parent() {
+                    std::fs::create_dir_all(parent)
+                        .map_err(|e| Error::io("create folder", parent, e))?;
+                }
+                if std::fs::hard_link(&from, &to).is_err() {
+                    std::fs::copy(&from, &to)
+                        .map_err(|e| Error::io("copy the earlier output to", &to, e))?;
+                }
+            }
+            reused.push(part.name.clone());
+        }
+    }
+    Ok(reused)
+}
+
+/// The kept parts' lines (and per-part toolpaths) from the previous summary, in batch order.
+fn add_reused(
+    summary: &mut BatchSummary,
+    file: &JobFile,
+    target: &Path,
+    staging: &Path,
+    reused: &[String],
+) -> Result<()> {
+    for name in reused {
+        let path = staging.join(name).join("summary.json");
+        let text = errmap_core::io::read_text(&path)?;
+        let p: PartSummary = serde_json::from_str(&text).map_err(|e| {
+            Error::input(
+                Location::file(&path),
+                format!("not a part summary: {e}"),
+                "rerun without --resume",
+            )
+        })?;
+        summary.parts.push(p);
+    }
+    if let Ok(prev) = BatchSummary::read(&target.join("summary.json")) {
+        let kept = prev
+            .toolpaths
+            .into_iter()
+            .filter(|t| reused.contains(&t.map));
+        summary.toolpaths.extend(kept);
+    }
+    let order = file.probe_files()?;
+    summary.parts.sort_by_key(|p| {
+        order
+            .iter()
+            .position(|f| *f == p.probe_file)
+            .unwrap_or(usize::MAX)
+    });
+    summary.failed_parts = summary.parts.iter().filter(|p| !p.ok).count();
+    Ok(())
+}
+
+/// The reduce inputs of the mapped parts of `summary`, in its (batch) order, each read from
+/// `<folder>/<part>/reduce.json` and, when a manifest is given, checked against its hash.
+fn read_reduce_parts(
+    summary: &BatchSummary,
+    folder: &Path,
+    manifest: Option<&RunManifest>,
+) -> Result<Vec<PartReduce>> {
+    let mut parts = Vec::new();
+    for p in summary.parts.iter().filter(|p| p.ok) {
+        let rel = format!("{}/{REDUCE_FILE}", p.part);
+        let path = folder.join(&rel);
+        if let Some(m) = manifest {
+            let want = m
+                .parts
+                .iter()
+                .find(|r| r.part == p.part)
+                .and_then(|r| r.outputs.get(&rel));
+            if want != Some(&manifest::sha256_file(&path)?) {
+                return Err(Error::input(
+                    Location::file(&path),
+                    "the file differs from the one its shard's run.json lists",
+                    "rerun that shard",
+                ));
+            }
+        }
+        parts.push(PartReduce::read(&path)?);
+    }
+    Ok(parts)
+}
+
+/// What `errmap merge` reduces.
+#[derive(Debug, Clone, Default)]
+pub struct MergeRequest {
+    /// The batch's output folder (holding `shard-I-of-N/`), shard folders, or their
+    /// `summary.json` / `run.json` files.
+    pub inputs: Vec<PathBuf>,
+    /// The number of shards, when no shard folder may exist yet.
+    pub shards: Option<usize>,
+    /// The job file, instead of the one the shards' manifests name.
+    pub job: Option<PathBuf>,
+    pub backend: Option<errmap_maps::nn::Backend>,
+    /// Wait this long for missing shards before reporting them.
+    pub wait: Option<std::time::Duration>,
+}
+
+/// Shard folders by shard index.
+type ShardFolders = BTreeMap<usize, (Shard, PathBuf)>;
+
+/// The batch folder and its shard folders (`shard-I-of-N` → Shard) named by the inputs.
+/// With `only_count`, folders of another split are left out.
+fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathBuf, ShardFolders)> {
+    let mut found: Vec<(Shard, PathBuf)> = Vec::new();
+    for input in inputs {
+        let dir = if input.is_file() {
+            input.parent().map(Path::to_path_buf).unwrap_or_default()
+        } else {
+            input.clone()
+        };
+        let name = dir.file_name().map(|n| n.to_string_lossy().to_string());
+        if let Some(s) = name.as_deref().and_then(Shard::from_folder_name) {
+            found.push((s, dir));
+            continue;
+        }
+        let entries = std::fs::read_dir(&dir).map_err(|e| Error::read(&dir, e))?;
+        for entry in entries.flatten() {
+            let n = entry.file_name().to_string_lossy().to_string();
+            if let Some(s) = Shard::from_folder_name(&n) {
+                if entry.path().is_dir() {
+                    found.push((s, entry.path()));
+                }
+            }
+        }
+        if !found.iter().any(|(_, p)| p.starts_with(&dir)) && only_count.is_none() {
+            return Err(Error::usage(
+                format!("{} holds no shard folder (shard-I-of-N)", dir.display()),
+                "pass the batch's output folder, or run the shards first with errmap batch --shard I/N",
+            ));
+        }
+    }
+    if let Some(n) = only_count {
+        found.retain(|(s, _)| s.count == n);
+    }
+    let batch_dir = found
+        .first()
+        .and_then(|(_, p)| p.parent())
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    let mut by_index = BTreeMap::new();
+    let counts: std::collections::BTreeSet<usize> = found.iter().map(|(s, _)| s.count).collect();
+    if counts.len() > 1 {
+        return Err(Error::usage(
+            format!("the shard folders are of different splits (of {counts:?})"),
+            "remove the folders of an earlier split, or pass --shards N to merge the split of N",
+        ));
+    }
+    for (s, p) in found {
+        if p.parent() != Some(batch_dir.as_path()) {
+            return Err(Error::usage(
+                format!(
+                    "shard folder {} is not in {}",
+                    p.display(),
+                    batch_dir.display()
+                ),
+                "merge the shards of one output folder",
+            ));
+        }
+        by_index.insert(s.index, (s, p));
+    }
+    Ok((batch_dir, by_index))
+}
+
+/// Shard indexes of `0..count` that have no committed run.
+fn missing_shards(folders: &ShardFolders, count: usize) -> Vec<usize> {
+    (0..count)
+        .filter(|i| {
+            !folders
+                .get(i)
+                .is_some_and(|(s, p)| s.count == count && p.join(RUN_MANIFEST).is_file())
+        })
+        .collect()
+}
+
+/// The shard count: `--shards`, or the count every shard folder names.
+fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize> {
+    req.shards
+        .or(folders.values().next().map(|(s, _)| s.count))
+        .ok_or_else(|| {
+            Error::usage(
+                "no shard folder found",
+                "pass --shards N or the shards' folder",
+            )
+        })
+}
+
+/// Reduce the shards of a job: check they are one job's and complete, merge their summaries,
+/// fit the family network, write the family folder, the merged `summary.json` and `run.json`.
+pub fn merge_job(
+    req: &MergeRequest,
+    trainer_for: &dyn Fn(errmap_maps::nn::Backend) -> Result<Box<dyn Trainer>>,
+) -> Result<JobRun> {
+    let (batch_dir, folders) = complete_shards(req)?;
+    let manifests = shard_manifests(&folders)?;
+    let file = merged_job(req, &manifests[0], &batch_dir)?;
+    reduce_into(&file, &batch_dir, &folders, &manifests, trainer_for)
+}
+
+/// The batch folder and its shard folders once every shard has committed its run (waiting up
+/// to `req.wait` for them); the missing shards are an error naming how to rerun them.
+fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders)> {
+    let start = std::time::Instant::now();
+    loop {
+        let (batch_dir, folders) = shard_folders(&req.inputs, req.shards)?;
+        let count = shard_count(req, &folders)?;
+        let missing = missing_shards(&folders, count);
+        if missing.is_empty() {
+            return Ok((batch_dir, folders));
+        }
+        if req.wait.is_some_and(|w| start.elapsed() < w) {
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            continue;
+        }
+        let ids = missing
+            .iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(",");
+        return Err(Error::usage(
+            format!(
+                "shards [{ids}] of {count} have no complete run in {} (Slurm array task ids {ids}; Kubernetes completion indexes {ids})",
+                batch_dir.display()
+            ),
+            format!("rerun only those: errmap slurm JOB --shards {count} --array {ids} --submit, or errmap batch JOB --shard I/{count} for each; then merge again"),
+        ));
+    }
+}
+
+/// Every shard's manifest, checked to be that shard's run and of one job.
+fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
+    let mut manifests = Vec::new();
+    for (s, dir) in folders.values() {
+        let m = RunManifest::read(dir)?
+            .ok_or_else(|| Error::Internal(format!("{} lost its run.json", dir.display())))?;
+        if m.shard != Some([s.index, s.count]) {
+            return Err(Error::input(
+                Location::file(dir.join(RUN_MANIFEST)),
+                format!(
+                    "the run in {} is not shard {}/{}",
+                    dir.display(),
+                    s.index,
+                    s.count
+                ),
+                "let errmap batch --shard name the folders",
+            ));
+        }
+        manifests.push(m);
+    }
+    let first = &manifests[0];
+    for (m, (_, dir)) in manifests.iter().zip(folders.values()) {
+        if m.job_hash != first.job_hash {
+            return Err(Error::input(
+                Location::file(dir.join(RUN_MANIFEST)),
+                format!(
+                    "shard {} belongs to another job (job hash {}…, not {}… of {})",
+                    dir.display(),
+                    &m.job_hash[..12],
+                    &first.job_hash[..12],
+                    folders[&0].1.display()
+                ),
+                "rerun that shard with the same job file and options, then merge again",
+            ));
+        }
+    }
+    Ok(manifests)
+}
+
+/// The job the shards ran (`--job` or the one their manifests name), checked against their
+/// job hash, with a fixed domain and its inputs outside the batch folder.
+fn merged_job(req: &MergeRequest, first: &RunManifest, batch_dir: &Path) -> Result<JobFile> {
+    let job_path = req
+        .job
+        .clone()
+        .or_else(|| first.job.clone())
+        .ok_or_else(|| Error::usage("the shards name no job file", "pass --job JOB.toml"))?;
+    let file = effective_job(&super::Job::read(&job_path)?, req.backend);
+    require_domain(&file, "the reduce")?;
+    commit::check_inputs_outside(batch_dir, &job_inputs(&file)?)?;
+    let hash = manifest::job_hash(&file.job, &file.probe_files()?, &file.base_dir())?;
+    if hash != first.job_hash {
+        return Err(Error::input(
+            Location::file(&job_path),
+            "this job (with these options) is not the one the shards ran",
+            "pass the shards' job file unchanged and the same --backend as the shards",
+        ));
+    }
+    Ok(file)
+}
+
+/// Merge the shards' summaries and write the family, `summary.json` and `run.json` into the
+/// batch folder (the family folder is replaced as a whole; `run.json` is written last).
+fn reduce_into(
+    file: &JobFile,
+    batch_dir: &Path,
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+    trainer_for: &dyn Fn(errmap_maps::nn::Backend) -> Result<Box<dyn Trainer>>,
+) -> Result<JobRun> {
+    let summaries = shard_summaries(folders, manifests)?;
+    let mut merged = super::merge(&summaries)?;
+    let parts = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
+    let trainer = trainer_for(file.job.model.backend)?;
+    let opts = BatchOptions::default();
+    let plan = plan_job(file, &opts, batch_dir)?;
+    let family_dir = batch_dir.join("family");
+    // A stale run.json must not vouch for a family being replaced; the parts of an unsharded
+    // run that the folder held before are removed, so the folder holds one run only.
+    let manifest_path = batch_dir.join(RUN_MANIFEST);
+    if let Some(old) = RunManifest::read(batch_dir).ok().flatten() {
+        if old.kind == "batch" {
+            remove_part_outputs(batch_dir, &old)?;
+        }
+    }
+    if manifest_path.exists() {
+        std::fs::remove_file(&manifest_path)
+            .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
+    }
+    let staging = Staging::begin_owned(&family_dir)?;
+    let outcome = reduce::reduce_family(
+        &parts,
+        &plan.settings,
+        &domain_of(file)?,
+        staging.path(),
+        plan.toolpaths.as_ref(),
+        trainer.as_ref(),
+    )?;
+    let staged = staging.path().to_path_buf();
+    merged.family_map = outcome.family;
+    merged.toolpaths.extend(outcome.toolpaths);
+    relocate_summary(&mut merged, &staged, &family_dir);
+    staging.commit()?;
+    errmap_core::io::write_json(&batch_dir.join("summary.json"), &merged)?;
+    let mut m = reduce_manifest(batch_dir, folders, manifests, &merged)?;
+    m.job = Some(file.path.clone());
+    m.metadata = file.job.metadata_json();
+    m.k_sigma = Some(file.job.clean.k_sigma);
+    write_report(batch_dir, &mut m)?;
+    m.write(batch_dir)?;
+    Ok(JobRun {
+        summary: merged,
+        folder: batch_dir.to_path_buf(),
+        reused: Vec::new(),
+    })
+}
+
+/// Every shard's summary, checked against its manifest, in shard order.
+fn shard_summaries(
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<(PathBuf, BatchSummary)>> {
+    let mut summaries = Vec::new();
+    for ((_, dir), m) in folders.values().zip(manifests) {
+        let path = dir.join("summary.json");
+        if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
+            return Err(Error::input(
+                Location::file(&path),
+                "the summary differs from the one the shard's run.json lists",
+                "rerun that shard",
+            ));
+        }
+        summaries.push((path.clone(), BatchSummary::read(&path)?));
+    }
+    Ok(summaries)
+}
+
+/// The reduce inputs of the merged summary's mapped parts, in batch order, each from its own
+/// shard's folder.
+fn shard_reduce_parts(
+    merged: &BatchSummary,
+    summaries: &[(PathBuf, BatchSummary)],
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<Vec<PartReduce>> {
+    let mut parts = Vec::new();
+    for p in merged.parts.iter().filter(|p| p.ok) {
+        let (k, _) = summaries
+            .iter()
+            .enumerate()
+            .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
+            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
+        let one = BatchSummary {
+            parts: vec![p.clone()],
+            ..summaries[k].1.clone()
+        };
+        let dir = &folders.values().nth(k).expect("one folder per summary").1;
+        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
+    }
+    Ok(parts)
+}
+
+/// Remove the part files an earlier unsharded run listed (and the folders left empty).
+fn remove_part_outputs(batch_dir: &Path, old: &RunManifest) -> Result<()> {
+    for rec in &old.parts {
+        for rel in rec.outputs.keys() {
+            let path = batch_dir.join(rel);
+            match std::fs::remove_file(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::io("remove the earlier output", &path, e))
+                }
+                _ => {}
+            }
+        }
+        // Only an emptied folder goes; a folder with other files stays.
+        let _ = std::fs::remove_dir(batch_dir.join(&rec.part));
+    }
+    Ok(())
+}
+
+/// The reduce's manifest: the shards' run.json hashes, their parts (paths under the batch
+/// folder), the family files and the merged summary.
+fn reduce_manifest(
+    batch_dir: &Path,
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+    merged: &BatchSummary,
+) -> Result<RunManifest> {
+    let mut files = BTreeMap::new();
+    for (rel, h) in manifest::hash_tree(&batch_dir.join("family"))? {
+        files.insert(format!("family/{rel}"), h);
+    }
+    files.insert(
+        "summary.json".to_string(),
+        manifest::sha256_file(&batch_dir.join("summary.json"))?,
+    );
+    let mut inputs = BTreeMap::new();
+    let mut parts = Vec::new();
+    let mut shards = BTreeMap::new();
+    for ((s, dir), m) in folders.values().zip(manifests) {
+        let name = s.folder_name();
+        shards.insert(
+            name.clone(),
+            manifest::sha256_file(&dir.join(RUN_MANIFEST))?,
+        );
+        inputs.extend(m.inputs.clone());
+        for rec in &m.parts {
+            let mut rec = rec.clone();
+            rec.outputs = rec
+                .outputs
+                .into_iter()
+                .map(|(k, v)| (format!("{name}/{k}"), v))
+                .collect();
+            parts.push(rec);
+        }
+    }
+    Ok(RunManifest {
+        format: manifest::RUN_FORMAT.into(),
+        errmap_version: env!("CARGO_PKG_VERSION").into(),
+        kind: "reduce".into(),
+        job: merged.job.clone(),
+        job_hash: manifests[0].job_hash.clone(),
+        shard: None,
+        backend: merged.backend.clone(),
+        inputs,
+        parts,
+        files,
+        shards,
+        created_utc: Some(manifest::utc_now()),
+        metadata: manifests[0].metadata.clone(),
+        k_sigma: manifests[0].k_sigma,
+    })
+}

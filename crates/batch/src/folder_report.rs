@@ -1,0 +1,52 @@
+//! Which report a folder gets: a batch run's (it has `run.json`) or its analysis results' (`*.json` of format `errmap-result/1`).
+
+use super::manifest::{RunManifest, RUN_MANIFEST};
+use super::run_page::{render_run, RunInput};
+use super::summary::BatchSummary;
+use errmap_core::error::{Error, Result};
+use errmap_report::result::{read_result, render_results, results_in};
+use std::path::Path;
+
+/// The report of `source`: a batch run's folder, a folder of analysis results, or one
+/// result file.
+pub fn render_path(source: &Path) -> Result<String> {
+    if source.is_file() {
+        return match read_result(source)? {
+            Some(r) => render_results(&[(source.to_path_buf(), r)]),
+            None => Err(not_a_source(source)),
+        };
+    }
+    if !source.is_dir() {
+        return Err(Error::usage(
+            format!("{} does not exist", source.display()),
+            "pass the folder of an errmap batch run or of an analysis's outputs",
+        ));
+    }
+    if source.join(RUN_MANIFEST).is_file() {
+        errmap_core::io::safety::protect(&source.join(RUN_MANIFEST));
+        let manifest = RunManifest::read(source)?
+            .ok_or_else(|| Error::Internal("run.json vanished".into()))?;
+        let summary = BatchSummary::read(&source.join("summary.json"))?;
+        let input = RunInput {
+            dir: source,
+            manifest: &manifest,
+            summary: &summary,
+        };
+        return render_run(&input);
+    }
+    let results = results_in(source)?;
+    if results.is_empty() {
+        return Err(not_a_source(source));
+    }
+    render_results(&results)
+}
+
+fn not_a_source(source: &Path) -> Error {
+    Error::usage(
+        format!(
+            "{} holds no errmap run ({RUN_MANIFEST}) and no analysis result",
+            source.display()
+        ),
+        "pass a batch's output folder, or the folder where linear analyze --chart, thermal difference/evaluate, rotary analyze --chart or circular -o wrote",
+    )
+}

@@ -1,0 +1,324 @@
+//! Batch jobs over a part family: the job manifest, scheduling over parts, sharding and the summary.
+#![forbid(unsafe_code)]
+#![deny(rustdoc::broken_intra_doc_links)]
+
+pub mod commit;
+pub mod driver;
+pub mod folder_report;
+pub mod job;
+pub mod k8s;
+pub mod manifest;
+mod part_record;
+pub mod reduce;
+pub mod run;
+pub mod run_page;
+pub mod single;
+pub mod slurm;
+pub mod summary;
+pub mod timing;
+pub mod train_step;
+
+pub use driver::{merge_job, run_job, JobRun, MergeRequest};
+pub use job::{Job, JobFile, MapChoice};
+pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
+pub use single::{map_part, MapRequest};
+pub use summary::{merge, BatchSummary, PartSummary};
+
+use errmap_core::error::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// Which share of the parts this process maps: shard `index` of `count` (0-based) takes the
+/// parts whose position in the sorted file list is `index` modulo `count`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// Parse `i/n` (0-based i < n).
+    pub fn parse(text: &str) -> Result<Shard> {
+        let hint = "write --shard INDEX/COUNT with 0 ≤ INDEX < COUNT, e.g. --shard 0/4";
+        let (a, b) = text
+            .split_once('/')
+            .ok_or_else(|| Error::usage(format!("--shard '{text}' is not INDEX/COUNT"), hint))?;
+        let index: usize = a
+            .trim()
+            .parse()
+            .map_err(|_| Error::usage(format!("--shard index '{a}' is not a number"), hint))?;
+        let count: usize = b
+            .trim()
+            .parse()
+            .map_err(|_| Error::usage(format!("--shard count '{b}' is not a number"), hint))?;
+        Shard::new(index, count)
+            .ok_or_else(|| Error::usage(format!("--shard {index}/{count} is out of range"), hint))
+    }
+
+    pub fn new(index: usize, count: usize) -> Option<Shard> {
+        (count > 0 && index < count).then_some(Shard { index, count })
+    }
+
+    /// The shard from a scheduler's environment: `SLURM_ARRAY_TASK_ID` (with
+    /// `SLURM_ARRAY_TASK_COUNT`, or `count`) or `JOB_COMPLETION_INDEX` of a Kubernetes
+    /// Indexed Job (with `count`). `None` when neither variable is set.
+    pub fn from_env(
+        count: Option<usize>,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Option<Shard>> {
+        let hint = "pass --shards COUNT (the number of array tasks / completions)";
+        for (var, count_var) in [
+            ("SLURM_ARRAY_TASK_ID", Some("SLURM_ARRAY_TASK_COUNT")),
+            ("JOB_COMPLETION_INDEX", None),
+        ] {
+            let Some(value) = env(var) else { continue };
+            let index: usize = value
+                .trim()
+                .parse()
+                .map_err(|_| Error::usage(format!("{var}='{value}' is not an index"), hint))?;
+            let count = match count {
+                Some(c) => c,
+                None => count_var
+                    .and_then(&env)
+                    .and_then(|v| v.trim().parse().ok())
+                    .ok_or_else(|| {
+                        Error::usage(
+                            format!("{var} is set but the number of shards is not known"),
+                            hint,
+                        )
+                    })?,
+            };
+            // Slurm arrays often start at 1 (--array=1-N); accept index == count as the last shard.
+            let index = if var == "SLURM_ARRAY_TASK_ID" && index == count {
+                0
+            } else {
+                index
+            };
+            return Shard::new(index, count).map(Some).ok_or_else(|| {
+                Error::usage(
+                    format!("{var}={index} is not below the shard count {count}"),
+                    hint,
+                )
+            });
+        }
+        Ok(None)
+    }
+
+    pub fn takes(&self, position: usize) -> bool {
+        position % self.count == self.index
+    }
+}
+
+/// Part names from probe file stems, safe as folder names and distinct
+/// ([`errmap_core::io::safety::part_names`]): a repeated stem gets a number, `family` and other
+/// reserved names get a suffix, and `..` cannot escape the output folder.
+pub fn part_names(files: &[PathBuf]) -> Vec<String> {
+    errmap_core::io::safety::part_names(&stems(files)).0
+}
+
+/// One line per part whose folder name differs from its probe file's stem.
+pub fn renamed_parts(files: &[PathBuf]) -> Vec<String> {
+    errmap_core::io::safety::part_names(&stems(files)).1
+}
+
+fn stems(files: &[PathBuf]) -> Vec<String> {
+    files
+        .iter()
+        .map(|f| {
+            f.file_stem()
+                .map_or("part".into(), |s| s.to_string_lossy().to_string())
+        })
+        .collect()
+}
+
+/// Options of `errmap batch` that override or add to the job file.
+#[derive(Debug, Clone, Default)]
+pub struct BatchOptions {
+    pub backend: Option<errmap_maps::nn::Backend>,
+    pub shard: Option<Shard>,
+    pub output: Option<PathBuf>,
+    /// Keep the parts of the folder's run whose input and outputs still match its `run.json`.
+    pub resume: bool,
+}
+
+/// The number of shards of a scale-out run (`--shards`): 1 to 10000.
+pub fn check_shard_count(shards: usize) -> Result<()> {
+    if !(1..=10_000).contains(&shards) {
+        return Err(Error::usage(
+            format!("--shards {shards} is not between 1 and 10000"),
+            "one shard per array task / completion, e.g. --shards 4",
+        ));
+    }
+    Ok(())
+}
+
+/// Shards of a scale-out run share one map domain, which only the job can fix.
+pub fn require_shard_domain(file: &JobFile) -> Result<()> {
+    if file.job.domain.is_none() {
+        return Err(Error::usage(
+            format!(
+                "{} has no `domain`, and shards need one",
+                file.path.display()
+            ),
+            "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
+        ));
+    }
+    Ok(())
+}
+
+impl Shard {
+    /// The shard's own folder inside the batch's output folder: `shard-I-of-N`.
+    pub fn folder_name(&self) -> String {
+        format!("shard-{}-of-{}", self.index, self.count)
+    }
+
+    /// The shard of a folder named `shard-I-of-N`.
+    pub fn from_folder_name(name: &str) -> Option<Shard> {
+        let rest = name.strip_prefix("shard-")?;
+        let (i, n) = rest.split_once("-of-")?;
+        Shard::new(i.parse().ok()?, n.parse().ok()?)
+    }
+}
+
+/// Build the plan of a job file: its parts (this shard's) with their folders under `out`,
+/// the family folder and the toolpaths.
+pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan> {
+    let job = &file.job;
+    let files = file.probe_files()?;
+    let names = part_names(&files);
+    let all_parts: Vec<PartInput> = files
+        .iter()
+        .zip(&names)
+        .map(|(f, n)| PartInput {
+            name: n.clone(),
+            probe_file: f.clone(),
+            out_dir: out.join(n),
+        })
+        .collect();
+    let parts: Vec<PartInput> = all_parts
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| opts.shard.is_none_or(|s| s.takes(*i)))
+        .map(|(_, p)| p.clone())
+        .collect();
+    let mut model = job.model.clone();
+    if let Some(b) = opts.backend {
+        model.backend = b;
+    }
+    // A shard that warm-starts its parts needs the family network: it rebuilds it from every
+    // part of the job, exactly as the unsharded run does.
+    let family_parts =
+        if opts.shard.is_some() && model.warm_start == errmap_maps::nn::WarmStart::Family {
+            all_parts
+        } else {
+            Vec::new()
+        };
+    let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
+        files: file.toolpath_files(),
+        settings: errmap_toolpath::CompensationSettings {
+            zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
+            everywhere: job.toolpaths.zone_all,
+            surface_tol_mm: job.toolpaths.surface_tol_mm,
+            max_segment: job.toolpaths.max_segment_mm,
+            chord_tol: job.toolpaths.chord_tol_mm,
+            dialect: job.toolpaths.dialect,
+            units: job.toolpaths.units,
+            fanuc_numbers: job.toolpaths.fanuc_numbers,
+            extrapolate: job.toolpaths.extrapolate,
+            domain_margin_mm: job.toolpaths.domain_margin_mm,
+            power_on_motion: job.toolpaths.power_on_motion,
+            expand: job.toolpaths.expand,
+            compensate_holes: job.toolpaths.compensate_holes,
+            same_part_per_offset: job.toolpaths.same_part_per_offset,
+        },
+        per_part: job.toolpaths.map == MapChoice::Part,
+        allow_weak_map: job.toolpaths.allow_weak_map,
+    });
+    // A shard sees only some parts, so family maps (and toolpaths compensated with the family
+    // map) come from an unsharded run; each shard maps its own parts and per-part toolpaths.
+    let family_dir = opts.shard.is_none().then(|| out.join("family"));
+    let toolpaths = match (&toolpaths, opts.shard) {
+        (Some(tp), Some(_)) if !tp.per_part => None,
+        _ => toolpaths,
+    };
+    let plan = Plan {
+        settings: Settings {
+            family: job.family.clone(),
+            normal: job.normal,
+            nominal_plane_mm: job.nominal_plane_mm,
+            domain: job.domain(),
+            grid_step_mm: job.grid_step_mm,
+            k_sigma: job.clean.k_sigma,
+            method: job.interp.method,
+            spacing_mm: job.interp.spacing_mm,
+            model,
+            max_deviation_mm: job.max_deviation_mm,
+            columns: job.columns.clone(),
+            header_line: job.header_line,
+            reduce_inputs: true,
+        },
+        parts,
+        family_parts,
+        family_dir,
+        toolpaths,
+        job: Some(file.path.clone()),
+        shard: opts.shard.map(|s| [s.index, s.count]),
+    };
+    Ok(plan)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_split_parts_round_robin_and_read_the_scheduler_env() {
+        let s = Shard::parse("1/3").unwrap();
+        let taken: Vec<usize> = (0..8).filter(|&i| s.takes(i)).collect();
+        assert_eq!(taken, vec![1, 4, 7]);
+        for (bad, words) in [
+            ("3/3", "--shard 3/3 is out of range"),
+            ("a/3", "--shard index 'a' is not a number"),
+        ] {
+            let err = Shard::parse(bad).unwrap_err();
+            assert_eq!(err.kind(), "input", "{err}");
+            assert!(err.to_string().contains(words), "{err}");
+        }
+        let env = |k: &str| match k {
+            "SLURM_ARRAY_TASK_ID" => Some("2".to_string()),
+            "SLURM_ARRAY_TASK_COUNT" => Some("4".to_string()),
+            _ => None,
+        };
+        assert_eq!(Shard::from_env(None, env).unwrap(), Shard::new(2, 4));
+        let k8s = |k: &str| (k == "JOB_COMPLETION_INDEX").then(|| "5".to_string());
+        assert_eq!(Shard::from_env(Some(6), k8s).unwrap(), Shard::new(5, 6));
+        let err = Shard::from_env(None, k8s).unwrap_err();
+        assert_eq!(err.kind(), "input", "{err}");
+        assert!(
+            err.to_string()
+                .contains("JOB_COMPLETION_INDEX is set but the number of shards is not known"),
+            "{err}"
+        );
+        assert_eq!(Shard::from_env(None, |_| None).unwrap(), None);
+    }
+
+    #[test]
+    fn repeated_stems_get_distinct_names() {
+        let files = vec![
+            PathBuf::from("a/p1.csv"),
+            PathBuf::from("b/p1.csv"),
+            PathBuf::from("b/p2.csv"),
+        ];
+        assert_eq!(part_names(&files), vec!["p1-1", "p1-2", "p2"]);
+        // `c/p1-1.csv` keeps its name; the repeated stems go round it.
+        let files = vec![
+            PathBuf::from("a/p1.csv"),
+            PathBuf::from("b/p1.csv"),
+            PathBuf::from("c/p1-1.csv"),
+            PathBuf::from("d/....csv"),
+            PathBuf::from("e/family.csv"),
+        ];
+        let names = part_names(&files);
+        assert_eq!(names, vec!["p1-2", "p1-3", "p1-1", "part", "family-part"]);
+        assert_eq!(renamed_parts(&files).len(), 4);
+    }
+}

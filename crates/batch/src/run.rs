@@ -1,0 +1,1381 @@
+//! The family pipeline: read → clean → hold-out split → training sets (rayon), one `train_batch` for every network of the batch, grid evaluation, outputs.
+//!
+//! Every part brings up to two networks: the hold-out fit (trained without the held-out probe
+//! points; it gives `holdout_rmse_um`) and the delivered fit (all clean points). The family
+//! network is fitted to the node-wise mean of the parts' training sets. All of them go to the
+//! trainer in one call, so on a GPU a whole family trains in the same dispatches.
+
+use super::part_record::Marks;
+use super::summary::{BatchSummary, FamilySummary, PartSummary, ToolpathSummary};
+use super::timing::{PartTiming, Stopping, Timing};
+use super::train_step::{train_all, Role};
+use errmap_core::error::{Error, Result};
+use errmap_core::geom::{Axis, Domain};
+use errmap_core::progress::Reporter;
+use errmap_maps::interp::{self, Grid, Method, Surface};
+use errmap_maps::map::{family_stats, Benefit, ErrorMap, FittedModel};
+use errmap_maps::nn::stop::Holdout;
+use errmap_maps::nn::{Mlp, ModelConfig, Normalisation, Trainer, TrainingSet};
+use errmap_maps::probe::{self, ProbePoint, ProbeSpec, Rejected};
+use errmap_report::heatmap::{self, Heatmap, Scale};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Everything the pipeline needs, from a job file or from `errmap map` flags.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    pub family: String,
+    pub normal: Axis,
+    pub nominal_plane_mm: Option<f64>,
+    /// Fixed map domain; `None`: bounding box of all probe points of the batch.
+    pub domain: Option<Domain>,
+    pub grid_step_mm: f64,
+    pub k_sigma: f64,
+    pub method: Method,
+    pub spacing_mm: f64,
+    pub model: ModelConfig,
+    /// Plausibility bound of probe deviations and map values, mm.
+    pub max_deviation_mm: f64,
+    /// Column mapping of the probe files (CSV exports), see [`ProbeSpec::columns`].
+    pub columns: Option<String>,
+    /// 1-based header line of the probe files, see [`ProbeSpec::header_line`].
+    pub header_line: Option<u64>,
+    /// Write each part's `reduce.json` (batch runs: the shards' input to the reduce).
+    pub reduce_inputs: bool,
+}
+
+/// One part to map and where its files go.
+#[derive(Debug, Clone)]
+pub struct PartInput {
+    pub name: String,
+    pub probe_file: PathBuf,
+    pub out_dir: PathBuf,
+}
+
+/// Toolpaths to compensate after fitting.
+#[derive(Debug, Clone)]
+pub struct ToolpathPlan {
+    pub files: Vec<PathBuf>,
+    pub settings: errmap_toolpath::CompensationSettings,
+    /// `true`: each part's map (outputs in the part's folder); `false`: the family map.
+    pub per_part: bool,
+    /// Use maps that remove less than [`errmap_maps::map::MIN_BENEFIT_SHARE`] of E at their
+    /// held-out points (job key `[toolpaths] allow_weak_map`).
+    pub allow_weak_map: bool,
+}
+
+/// A whole run.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub settings: Settings,
+    pub parts: Vec<PartInput>,
+    /// Every part of the family in batch order, when this run maps only some of them (a shard,
+    /// a resumed run) and its parts start from the family network: the family network is then
+    /// rebuilt from all of them, as the whole run builds it. Empty otherwise.
+    pub family_parts: Vec<PartInput>,
+    /// Folder of the family maps; `None` for a single part.
+    pub family_dir: Option<PathBuf>,
+    pub toolpaths: Option<ToolpathPlan>,
+    pub job: Option<PathBuf>,
+    pub shard: Option<[usize; 2]>,
+}
+
+impl Plan {
+    /// Every file the plan reads is an input no output may replace: protect them all, then
+    /// check every part's outputs before the first is written, so a refused plan writes nothing.
+    pub fn protect_files(&self) -> Result<()> {
+        use errmap_core::io::safety::{check_output, protect};
+        for part in &self.parts {
+            protect(&part.probe_file);
+        }
+        if let Some(job) = &self.job {
+            protect(job);
+        }
+        for f in self.toolpaths.iter().flat_map(|t| &t.files) {
+            protect(f);
+        }
+        for part in &self.parts {
+            for name in PART_OUTPUTS {
+                check_output(&part.out_dir.join(name))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A part after reading and cleaning.
+struct Prepared {
+    input: PartInput,
+    points: usize,
+    repeats_averaged: usize,
+    preamble_lines: usize,
+    skipped_features: usize,
+    clean: Vec<ProbePoint>,
+    rejected: Vec<Rejected>,
+    sigma_um: f64,
+    holdout: Vec<usize>,
+}
+
+/// A part with its training sets (values at training-grid nodes, `None` outside the hull).
+struct Interpolated {
+    prep: Prepared,
+    full_nodes: Vec<Option<f64>>,
+    holdout_nodes: Option<Vec<Option<f64>>>,
+    /// Hold-out RMSE of the kriging baseline (fitted on the same kept points), µm.
+    kriging_holdout_rmse_um: Option<f64>,
+}
+
+/// Which points lie on the boundary of their convex hull (vertices and points on its edges).
+fn hull_boundary(points: &[ProbePoint]) -> Vec<bool> {
+    let uv: Vec<[f64; 2]> = points.iter().map(|p| [p.u_mm, p.v_mm]).collect();
+    let hull = errmap_core::geom::convex_hull(&uv);
+    if hull.len() < 2 {
+        return vec![true; points.len()];
+    }
+    let scale = uv
+        .iter()
+        .map(|q| q[0].abs().max(q[1].abs()))
+        .fold(1.0, f64::max);
+    let on_edge = |a: [f64; 2], b: [f64; 2], q: [f64; 2]| {
+        let (du, dv) = (b[0] - a[0], b[1] - a[1]);
+        let len = du.hypot(dv);
+        let cross = du * (q[1] - a[1]) - dv * (q[0] - a[0]);
+        let t = ((q[0] - a[0]) * du + (q[1] - a[1]) * dv) / (len * len);
+        len > 0.0 && (cross / len).abs() <= 1e-9 * scale && (-1e-12..=1.0 + 1e-12).contains(&t)
+    };
+    uv.iter()
+        .map(|&q| (0..hull.len()).any(|k| on_edge(hull[k], hull[(k + 1) % hull.len()], q)))
+        .collect()
+}
+
+/// Seeded choice of the held-out points: interior points only (the hull stays the same, so the
+/// hold-out fit is judged where it interpolates), `round(fraction · n)` of them, at least one.
+fn choose_holdout(clean: &[ProbePoint], fraction: f64, seed: u64, name: &str) -> Vec<usize> {
+    if fraction <= 0.0 || clean.len() < 8 {
+        return Vec::new();
+    }
+    let boundary = hull_boundary(clean);
+    let mut candidates: Vec<usize> = (0..clean.len()).filter(|&i| !boundary[i]).collect();
+    let want = ((fraction * clean.len() as f64).round() as usize).max(1);
+    let want = want
+        .min(candidates.len())
+        .min(clean.len().saturating_sub(5));
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ super::train_step::fnv1a(name));
+    candidates.shuffle(&mut rng);
+    let mut chosen: Vec<usize> = candidates.into_iter().take(want).collect();
+    chosen.sort_unstable();
+    chosen
+}
+
+fn prepare(
+    input: PartInput,
+    s: &Settings,
+) -> std::result::Result<Prepared, Box<(PartInput, Error)>> {
+    let spec = ProbeSpec {
+        normal: s.normal,
+        nominal_plane_mm: s.nominal_plane_mm,
+        domain: s.domain,
+        max_deviation_mm: s.max_deviation_mm,
+        columns: s.columns.clone(),
+        header_line: s.header_line,
+    };
+    let (set, preamble_lines, skipped_features) =
+        match probe::read_probe_file(&input.probe_file, &spec) {
+            Ok(read) => (read.set, read.preamble_lines, read.skipped_features),
+            Err(e) => return Err(Box::new((input, e))),
+        };
+    let cleaned = match probe::reject_gross_errors(&set, s.k_sigma) {
+        Ok(c) => c,
+        Err(e) => return Err(Box::new((input, e))),
+    };
+    let rows: u32 = set.points.iter().map(|p| p.repeats).sum();
+    let holdout = choose_holdout(
+        &cleaned.clean,
+        s.model.holdout_fraction,
+        s.model.seed,
+        &input.name,
+    );
+    Ok(Prepared {
+        points: set.points.len(),
+        repeats_averaged: (rows as usize).saturating_sub(set.points.len()),
+        preamble_lines,
+        skipped_features,
+        clean: cleaned.clean,
+        rejected: cleaned.rejected,
+        sigma_um: cleaned.sigma_um,
+        holdout,
+        input,
+    })
+}
+
+/// The part's training-grid values from all its clean points (`None` outside their hull).
+fn full_nodes(prep: &Prepared, s: &Settings, train_grid: &Grid) -> Result<Vec<Option<f64>>> {
+    let surface = Surface::new(&probe::uve(&prep.clean))?;
+    if s.method == Method::Kriging {
+        surface.kriging()?;
+    }
+    Ok(interp::resample(&surface, s.method, train_grid))
+}
+
+fn interpolate(
+    prep: Prepared,
+    s: &Settings,
+    train_grid: &Grid,
+) -> std::result::Result<Interpolated, Box<(PartInput, Error)>> {
+    let full = match full_nodes(&prep, s, train_grid) {
+        Ok(nodes) => nodes,
+        Err(e) => return Err(Box::new((prep.input, e))),
+    };
+    let kriging_holdout_rmse_um = kriging_holdout_rmse(&prep);
+    let holdout_nodes = if prep.holdout.is_empty() {
+        None
+    } else {
+        match Surface::new(&probe::uve(&kept_points(&prep))) {
+            Ok(surface) => Some(interp::resample(&surface, s.method, train_grid)),
+            Err(e) => return Err(Box::new((prep.input, e))),
+        }
+    };
+    if full.iter().flatten().count() < 3 {
+        let e = Error::input(
+            errmap_core::Location::file(&prep.input.probe_file),
+            format!(
+                "the probes' convex hull holds fewer than 3 nodes of the {} mm training grid",
+                s.spacing_mm
+            ),
+            "use a smaller [interp] spacing_mm or probe a larger area",
+        );
+        return Err(Box::new((prep.input, e)));
+    }
+    Ok(Interpolated {
+        prep,
+        full_nodes: full,
+        holdout_nodes,
+        kriging_holdout_rmse_um,
+    })
+}
+
+/// The clean points the hold-out fits see: all but the held-out ones.
+fn kept_points(prep: &Prepared) -> Vec<ProbePoint> {
+    prep.clean
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| prep.holdout.binary_search(i).is_err())
+        .map(|(_, p)| p.clone())
+        .collect()
+}
+
+/// The kriging baseline a metrologist would compare the map with: fitted on the points the
+/// hold-out network saw, RMS of its misses at the held-out points (µm); `None` without a
+/// hold-out or when the points cannot be kriged.
+fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
+    if prep.holdout.is_empty() {
+        return None;
+    }
+    let k = interp::kriging::Kriging::fit(&probe::uve(&kept_points(prep))).ok()?;
+    let sq: f64 = prep
+        .holdout
+        .iter()
+        .map(|&i| {
+            let q = &prep.clean[i];
+            (q.e_um - k.predict(q.u_mm, q.v_mm)).powi(2)
+        })
+        .sum();
+    Some((sq / prep.holdout.len() as f64).sqrt())
+}
+
+/// The training-grid values of the parts the family network is fitted to, in batch order:
+/// this run's parts when it maps the whole family; every part of the family (those of other
+/// shards read and interpolated here, failures left out as the whole run leaves them out) when
+/// only some are mapped but they start from the family network; none otherwise.
+fn family_members(
+    plan: &Plan,
+    interpolated: &[Interpolated],
+    s: &Settings,
+    train_grid: &Grid,
+) -> Vec<Vec<Option<f64>>> {
+    if plan.family_dir.is_some() {
+        return interpolated.iter().map(|p| p.full_nodes.clone()).collect();
+    }
+    if plan.family_parts.is_empty() || s.model.warm_start != errmap_maps::nn::WarmStart::Family {
+        return Vec::new();
+    }
+    plan.family_parts
+        .par_iter()
+        .map(
+            |part| match interpolated.iter().find(|p| p.prep.input.name == part.name) {
+                Some(p) => Some(p.full_nodes.clone()),
+                // Only its training-grid values: no hold-out fits for a part mapped elsewhere.
+                None => prepare(part.clone(), s)
+                    .ok()
+                    .and_then(|prep| full_nodes(&prep, s, train_grid).ok()),
+            },
+        )
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// A training set from node values: the nodes that have a value.
+pub(crate) fn training_set(
+    grid: &Grid,
+    values: &[Option<f64>],
+    domain: &Domain,
+) -> (TrainingSet, Normalisation) {
+    let present: Vec<f64> = values.iter().flatten().copied().collect();
+    let norm = Normalisation::new(domain, &present);
+    let mut set = TrainingSet {
+        inputs: Vec::with_capacity(present.len()),
+        targets: Vec::with_capacity(present.len()),
+    };
+    for j in 0..grid.nv {
+        for i in 0..grid.nu {
+            if let Some(Some(e)) = values.get(j * grid.nu + i) {
+                let (u, v) = grid.node(i, j);
+                set.inputs.push(norm.scale_input(u, v));
+                set.targets.push(norm.scale_target(*e));
+            }
+        }
+    }
+    (set, norm)
+}
+
+/// Bounding box of every clean point of the batch.
+fn union_box(parts: &[Prepared]) -> Option<Domain> {
+    let mut all: Option<Domain> = None;
+    for p in parts {
+        if let Some(b) = probe::bounding_box(&p.clean) {
+            all = Some(match all {
+                None => b,
+                Some(a) => Domain {
+                    u_min_mm: a.u_min_mm.min(b.u_min_mm),
+                    v_min_mm: a.v_min_mm.min(b.v_min_mm),
+                    u_max_mm: a.u_max_mm.max(b.u_max_mm),
+                    v_max_mm: a.v_max_mm.max(b.v_max_mm),
+                },
+            });
+        }
+    }
+    all
+}
+
+/// Run the plan with `trainer`, telling `reporter` how it goes; every part's outcome (and its
+/// error) is in the summary. The steps: read → clean → grid → train → evaluate → write.
+pub fn execute(
+    plan: &Plan,
+    trainer: &dyn Trainer,
+    reporter: &dyn Reporter,
+) -> Result<BatchSummary> {
+    let s = &plan.settings;
+    let Cleaned { parts, mut failed } = read_and_clean(plan, reporter);
+    let Some(domain) = map_domain(s, &parts)? else {
+        // Nothing could be fitted: every part failed before training.
+        return Ok(finish(plan, trainer, None, failed, None, Vec::new()));
+    };
+    let grids = Grids::new(&domain, s)?;
+    let (interpolated, mut lost) = interpolate_all(parts, s, &grids.train, reporter);
+    failed.append(&mut lost);
+    let sets = training_sets(plan, &interpolated, &grids.train, &domain);
+    if sets.sets.is_empty() {
+        return Ok(finish(
+            plan,
+            trainer,
+            Some(domain),
+            failed,
+            None,
+            Vec::new(),
+        ));
+    }
+    let networks = train(trainer, &sets, &interpolated, s, reporter)?;
+    let fit = Fit {
+        settings: s,
+        domain,
+        grid: grids.map,
+        sets: &sets,
+        nets: &networks.nets,
+    };
+    let outputs = evaluate(plan, trainer, &fit)?;
+    let mut delivered = write_parts(&fit, &interpolated, &outputs, &networks.timings, reporter);
+    delivered.summaries.append(&mut failed);
+    let (family_model, family_summary) = write_family_maps(plan, &fit, &delivered)?;
+    let toolpaths = compensate_toolpaths(plan, &delivered.maps, family_model.as_ref());
+    let mut summary = finish(
+        plan,
+        trainer,
+        Some(domain),
+        delivered.summaries,
+        family_summary,
+        toolpaths,
+    );
+    let timings: Vec<PartTiming> = networks.timings.into_iter().flatten().collect();
+    if !timings.is_empty() {
+        summary.timing = Some(Timing::new(trainer.name(), timings));
+    }
+    Ok(summary)
+}
+
+/// Step 1's outcome: the parts read and cleaned, and the summaries of those that failed.
+struct Cleaned {
+    parts: Vec<Prepared>,
+    failed: Vec<PartSummary>,
+}
+
+/// The summary of a part that failed.
+fn failed_part(input: &PartInput, e: &Error) -> PartSummary {
+    PartSummary::failed(&input.name, &input.probe_file, e)
+}
+
+/// Step 1: read and clean every part (rayon).
+fn read_and_clean(plan: &Plan, reporter: &dyn Reporter) -> Cleaned {
+    let bar = reporter.progress(plan.parts.len() as u64, "clean");
+    let prepared: Vec<_> = plan
+        .parts
+        .par_iter()
+        .map(|p| {
+            let r = prepare(p.clone(), &plan.settings);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish();
+    let mut cleaned = Cleaned {
+        parts: Vec::new(),
+        failed: Vec::new(),
+    };
+    for r in prepared {
+        match r {
+            Ok(p) => cleaned.parts.push(p),
+            Err(b) => cleaned.failed.push(failed_part(&b.0, &b.1)),
+        }
+    }
+    cleaned
+}
+
+/// The domain every network is scaled over: the settings' or the clean points' box; `None`
+/// when no part has a clean point.
+fn map_domain(s: &Settings, parts: &[Prepared]) -> Result<Option<Domain>> {
+    match s.domain.or_else(|| union_box(parts)) {
+        Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Ok(Some(d)),
+        Some(_) => Err(Error::usage(
+            "the probe points span no area (zero width or height)",
+            "give a map domain",
+        )),
+        None => Ok(None),
+    }
+}
+
+/// The training grid (the networks' training points) and the map grid (the outputs).
+struct Grids {
+    train: Grid,
+    map: Grid,
+}
+
+impl Grids {
+    fn new(domain: &Domain, s: &Settings) -> Result<Grids> {
+        Ok(Grids {
+            train: Grid::covering(domain, s.spacing_mm)?,
+            map: Grid::covering(domain, s.grid_step_mm)?,
+        })
+    }
+}
+
+/// Step 2: every part's training-grid values (rayon); the parts that fail are summarised.
+fn interpolate_all(
+    parts: Vec<Prepared>,
+    s: &Settings,
+    train_grid: &Grid,
+    reporter: &dyn Reporter,
+) -> (Vec<Interpolated>, Vec<PartSummary>) {
+    let bar = reporter.progress(parts.len() as u64, "interpolate");
+    let results: Vec<_> = parts
+        .into_par_iter()
+        .map(|p| {
+            let r = interpolate(p, s, train_grid);
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish();
+    let mut interpolated = Vec::new();
+    let mut failed = Vec::new();
+    for r in results {
+        match r {
+            Ok(p) => interpolated.push(p),
+            Err(b) => failed.push(failed_part(&b.0, &b.1)),
+        }
+    }
+    (interpolated, failed)
+}
+
+/// Step 3's outcome: every training set of the batch with its scaling and role: per part
+/// [hold-out fit], delivered fit; then the family.
+struct TrainingSets {
+    sets: Vec<TrainingSet>,
+    norms: Vec<Normalisation>,
+    roles: Vec<Role>,
+    /// Per part: (hold-out slot, delivered slot).
+    slots: Vec<(Option<usize>, usize)>,
+    /// The held-out points of each part's slot (none for the family).
+    holdouts: Vec<Option<Holdout>>,
+    family_slot: Option<usize>,
+}
+
+impl TrainingSets {
+    fn push(&mut self, (set, norm): (TrainingSet, Normalisation), role: Role) -> usize {
+        self.sets.push(set);
+        self.norms.push(norm);
+        self.roles.push(role);
+        self.sets.len() - 1
+    }
+}
+
+/// Step 3: the training sets of every part and of the family.
+fn training_sets(
+    plan: &Plan,
+    interpolated: &[Interpolated],
+    train_grid: &Grid,
+    domain: &Domain,
+) -> TrainingSets {
+    let mut t = TrainingSets {
+        sets: Vec::new(),
+        norms: Vec::new(),
+        roles: Vec::new(),
+        slots: Vec::new(),
+        holdouts: Vec::new(),
+        family_slot: None,
+    };
+    for p in interpolated {
+        let name = &p.prep.input.name;
+        let h = p.holdout_nodes.as_ref().map(|nodes| {
+            let (set, norm) = training_set(train_grid, nodes, domain);
+            t.holdouts.push(Some(held_out(p, &norm)));
+            t.push((set, norm), Role::Holdout(name.clone()))
+        });
+        let delivered = training_set(train_grid, &p.full_nodes, domain);
+        t.holdouts.push(None);
+        let d = t.push(delivered, Role::Delivered(name.clone()));
+        t.slots.push((h, d));
+    }
+    let members = family_members(plan, interpolated, &plan.settings, train_grid);
+    if let Some(mean) = family_mean(&members, train_grid) {
+        let set = training_set(train_grid, &mean, domain);
+        t.family_slot = Some(t.push(set, Role::Family));
+    }
+    t
+}
+
+/// The node-wise mean of the family members' training-grid values (a node counts where every
+/// member has a value); `None` without members or with fewer than 3 such nodes.
+fn family_mean(members: &[Vec<Option<f64>>], train_grid: &Grid) -> Option<Vec<Option<f64>>> {
+    if members.is_empty() {
+        return None;
+    }
+    let mean: Vec<Option<f64>> = (0..train_grid.len())
+        .map(|k| {
+            let vals: Option<Vec<f64>> = members.iter().map(|p| p[k]).collect();
+            vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
+        })
+        .collect();
+    (mean.iter().flatten().count() >= 3).then_some(mean)
+}
+
+/// The `--verbose` line on the training work: how many networks, how many points, which
+/// schedule, on which trainer.
+fn describe_training(t: &TrainingSets, s: &Settings, trainer: &dyn Trainer) -> String {
+    let warm =
+        s.model.warm_start == errmap_maps::nn::WarmStart::Family && t.roles.contains(&Role::Family);
+    let epochs = if warm {
+        format!(
+            "the family network {} epochs, then the parts {} epochs from it",
+            s.model.epochs, s.model.warm_epochs
+        )
+    } else {
+        format!("{} epochs", s.model.epochs)
+    };
+    let epochs = if s.model.stop == errmap_maps::nn::Stop::Holdout {
+        format!(
+            "{epochs} at most, stopping on the hold-out RMS: a check every {} epochs, patience {} checks",
+            s.model.check_every_epochs, s.model.patience_checks
+        )
+    } else {
+        epochs
+    };
+    format!(
+        "training {} networks ({} points each at most; {epochs}) on {}",
+        t.sets.len(),
+        t.sets.iter().map(|t| t.len()).max().unwrap_or(0),
+        trainer.name()
+    )
+}
+
+/// Step 4's outcome: one network per training set, and per part its hold-out stopping.
+struct Networks {
+    nets: Vec<Mlp>,
+    timings: Vec<Option<PartTiming>>,
+}
+
+/// Step 4: train every network of the batch in one trainer call.
+fn train(
+    trainer: &dyn Trainer,
+    t: &TrainingSets,
+    interpolated: &[Interpolated],
+    s: &Settings,
+    reporter: &dyn Reporter,
+) -> Result<Networks> {
+    if reporter.shows_detail() {
+        reporter.detail(&describe_training(t, s, trainer));
+    }
+    let bar = reporter.activity("train");
+    let trained = train_all(trainer, &t.sets, &t.norms, &t.roles, &s.model, &t.holdouts);
+    bar.finish();
+    let trained = trained?;
+    let timings = interpolated
+        .iter()
+        .zip(&t.slots)
+        .map(|(p, &(h, _))| {
+            let outcome = trained.stops.get(h?)?.as_ref()?;
+            Some(PartTiming::new(&p.prep.input.name, outcome))
+        })
+        .collect();
+    if trained.nets.len() != t.sets.len() {
+        return Err(Error::Internal(format!(
+            "trainer returned {} networks for {} training sets",
+            trained.nets.len(),
+            t.sets.len()
+        )));
+    }
+    Ok(Networks {
+        nets: trained.nets,
+        timings,
+    })
+}
+
+/// What the steps after training share: the settings, the domain and map grid, the training
+/// sets and their networks.
+struct Fit<'a> {
+    settings: &'a Settings,
+    domain: Domain,
+    grid: Grid,
+    sets: &'a TrainingSets,
+    nets: &'a [Mlp],
+}
+
+impl Fit<'_> {
+    /// The fitted model of training slot `slot`.
+    fn model(&self, name: &str, slot: usize) -> FittedModel {
+        FittedModel::new(
+            name,
+            self.settings.normal,
+            self.domain,
+            self.sets.norms[slot].clone(),
+            self.nets[slot].clone(),
+        )
+    }
+}
+
+/// Step 5: the delivered networks of every part (and the family's, when this run writes the
+/// family) on the map grid, in network outputs.
+fn evaluate(plan: &Plan, trainer: &dyn Trainer, fit: &Fit) -> Result<Vec<Vec<f32>>> {
+    let scale = Normalisation::new(&fit.domain, &[]);
+    let grid = &fit.grid;
+    let mut inputs = Vec::with_capacity(grid.len());
+    for j in 0..grid.nv {
+        for i in 0..grid.nu {
+            let (u, v) = grid.node(i, j);
+            inputs.push(scale.scale_input(u, v));
+        }
+    }
+    let mut eval_slots: Vec<usize> = fit.sets.slots.iter().map(|&(_, d)| d).collect();
+    eval_slots.extend(fit.sets.family_slot.filter(|_| plan.family_dir.is_some()));
+    let eval_nets: Vec<_> = eval_slots.iter().map(|&k| fit.nets[k].clone()).collect();
+    trainer.evaluate_batch(&eval_nets, &inputs)
+}
+
+/// A delivered part: its name, folder, map and model.
+struct PartMap {
+    name: String,
+    dir: Option<PathBuf>,
+    map: ErrorMap,
+    model: FittedModel,
+}
+
+/// Step 6's outcome: every part's summary, the delivered maps, and every part's probe and
+/// rejected points in batch order (for the family maps).
+struct Delivered {
+    summaries: Vec<PartSummary>,
+    maps: Vec<PartMap>,
+    marks: Marks,
+}
+
+/// Step 6: every part's outputs (rayon).
+fn write_parts(
+    fit: &Fit,
+    interpolated: &[Interpolated],
+    outputs: &[Vec<f32>],
+    timings: &[Option<PartTiming>],
+    reporter: &dyn Reporter,
+) -> Delivered {
+    let bar = reporter.progress(interpolated.len() as u64, "write");
+    let results: Vec<(PartSummary, Option<Fitted>)> = interpolated
+        .par_iter()
+        .zip(fit.sets.slots.par_iter())
+        .zip(outputs.par_iter())
+        .zip(timings.par_iter())
+        .map(|(((p, &slots), out), timing)| {
+            let r = deliver_part(fit, p, slots, out, timing.as_ref());
+            bar.inc(1);
+            r
+        })
+        .collect();
+    bar.finish();
+    let mut delivered = Delivered {
+        summaries: Vec::new(),
+        maps: Vec::new(),
+        marks: Marks::default(),
+    };
+    for (summary, fitted) in results {
+        if let Some((map, model, part)) = fitted {
+            delivered.maps.push(PartMap {
+                name: summary.part.clone(),
+                dir: summary.output_dir.clone(),
+                map,
+                model,
+            });
+            delivered.marks.probes.extend(part.probes);
+            delivered.marks.rejected.extend(part.rejected);
+        }
+        delivered.summaries.push(summary);
+    }
+    delivered
+}
+
+/// One part's delivered map and model, written with its summary; a part that fails here is
+/// summarised with its error.
+fn deliver_part(
+    fit: &Fit,
+    p: &Interpolated,
+    (h, d): (Option<usize>, usize),
+    out: &[f32],
+    timing: Option<&PartTiming>,
+) -> (PartSummary, Option<Fitted>) {
+    let s = fit.settings;
+    let map = ErrorMap {
+        grid: fit.grid,
+        normal: s.normal,
+        values: out
+            .iter()
+            .map(|&y| fit.sets.norms[d].unscale_output(y))
+            .collect(),
+    };
+    let model = fit.model(&p.prep.input.name, d).with_probes(&p.prep.clean);
+    let holdout_rmse_um = h.map(|h| holdout_rmse(p, &fit.model("holdout", h)));
+    let (map, model) = match kriging_if_better(p, holdout_rmse_um) {
+        Some(k) => (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k)),
+        None => (map, model),
+    };
+    // The delivered surface's own hold-out figure: the kriging's when it is delivered.
+    let delivered_rmse_um = if model.kriging.is_some() {
+        p.kriging_holdout_rmse_um
+    } else {
+        holdout_rmse_um
+    };
+    let benefit = holdout_e_rms(p)
+        .zip(delivered_rmse_um)
+        .and_then(|(e, r)| Benefit::from_rms(e, r));
+    let model = model.with_benefit(benefit);
+    let stopping = timing.map(PartTiming::stopping);
+    let axes = s.normal.plane_axes();
+    match write_part(p, &map, &model, holdout_rmse_um, stopping, s, axes) {
+        Ok(summary) => (summary, Some((map, model, part_marks(p)))),
+        Err(e) => (failed_part(&p.prep.input, &e), None),
+    }
+}
+
+/// RMS of E (about zero) at the part's held-out points, µm; `None` without any.
+fn holdout_e_rms(p: &Interpolated) -> Option<f64> {
+    let e: Vec<f64> = p
+        .prep
+        .holdout
+        .iter()
+        .map(|&i| p.prep.clean[i].e_um)
+        .collect();
+    errmap_maps::map::rms_um(&e)
+}
+
+/// RMS of a hold-out network's misses at the part's held-out points, µm.
+fn holdout_rmse(p: &Interpolated, holdout_model: &FittedModel) -> f64 {
+    let sq: f64 = p
+        .prep
+        .holdout
+        .iter()
+        .map(|&i| {
+            let q = &p.prep.clean[i];
+            (q.e_um - holdout_model.e_um(q.u_mm, q.v_mm)).powi(2)
+        })
+        .sum();
+    (sq / p.prep.holdout.len() as f64).sqrt()
+}
+
+/// The kriging of every clean point, when it fits the held-out points better than the network
+/// (fitted only then: it costs a likelihood search).
+fn kriging_if_better(
+    p: &Interpolated,
+    network_holdout_rmse_um: Option<f64>,
+) -> Option<interp::kriging::Kriging> {
+    if better_fit(p, network_holdout_rmse_um) != Some("kriging") {
+        return None;
+    }
+    interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok()
+}
+
+/// A kriging's values on the map grid.
+fn kriging_map(k: &interp::kriging::Kriging, grid: Grid, normal: Axis) -> ErrorMap {
+    let values = (0..grid.nv)
+        .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let (u, v) = grid.node(i, j);
+            k.predict(u, v)
+        })
+        .collect();
+    ErrorMap {
+        grid,
+        normal,
+        values,
+    }
+}
+
+/// Step 7: the family maps and network, when this run writes the family.
+fn write_family_maps(
+    plan: &Plan,
+    fit: &Fit,
+    delivered: &Delivered,
+) -> Result<(Option<FittedModel>, Option<FamilySummary>)> {
+    let (Some(dir), Some(fslot)) = (&plan.family_dir, fit.sets.family_slot) else {
+        return Ok((None, None));
+    };
+    let maps: Vec<&ErrorMap> = delivered.maps.iter().map(|m| &m.map).collect();
+    let Some((mean, std)) = family_stats(&maps) else {
+        return Ok((None, None));
+    };
+    let s = fit.settings;
+    let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
+    check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
+    let parts: Vec<&FittedModel> = delivered.maps.iter().map(|m| &m.model).collect();
+    let model = fit.model("family", fslot).with_parts(&parts);
+    let summary = write_family(dir, &mean, &std, &model, maps.len(), &delivered.marks, s)?;
+    Ok((Some(model), Some(summary)))
+}
+
+/// Step 8: the toolpaths compensated with each part's map or with the family map.
+fn compensate_toolpaths(
+    plan: &Plan,
+    maps: &[PartMap],
+    family_model: Option<&FittedModel>,
+) -> Vec<ToolpathSummary> {
+    let mut toolpaths = Vec::new();
+    let Some(tp) = &plan.toolpaths else {
+        return toolpaths;
+    };
+    if tp.per_part {
+        for m in maps {
+            if let Some(dir) = &m.dir {
+                for f in &tp.files {
+                    toolpaths.push(compensate_one(f, dir, &m.name, &m.model, tp));
+                }
+            }
+        }
+    } else if let (Some(model), Some(dir)) = (family_model, &plan.family_dir) {
+        for f in &tp.files {
+            toolpaths.push(compensate_one(f, dir, "family", model, tp));
+        }
+    }
+    toolpaths
+}
+
+fn finish(
+    plan: &Plan,
+    trainer: &dyn Trainer,
+    domain: Option<Domain>,
+    mut parts: Vec<PartSummary>,
+    family_map: Option<FamilySummary>,
+    toolpaths: Vec<ToolpathSummary>,
+) -> BatchSummary {
+    // Stable order: the plan's part order.
+    let order = |p: &PartSummary| {
+        plan.parts
+            .iter()
+            .position(|q| q.name == p.part)
+            .unwrap_or(usize::MAX)
+    };
+    parts.sort_by_key(order);
+    BatchSummary {
+        family: plan.settings.family.clone(),
+        job: plan.job.clone(),
+        backend: trainer.name(),
+        normal: plan.settings.normal,
+        shard: plan.shard,
+        domain_mm: domain.map(|d| [d.u_min_mm, d.v_min_mm, d.u_max_mm, d.v_max_mm]),
+        grid_step_mm: plan.settings.grid_step_mm,
+        failed_parts: parts.iter().filter(|p| !p.ok).count(),
+        parts,
+        family_map,
+        toolpaths,
+        timing: None,
+    }
+}
+
+/// A part's held-out probe points in the units of its hold-out network (`norm`).
+fn held_out(p: &Interpolated, norm: &Normalisation) -> Holdout {
+    let points = p.prep.holdout.iter().map(|&i| &p.prep.clean[i]);
+    Holdout {
+        inputs: points
+            .clone()
+            .map(|q| norm.scale_input(q.u_mm, q.v_mm))
+            .collect(),
+        e_um: points.map(|q| q.e_um).collect(),
+        norm: norm.clone(),
+    }
+}
+
+/// A part's delivered map, its model and its marks.
+type Fitted = (ErrorMap, FittedModel, Marks);
+
+/// A part's kept and rejected probe points in the map plane.
+fn part_marks(p: &Interpolated) -> Marks {
+    Marks {
+        probes: p.prep.clean.iter().map(|q| (q.u_mm, q.v_mm)).collect(),
+        rejected: p
+            .prep
+            .rejected
+            .iter()
+            .map(|r| (r.point.u_mm, r.point.v_mm))
+            .collect(),
+    }
+}
+
+/// The family folder: mean and std maps (CSV, heatmaps with every part's probe and rejected
+/// points and the family's measured hull) and the family network's `model.json`.
+pub(crate) fn write_family(
+    dir: &Path,
+    mean: &ErrorMap,
+    std: &ErrorMap,
+    model: &FittedModel,
+    parts: usize,
+    marks: &Marks,
+    s: &Settings,
+) -> Result<FamilySummary> {
+    let axes = s.normal.plane_axes();
+    mean.write_csv(&dir.join("mean.csv"), "e_um")?;
+    std.write_csv(&dir.join("std.csv"), "std_um")?;
+    let extrapolated = mean.extrapolated_nodes(model.hull_mm.as_deref());
+    let (pv, rms) = mean
+        .pv_rms_where_um(&extrapolated, false)
+        .unwrap_or_else(|| mean.pv_rms_um());
+    let std_max = std.values.iter().cloned().fold(0.0, f64::max);
+    let title_mean = format!(
+        "{} family mean of {parts} parts — PV {pv:.1} µm, RMS {rms:.1} µm (measured area)",
+        s.family
+    );
+    let hull = model.hull_mm.as_deref().unwrap_or(&[]);
+    draw_shaded(
+        &dir.join("mean.png"),
+        &title_mean,
+        mean,
+        marks,
+        hull,
+        Scale::Diverging,
+        axes,
+        "mean E (µm)",
+        &extrapolated,
+    )?;
+    let title_std = format!(
+        "{} part-to-part standard deviation — max {std_max:.2} µm",
+        s.family
+    );
+    draw_shaded(
+        &dir.join("std.png"),
+        &title_std,
+        std,
+        marks,
+        hull,
+        Scale::Sequential,
+        axes,
+        "σ of E (µm)",
+        &extrapolated,
+    )?;
+    errmap_core::io::write_json(&dir.join("model.json"), model)?;
+    Ok(FamilySummary {
+        parts,
+        output_dir: dir.to_path_buf(),
+        mean_rms_um: rms,
+        mean_pv_um: pv,
+        std_max_um: std_max,
+    })
+}
+
+/// `finish.ngc` → `finish-compensated.ngc` in `dir`.
+fn compensated_name(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map_or("toolpath".into(), |s| s.to_string_lossy().to_string());
+    match input.extension() {
+        Some(ext) => PathBuf::from(format!("{stem}-compensated.{}", ext.to_string_lossy())),
+        None => PathBuf::from(format!("{stem}-compensated")),
+    }
+}
+
+pub(crate) fn compensate_one(
+    input: &Path,
+    dir: &Path,
+    map_name: &str,
+    model: &FittedModel,
+    tp: &ToolpathPlan,
+) -> ToolpathSummary {
+    let output = dir.join(compensated_name(input));
+    // A weak map is refused before the program is read; one without figures is used as before.
+    let model_file = dir.join("model.json");
+    let checked = model
+        .check_benefit(
+            tp.allow_weak_map,
+            "set [toolpaths] allow_weak_map = true in the job",
+            &model_file,
+        )
+        .and_then(|_| errmap_toolpath::compensate_file(input, &output, model, &tp.settings));
+    match checked {
+        Ok(report) => ToolpathSummary {
+            input: input.to_path_buf(),
+            output,
+            map: map_name.into(),
+            report: serde_json::to_value(&report).ok(),
+            error: None,
+        },
+        Err(e) => ToolpathSummary {
+            input: input.to_path_buf(),
+            output,
+            map: map_name.into(),
+            report: None,
+            error: Some(e.report()),
+        },
+    }
+}
+
+/// Draw a map's heatmap with its probe and rejected points, the measured hull and the nodes
+/// outside it (`extrapolated`) lightened.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn draw_shaded(
+    path: &Path,
+    title: &str,
+    map: &ErrorMap,
+    marks: &Marks,
+    hull: &[[f64; 2]],
+    scale: Scale,
+    (ua, va): (Axis, Axis),
+    label: &str,
+    extrapolated: &[bool],
+) -> Result<()> {
+    let values: Vec<Option<f64>> = map.values.iter().map(|&v| Some(v)).collect();
+    heatmap::save_heatmap(
+        path,
+        &Heatmap {
+            title: title.into(),
+            u_name: ua.name(),
+            v_name: va.name(),
+            value_label: label,
+            u0_mm: map.grid.u0_mm,
+            v0_mm: map.grid.v0_mm,
+            step_mm: map.grid.step_mm,
+            nu: map.grid.nu,
+            nv: map.grid.nv,
+            values: &values,
+            probes: &marks.probes,
+            rejected: &marks.rejected,
+            hull,
+            scale,
+            extrapolated,
+        },
+    )?;
+    Ok(())
+}
+
+/// `kriging` when its hold-out RMSE is below the network's (a tie keeps the network).
+fn better_fit(p: &Interpolated, network_holdout_rmse_um: Option<f64>) -> Option<&'static str> {
+    match (network_holdout_rmse_um, p.kriging_holdout_rmse_um) {
+        (Some(n), Some(k)) => Some(if k < n { "kriging" } else { "network" }),
+        _ => None,
+    }
+}
+
+/// A fitted map whose value anywhere exceeds the plausibility bound is not delivered: the
+/// network extrapolated wildly or the probe data hide a unit slip.
+fn check_map_plausible(map: &ErrorMap, max_deviation_mm: f64, probe_file: &Path) -> Result<()> {
+    let worst_um = map.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if worst_um.is_finite() && worst_um <= max_deviation_mm * 1000.0 {
+        return Ok(());
+    }
+    Err(Error::input(
+        errmap_core::Location::file(probe_file),
+        format!(
+            "the fitted map reaches |E| = {worst_um:.1} µm, beyond the plausibility bound of {max_deviation_mm} mm",
+        ),
+        "check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm (--max-deviation-mm)",
+    ))
+}
+
+/// The files [`write_part`] writes into a part's folder.
+pub const PART_OUTPUTS: [&str; 6] = [
+    "map.csv",
+    "model.json",
+    "clean.csv",
+    "rejected.csv",
+    "map.png",
+    "summary.json",
+];
+
+/// Write every file of one part and return its summary.
+fn write_part(
+    p: &Interpolated,
+    map: &ErrorMap,
+    model: &FittedModel,
+    holdout_rmse_um: Option<f64>,
+    stopping: Option<Stopping>,
+    s: &Settings,
+    axes: (Axis, Axis),
+) -> Result<PartSummary> {
+    let dir = &p.prep.input.out_dir;
+    let name = &p.prep.input.name;
+    check_map_plausible(map, s.max_deviation_mm, &p.prep.input.probe_file)?;
+    map.write_csv(&dir.join("map.csv"), "e_um")?;
+    errmap_core::io::write_json(&dir.join("model.json"), model)?;
+    probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
+    probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
+    let marks = part_marks(p);
+    if s.reduce_inputs {
+        super::part_record::PartReduce {
+            part: name.clone(),
+            holdout_fit: p.holdout_nodes.is_some(),
+            train_nodes: p.full_nodes.clone(),
+            map_e_um: map.values.clone(),
+            hull_mm: model.hull_mm.clone(),
+            surface_mm: model.surface_mm,
+            marks: marks.clone(),
+        }
+        .write(dir)?;
+    }
+    let acc = Accuracy::of(map, model);
+    // `errmap map` names the family after the part: say it once.
+    let label = if s.family == *name {
+        name.clone()
+    } else {
+        format!("{} {name}", s.family)
+    };
+    let title = format!(
+        "{label} — PV {:.1} µm, RMS {:.1} µm (measured area)",
+        acc.pv_um, acc.rms_um
+    );
+    draw_shaded(
+        &dir.join("map.png"),
+        &title,
+        map,
+        &marks,
+        model.hull_mm.as_deref().unwrap_or(&[]),
+        Scale::Diverging,
+        axes,
+        "E (µm)",
+        &acc.extrapolated,
+    )?;
+    let summary = part_summary(p, holdout_rmse_um, model.benefit, stopping, &acc);
+    errmap_core::io::write_json(&dir.join("summary.json"), &summary)?;
+    Ok(summary)
+}
+
+/// A map's accuracy figures over the measured domain, the extrapolated rest reported apart.
+struct Accuracy {
+    /// Nodes outside the measured hull.
+    extrapolated: Vec<bool>,
+    pv_um: f64,
+    rms_um: f64,
+    /// (PV, RMS) of the extrapolated nodes, µm; `None` when there are none.
+    outside_um: Option<(f64, f64)>,
+}
+
+impl Accuracy {
+    fn of(map: &ErrorMap, model: &FittedModel) -> Accuracy {
+        let extrapolated = map.extrapolated_nodes(model.hull_mm.as_deref());
+        let (pv_um, rms_um) = map
+            .pv_rms_where_um(&extrapolated, false)
+            .unwrap_or((0.0, 0.0));
+        let outside_um = map.pv_rms_where_um(&extrapolated, true);
+        Accuracy {
+            extrapolated,
+            pv_um,
+            rms_um,
+            outside_um,
+        }
+    }
+}
+
+/// The summary of a delivered part.
+fn part_summary(
+    p: &Interpolated,
+    holdout_rmse_um: Option<f64>,
+    benefit: Option<Benefit>,
+    stopping: Option<Stopping>,
+    acc: &Accuracy,
+) -> PartSummary {
+    let extrapolated = &acc.extrapolated;
+    PartSummary {
+        part: p.prep.input.name.clone(),
+        probe_file: p.prep.input.probe_file.clone(),
+        ok: true,
+        points: p.prep.points,
+        repeats_averaged: p.prep.repeats_averaged,
+        preamble_lines: p.prep.preamble_lines,
+        skipped_features: p.prep.skipped_features,
+        rejected: p.prep.rejected.len(),
+        sigma_um: Some(p.prep.sigma_um),
+        holdout_points: p.prep.holdout.len(),
+        holdout_rmse_um,
+        kriging_holdout_rmse_um: p.kriging_holdout_rmse_um,
+        better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
+        holdout_e_rms_um: benefit.map(|b| b.holdout_e_rms_um),
+        benefit_share: benefit.map(|b| b.share),
+        rms_um: Some(acc.rms_um),
+        pv_um: Some(acc.pv_um),
+        extrapolated_fraction: Some(
+            extrapolated.iter().filter(|&&x| x).count() as f64 / extrapolated.len().max(1) as f64,
+        ),
+        rms_extrapolated_um: acc.outside_um.map(|o| o.1),
+        pv_extrapolated_um: acc.outside_um.map(|o| o.0),
+        stopping,
+        output_dir: Some(p.prep.input.out_dir.clone()),
+        error: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid_points(nx: usize, ny: usize) -> Vec<ProbePoint> {
+        let mut pts = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                pts.push(ProbePoint {
+                    id: None,
+                    line: (pts.len() + 2) as u64,
+                    measured_mm: [i as f64 * 10.0, j as f64 * 5.0, 0.0],
+                    nominal_mm: [i as f64 * 10.0, j as f64 * 5.0, 0.0],
+                    u_mm: i as f64 * 10.0,
+                    v_mm: j as f64 * 5.0,
+                    e_um: 0.0,
+                    repeats: 1,
+                    spread_um: 0.0,
+                });
+            }
+        }
+        pts
+    }
+
+    /// A 6 × 6 probe grid on a tilted plane (E = 2 µm per 10 mm along x), 50 mm square.
+    fn tilted_plate(dir: &Path) -> PathBuf {
+        let mut text = String::from("x_mm,y_mm,z_mm\n");
+        for j in 0..6 {
+            for i in 0..6 {
+                let (x, y) = (i as f64 * 10.0, j as f64 * 10.0);
+                text.push_str(&format!("{x},{y},{}\n", x * 0.2e-3));
+            }
+        }
+        let path = dir.join("plate.csv");
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_run_reports_every_step_to_the_reporter_it_is_given() {
+        let root = tempfile::tempdir().unwrap();
+        let out_dir = root.path().join("out");
+        let plan = super::super::MapRequest {
+            probes: tilted_plate(root.path()),
+            out_dir: out_dir.clone(),
+            normal: Axis::Z,
+            nominal_plane_mm: Some(0.0),
+            domain: None,
+            grid_step_mm: 10.0,
+            method: Method::NaturalNeighbour,
+            spacing_mm: 10.0,
+            k_sigma: 3.0,
+            epochs: Some(20),
+            seed: Some(1),
+            backend: errmap_maps::nn::Backend::CpuReference,
+            max_deviation_mm: 1.0,
+            columns: None,
+            header_line: None,
+        }
+        .plan()
+        .unwrap();
+        let trainer = errmap_maps::nn::CpuTrainer::reference();
+        let recorder = errmap_core::progress::Recorder::default();
+        let summary = execute(&plan, &trainer, &recorder).unwrap();
+        assert_eq!(summary.failed_parts, 0, "{:?}", summary.parts[0].error);
+        use errmap_core::progress::Event;
+        let events = recorder.events();
+        let stages: Vec<&Event> = events
+            .iter()
+            .filter(|e| matches!(e, Event::Stage(..)))
+            .collect();
+        assert_eq!(
+            stages,
+            [
+                &Event::Stage("clean".into(), 1),
+                &Event::Stage("interpolate".into(), 1),
+                &Event::Stage("train".into(), 1),
+                &Event::Stage("write".into(), 1),
+            ]
+        );
+        // 36 points: 4 held out (round(0.1 · 36)), so a hold-out and a delivered network.
+        assert_eq!(summary.parts[0].holdout_points, 4);
+        let Some(Event::Detail(line)) = events.iter().find(|e| matches!(e, Event::Detail(_)))
+        else {
+            panic!("no detail line in {events:?}");
+        };
+        assert!(
+            line.starts_with("training 2 networks (") && line.contains("; 20 epochs) on "),
+            "{line}"
+        );
+        // The silent reporter changes nothing of the outcome.
+        let again = execute(&plan, &trainer, &errmap_core::progress::Silent).unwrap();
+        assert_eq!(again.parts[0].rms_um, summary.parts[0].rms_um);
+        assert!(out_dir.join("summary.json").is_file());
+    }
+
+    #[test]
+    fn hull_boundary_is_the_outer_ring_of_a_grid() {
+        let pts = grid_points(5, 4);
+        let on = hull_boundary(&pts);
+        for (k, p) in pts.iter().enumerate() {
+            let ring = p.u_mm == 0.0 || p.u_mm == 40.0 || p.v_mm == 0.0 || p.v_mm == 15.0;
+            assert_eq!(on[k], ring, "point {k} at ({}, {})", p.u_mm, p.v_mm);
+        }
+        // 5 × 4 grid: 14 ring points, 6 interior.
+        assert_eq!(on.iter().filter(|&&b| b).count(), 14);
+    }
+
+    #[test]
+    fn holdout_takes_a_tenth_of_interior_points_seeded_by_part_name() {
+        let pts = grid_points(12, 12);
+        let on = hull_boundary(&pts);
+        let a = choose_holdout(&pts, 0.1, 1, "p01");
+        // round(0.1 · 144) = 14 points, none on the hull, sorted, distinct.
+        assert_eq!(a.len(), 14);
+        assert!(a.iter().all(|&i| !on[i]));
+        assert!(a.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(a, choose_holdout(&pts, 0.1, 1, "p01"));
+        assert_ne!(a, choose_holdout(&pts, 0.1, 1, "p02"));
+        assert!(choose_holdout(&pts, 0.0, 1, "p01").is_empty());
+        // Too few points to spare any.
+        assert!(choose_holdout(&grid_points(2, 3), 0.1, 1, "p01").is_empty());
+    }
+}

@@ -1,0 +1,487 @@
+//! The report of a batch run (`report.html`): job metadata, the family (mean, spread, hull), each part (heatmap, figures, hold-out accuracy, rejected points) and the compensated toolpaths, read from the run's own files.
+//!
+//! Everything shown comes from the run folder (`run.json`, `summary.json`, the part and family
+//! files), so the same run always gives the same bytes; the date is the run's, from `run.json`.
+
+use super::manifest::RunManifest;
+use super::summary::{BatchSummary, PartSummary};
+use errmap_core::error::{Error, Location, Result};
+use errmap_report::html::{self, figure_cell, json_text, num, para, png_figure, table, Cell, Page};
+use std::path::Path;
+
+/// File name of the report in a run's folder.
+pub const REPORT_FILE: &str = "report.html";
+
+/// What a run report is built from.
+pub struct RunInput<'a> {
+    /// The run's folder (or its staging folder while the batch writes it).
+    pub dir: &'a Path,
+    pub manifest: &'a RunManifest,
+    pub summary: &'a BatchSummary,
+}
+
+/// Render the report of a run.
+pub fn render_run(input: &RunInput) -> Result<String> {
+    let s = input.summary;
+    let mut page = Page {
+        title: format!("errmap report — {}", s.family),
+        lead: format!(
+            "Part family {}: {} part(s), {} failed. Lengths in mm, errors in µm.",
+            s.family,
+            s.parts.len(),
+            s.failed_parts
+        ),
+        sections: Vec::new(),
+    };
+    page.section("job", "Job", job_section(input));
+    if let Some(f) = &s.family_map {
+        page.section("family", "Family", family_section(input, f)?);
+    }
+    if !s.toolpaths.is_empty() {
+        page.section("toolpaths", "Compensated toolpaths", toolpath_section(s));
+    }
+    for p in &s.parts {
+        page.section(
+            &format!("part-{}", p.part),
+            &format!("Part {}", p.part),
+            part_section(input, p)?,
+        );
+    }
+    Ok(page.render())
+}
+
+fn kv(key: &str, value: impl Into<String>) -> Vec<Cell> {
+    vec![Cell::text(key), Cell::text(value)]
+}
+
+fn job_section(input: &RunInput) -> String {
+    let m = input.manifest;
+    let s = input.summary;
+    let mut rows = vec![
+        kv("errmap version", &m.errmap_version),
+        kv("run", &m.kind),
+        kv(
+            "job file",
+            m.job
+                .as_ref()
+                .map_or("-".to_string(), |j| j.display().to_string()),
+        ),
+        vec![
+            Cell::text("job hash (SHA-256)"),
+            Cell::Raw(format!("<code>{}</code>", html::escape(&m.job_hash))),
+        ],
+        kv(
+            "date (UTC, of the run)",
+            m.created_utc
+                .clone()
+                .unwrap_or_else(|| "not recorded".into()),
+        ),
+        kv("backend", &m.backend),
+        kv("error direction (normal)", format!("{:?}", s.normal)),
+        kv("units", "coordinates mm, errors µm"),
+        kv("map grid step", format!("{} mm", s.grid_step_mm)),
+    ];
+    if let Some(d) = s.domain_mm {
+        rows.push(kv(
+            "map domain [u_min, v_min, u_max, v_max]",
+            format!("[{}, {}, {}, {}] mm", d[0], d[1], d[2], d[3]),
+        ));
+    }
+    if let Some([i, n]) = m.shard {
+        rows.push(kv("shard", format!("{i} of {n} (0-based)")));
+    }
+    let mut body = table(&["", ""], &rows);
+    if !m.metadata.is_empty() {
+        body.push_str("<h3>Machine and set-up (job [metadata])</h3>\n");
+        let rows: Vec<Vec<Cell>> = m
+            .metadata
+            .iter()
+            .map(|(k, v)| {
+                let text = match v {
+                    serde_json::Value::String(t) => t.clone(),
+                    other => other.to_string(),
+                };
+                kv(k, text)
+            })
+            .collect();
+        body.push_str(&table(&["key", "value"], &rows));
+    }
+    body.push_str("<h3>Inputs</h3>\n");
+    let rows: Vec<Vec<Cell>> = m
+        .inputs
+        .iter()
+        .map(|(f, h)| {
+            vec![
+                Cell::text(f.display().to_string()),
+                Cell::Raw(format!("<code>{}</code>", html::escape(h))),
+            ]
+        })
+        .collect();
+    body.push_str(&table(&["file", "SHA-256"], &rows));
+    body
+}
+
+/// A PNG of the run as a figure, or a note when it is missing.
+fn picture(dir: &Path, rel: &str, caption: &str) -> Result<String> {
+    let path = dir.join(rel);
+    if !path.is_file() {
+        return Ok(para("note", &format!("{rel}: not written")));
+    }
+    errmap_core::io::safety::protect(&path);
+    let bytes = std::fs::read(&path).map_err(|e| Error::read(&path, e))?;
+    Ok(png_figure(&bytes, rel, caption))
+}
+
+fn family_section(input: &RunInput, f: &super::summary::FamilySummary) -> Result<String> {
+    let rows = vec![
+        vec![
+            Cell::text("parts in the family"),
+            figure_cell("family.parts", Some(f.parts as f64), 0),
+            Cell::text("parts whose maps were averaged"),
+        ],
+        vec![
+            Cell::text("mean map RMS, µm"),
+            figure_cell("family.mean_rms_um", Some(f.mean_rms_um), 2),
+            Cell::text("RMS about 0 of the mean map over the grid nodes in the measured domain"),
+        ],
+        vec![
+            Cell::text("mean map PV, µm"),
+            figure_cell("family.mean_pv_um", Some(f.mean_pv_um), 2),
+            Cell::text("peak-to-valley of the mean map over the same nodes"),
+        ],
+        vec![
+            Cell::text("largest part-to-part spread, µm"),
+            figure_cell("family.std_max_um", Some(f.std_max_um), 2),
+            Cell::text("largest standard deviation of the parts' maps at one grid node"),
+        ],
+        vec![
+            Cell::text("benefit share"),
+            figure_cell("family.benefit_share", None, 3),
+            Cell::text("unknown: the family map has no held-out points to judge it by"),
+        ],
+    ];
+    let mut body = table(&["figure", "value", "definition"], &rows);
+    body.push_str(&picture(
+        input.dir,
+        "family/mean.png",
+        "Mean error map of the family (µm)",
+    )?);
+    body.push_str(&picture(
+        input.dir,
+        "family/std.png",
+        "Part-to-part spread: standard deviation of the parts' maps at each node (µm)",
+    )?);
+    body.push_str("<h3>Measured domain (convex hull of the probes)</h3>\n");
+    body.push_str(&hull_block(input.dir, input.summary.domain_mm)?);
+    Ok(body)
+}
+
+/// The family's measured hull (from `family/model.json`) as an inline SVG in the map domain,
+/// with its vertices.
+fn hull_block(dir: &Path, domain: Option<[f64; 4]>) -> Result<String> {
+    let path = dir.join("family/model.json");
+    if !path.is_file() {
+        return Ok(para("note", "family/model.json: not written"));
+    }
+    let text = errmap_core::io::read_text(&path)?;
+    let doc: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        Error::input(
+            Location::file(&path),
+            format!("not an errmap model: {e}"),
+            "rerun the batch",
+        )
+    })?;
+    let hull: Vec<[f64; 2]> = doc
+        .get("hull_mm")
+        .and_then(|h| serde_json::from_value(h.clone()).ok())
+        .unwrap_or_default();
+    if hull.is_empty() {
+        return Ok(para("note", "no hull recorded"));
+    }
+    let [u0, v0, u1, v1] = domain.unwrap_or_else(|| {
+        let (mut a, mut b, mut c, mut d) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for [u, v] in &hull {
+            (a, b, c, d) = (a.min(*u), b.min(*v), c.max(*u), d.max(*v));
+        }
+        [a, b, c, d]
+    });
+    let (w, h) = ((u1 - u0).max(1e-9), (v1 - v0).max(1e-9));
+    let scale = 600.0 / w.max(h);
+    let (pw, ph) = (w * scale, h * scale);
+    // SVG's y grows downwards; the map's v grows upwards.
+    let pt = |[u, v]: [f64; 2]| format!("{:.2},{:.2}", (u - u0) * scale, (v1 - v) * scale);
+    let points: Vec<String> = hull.iter().map(|p| pt(*p)).collect();
+    let mut s = format!(
+        "<figure><svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{pw:.0}\" height=\"{ph:.0}\" viewBox=\"-4 -4 {:.2} {:.2}\" role=\"img\">\
+<rect x=\"0\" y=\"0\" width=\"{pw:.2}\" height=\"{ph:.2}\" fill=\"none\" stroke=\"#888\" stroke-dasharray=\"6 4\"/>\
+<polygon points=\"{}\" fill=\"#cfe3f5\" fill-opacity=\"0.6\" stroke=\"#1f4e79\" stroke-width=\"2\"/></svg>\
+<figcaption>Solid: the convex hull of the probes, where the maps interpolate; dashed: the map domain \
+[{u0}, {v0}] – [{u1}, {v1}] mm (outside the hull the maps extrapolate).</figcaption></figure>\n",
+        pw + 8.0,
+        ph + 8.0,
+        points.join(" ")
+    );
+    let rows: Vec<Vec<Cell>> = hull
+        .iter()
+        .map(|[u, v]| vec![Cell::Num(format!("{u}")), Cell::Num(format!("{v}"))])
+        .collect();
+    s.push_str(&table(&["u, mm", "v, mm"], &rows));
+    Ok(s)
+}
+
+fn toolpath_section(s: &BatchSummary) -> String {
+    let mut body = String::new();
+    for t in &s.toolpaths {
+        let name = last_components(&t.output, 2);
+        body.push_str(&format!(
+            "<h3>{} → {}</h3>\n",
+            html::escape(&t.input.display().to_string()),
+            html::escape(&name)
+        ));
+        body.push_str(&para("", &format!("compensated with the {} map", t.map)));
+        if let Some(e) = &t.error {
+            body.push_str(&para("failed", &format!("FAILED: {e}")));
+        }
+        if let Some(serde_json::Value::Object(r)) = &t.report {
+            let rows: Vec<Vec<Cell>> = r
+                .iter()
+                .map(|(k, v)| vec![Cell::text(k), Cell::Num(json_text(v))])
+                .collect();
+            body.push_str(&table(&["compensation report", "value"], &rows));
+        }
+    }
+    body
+}
+
+/// The last `n` components of a path, joined with `/` (a run's own file, wherever it lies).
+fn last_components(p: &Path, n: usize) -> String {
+    let parts: Vec<String> = p
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().to_string())
+        .collect();
+    parts[parts.len().saturating_sub(n)..].join("/")
+}
+
+/// The part's folder relative to the run: where the manifest lists its `summary.json`
+/// (`shard-I-of-N/<part>/` in a merged run), else `<part>/`.
+fn part_folder(m: &RunManifest, part: &str) -> String {
+    let tail = format!("{part}/summary.json");
+    m.parts
+        .iter()
+        .filter(|r| r.part == part)
+        .flat_map(|r| r.outputs.keys())
+        .find(|k| k.as_str() == tail || k.ends_with(&format!("/{tail}")))
+        .map_or(format!("{part}/"), |k| {
+            k[..k.len() - "summary.json".len()].to_string()
+        })
+}
+
+fn part_section(input: &RunInput, p: &PartSummary) -> Result<String> {
+    let mut body = para("", &format!("probe file {}", p.probe_file.display()));
+    if !p.ok {
+        let why = p
+            .error
+            .as_ref()
+            .map_or("unknown error".to_string(), |e| e.to_string());
+        body.push_str(&para("failed", &format!("FAILED: {why}")));
+        return Ok(body);
+    }
+    let key = |k: &str| format!("{}.{k}", p.part);
+    let f = |k: &str, label: &str, v: Option<f64>, d: usize, def: &str| {
+        vec![
+            Cell::text(label),
+            figure_cell(&key(k), v, d),
+            Cell::text(def),
+        ]
+    };
+    let mut rows = vec![
+        f("points", "probe points", Some(p.points as f64), 0, "points after averaging repeats"),
+        f("repeats_averaged", "repeats averaged", Some(p.repeats_averaged as f64), 0, "rows that repeated another row's nominal point, averaged into it"),
+        f("rejected", "rejected points", Some(p.rejected as f64), 0, "gross errors: leave-one-out residual beyond k·σ (listed below)"),
+        f("sigma_um", "σ, µm", p.sigma_um, 3, "robust standard deviation (from the MAD) of the clean points' leave-one-out residuals"),
+        f("holdout_points", "hold-out points", Some(p.holdout_points as f64), 0, "clean points held out of the first fit"),
+        f("holdout_rmse_um", "hold-out RMSE (network), µm", p.holdout_rmse_um, 3, "RMS of held-out probe value − network fitted without them: the accuracy of the map"),
+        f("kriging_holdout_rmse_um", "hold-out RMSE (kriging), µm", p.kriging_holdout_rmse_um, 3, "the same for the kriging baseline (Matérn 5/2 + nugget, maximum likelihood) on the same points"),
+        f("holdout_e_rms_um", "hold-out E RMS, µm", p.holdout_e_rms_um, 3, "RMS about 0 of E at the held-out points: what compensation there has to remove"),
+        f("benefit_share", "benefit share", p.benefit_share, 3, "1 − (delivered map's hold-out RMSE) / (hold-out E RMS): the share of E the map removes; below 0.10 compensate refuses the map"),
+        f("rms_um", "map RMS, µm", p.rms_um, 2, "RMS about 0 of the map over the grid nodes in the measured domain (the probes' hull)"),
+        f("pv_um", "map PV, µm", p.pv_um, 2, "peak-to-valley of the map over the same nodes"),
+    ];
+    if p.extrapolated_fraction.is_some() {
+        rows.push(f(
+            "extrapolated_fraction",
+            "extrapolated share of nodes",
+            p.extrapolated_fraction,
+            3,
+            "grid nodes outside the measured domain, where the map extrapolates",
+        ));
+        rows.push(f(
+            "rms_extrapolated_um",
+            "RMS of extrapolated nodes, µm",
+            p.rms_extrapolated_um,
+            2,
+            "not an accuracy figure",
+        ));
+        rows.push(f(
+            "pv_extrapolated_um",
+            "PV of extrapolated nodes, µm",
+            p.pv_extrapolated_um,
+            2,
+            "not an accuracy figure",
+        ));
+    }
+    body.push_str(&table(&["figure", "value", "definition"], &rows));
+    if let Some(b) = &p.better_fit {
+        body.push_str(&para("note", &format!("lower hold-out RMSE: {b}")));
+    }
+    let folder = part_folder(input.manifest, &p.part);
+    body.push_str(&picture(
+        input.dir,
+        &format!("{folder}map.png"),
+        &format!("Error map of part {} (µm)", p.part),
+    )?);
+    body.push_str("<h3>Rejected points</h3>\n");
+    body.push_str(&rejected_block(input, p, &folder)?);
+    Ok(body)
+}
+
+fn rejected_block(input: &RunInput, p: &PartSummary, folder: &str) -> Result<String> {
+    let path = input.dir.join(format!("{folder}rejected.csv"));
+    if !path.is_file() {
+        return Ok(para("note", "rejected.csv: not written"));
+    }
+    let t = errmap_core::io::CsvTable::read(&path)?;
+    let cols = ["x_mm", "y_mm", "z_mm", "residual_um"]
+        .map(|c| t.require(c))
+        .into_iter()
+        .collect::<Result<Vec<usize>>>()?;
+    let limit = match (input.manifest.k_sigma, p.sigma_um) {
+        (Some(k), Some(s)) => Some((k, s)),
+        _ => None,
+    };
+    let mut rows = Vec::new();
+    for row in &t.rows {
+        let r = t.f64(row, cols[3])?;
+        let reason = match limit {
+            Some((k, s)) => format!(
+                "leave-one-out residual {r:.2} µm: |r| > k·σ = {k}·{s:.3} = {:.3} µm",
+                k * s
+            ),
+            None => format!("leave-one-out residual {r:.2} µm beyond k·σ"),
+        };
+        let mut cells: Vec<Cell> = cols[..3]
+            .iter()
+            .map(|&c| Cell::Num(t.text(row, c).to_string()))
+            .collect();
+        cells.push(Cell::Num(num(Some(r), 3)));
+        cells.push(Cell::text(reason));
+        rows.push(cells);
+    }
+    Ok(table(
+        &["x, mm", "y, mm", "z, mm", "residual, µm", "reason"],
+        &rows,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// A run folder with one mapped part whose name needs escaping, one failed part, the
+    /// family and a toolpath.
+    fn fake_run(dir: &Path) -> (RunManifest, BatchSummary) {
+        let part = "p<1>&";
+        std::fs::create_dir_all(dir.join(part)).unwrap();
+        std::fs::create_dir_all(dir.join("family")).unwrap();
+        for f in [
+            format!("{part}/map.png"),
+            "family/mean.png".into(),
+            "family/std.png".into(),
+        ] {
+            std::fs::write(dir.join(f), b"\x89PNG fake").unwrap();
+        }
+        std::fs::write(
+            dir.join(part).join("rejected.csv"),
+            "x_mm,y_mm,z_mm,residual_um\n125,70.5,5.05,39.5\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("family/model.json"),
+            r#"{"hull_mm": [[25.0, 25.0], [575.0, 25.0], [575.0, 275.0]]}"#,
+        )
+        .unwrap();
+        let summary: BatchSummary = serde_json::from_value(json!({
+            "family": "web<plate>", "job": "job.toml", "backend": "cpu", "normal": "z",
+            "shard": null, "domain_mm": [10.0, 10.0, 590.0, 290.0], "grid_step_mm": 5.0,
+            "parts": [
+                {"part": part, "probe_file": "probes/p<1>&.csv", "ok": true, "points": 144,
+                 "repeats_averaged": 2, "rejected": 1, "sigma_um": 1.25, "holdout_points": 14,
+                 "holdout_rmse_um": 1.19, "kriging_holdout_rmse_um": 1.2, "better_fit": "network",
+                 "holdout_e_rms_um": 14.2, "benefit_share": 0.916,
+                 "rms_um": 16.6, "pv_um": 30.7, "output_dir": null, "error": null},
+                {"part": "bad", "probe_file": "probes/bad.csv", "ok": false, "points": 0,
+                 "repeats_averaged": 0, "rejected": 0, "sigma_um": null, "holdout_points": 0,
+                 "holdout_rmse_um": null, "rms_um": null, "pv_um": null, "output_dir": null,
+                 "error": {"kind": "input", "message": "no <points>", "file": null, "line": null,
+                           "column": null, "hint": null}}
+            ],
+            "failed_parts": 1,
+            "family_map": {"parts": 1, "output_dir": "family", "mean_rms_um": 17.5,
+                           "mean_pv_um": 31.0, "std_max_um": 2.5},
+            "toolpaths": [{"input": "finish.ngc", "output": "/x/family/finish-compensated.ngc",
+                           "map": "family", "report": {"moves_changed": 34}, "error": null}]
+        }))
+        .unwrap();
+        let manifest: RunManifest = serde_json::from_value(json!({
+            "format": "errmap-run/1", "errmap_version": "0.1.0", "kind": "batch",
+            "job": "job.toml", "job_hash": "abc", "shard": null, "backend": "cpu",
+            "inputs": {"probes/p<1>&.csv": "1234"},
+            "parts": [{"part": part, "probe_file": "probes/p<1>&.csv", "input_sha256": "1234",
+                       "ok": true, "reused": false,
+                       "outputs": {"p<1>&/summary.json": "00", "p<1>&/map.png": "01"}}],
+            "files": {}, "shards": {}, "created_utc": "2026-11-23T16:11:05Z",
+            "metadata": {"machine": "DMU <50>", "spindle_temp_c": 21.5}, "k_sigma": 3.0
+        }))
+        .unwrap();
+        (manifest, summary)
+    }
+
+    #[test]
+    fn every_section_is_present_and_every_text_escaped() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (manifest, summary) = fake_run(tmp.path());
+        let html = render_run(&RunInput {
+            dir: tmp.path(),
+            manifest: &manifest,
+            summary: &summary,
+        })
+        .unwrap();
+        for id in ["job", "family", "toolpaths", "part-p-1--", "part-bad"] {
+            assert!(html.contains(&format!("<section id=\"{id}\">")), "{id}");
+        }
+        // Job metadata: date from run.json, metadata, inputs, escaped.
+        assert!(html.contains("2026-11-23T16:11:05Z"));
+        assert!(html.contains("DMU &lt;50&gt;") && html.contains("21.5"));
+        assert!(html.contains("probes/p&lt;1&gt;&amp;.csv"));
+        assert!(!html.contains("<1>") && !html.contains("<plate>") && !html.contains("<points>"));
+        // Three pictures (the fake PNG bytes, base64) and the hull drawn.
+        assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3);
+        assert!(html.contains("<polygon points=\""));
+        // Figures with exact values; the rejected point with its reason (k·σ = 3·1.25).
+        assert!(
+            html.contains("data-figure=\"p&lt;1&gt;&amp;.holdout_rmse_um\" data-value=\"1.19\"")
+        );
+        assert!(html.contains("data-figure=\"family.std_max_um\" data-value=\"2.5\""));
+        // The benefit: the part's share as given; the family's stated unknown, not invented.
+        assert!(html.contains("data-figure=\"p&lt;1&gt;&amp;.benefit_share\" data-value=\"0.916\""));
+        assert!(!html.contains("data-figure=\"family.benefit_share\" data-value"));
+        assert!(html.contains("unknown: the family map has no held-out points"));
+        assert!(html.contains("|r| &gt; k·σ = 3·1.250 = 3.750 µm"), "{html}");
+        assert!(html.contains("moves_changed") && html.contains("family/finish-compensated.ngc"));
+        assert!(html.contains("FAILED: no &lt;points&gt;"));
+        // No network: nothing but data: URIs and in-page anchors.
+        assert!(!html.contains("http://") || html.matches("http://").count() == 1);
+        assert!(!html.contains("https://") && !html.contains("<script"));
+    }
+}

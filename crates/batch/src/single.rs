@@ -1,0 +1,134 @@
+//! One part mapped without a job file (`errmap map`): its settings checked and made a plan,
+//! and the part's failure turned into the run's error.
+
+use super::run::{PartInput, Plan, Settings};
+use super::summary::BatchSummary;
+use errmap_core::error::{Error, Result};
+use errmap_core::geom::{Axis, Domain};
+use errmap_core::progress::Reporter;
+use errmap_maps::interp::Method;
+use errmap_maps::nn::{Backend, ModelConfig, Trainer};
+use std::path::PathBuf;
+
+/// The settings of one part's map, as `errmap map` takes them.
+#[derive(Debug, Clone)]
+pub struct MapRequest {
+    pub probes: PathBuf,
+    pub out_dir: PathBuf,
+    pub normal: Axis,
+    pub nominal_plane_mm: Option<f64>,
+    pub domain: Option<Domain>,
+    pub grid_step_mm: f64,
+    pub method: Method,
+    pub spacing_mm: f64,
+    pub k_sigma: f64,
+    /// Training epochs; `None`: the job file's default.
+    pub epochs: Option<u32>,
+    /// Seed of the random choices; `None`: the job file's default.
+    pub seed: Option<u64>,
+    pub backend: Backend,
+    pub max_deviation_mm: f64,
+    /// Column mapping of the probe file (a CSV export), see [`errmap_maps::probe::ProbeSpec::columns`].
+    pub columns: Option<String>,
+    /// 1-based header line of the probe file.
+    pub header_line: Option<u64>,
+}
+
+impl MapRequest {
+    /// The model configuration: the job file's defaults with this request's backend, epochs
+    /// and seed, checked.
+    pub fn model(&self) -> Result<ModelConfig> {
+        let mut model = ModelConfig {
+            backend: self.backend,
+            ..ModelConfig::default()
+        };
+        if let Some(e) = self.epochs {
+            model.epochs = e;
+        }
+        if let Some(s) = self.seed {
+            model.seed = s;
+        }
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// The checked plan of one part named after its probe file, written into `out_dir`.
+    pub fn plan(&self) -> Result<Plan> {
+        if let Some(z) = self.nominal_plane_mm {
+            if !z.is_finite() {
+                return Err(Error::usage(
+                    "--nominal-plane must be a finite number",
+                    "e.g. --nominal-plane 5.0",
+                ));
+            }
+        }
+        let model = self.model()?;
+        if let Some(text) = &self.columns {
+            errmap_maps::probe::ProbeColumns::parse(text)?;
+        }
+        if self.header_line == Some(0) {
+            return Err(Error::usage(
+                "--header-line 0: lines are numbered from 1",
+                "give the 1-based line of the header, as an editor shows it",
+            ));
+        }
+        errmap_maps::probe::validate_max_deviation(self.max_deviation_mm, "--max-deviation-mm")?;
+        for (flag, v) in [
+            ("--grid-step", self.grid_step_mm),
+            ("--spacing", self.spacing_mm),
+            ("--k-sigma", self.k_sigma),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::usage(
+                    format!("{flag} {v} must be a positive number"),
+                    "see errmap map --help",
+                ));
+            }
+        }
+        let name = self
+            .probes
+            .file_stem()
+            .map_or("part".to_string(), |s| s.to_string_lossy().to_string());
+        Ok(Plan {
+            settings: Settings {
+                family: name.clone(),
+                normal: self.normal,
+                nominal_plane_mm: self.nominal_plane_mm,
+                domain: self.domain,
+                grid_step_mm: self.grid_step_mm,
+                k_sigma: self.k_sigma,
+                method: self.method,
+                spacing_mm: self.spacing_mm,
+                model,
+                max_deviation_mm: self.max_deviation_mm,
+                columns: self.columns.clone(),
+                header_line: self.header_line,
+                reduce_inputs: false,
+            },
+            parts: vec![PartInput {
+                name,
+                probe_file: self.probes.clone(),
+                out_dir: self.out_dir.clone(),
+            }],
+            family_parts: Vec::new(),
+            family_dir: None,
+            toolpaths: None,
+            job: None,
+            shard: None,
+        })
+    }
+}
+
+/// Map the one part of `plan`. A single part has no batch to finish: its failure is the
+/// run's error, with its kind (and exit code), place and fix.
+pub fn map_part(
+    plan: &Plan,
+    trainer: &dyn Trainer,
+    reporter: &dyn Reporter,
+) -> Result<BatchSummary> {
+    let summary = super::execute(plan, trainer, reporter)?;
+    if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
+        return Err(err.into_error());
+    }
+    Ok(summary)
+}

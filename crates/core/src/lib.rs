@@ -1,0 +1,15 @@
+//! errmap's ground floor, shared by every other crate: the error type with file, line and
+//! column, atomic output that never lands over an input, CSV reading with line numbers, the
+//! machine axes and map plane, least squares and the formatting of written numbers, the progress
+//! a long call reports, and the approach direction of linear, rotary and thermal data.
+#![forbid(unsafe_code)]
+#![deny(rustdoc::broken_intra_doc_links)]
+
+pub mod direction;
+pub mod error;
+pub mod geom;
+pub mod io;
+pub mod numeric;
+pub mod progress;
+
+pub use error::{Error, Location, Result};

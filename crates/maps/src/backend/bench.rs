@@ -1,0 +1,89 @@
+//! `errmap bench training`: one backend's training throughput on synthetic work, as one JSON object, so a user can check a machine in one command.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{probe, select_trainer, silent};
+use crate::nn::{Backend, ModelConfig};
+use errmap_core::{Error, Result};
+
+/// What `errmap bench training` trains.
+#[derive(Debug, Clone)]
+pub struct TrainingBench {
+    pub parts: usize,
+    pub samples: usize,
+    pub epochs: u32,
+    pub backend: Backend,
+    /// Hidden layer widths (default 32, 32).
+    pub hidden: Vec<usize>,
+}
+
+/// The figures of one bench run.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrainingBenchReport {
+    /// The backend that trained (`gpu`, `cpu` or `cpu-reference`; `auto` resolved).
+    pub backend: String,
+    /// The adapter (e.g. llvmpipe) or the CPU trainer's SIMD path and threads.
+    pub device: String,
+    /// Why this backend, for `auto`.
+    pub reason: String,
+    pub parts: usize,
+    pub samples: usize,
+    pub epochs: u32,
+    pub layer_sizes: Vec<usize>,
+    /// parts × samples × epochs / training seconds (pipeline build excluded).
+    pub sample_epochs_per_s: f64,
+    pub train_s: f64,
+    /// Opening the device, building the pipelines and the warm-up epoch (0 for the CPU
+    /// trainers apart from their warm-up).
+    pub pipeline_build_s: f64,
+}
+
+/// Most samples a bench trains per network, and most networks (a typo guard).
+const MAX_SAMPLES: usize = 1 << 22;
+const MAX_PARTS: usize = 4096;
+
+pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
+    if !(1..=MAX_PARTS).contains(&bench.parts) || !(8..=MAX_SAMPLES).contains(&bench.samples) {
+        return Err(Error::usage(
+            format!(
+                "--parts {} --samples {}: parts must be 1..={MAX_PARTS}, samples 8..={MAX_SAMPLES}",
+                bench.parts, bench.samples
+            ),
+            "e.g. --parts 8 --samples 1536",
+        ));
+    }
+    let config = ModelConfig {
+        hidden: bench.hidden.clone(),
+        epochs: bench.epochs,
+        loss_every: bench.epochs.max(1),
+        ..ModelConfig::default()
+    };
+    config.validate()?;
+    let open = Instant::now();
+    let selection = select_trainer(bench.backend, &config, silent())?;
+    let open_s = open.elapsed().as_secs_f64();
+    let sets = crate::nn::workload::plate_family(bench.parts, bench.samples);
+    let measure = probe::measure(
+        selection.trainer.as_ref(),
+        selection.backend.name(),
+        open_s,
+        &sets,
+        &config,
+        bench.epochs,
+    )?;
+    let work = (bench.parts * bench.samples) as f64 * bench.epochs as f64;
+    Ok(TrainingBenchReport {
+        backend: measure.backend,
+        device: measure.device,
+        reason: selection.reason,
+        parts: bench.parts,
+        samples: bench.samples,
+        epochs: bench.epochs,
+        layer_sizes: config.layer_sizes(),
+        sample_epochs_per_s: measure.sample_epochs_per_s,
+        train_s: work / measure.sample_epochs_per_s,
+        pipeline_build_s: measure.pipeline_build_s,
+    })
+}

@@ -1,0 +1,13 @@
+//! errmap's part maps: probe files read and cleaned (`probe`), scattered points interpolated
+//! (`interp`), one small network per part (`nn`) trained on the CPU or in WGSL compute shaders
+//! through wgpu (`gpu`, chosen by `backend`), and the fitted maps with their family statistics
+//! and files (`map`).
+#![forbid(unsafe_code)]
+#![deny(rustdoc::broken_intra_doc_links)]
+
+pub mod backend;
+pub mod gpu;
+pub mod interp;
+pub mod map;
+pub mod nn;
+pub mod probe;

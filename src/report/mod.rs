@@ -1,8 +1,0 @@
-//! Pictures and reports: the shared chart plumbing (fonts, PNG output), the heatmaps and charts built on it, and the self-contained `report.html`.
-
-pub mod chart;
-pub mod colormap;
-pub mod heatmap;
-pub mod html;
-pub mod pdf;
-pub mod result;
