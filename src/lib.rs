@@ -12,6 +12,7 @@
 //! program (and errmap's own binary and tests) writes `errmap::toolpath::…` whichever crate
 //! holds it; docs/architecture.md draws the crates and what each owns.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub use errmap_batch as batch;

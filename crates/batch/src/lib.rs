@@ -1,22 +1,23 @@
 //! Batch jobs over a part family: the job manifest, scheduling over parts, sharding and the summary.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-pub mod commit;
-pub mod driver;
+pub(crate) mod commit;
+pub(crate) mod driver;
 pub mod folder_report;
-pub mod job;
+pub(crate) mod job;
 pub mod k8s;
 pub mod manifest;
 mod part_record;
-pub mod reduce;
-pub mod run;
+pub(crate) mod reduce;
+pub(crate) mod run;
 pub mod run_page;
-pub mod single;
+pub(crate) mod single;
 pub mod slurm;
-pub mod summary;
-pub mod timing;
-pub mod train_step;
+pub(crate) mod summary;
+pub(crate) mod timing;
+pub(crate) mod train_step;
 
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};

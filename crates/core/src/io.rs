@@ -1,7 +1,7 @@
 //! File plumbing shared by every module: atomic writes that obey the output safety rules, and a streaming CSV table reader that keeps line numbers for error messages.
 
 pub mod columns;
-pub mod lines;
+pub(crate) mod lines;
 pub mod safety;
 pub mod stamp;
 

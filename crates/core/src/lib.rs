@@ -3,6 +3,7 @@
 //! machine axes and map plane, least squares and the formatting of written numbers, the progress
 //! a long call reports, and the approach direction of linear, rotary and thermal data.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod direction;

@@ -3,6 +3,7 @@
 //! through wgpu (`gpu`, chosen by `backend`), and the fitted maps with their family statistics
 //! and files (`map`).
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod backend;

@@ -3,6 +3,7 @@
 //! the composite model (`thermal`), rotary axes from sphere probing (`rotary`), circular tests by
 //! ISO 230-4 (`circular`), and the compensation tables of each controller (`controller`).
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod circular;

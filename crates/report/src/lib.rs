@@ -1,5 +1,6 @@
 //! Pictures and reports: the shared chart plumbing (fonts, PNG output), the heatmaps and charts built on it, and the self-contained `report.html`.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod chart;

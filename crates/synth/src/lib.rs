@@ -1,5 +1,6 @@
 //! Generators of sample data with known ground truth, for every kind of measurement errmap reads.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod circular;

@@ -13,6 +13,7 @@
 //! refused with an error naming file:line.
 //! `docs/toolpath.md` has the details and a worked example.
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
 mod arc;

@@ -137,6 +137,7 @@ impl LineIndex {
         line
     }
 
+    #[cfg(test)]
     /// Bytes held for line counting (what the reader read ahead of the cursor).
     pub fn held_bytes(&self) -> usize {
         self.state

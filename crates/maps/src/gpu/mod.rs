@@ -5,10 +5,10 @@
 //! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; [`context`] picks the
 //! adapter and turns device failures into [`Error::device`].
 
-pub mod context;
-pub mod epochs;
+pub(crate) mod context;
+pub(crate) mod epochs;
 pub mod evaluate;
-pub mod fixed;
+pub(crate) mod fixed;
 pub mod lavapipe;
 pub mod layout;
 pub mod pipeline_cache;

@@ -5,14 +5,14 @@
 //! [`min_zone`] iterated on the exact radii, F, H) → [`diagnose`] (the model of
 //! [`model`] fitted by least squares, decays and periods searched) → [`chart::save_polar_chart`].
 
-pub mod chart;
-pub mod circle;
-pub mod diagnosis;
-pub mod figures;
+pub(crate) mod chart;
+pub(crate) mod circle;
+pub(crate) mod diagnosis;
+pub(crate) mod figures;
 pub mod input;
-pub mod model;
-pub mod report;
-pub mod zone;
+pub(crate) mod model;
+pub(crate) mod report;
+pub(crate) mod zone;
 
 pub use circle::{fit_circle, CircleFit};
 pub use diagnosis::{diagnose, Diagnosis, Term, Terms};

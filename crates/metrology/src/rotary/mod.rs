@@ -7,14 +7,14 @@
 //! chart ([`chart::save_error_chart`]). [`commands`] runs each `rotary` command as one call.
 
 pub mod analysis;
-pub mod angle;
-pub mod axis_fit;
-pub mod chart;
+pub(crate) mod angle;
+pub(crate) mod axis_fit;
+pub(crate) mod chart;
 pub mod commands;
 pub mod input;
 pub mod sphere;
-pub mod table;
-pub mod text_report;
+pub(crate) mod table;
+pub(crate) mod text_report;
 
 pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, Sign, TableRow};
 pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};

@@ -7,8 +7,6 @@ use errmap_core::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 pub use crate::controller::{fixed, TableFormat, TableOptions};
-/// LinuxCNC reads at most 256 triplets per joint (ini-config, `COMP_FILE`).
-pub const LINUXCNC_MAX_ENTRIES: usize = crate::controller::LINUXCNC_MAX_LINES;
 /// Most entries per turn a table may have (0.01° steps).
 pub const MAX_ENTRIES: usize = 36_000;
 /// Largest gap between measured angles the table will interpolate across.

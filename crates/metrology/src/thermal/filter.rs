@@ -142,6 +142,7 @@ impl SgProjection {
     }
 }
 
+#[cfg(test)]
 /// Savitzky–Golay weights of a `window`-sample least-squares polynomial of `order`, evaluated at
 /// sample `at` (0-based within the window). `weights · samples` is the smoothed value.
 pub fn sg_weights(window: usize, order: usize, at: usize) -> Result<Vec<f64>> {
@@ -195,6 +196,7 @@ pub fn savitzky_golay(samples: &[f64], window: usize, order: usize) -> Result<Ve
     Ok(out)
 }
 
+#[cfg(test)]
 /// Closed-form variance reduction of the central Savitzky–Golay smoother for white noise:
 /// Σ h_k² = h_0 for a least-squares projection; for order 0 or 1 it is 1/(2m+1), for order 2
 /// or 3 it is 3(3m² + 3m − 1)/((2m − 1)(2m + 1)(2m + 3)), window 2m + 1

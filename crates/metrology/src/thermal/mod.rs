@@ -1,17 +1,17 @@
 //! Thermal positioning error of linear axes: cold/warm difference (seed 000), the composite geometric + thermal model (seed 004), sensors and the temperature store.
 
 pub mod campaign;
-pub mod charts;
+pub(crate) mod charts;
 pub mod commands;
 pub mod compensate;
-pub mod difference;
-pub mod evaluate;
-pub mod filter;
-pub mod lsq;
-pub mod model;
-pub mod outputs;
-pub mod pt100;
-pub mod runs;
+pub(crate) mod difference;
+pub(crate) mod evaluate;
+pub(crate) mod filter;
+pub(crate) mod lsq;
+pub(crate) mod model;
+pub(crate) mod outputs;
+pub(crate) mod pt100;
+pub(crate) mod runs;
 pub mod sample;
 pub mod sensors;
 pub mod store;

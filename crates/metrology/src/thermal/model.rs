@@ -206,14 +206,6 @@ pub struct ThermalModel {
     pub loco_rms_um: Option<f64>,
 }
 
-/// The k_j of a coolant state in gain-sensor order (0 for a sensor missing from the map).
-pub fn gains_in_order(g: &CoolantGains, sensors: &[String]) -> Vec<f64> {
-    sensors
-        .iter()
-        .map(|s| g.k_um_per_m_k.get(s).copied().unwrap_or(0.0))
-        .collect()
-}
-
 /// Temperatures of one thermal state, as the model needs them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ThermalState {
