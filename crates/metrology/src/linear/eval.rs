@@ -445,6 +445,32 @@ fn max_opt(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 /// target approaches from the same single direction (unidirectional test: the other direction's
 /// and the bidirectional figures are `None`). Targets closer than
 /// 1e-6 (in the samples' target unit) are one target.
+///
+/// Two targets approached twice from each side, figures by hand (ISO 230-2:2014, k = 2):
+///
+/// ```
+/// use errmap_metrology::linear::{evaluate, Direction, Sample, Standard};
+///
+/// // (target mm, run, direction, deviation µm)
+/// let readings = [
+///     (0.0, 1, Direction::Forward, 1.0), (0.0, 2, Direction::Forward, 3.0),
+///     (0.0, 1, Direction::Reverse, 2.0), (0.0, 2, Direction::Reverse, 4.0),
+///     (100.0, 1, Direction::Forward, 5.0), (100.0, 2, Direction::Forward, 7.0),
+///     (100.0, 1, Direction::Reverse, 6.0), (100.0, 2, Direction::Reverse, 8.0),
+/// ];
+/// let samples: Vec<Sample> = readings
+///     .iter()
+///     .map(|&(target, run, direction, deviation)| Sample { run, direction, target, deviation })
+///     .collect();
+/// let axis = evaluate(&samples, Standard::Iso230_2_2014).unwrap().axis;
+/// let near = |a: Option<f64>, b: f64| (a.unwrap() - b).abs() < 1e-12;
+/// // E↑ = max x̄↑ − min x̄↑ = 6 − 2; E = max(x̄↑, x̄↓) − min(x̄↑, x̄↓) = 7 − 2
+/// assert!(near(axis.E_up, 4.0) && near(axis.E, 5.0));
+/// // s↑ = √2 at both targets: R↑ = 4s↑, A↑ = (6 + 2√2) − (2 − 2√2)
+/// assert!(near(axis.R_up, 4.0 * 2f64.sqrt()) && near(axis.A_up, 4.0 + 4.0 * 2f64.sqrt()));
+/// // B = x̄↑ − x̄↓ = −1 at both targets
+/// assert!(near(axis.B.map(f64::abs), 1.0));
+/// ```
 pub fn evaluate(samples: &[Sample], standard: Standard) -> Result<Evaluation> {
     check_samples(samples)?;
     let groups = group_by_direction(samples)?;
