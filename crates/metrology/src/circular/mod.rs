@@ -3,7 +3,8 @@
 //! Data flow: [`read_run`] (radial or two-axis CSV, checked and sorted by angle) →
 //! [`evaluate`] (least-squares centre by [`fit_circle`], exact minimum zone by
 //! [`min_zone`] iterated on the exact radii, F, H) → [`diagnose`] (the model of
-//! [`model`] fitted by least squares, decays and periods searched) → [`chart::save_polar_chart`].
+//! `model` fitted by least squares, decays and periods searched) → the polar chart
+//! (`chart::save_polar_chart`).
 
 pub(crate) mod chart;
 pub(crate) mod circle;

@@ -188,7 +188,8 @@ pub struct ThermalModel {
     pub ambient_sensor: Option<String>,
     /// Sensor definitions (unit, calibration) used to read machine logs.
     pub sensors: Vec<Sensor>,
-    /// How the rises were referenced in the fit (see [`Reference`]).
+    /// How the rises were referenced in the fit: `room`, `shared`, `own-start` or
+    /// `campaign-offset`.
     #[serde(default)]
     pub reference: Reference,
     /// "cross-validation", "given" or a default.
