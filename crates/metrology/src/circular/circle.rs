@@ -5,7 +5,9 @@ use nalgebra::DMatrix;
 /// A fitted circle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CircleFit {
+    /// Centre of the circle (first, second axis) in the points' coordinates, mm.
     pub centre_mm: [f64; 2],
+    /// Fitted radius ρ, mm.
     pub radius_mm: f64,
 }
 

@@ -25,6 +25,8 @@ pub struct Term {
     /// Reversal spikes: the decay length along the path found in the data.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub decay_mm: Option<f64>,
+    /// Why the value is missing (one direction only, no feed, sampling too coarse, not in the
+    /// model); absent when there is a value.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
 }
@@ -46,14 +48,31 @@ impl Term {
 /// The terms of the model, keyed as `errmap circular --json` prints them.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Terms {
+    /// Squareness S of the two axes, µm/m: positive when the angle between +first and +second
+    /// motion exceeds 90°.
     pub squareness_um_per_m: Term,
+    /// Scale mismatch M = s₁ − s₂ of the axes' scale errors (e₁ = s₁·x, e₂ = s₂·y), µm/m: positive
+    /// when the first axis travels farther per commanded length than the second.
     pub scale_mismatch_um_per_m: Term,
+    /// Backlash b₁ of the first axis, µm: the axis lags b₁/2 behind its command in the direction of
+    /// motion, so the radius steps out by b₁ at its reversals (ψ = 0°, 180°); negative when
+    /// over-compensated.
     pub backlash_first_um: Term,
+    /// Backlash b₂ of the second axis, µm, as for the first, at its reversals (ψ = 90°, 270°).
     pub backlash_second_um: Term,
+    /// Height h₁ of the first axis' reversal spike, µm: an outward error h₁·exp(−s/λ) along the
+    /// path s after the axis reverses; λ in `decay_mm`.
     pub reversal_spike_first_um: Term,
+    /// Height h₂ of the second axis' reversal spike, µm; λ in `decay_mm`.
     pub reversal_spike_second_um: Term,
+    /// Servo mismatch Δτ = τ₁ − τ₂ of the axes' lags, ms: positive when the first axis lags more.
+    /// Needs both directions and the feed (without it, `model.servo_amplitude_um` only).
     pub servo_mismatch_ms: Term,
+    /// Amplitude A₁ of the first axis' cyclic error e₁ = A₁·sin(2π·x/P₁ + φ₁), µm; P₁ in
+    /// `period_mm`.
     pub cyclic_first_um: Term,
+    /// Amplitude A₂ of the second axis' cyclic error e₂ = A₂·sin(2π·y/P₂ + φ₂), µm; P₂ in
+    /// `period_mm`.
     pub cyclic_second_um: Term,
 }
 
@@ -77,6 +96,7 @@ impl Terms {
 /// What else the fit found: nuisance values and the ranking of the terms.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModelInfo {
+    /// The programmed feed given, mm/min; `None`: not given, so no servo mismatch in ms.
     pub feed_mm_per_min: Option<f64>,
     /// The constant of the model (mean radius about the least-squares centre), µm.
     pub constant_um: f64,
@@ -86,15 +106,20 @@ pub struct ModelInfo {
     pub servo_amplitude_um: Option<f64>,
     /// Keys of the terms with the widest contribution, widest first (share ≥ 5 %).
     pub largest: Vec<String>,
+    /// Number of readings fitted (both directions together).
     pub observations: usize,
+    /// Number of coefficients of the linear least-squares fit (9 to 14 columns).
     pub unknowns: usize,
 }
 
 /// Result of [`diagnose`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnosis {
+    /// Each diagnosed term: value, standard error and share of G.
     pub terms: Terms,
+    /// Root mean square of the deviations minus the fitted model, µm.
     pub residual_rms_um: f64,
+    /// The nuisance values, the size of the fit and the ranking of the terms.
     pub model: ModelInfo,
     /// The modelled deviation at each reading (same order as the input).
     pub fitted_um: Vec<f64>,

@@ -9,8 +9,11 @@ use serde::Serialize;
 /// A value per direction and for both together; `None` where a direction is missing.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PerDirection {
+    /// The value of the clockwise readings alone; `None` when the run has none.
     pub cw: Option<f64>,
+    /// The value of the counter-clockwise readings alone; `None` when the run has none.
     pub ccw: Option<f64>,
+    /// The value of both directions together; `None` unless the run has both.
     pub bidirectional: Option<f64>,
 }
 
@@ -19,27 +22,35 @@ pub struct PerDirection {
 pub struct ZoneReport {
     /// Zone centre minus the least-squares centre of the run, µm.
     pub centre_from_lsc_um: [f64; 2],
-    /// Radii of the inner and outer circle minus the nominal radius, µm.
+    /// Radius of the inner circle minus the nominal radius, µm.
     pub inner_um: f64,
+    /// Radius of the outer circle minus the nominal radius, µm.
     pub outer_um: f64,
-    /// Line numbers of the readings that touch the zone (outer, inner).
+    /// Lines of the readings that touch the outer circle.
     pub outer_lines: Vec<u64>,
+    /// Lines of the readings that touch the inner circle.
     pub inner_lines: Vec<u64>,
 }
 
 /// The ISO 230-4 figures.
 #[derive(Debug, Clone, Serialize)]
 pub struct Figures {
+    /// Programmed (nominal) radius R, mm.
     pub radius_mm: f64,
+    /// The CSV form the run was read from.
     pub form: Form,
+    /// Readings evaluated per direction, and the rows left out.
     pub readings: ReadingCounts,
     /// Circular deviation G (minimum zone).
     pub g_um: PerDirection,
     /// Circular hysteresis H: the largest radial difference between the ccw and cw paths
     /// about their common least-squares centre; `None` with one direction.
     pub h_um: Option<f64>,
-    /// Radial deviation F about the least-squares centre (nominal radius): largest and smallest.
+    /// Largest radial deviation F: distance from the least-squares centre minus the nominal
+    /// radius, µm.
     pub f_max_um: PerDirection,
+    /// Smallest radial deviation F about the least-squares centre, µm (negative inside the nominal
+    /// circle).
     pub f_min_um: PerDirection,
     /// Least-squares centre minus nominal centre (first, second axis), removed as set-up error.
     pub centre_offset_um: [f64; 2],
@@ -49,9 +60,12 @@ pub struct Figures {
     pub zone: ZoneReport,
 }
 
+/// Readings evaluated per direction and rows left out, as the report counts them.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct ReadingCounts {
+    /// Counter-clockwise readings evaluated.
     pub ccw: usize,
+    /// Clockwise readings evaluated.
     pub cw: usize,
     /// Rows not evaluated: marked `overshoot`, or past one turn.
     pub overshoot: usize,
@@ -73,6 +87,7 @@ impl Figures {
 /// Readings about the run's least-squares centre: the input of the diagnosis and the chart.
 #[derive(Debug, Clone)]
 pub struct Centred {
+    /// The direction of each reading.
     pub direction: Vec<Rotation>,
     /// Angle about the least-squares centre, [0, 2π).
     pub angle_rad: Vec<f64>,
@@ -81,13 +96,16 @@ pub struct Centred {
     pub nominal_angle_rad: Vec<f64>,
     /// Distance from the least-squares centre minus nominal radius, µm.
     pub dev_um: Vec<f64>,
+    /// 1-based line of each reading in the run file.
     pub line: Vec<u64>,
 }
 
 impl Centred {
+    /// Number of readings.
     pub fn len(&self) -> usize {
         self.dev_um.len()
     }
+    /// Whether there are no readings.
     pub fn is_empty(&self) -> bool {
         self.dev_um.is_empty()
     }

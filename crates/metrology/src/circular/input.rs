@@ -25,7 +25,9 @@ const SAME_ANGLE_DEG: f64 = 1e-9;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Rotation {
+    /// Counter-clockwise: the angle grows from +first toward +second axis (G3).
     Ccw,
+    /// Clockwise: the angle shrinks (G2).
     Cw,
 }
 
@@ -37,6 +39,8 @@ impl Rotation {
             Rotation::Cw => -1.0,
         }
     }
+    /// The direction word of the run file (`ccw`, `cw`), also used in messages and the chart
+    /// legend.
     pub fn name(self) -> &'static str {
         match self {
             Rotation::Ccw => "ccw",
@@ -49,9 +53,12 @@ impl Rotation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Plane {
+    /// First axis X, second Y (the G17 plane).
     #[default]
     Xy,
+    /// First axis Y, second Z (the G19 plane).
     Yz,
+    /// First axis Z, second X (the G18 plane).
     Zx,
 }
 
@@ -90,6 +97,7 @@ pub struct ReadOptions {
 pub struct Reading {
     /// 1-based line in the file.
     pub line: u64,
+    /// The sense of the contouring when the reading was taken.
     pub direction: Rotation,
     /// Angle about the nominal centre in [0, 2π): as read (radial form) or of the point (two-axis).
     pub angle_rad: f64,
@@ -100,8 +108,11 @@ pub struct Reading {
 /// A checked run: readings of each direction sorted by angle; overshoot rows counted, not used.
 #[derive(Debug, Clone)]
 pub struct CircularRun {
+    /// The file read, as messages name it.
     pub path: PathBuf,
+    /// The CSV form of the file.
     pub form: Form,
+    /// Programmed (nominal) radius of the circle, mm.
     pub radius_mm: f64,
     /// ccw readings first, then cw, each sorted by angle.
     pub readings: Vec<Reading>,

@@ -3,7 +3,8 @@
 //! Data flow: [`read_run`] (radial or two-axis CSV, checked and sorted by angle) →
 //! [`evaluate`] (least-squares centre by [`fit_circle`], exact minimum zone by
 //! [`min_zone`] iterated on the exact radii, F, H) → [`diagnose`] (the model of
-//! [`model`] fitted by least squares, decays and periods searched) → [`chart::save_polar_chart`].
+//! `model` fitted by least squares, decays and periods searched) → the polar chart
+//! (`chart::save_polar_chart`).
 
 pub(crate) mod chart;
 pub(crate) mod circle;
@@ -26,13 +27,18 @@ use serde::Serialize;
 /// Everything `errmap circular` reports: the ISO 230-4 figures and the diagnosis.
 #[derive(Debug, Clone, Serialize)]
 pub struct Evaluation {
+    /// The plane of the circle, which names its first and second axis.
     pub plane: Plane,
     /// Names of the plane's first and second axis.
     pub axes: [&'static str; 2],
+    /// The ISO 230-4 figures, their keys flattened into the document.
     #[serde(flatten)]
     pub figures: Figures,
+    /// The machine errors the diagnosis found behind the path's shape.
     pub terms: Terms,
+    /// Root mean square of the deviations the diagnosis model leaves unexplained, µm.
     pub residual_rms_um: f64,
+    /// The model's nuisance values, its size and the ranking of the terms.
     pub model: diagnosis::ModelInfo,
 }
 

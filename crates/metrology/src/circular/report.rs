@@ -14,6 +14,7 @@ pub struct TestRequest<'a> {
     pub run: &'a Path,
     /// Programmed radius of the circle.
     pub radius_mm: f64,
+    /// The plane of the circle; it only names the axes in the output.
     pub plane: Plane,
     /// Programmed feed; needed for the servo mismatch in ms.
     pub feed_mm_per_min: Option<f64>,

@@ -16,8 +16,9 @@ pub struct Zone {
     pub width_um: f64,
     /// Centre shift (a, b) that gives the zone, in the units of the deviations.
     pub shift_um: [f64; 2],
-    /// Largest and smallest shifted deviation (outer and inner circle).
+    /// Largest shifted deviation: the outer circle's radius minus the nominal one.
     pub outer_um: f64,
+    /// Smallest shifted deviation: the inner circle's radius minus the nominal one.
     pub inner_um: f64,
     /// Readings that touch the zone: (index, true when on the outer circle).
     pub contacts: Vec<(usize, bool)>,

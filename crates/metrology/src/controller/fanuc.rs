@@ -18,8 +18,9 @@ pub enum FanucSeries {
 pub struct FanucLimits {
     /// Highest compensation point number (3620-3622, 3626).
     pub max_point_number: i64,
-    /// Compensation value of one point, in detection units times the magnification.
+    /// Smallest compensation value of one point, in detection units times the magnification.
     pub value_min: i64,
+    /// Largest compensation value of one point, in the same units.
     pub value_max: i64,
     /// Parameter 3623.
     pub magnification_max: u32,
@@ -30,12 +31,15 @@ pub struct FanucLimits {
 }
 
 impl FanucSeries {
+    /// The series' name on the command line and in messages (`0i-F`, `30i-B`).
     pub fn name(self) -> &'static str {
         match self {
             FanucSeries::Fs0iF => "0i-F",
             FanucSeries::Fs30iB => "30i-B",
         }
     }
+    /// The data ranges of the series' parameter manual: point numbers 0 … 1023 (0i-F) or 0 … 1535
+    /// (30i-B), values −128 … 127 per point, magnification up to 100.
     pub fn limits(self) -> FanucLimits {
         let max_point_number = match self {
             FanucSeries::Fs0iF => 1023,

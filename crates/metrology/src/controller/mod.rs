@@ -45,6 +45,8 @@ pub enum TableFormat {
 }
 
 impl TableFormat {
+    /// The format's name on the command line and in JSON (`linuxcnc`, `sinumerik`, `fanuc`,
+    /// `heidenhain`, `csv`).
     pub fn name(self) -> &'static str {
         match self {
             TableFormat::Linuxcnc => "linuxcnc",
@@ -59,7 +61,9 @@ impl TableFormat {
 /// Linear axes (mm, µm) or modulo rotary axes (deg, arcsec, a whole turn 0 ... 360).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AxisKind {
+    /// A linear axis: positions in mm, errors in µm.
     Linear,
+    /// A modulo rotary axis: positions in degrees over one turn 0 … 360, errors in arcsec.
     Rotary,
 }
 
@@ -90,6 +94,7 @@ impl AxisKind {
 /// A compensation table as every controller writer takes it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerTable {
+    /// Linear or rotary: fixes the units of positions and errors.
     pub kind: AxisKind,
     /// Axis letter (X, C), for comments and the Heidenhain column.
     pub axis: String,
@@ -111,9 +116,11 @@ pub struct ControllerTable {
 }
 
 impl ControllerTable {
+    /// Number of entries (positions) of the table.
     pub fn len(&self) -> usize {
         self.forward.len()
     }
+    /// Whether the table has no entries.
     pub fn is_empty(&self) -> bool {
         self.forward.is_empty()
     }
@@ -121,6 +128,7 @@ impl ControllerTable {
     pub fn position(&self, i: usize) -> f64 {
         self.start + i as f64 * self.step
     }
+    /// Position of the last entry (mm or deg); `start` for an empty table.
     pub fn end(&self) -> f64 {
         self.position(self.len().saturating_sub(1))
     }

@@ -11,7 +11,7 @@
 
 use errmap_core::error::{Error, Result};
 
-/// Which equation.
+/// The equation of the refractive index of air.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum AirFormula {
@@ -22,6 +22,8 @@ pub enum AirFormula {
 }
 
 impl AirFormula {
+    /// The equation's lower-case name (`ciddor`, `edlen`): the command-line value and the name
+    /// the corrections note and JSON report give.
     pub fn name(self) -> &'static str {
         match self {
             AirFormula::Ciddor => "ciddor",
@@ -33,10 +35,15 @@ impl AirFormula {
 /// Air conditions for the index.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct AirConditions {
+    /// Air temperature at the beam, °C (valid −40…100 °C).
     pub temp_c: f64,
+    /// Absolute air pressure, kPa (valid 10…140; standard atmosphere 101.325).
     pub pressure_kpa: f64,
+    /// Relative humidity, % (0…100).
     pub humidity_pct: f64,
+    /// Vacuum wavelength of the laser, nm (300…1700; He-Ne 632.991).
     pub wavelength_nm: f64,
+    /// CO₂ content, µmol/mol (0…2000); only Ciddor uses it, Edlén requires the default 450.
     pub co2_ppm: f64,
 }
 

@@ -26,8 +26,12 @@ pub struct Corrections {
 /// with corrections applied.
 #[derive(Debug, Clone, Copy)]
 pub struct RunSource<'a> {
+    /// The run file: errmap's run CSV, or an instrument's export when `columns` is given.
     pub path: &'a Path,
+    /// Column mapping of an instrument export (`FIELD=COLUMN[unit],…`, see [`ColumnMap`]); `None`:
+    /// the file is errmap's run CSV.
     pub columns: Option<&'a str>,
+    /// Air and material corrections applied to the readings after reading.
     pub corrections: Corrections,
 }
 
@@ -60,7 +64,9 @@ impl RunSource<'_> {
 /// What `linear analyze` does.
 #[derive(Debug, Clone)]
 pub struct AnalyzeRequest<'a> {
+    /// The laser runs to evaluate and their corrections.
     pub runs: RunSource<'a>,
+    /// The standard the figures follow, before and after the table.
     pub standard: Standard,
     /// Fit the pitch error with this screw lead (mm).
     pub fit_pitch_lead_mm: Option<f64>,
@@ -77,7 +83,9 @@ pub struct AnalyzeRequest<'a> {
 /// The result of [`analyze`].
 #[derive(Debug, Clone)]
 pub struct Analysis {
+    /// The figures of the corrected runs (deviations actual − target, µm).
     pub evaluation: Evaluation,
+    /// The pitch-error fit of the targets' mean deviations; `None` when no screw lead was given.
     pub fit: Option<PitchFit>,
     /// The table applied and the evaluation with it active.
     pub after: Option<(PathBuf, Evaluation)>,
@@ -180,6 +188,7 @@ fn write_chart(req: &AnalyzeRequest<'_>, a: &Analysis, png: &Path) -> Result<()>
 /// A compensation table ready to render (`render_table`), and what the user should know.
 #[derive(Debug, Clone)]
 pub struct TablePlan {
+    /// The table: each direction's mean error (µm) at points every spacing from the first target.
     pub table: CompTable,
     /// The one direction of unidirectional runs (the table carries it for both).
     pub unidirectional: Option<Direction>,

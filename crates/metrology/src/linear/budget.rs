@@ -22,7 +22,7 @@
 //! expansion_ppm_per_k = 11.5
 //! temp_uncertainty_c = 0.2
 //! ```
-//! A missing section contributes nothing (its term is reported as 0 with the reason).
+//! A missing section contributes nothing: its term is left out of the list and the total.
 
 use super::air::{sensitivities, AirConditions, AirFormula, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM};
 use errmap_core::error::{Error, Location, Result};
@@ -30,15 +30,23 @@ use std::path::Path;
 
 const ARCSEC_TO_RAD: f64 = std::f64::consts::PI / (180.0 * 3600.0);
 
+/// The set-up of an error budget as read from its TOML file (keys in the module doc); a missing
+/// section adds no term.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BudgetSetup {
+    /// Measured travel L, mm; the stability, cosine and thermal terms scale with it.
     pub length_mm: f64,
+    /// Wavelength stability of the laser, ppm of L (term δ1); 0.1 when not given.
     #[serde(default = "default_stability")]
     pub laser_stability_ppm: f64,
+    /// Conditions and sensor uncertainties of the wavelength-correction term δ2; `None`: no term.
     pub air: Option<AirSetup>,
+    /// Abbe offset and angle of term δ3; `None`: no term.
     pub abbe: Option<AbbeSetup>,
+    /// Beam misalignment of the cosine term δ4; `None`: no term.
     pub alignment: Option<AlignmentSetup>,
+    /// Expansion coefficient and temperature uncertainty of term δ5; `None`: no term.
     pub thermal: Option<ThermalSetup>,
 }
 
@@ -46,21 +54,31 @@ fn default_stability() -> f64 {
     0.1
 }
 
+/// The `[air]` section: the wavelength-correction term δ2 = L·√Σ(∂n/∂q · u_q)², with the
+/// sensitivities of the index equation taken at the given conditions.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AirSetup {
+    /// The index equation whose sensitivities are taken; Edlén when not given.
     #[serde(default = "default_formula")]
     pub formula: AirFormula,
+    /// Vacuum wavelength of the laser, nm; He-Ne 632.991 when not given.
     #[serde(default = "default_wavelength")]
     pub wavelength_nm: f64,
+    /// Air temperature at which the sensitivities are taken, °C; 20 when not given.
     #[serde(default = "default_temp")]
     pub temp_c: f64,
+    /// Absolute air pressure at which the sensitivities are taken, kPa; 101.325 when not given.
     #[serde(default = "default_pressure")]
     pub pressure_kpa: f64,
+    /// Relative humidity at which the sensitivities are taken, %; 50 when not given.
     #[serde(default = "default_humidity")]
     pub humidity_pct: f64,
+    /// Uncertainty of the air-temperature sensor, °C.
     pub temp_uncertainty_c: f64,
+    /// Uncertainty of the pressure sensor, kPa.
     pub pressure_uncertainty_kpa: f64,
+    /// Uncertainty of the humidity sensor, percentage points of relative humidity.
     pub humidity_uncertainty_pct: f64,
 }
 
@@ -80,38 +98,55 @@ fn default_humidity() -> f64 {
     50.0
 }
 
+/// The `[abbe]` section: the Abbe term δ3 = offset × tan(angle).
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AbbeSetup {
+    /// Abbe offset between the laser beam and the point whose position matters (tool,
+    /// workpiece), mm.
     pub offset_mm: f64,
+    /// Angular error (pitch or yaw) of the carriage over the travel, arcsec.
     pub angle_arcsec: f64,
 }
 
+/// The `[alignment]` section: the cosine term δ4 = L·(1 − cos θ); exactly one of its two keys.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AlignmentSetup {
+    /// Angle θ between the beam and the axis of travel, arcsec.
     pub angle_arcsec: Option<f64>,
+    /// Lateral walk of the beam over the travel L, mm; θ = atan(offset / L).
     pub lateral_offset_mm: Option<f64>,
 }
 
+/// The `[thermal]` section: the material-expansion term δ5 = α·ΔT·L.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ThermalSetup {
+    /// Expansion coefficient α of the axis' scale or screw, µm/(m·K) (steel ≈ 11.5).
     pub expansion_ppm_per_k: f64,
+    /// Uncertainty ΔT of the material temperature, °C.
     pub temp_uncertainty_c: f64,
 }
 
 /// One term of the budget.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct BudgetTerm {
+    /// The term's key: `laser_stability`, `wavelength_correction`, `abbe`, `cosine_misalignment` or
+    /// `thermal_expansion`.
     pub name: &'static str,
+    /// Its contribution to the budget, µm (non-negative).
     pub value_um: f64,
+    /// The formula with this set-up's numbers, as the report prints it.
     pub formula: String,
 }
 
+/// The error budget of a laser set-up: its terms and their root-sum-square.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Budget {
+    /// Travel L the budget was computed for, mm.
     pub length_mm: f64,
+    /// The terms in the order δ1 … δ5; only those whose section the set-up gives.
     pub terms: Vec<BudgetTerm>,
     /// √(Σ δ²).
     pub total_um: f64,

@@ -11,12 +11,15 @@ use std::path::Path;
 
 /// What the chart shows.
 pub struct ChartInput<'a> {
+    /// Title drawn above the plot.
     pub title: String,
     /// Unit of the deviations, e.g. "µm".
     pub unit: &'a str,
+    /// The evaluation drawn: mean deviation and ±k·s band of each direction at each target.
     pub before: &'a Evaluation,
     /// Figures after applying a compensation table.
     pub after: Option<&'a Evaluation>,
+    /// The pitch-error fit drawn as a curve; `None`: no curve.
     pub fit: Option<&'a PitchFit>,
 }
 

@@ -22,8 +22,11 @@ pub const REFERENCE_TEMP_C: f64 = 20.0;
 /// Settings of the air correction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AirCorrection {
+    /// The refractive-index equation.
     pub formula: AirFormula,
+    /// Vacuum wavelength of the laser, nm (He-Ne 632.991).
     pub wavelength_nm: f64,
+    /// CO₂ content of the air, µmol/mol (used by Ciddor; Edlén requires the default 450).
     pub co2_ppm: f64,
     /// Machine position at which the laser was zeroed, mm.
     pub datum_mm: f64,

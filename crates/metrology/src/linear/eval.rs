@@ -120,20 +120,31 @@ impl serde::Serialize for Standard {
 /// Figures at one target position.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct TargetFigures {
+    /// Target position, in the samples' unit (mm on a linear axis, degrees on a rotary one).
     pub target: f64,
+    /// Number of forward (↑) approaches to the target.
     pub n_up: usize,
+    /// Number of reverse (↓) approaches to the target.
     pub n_down: usize,
-    /// x̄_i↑, x̄_i↓: mean deviation of each direction; `None` for a direction not measured.
+    /// x̄_i↑: mean deviation (actual − target) of the forward approaches; `None` when that
+    /// direction was not measured.
     pub mean_up: Option<f64>,
+    /// x̄_i↓: mean deviation of the reverse approaches; `None` when that direction was not
+    /// measured.
     pub mean_down: Option<f64>,
     /// x̄_i = (x̄_i↑ + x̄_i↓)/2; `None` in a unidirectional test.
     pub mean: Option<f64>,
-    /// s_i↑, s_i↓ (n − 1 in the denominator); `None` when n = 1.
+    /// s_i↑: standard deviation of the forward approaches (n − 1 in the denominator); `None`
+    /// when n < 2.
     pub s_up: Option<f64>,
+    /// s_i↓: standard deviation of the reverse approaches (n − 1); `None` when n < 2.
     pub s_down: Option<f64>,
     /// B_i = x̄_i↑ − x̄_i↓ (signed); `None` in a unidirectional test.
     pub reversal: Option<f64>,
+    /// Unidirectional repeatability ↑ at the target, 2k·s_i↑ (ISO R_i↑ = 4s, GB 6S, VDI 6s);
+    /// `None` without s_i↑.
     pub repeatability_up: Option<f64>,
+    /// Unidirectional repeatability ↓ at the target, 2k·s_i↓; `None` without s_i↓.
     pub repeatability_down: Option<f64>,
     /// Bidirectional repeatability at the target (ISO R_i, GB max(R↑, R↓), VDI Ps_j).
     pub repeatability: Option<f64>,
@@ -150,27 +161,43 @@ impl TargetFigures {
     }
 }
 
-/// Figures of the whole axis. `None` = not applicable (n = 1, or a unidirectional test).
+/// Figures of the whole axis in the deviations' unit (µm on a linear axis, arcsec on a rotary
+/// one), by the ISO 230-2 names of the module table. `None` = not applicable (n = 1, or a
+/// unidirectional test).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 #[allow(non_snake_case)]
 pub struct AxisFigures {
+    /// Reversal value B = max |B_i| (VDI: largest reversal span U max).
     pub B: Option<f64>,
+    /// Mean reversal value B̄ = Σ B_i / m, signed.
     pub B_mean: Option<f64>,
+    /// Unidirectional repeatability R↑ = max R_i↑ over the targets.
     pub R_up: Option<f64>,
+    /// Unidirectional repeatability R↓ = max R_i↓ over the targets.
     pub R_down: Option<f64>,
+    /// Bidirectional repeatability R = max over the targets of the standard's per-target
+    /// repeatability (VDI: largest position scatter Ps max).
     pub R: Option<f64>,
+    /// Unidirectional systematic positioning error E↑ = max x̄_i↑ − min x̄_i↑.
     pub E_up: Option<f64>,
+    /// Unidirectional systematic positioning error E↓ = max x̄_i↓ − min x̄_i↓.
     pub E_down: Option<f64>,
+    /// Bidirectional systematic positioning error E = max(x̄_i↑, x̄_i↓) − min(x̄_i↑, x̄_i↓).
     pub E: Option<f64>,
+    /// Mean bidirectional positioning error M = max x̄_i − min x̄_i (VDI: position deviation Pa).
     pub M: Option<f64>,
+    /// Unidirectional accuracy A↑ = max(x̄_i↑ + k·s_i↑) − min(x̄_i↑ − k·s_i↑).
     pub A_up: Option<f64>,
+    /// Unidirectional accuracy A↓ = max(x̄_i↓ + k·s_i↓) − min(x̄_i↓ − k·s_i↓).
     pub A_down: Option<f64>,
+    /// Bidirectional accuracy A: the ±k·s band over both directions (VDI: position uncertainty P).
     pub A: Option<f64>,
 }
 
 /// The result of [`evaluate`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Evaluation {
+    /// The standard whose definitions and coverage factor the figures follow.
     pub standard: Standard,
     /// Coverage factor of the band (2 or 3).
     pub k: f64,
@@ -180,6 +207,7 @@ pub struct Evaluation {
     pub unidirectional: Option<Direction>,
     /// Targets ascending.
     pub targets: Vec<TargetFigures>,
+    /// The figures of the whole axis.
     pub axis: AxisFigures,
 }
 

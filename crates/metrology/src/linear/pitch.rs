@@ -13,6 +13,7 @@ use std::f64::consts::PI;
 /// The fitted pitch-error curve. Lengths in mm, errors in the input's unit (µm).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PitchFit {
+    /// Ball-screw lead P of the periodic term, mm.
     pub lead_mm: f64,
     /// Offset a (µm).
     pub a_um: f64,
@@ -24,6 +25,7 @@ pub struct PitchFit {
     pub phi_rad: f64,
     /// Root mean square of the residuals e_i − e(x_i) (µm).
     pub residual_rms_um: f64,
+    /// Number of targets fitted.
     pub points: usize,
 }
 

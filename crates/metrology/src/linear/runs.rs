@@ -14,29 +14,41 @@ pub use errmap_core::direction::Direction;
 /// [`crate::linear::evaluate`] never converts.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Sample {
+    /// Run (repeat) number j of the approach.
     pub run: u32,
+    /// Approach direction: forward (`+`, increasing) or reverse (`-`).
     pub direction: Direction,
+    /// Target position: mm on a linear axis, degrees on a rotary one.
     pub target: f64,
+    /// Deviation actual − target: µm on a linear axis, arcsec on a rotary one.
     pub deviation: f64,
 }
 
 /// Optional environment of a row, as the laser's weather station and material sensors logged it.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct Env {
+    /// Air temperature at the beam, °C; `None`: not logged.
     pub air_temp_c: Option<f64>,
+    /// Absolute air pressure, kPa; `None`: not logged.
     pub pressure_kpa: Option<f64>,
+    /// Relative humidity, %; `None`: not logged.
     pub humidity_pct: Option<f64>,
+    /// Temperature of the axis' material (scale or screw), °C; `None`: not logged.
     pub material_temp_c: Option<f64>,
 }
 
 /// One row of a run file.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RunRow {
+    /// Run number from the `run` column (non-negative integer).
     pub run: u32,
+    /// Approach direction from the `direction` column (`+` forward, `-` reverse).
     pub direction: Direction,
+    /// Commanded target position, mm.
     pub target_mm: f64,
     /// Positional deviation, actual − target (ISO 230-2 sign), in µm.
     pub deviation_um: f64,
+    /// The environment logged with the reading (all `None` when the file has no such columns).
     pub env: Env,
     /// Optional time stamp of the reading (seconds from any origin), for thermal campaigns.
     pub time_s: Option<f64>,
@@ -54,6 +66,7 @@ impl RunRow {
 /// A validated run file: every (run, direction) pass visits the same set of targets once.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RunFile {
+    /// The file read, as messages name it.
     pub path: PathBuf,
     /// Rows in file order.
     pub rows: Vec<RunRow>,

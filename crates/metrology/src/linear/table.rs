@@ -17,6 +17,7 @@ pub const FANUC_MAX_POINTS: usize = 1536;
 /// Axis error of each direction at equally spaced positions.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct CompTable {
+    /// Table points, mm: first target + k·spacing, ascending.
     pub positions_mm: Vec<f64>,
     /// e↑ = actual − nominal, forward approach (µm).
     pub forward_um: Vec<f64>,

@@ -42,13 +42,18 @@ impl Default for AnalyzeOptions {
 /// One sphere fitted at one position (touch-point files only).
 #[derive(Debug, Clone, Serialize)]
 pub struct SphereReport {
+    /// Approach direction of the position (`+` increasing angle, `-` decreasing).
     #[serde(with = "errmap_core::direction::symbol")]
     pub direction: Direction,
+    /// Repeat number of the position.
     pub repeat: u32,
+    /// Commanded angle α of the position, degrees.
     pub angle_deg: f64,
+    /// Sphere number (1 or 2).
     pub sphere: u8,
     /// First file line of the sphere's touch points.
     pub line: u64,
+    /// The fit: centre, radius and form residuals, its keys flattened into the report.
     #[serde(flatten)]
     pub fit: SphereFit,
     /// Fitted minus nominal radius (sphere + stylus), when the diameter is known.
@@ -58,11 +63,15 @@ pub struct SphereReport {
 /// The angular error of one position in one repeat.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Observation {
+    /// Approach direction (`+` increasing angle, `-` decreasing).
     #[serde(with = "errmap_core::direction::symbol")]
     pub direction: Direction,
+    /// Repeat number.
     pub repeat: u32,
+    /// Commanded angle α, degrees.
     pub angle_deg: f64,
-    /// err = α − β.
+    /// Angular error err = α − β (commanded − measured, relative to the reference angle),
+    /// arcsec; β − α after [`Analysis::with_sign`] with [`Sign::Calibrator`].
     pub error_arcsec: f64,
     /// First file line of the position.
     pub line: u64,
@@ -71,21 +80,30 @@ pub struct Observation {
 /// Mean error at one target angle and direction over the repeats.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TableRow {
+    /// Commanded angle α, degrees.
     pub angle_deg: f64,
+    /// Approach direction (`+` increasing angle, `-` decreasing).
     #[serde(with = "errmap_core::direction::symbol")]
     pub direction: Direction,
+    /// Mean angular error over the repeats, arcsec, in the analysis' [`Sign`].
     pub error_arcsec: f64,
     /// Sample standard deviation over the repeats (n − 1); `null` for a single repeat.
     pub s_arcsec: Option<f64>,
+    /// Number of repeats averaged.
     pub n: usize,
+    /// Smallest error over the repeats, arcsec.
     pub min_arcsec: f64,
+    /// Largest error over the repeats, arcsec.
     pub max_arcsec: f64,
 }
 
 /// The reference vector a.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Reference {
+    /// Reference angle, degrees: the commanded angle at which vector a was taken; errors are
+    /// measured from it.
     pub angle_deg: f64,
+    /// The direction whose repeats gave a: `+`, or `-` when `+` was not measured at that angle.
     #[serde(with = "errmap_core::direction::symbol")]
     pub direction: Direction,
     /// Repeats averaged into a.
@@ -101,12 +119,22 @@ pub struct Reference {
 pub struct AxisReport {
     /// `nominal` or `fitted`.
     pub method: &'static str,
+    /// Unit vector of the machine axis the rotary axis nominally turns about (X for A, Y for B, Z
+    /// for C).
     pub nominal_direction: [f64; 3],
+    /// Unit direction of the axis the angles are taken about: the nominal one, or the fitted one.
     pub direction: [f64; 3],
+    /// Angle between the fitted and the nominal direction, arcsec; `None` with the nominal axis.
     pub tilt_arcsec: Option<f64>,
+    /// Inclination of the fitted axis toward each of the two other machine axes, arcsec, keyed by
+    /// their letters; `None` with the nominal axis.
     pub tilt_toward_arcsec: Option<BTreeMap<String, f64>>,
+    /// Mean of the circle centres, a point on the fitted axis, mm; `None` with the nominal axis.
     pub centre_mm: Option<[f64; 3]>,
+    /// Where the fitted axis crosses the plane through the machine origin normal to the nominal
+    /// axis, mm; `None` with the nominal axis.
     pub location_mm: Option<[f64; 3]>,
+    /// The circle each sphere centre traced about the fitted axis; empty with the nominal axis.
     pub circles: Vec<CircleFit>,
 }
 
@@ -141,10 +169,16 @@ impl AxisReport {
 /// Summary of the sphere fits of a touch-point file.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SphereSummary {
+    /// Number of sphere fits (two per position).
     pub fits: usize,
+    /// Largest RMS of the geometric residuals over the fits, mm.
     pub max_form_rms_mm: f64,
+    /// Largest form error (peak-to-valley of the residuals) over the fits, mm.
     pub max_form_pv_mm: f64,
+    /// Mean fitted radius (sphere + stylus), mm.
     pub mean_radius_mm: f64,
+    /// Largest |fitted − nominal radius| over the fits, mm; `None` when no sphere diameter was
+    /// given.
     pub max_abs_radius_deviation_mm: Option<f64>,
 }
 
@@ -185,19 +219,23 @@ impl Sign {
 /// Result of `rotary analyze`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Analysis {
+    /// The rotary axis measured.
     pub axis: RotaryAxis,
+    /// Unit of every angular error: always `arcsec`.
     pub unit: &'static str,
     /// Sign of `table` (and of the observations): `errmap` (α − β) or `calibrator` (β − α).
     /// `iso230_2` keeps ISO's x = β − α whatever the sign.
     pub sign: Sign,
     /// Mean error per direction and target angle, direction `+` first, angles ascending.
     pub table: Vec<TableRow>,
+    /// The axis direction the angles are taken about and, with `--fit-axis`, its location.
     pub axis_fit: AxisReport,
     /// Positioning figures by ISO 230-2:2014 in arcsec (from [`crate::linear::evaluate`]),
     /// with ISO's sign x = actual − target = β − α = −err; `null` when not applicable.
     pub iso230_2: Option<Evaluation>,
     /// Why `iso230_2` is `null`, if it is.
     pub iso230_2_note: Option<String>,
+    /// The reference vector a, from whose angle the errors are measured.
     pub reference: Reference,
     /// Present for touch-point files.
     pub spheres: Option<SphereSummary>,

@@ -12,12 +12,15 @@ const ARCSEC_PER_RAD: f64 = 180.0 * 3600.0 / std::f64::consts::PI;
 pub struct CircleFit {
     /// Sphere number (1 or 2).
     pub sphere: u8,
+    /// Centre of the circle, a point on the axis, mm (machine coordinates).
     pub centre_mm: [f64; 3],
+    /// Radius of the circle, mm.
     pub radius_mm: f64,
     /// RMS distance of the centres from the fitted plane.
     pub plane_rms_mm: f64,
     /// RMS of the in-plane radial residuals.
     pub circle_rms_mm: f64,
+    /// Number of sphere centres (positions) on the circle.
     pub n: usize,
 }
 
@@ -36,6 +39,7 @@ pub struct AxisFit {
     /// Where the axis crosses the machine plane through the origin normal to the nominal
     /// axis (for C: its X and Y at Z = 0) — the axis location a kinematic calibration uses.
     pub location_mm: [f64; 3],
+    /// The circle of each sphere, sphere 1 first.
     pub circles: Vec<CircleFit>,
 }
 

@@ -18,7 +18,9 @@ pub fn analyze_file(path: &Path, opts: &AnalyzeOptions) -> Result<Analysis> {
 /// What `rotary analyze` is asked for.
 #[derive(Debug, Clone)]
 pub struct AnalyzeRequest<'a> {
+    /// The measurement file (sphere centres or touch points, see docs/rotary.md).
     pub file: &'a Path,
+    /// How to analyse it: sphere and stylus sizes, axis fit, reference angle.
     pub options: AnalyzeOptions,
     /// Sign of the errors in the text, JSON and chart.
     pub sign: Sign,
@@ -68,8 +70,11 @@ pub fn json_document(analysis: &Analysis) -> Result<String> {
 /// What `rotary table` is asked for.
 #[derive(Debug, Clone)]
 pub struct TableRequest<'a> {
+    /// The measurement file (sphere centres or touch points, see docs/rotary.md).
     pub file: &'a Path,
+    /// How to analyse it: sphere and stylus sizes, axis fit, reference angle.
     pub options: AnalyzeOptions,
+    /// The controller format to write.
     pub format: TableFormat,
     /// The output file (Sinumerik and Heidenhain write a second one beside it).
     pub output: &'a Path,

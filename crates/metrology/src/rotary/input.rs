@@ -23,8 +23,11 @@ pub const COLUMNS: [&str; 9] = [
 /// A rotary axis by its letter: A turns about X, B about Y, C about Z (ISO 841).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum RotaryAxis {
+    /// Turns about X.
     A,
+    /// Turns about Y.
     B,
+    /// Turns about Z.
     C,
 }
 
@@ -92,8 +95,11 @@ pub struct SphereData {
 /// One commanded position of the axis in one repeat: both spheres.
 #[derive(Debug, Clone)]
 pub struct Position {
+    /// Approach direction from the `direction` column (`+` increasing angle, `-` decreasing).
     pub direction: Direction,
+    /// Repeat number from the `repeat` column (non-negative integer).
     pub repeat: u32,
+    /// Commanded angle α from the `angle_deg` column, degrees (within ten turns, ±3600).
     pub angle_deg: f64,
     /// Sphere 1 and sphere 2.
     pub spheres: [SphereData; 2],
@@ -113,7 +119,9 @@ impl Position {
 /// A whole measurement file, validated and grouped by position.
 #[derive(Debug, Clone)]
 pub struct Measurement {
+    /// The file read, as messages name it.
     pub path: PathBuf,
+    /// The rotary axis measured (one per file).
     pub axis: RotaryAxis,
     /// True when the file has a `point` column: rows are touch points, not centres.
     pub touch_points: bool,

@@ -4,7 +4,7 @@
 //! position → vector a = c2 − c1 at the reference angle and b at each α → β by
 //! [`signed_angle_about`] → err = α − β per position, averaged over repeats ([`analyze`]) →
 //! tables for controllers ([`build_table`], [`render`]), a text report ([`text_report()`]) and a
-//! chart ([`chart::save_error_chart`]). [`commands`] runs each `rotary` command as one call.
+//! chart (`chart::save_error_chart`). [`commands`] runs each `rotary` command as one call.
 
 pub mod analysis;
 pub(crate) mod angle;

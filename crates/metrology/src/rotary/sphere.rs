@@ -8,6 +8,7 @@ use std::fmt;
 /// A fitted sphere.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SphereFit {
+    /// Centre of the sphere in the touch points' coordinates, mm.
     pub centre_mm: [f64; 3],
     /// Fitted radius, or the given one when the radius was fixed.
     pub radius_mm: f64,

@@ -20,8 +20,11 @@ pub const INTERPOLATION: &str =
 /// repeats the first, so a modulo axis sees no jump at 360° → 0°.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompTable {
+    /// Axis letter (`A`, `B`, `C`), written into the table.
     pub axis: String,
+    /// Spacing of the entries, degrees (a divisor of 360).
     pub step_deg: f64,
+    /// Entry angles 0 … 360 inclusive, degrees.
     pub angles_deg: Vec<f64>,
     /// err = α − β with the axis approaching in the + direction.
     pub forward_arcsec: Vec<f64>,

@@ -34,7 +34,9 @@ pub fn direction_name(d: Direction) -> &'static str {
 /// All laser readings taken at one thermal state, with its temperatures.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Measurement {
+    /// Start time of the measurement (its rows' `time_s`), s, in the temperature log's time base.
     pub time_s: f64,
+    /// The laser readings of the measurement: all its runs, both directions.
     pub points: Vec<LaserPoint>,
     /// Mean calibrated, denoised temperature of each sensor over the measurement (°C).
     pub temperatures_c: BTreeMap<String, f64>,
@@ -44,19 +46,30 @@ pub struct Measurement {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CampaignFile {
+    /// Unique campaign name, the store's key; `None`: the folder's name.
     pub name: Option<String>,
+    /// Axis name (default `X`); the model's default name in the store.
     #[serde(default = "default_axis")]
     pub axis: String,
+    /// Coolant state label (default `off`); gains are fitted per state.
     #[serde(default = "default_coolant")]
     pub coolant: String,
+    /// Run file, relative to the campaign folder (default `runs.csv`); every row needs `time_s`.
     #[serde(default = "default_runs")]
     pub runs: PathBuf,
+    /// Temperature log, relative to the campaign folder (default `temperatures.csv`).
     #[serde(default = "default_temperatures")]
     pub temperatures: PathBuf,
+    /// Sensor table, relative to the campaign folder (default `sensors.csv`); campaigns may share
+    /// one.
     #[serde(default = "default_sensors")]
     pub sensors: PathBuf,
+    /// Duration of one measurement, s (default 300): temperatures are averaged over
+    /// [time_s, time_s + measurement_s].
     #[serde(default = "default_measurement_s")]
     pub measurement_s: f64,
+    /// Px, mm (default 0): the point of the axis the thermal error lines fan about, where thermal
+    /// growth is zero.
     #[serde(default)]
     pub reference_point_mm: f64,
 }
@@ -83,13 +96,19 @@ fn default_measurement_s() -> f64 {
 /// A campaign in memory: settings, sensors and the measurements in time order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Campaign {
+    /// The campaign's name: from the file, else the folder's.
     pub name: String,
     /// Folder of the campaign file (outputs and the default store go beside it).
     pub dir: PathBuf,
+    /// Axis name from the campaign file.
     pub axis: String,
+    /// Coolant state label from the campaign file.
     pub coolant: String,
+    /// Px, the point the thermal error lines fan about, mm.
     pub reference_point_mm: f64,
+    /// Duration of one measurement, s: the averaging window of its temperatures.
     pub measurement_s: f64,
+    /// The sensor table, with the calibrations and filters applied to the log.
     pub sensors: SensorTable,
     /// The run file the readings came from (for messages).
     pub runs_path: PathBuf,

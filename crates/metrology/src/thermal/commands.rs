@@ -52,7 +52,10 @@ pub fn calibrate_table(
 pub struct DifferenceRun {
     /// The campaign argument as given (a folder or its campaign.toml).
     pub campaign_arg: PathBuf,
+    /// The campaign read.
     pub campaign: Campaign,
+    /// Its cold/warm difference Et = E − Es per time, target and direction, with each time's error
+    /// line.
     pub difference: Difference,
 }
 
@@ -96,7 +99,9 @@ impl DifferenceRun {
 /// What `thermal ingest` added, and to which store.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct IngestReport {
+    /// What each campaign added, in argument order.
     pub ingested: Vec<IngestSummary>,
+    /// The store written.
     pub store: PathBuf,
 }
 
@@ -150,21 +155,28 @@ pub fn ingest_folders(
 pub struct FitRequest {
     /// Campaign folders; with `from_store` they only locate the default store.
     pub campaigns: Vec<PathBuf>,
+    /// The model file (model.json) to write.
     pub output: PathBuf,
+    /// Read the campaigns from the store instead of their folders.
     pub from_store: bool,
     /// With `from_store`: only these stored campaigns (all when empty).
     pub campaign_names: Vec<String>,
+    /// The store to read from and save the model in; `None`: thermal.sqlite beside the first
+    /// campaign with `from_store`, else no store.
     pub db: Option<PathBuf>,
     /// Model name in the store (default: the axis).
     pub name: Option<String>,
-    /// The `--reference` text: shared, own-start, campaign-offset or cv.
+    /// The `--reference` text: room, shared, own-start, campaign-offset or cv.
     pub reference: String,
+    /// The fit's settings; its `reference` is replaced by the parsed `reference` text.
     pub options: FitOptions,
 }
 
 /// A fitted model and where it was saved in a store (store, name, version).
 pub struct FitOutcome {
+    /// The fitted model, as written to the model file.
     pub model: ThermalModel,
+    /// (store, model name, version) of the copy saved in a store; `None` when no store was in play.
     pub saved: Option<(PathBuf, String, i64)>,
 }
 
@@ -244,9 +256,13 @@ fn parse_reference(text: &str) -> Result<Option<Reference>> {
 /// What a store holds: campaign names, table counts and model versions.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModelsReport {
+    /// Names of the stored campaigns, in name order.
     pub campaigns: Vec<String>,
+    /// Rows in each table of the store.
     pub counts: StoreCounts,
+    /// Every stored model version, by name then version.
     pub models: Vec<ModelEntry>,
+    /// The store read.
     pub store: PathBuf,
 }
 
@@ -290,7 +306,9 @@ pub fn compensate_log(
 
 /// A model evaluated on campaigns, before its files are written.
 pub struct EvaluateRun {
+    /// The model file evaluated.
     pub model_path: PathBuf,
+    /// The axis figures before and after compensation for each measurement of each campaign.
     pub report: EvaluationReport,
 }
 

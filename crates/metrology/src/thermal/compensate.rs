@@ -26,9 +26,11 @@ pub const OUTPUT_HEADER: [&str; 5] = [
 /// What a compensation run did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct CompensateSummary {
+    /// Machine-log rows compensated.
     pub rows: u64,
     /// Rows whose position lies outside the fitted travel (Er(x) held at the nearest end).
     pub outside_travel: u64,
+    /// Largest |compensation value| written, µm (that is, the largest |E|).
     pub max_abs_compensation_um: f64,
 }
 

@@ -171,12 +171,16 @@ pub struct CampaignReport {
 /// The fitted composite model (model.json).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ThermalModel {
+    /// File format tag, `errmap-thermal-model/2`; a model file of another format is refused.
     pub format: String,
+    /// Axis name of the fitted campaigns (e.g. `X`).
     pub axis: String,
     /// Px: the point the thermal error lines fan about (mm).
     pub reference_point_mm: f64,
-    /// Travel covered by the fitting campaigns; s = ±1 at these ends.
+    /// Lower end of the travel covered by the fitting campaigns, mm (s = −1); Er(x) is held at
+    /// these ends outside it.
     pub x_min_mm: f64,
+    /// Upper end of the travel covered by the fitting campaigns, mm (s = +1).
     pub x_max_mm: f64,
     /// Sensors tanβ depends on, in gain order.
     pub gain_sensors: Vec<String>,
@@ -184,7 +188,8 @@ pub struct ThermalModel {
     pub ambient_sensor: Option<String>,
     /// Sensor definitions (unit, calibration) used to read machine logs.
     pub sensors: Vec<Sensor>,
-    /// How the rises were referenced in the fit (see [`Reference`]).
+    /// How the rises were referenced in the fit: `room`, `shared`, `own-start` or
+    /// `campaign-offset`.
     #[serde(default)]
     pub reference: Reference,
     /// "cross-validation", "given" or a default.
@@ -194,13 +199,16 @@ pub struct ThermalModel {
     #[serde(default)]
     pub reference_cv: Vec<ReferenceScore>,
     /// (T_j − T_amb) (or T_j without ambient) in the cold reference state, °C, by sensor:
-    /// the mean of the campaigns' cold measurements.
+    /// the mean of the campaigns' cold measurements (zeros with the `room` reference).
     pub reference_rise_c: BTreeMap<String, f64>,
     /// Ambient temperature of the cold reference state, °C.
     pub reference_ambient_c: Option<f64>,
+    /// Coolant state labels of the fitted campaigns; each direction has gains per state, in this
+    /// order.
     pub coolant_states: Vec<String>,
     /// Forward then reverse.
     pub directions: Vec<DirectionModel>,
+    /// Residuals of each fitted campaign, in the full fit and held out.
     pub campaigns: Vec<CampaignReport>,
     /// Pooled leave-one-campaign-out RMS (µm) over campaigns that have one.
     pub loco_rms_um: Option<f64>,
@@ -1087,6 +1095,7 @@ impl ThermalModel {
         Ok(())
     }
 
+    /// The model of direction `d`.
     pub fn direction(&self, d: Direction) -> &DirectionModel {
         &self.directions[match d {
             Direction::Forward => 0,
@@ -1094,6 +1103,8 @@ impl ThermalModel {
         }]
     }
 
+    /// Index of a coolant state label in `coolant_states`; `None` when the model has no gains
+    /// for it.
     pub fn coolant_index(&self, state: &str) -> Option<usize> {
         self.coolant_states.iter().position(|s| s == state)
     }

@@ -9,8 +9,11 @@ use std::path::Path;
 /// One laser reading.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LaserPoint {
+    /// Run number from the run file.
     pub run: u32,
+    /// Approach direction (forward `+`, reverse `-`).
     pub direction: Direction,
+    /// Target position, mm.
     pub target_mm: f64,
     /// Measured minus target (µm).
     pub deviation_um: f64,

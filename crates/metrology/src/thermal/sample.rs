@@ -22,12 +22,15 @@ use std::path::Path;
 /// What to generate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthThermalOptions {
+    /// Seed of the random streams (sensor and laser noise, warm-start times).
     pub seed: u64,
     /// Number of campaigns; coolant alternates off, on, off, on …
     pub campaigns: usize,
     /// Bidirectional runs per measurement.
     pub repeats: u32,
+    /// Measured travel, mm: targets run from 0 to this.
     pub travel_mm: f64,
+    /// Spacing of the targets, mm.
     pub step_mm: f64,
     /// Time between measurement starts (s).
     pub every_s: f64,
@@ -69,17 +72,22 @@ impl Default for SynthThermalOptions {
 /// Gains of one coolant state (µm/m/K).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrueGains {
+    /// Coolant state label (`off`, `on`).
     pub coolant: String,
+    /// Gain of the nut's rise above the room, µm/(m·K).
     pub k_nut_um_per_m_k: f64,
+    /// Gain of the bearing's rise above the room, µm/(m·K).
     pub k_bearing_um_per_m_k: f64,
 }
 
 /// Truth of one direction.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrueDirection {
+    /// `forward` or `reverse`.
     pub direction: String,
     /// Er(x) = Σ c_n·P_n(s), s = 2x/travel − 1 (µm).
     pub pitch_legendre_um: Vec<f64>,
+    /// Gains of each coolant state, `off` first.
     pub gains: Vec<TrueGains>,
 }
 
@@ -87,39 +95,63 @@ pub struct TrueDirection {
 /// recovers T.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrueSensor {
+    /// Sensor name: its column in the logs.
     pub name: String,
+    /// Offset of the calibration that recovers T, °C.
     pub offset_c: f64,
+    /// Scale of the calibration that recovers T (dimensionless).
     pub scale: f64,
 }
 
 /// Settings of one campaign.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrueCampaign {
+    /// Campaign name, also its folder's name.
     pub name: String,
+    /// Coolant state label of the campaign (`off`, `on`).
     pub coolant: String,
+    /// Room temperature at the campaign's start, °C.
     pub ambient_start_c: f64,
+    /// Linear drift of the room over the campaign, °C per hour.
     pub ambient_drift_c_per_h: f64,
+    /// Rise of the nut above the room that its first-order lag approaches while the machine
+    /// runs, K.
     pub nut_rise_c: f64,
+    /// Time constant of the nut's lag, s (heating and cooling alike).
     pub nut_tau_s: f64,
+    /// Rise of the bearing above the room that its lag approaches while the machine runs, K.
     pub bearing_rise_c: f64,
+    /// Time constant of the bearing's lag, s.
     pub bearing_tau_s: f64,
+    /// Time the machine program starts, s from the campaign's start (inside the cold measurement
+    /// with a warm start).
     pub machine_on_s: f64,
+    /// Time the machine stops, s from the campaign's start; the rises decay after it.
     pub machine_off_s: f64,
 }
 
 /// Everything `truth.json` holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ThermalTruth {
+    /// Seed the campaigns were generated with.
     pub seed: u64,
+    /// Measured travel, mm (targets 0 … travel).
     pub travel_mm: f64,
+    /// Px, the point the error lines fan about, mm (0).
     pub reference_point_mm: f64,
     /// Ambient temperature at which the pitch curves hold (ΔT_env = T_amb − this).
     pub pitch_ambient_c: f64,
+    /// Expansion ρ with the room temperature, µm/(m·K).
     pub rho_um_per_m_k: f64,
+    /// Laser reading noise, one sigma, µm.
     pub laser_noise_um: f64,
+    /// Temperature sensor noise, one sigma, °C.
     pub sensor_noise_c: f64,
+    /// Pitch curve and gains of each direction, forward first.
     pub directions: Vec<TrueDirection>,
+    /// Offsets and scales of the sensors: nut, bearing, room, reference.
     pub sensors: Vec<TrueSensor>,
+    /// Settings of each campaign, in generation order.
     pub campaigns: Vec<TrueCampaign>,
 }
 

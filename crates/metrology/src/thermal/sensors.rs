@@ -19,14 +19,20 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, PartialOrd, Ord, Hash)]
 #[serde(rename_all = "lowercase")]
 pub enum Role {
+    /// At the ball-screw nut; a gain sensor of the model by default.
     Nut,
+    /// At the screw's bearing; a gain sensor of the model by default.
     Bearing,
+    /// The room air (at most one): rises are taken above it, and its change drives the ρ term.
     Ambient,
+    /// The sensor the others are calibrated against (at most one).
     Reference,
+    /// Any other place; a gain sensor only when named with `--sensors`.
     Other,
 }
 
 impl Role {
+    /// The role written in a sensor table's `role` cell (any case); `None` for an unknown word.
     pub fn parse(text: &str) -> Option<Role> {
         match text.to_ascii_lowercase().as_str() {
             "nut" => Some(Role::Nut),
@@ -37,6 +43,7 @@ impl Role {
             _ => None,
         }
     }
+    /// The role's word as the sensor table and the store write it (`nut`, `bearing`, …).
     pub fn name(self) -> &'static str {
         match self {
             Role::Nut => "nut",
@@ -59,6 +66,8 @@ pub enum Unit {
 }
 
 impl Unit {
+    /// The unit written in a sensor table's `unit` cell: `c`, `degc`, `°c`, `ohm` or `Ω` (any
+    /// case); `None` otherwise.
     pub fn parse(text: &str) -> Option<Unit> {
         match text.to_ascii_lowercase().as_str() {
             "c" | "degc" | "°c" => Some(Unit::C),
@@ -66,6 +75,7 @@ impl Unit {
             _ => None,
         }
     }
+    /// The unit's word as the sensor table and the store write it (`c`, `ohm`).
     pub fn name(self) -> &'static str {
         match self {
             Unit::C => "c",
@@ -84,7 +94,9 @@ impl Unit {
 /// Calibration of one sensor against the reference sensor: `T = scale·T_raw + offset_c`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Calibration {
+    /// Offset added after scaling, °C.
     pub offset_c: f64,
+    /// Factor on the raw reading (dimensionless, 1 = none).
     pub scale: f64,
 }
 
@@ -98,6 +110,7 @@ impl Default for Calibration {
 }
 
 impl Calibration {
+    /// The calibrated temperature scale·raw + offset, °C, of a raw reading already in °C.
     #[inline]
     pub fn apply(&self, raw_c: f64) -> f64 {
         self.scale * raw_c + self.offset_c
@@ -107,17 +120,24 @@ impl Calibration {
 /// One row of the sensor table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Sensor {
+    /// Sensor name: its column in the temperature log and in a machine log.
     pub name: String,
+    /// Where the sensor sits, which decides how the model uses it.
     pub role: Role,
+    /// Unit of the sensor's log column (°C, or Ω of a Pt100).
     pub unit: Unit,
+    /// Calibration from raw °C to temperature, against the reference sensor.
     pub calibration: Calibration,
+    /// Denoising of the channel: running-median window, then Savitzky–Golay window and order.
     pub filter: FilterSpec,
 }
 
 /// The sensor table of a campaign.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SensorTable {
+    /// The table file read, as messages name it.
     pub path: PathBuf,
+    /// The sensors in table order.
     pub sensors: Vec<Sensor>,
 }
 
@@ -185,6 +205,7 @@ impl SensorTable {
         }
     }
 
+    /// The sensor named `name`, if the table lists it.
     pub fn get(&self, name: &str) -> Option<&Sensor> {
         self.sensors.iter().find(|s| s.name == name)
     }
@@ -339,7 +360,9 @@ fn check_roles(path: &Path, sensors: &[Sensor]) -> Result<()> {
 /// A temperature log as read: times and, per sensor, readings converted to °C (uncalibrated).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TemperatureLog {
+    /// The log file read, as messages name it.
     pub path: PathBuf,
+    /// Sample times, s, strictly increasing.
     pub time_s: Vec<f64>,
     /// Sensor names in column order.
     pub sensors: Vec<String>,
@@ -447,13 +470,17 @@ impl TemperatureLog {
 /// Calibrated, denoised temperatures.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProcessedLog {
+    /// Sample times, s, strictly increasing (those of the log).
     pub time_s: Vec<f64>,
+    /// Sensor names in the log's column order.
     pub sensors: Vec<String>,
     /// `temperature_c[k][i]`: sensor k at time i.
     pub temperature_c: Vec<Vec<f64>>,
 }
 
 impl ProcessedLog {
+    /// The calibrated, denoised series of `sensor` (°C, one value per sample time); `None` when the
+    /// log has no such column.
     pub fn channel(&self, sensor: &str) -> Option<&[f64]> {
         let k = self.sensors.iter().position(|s| s == sensor)?;
         Some(&self.temperature_c[k])
@@ -492,10 +519,13 @@ impl ProcessedLog {
 /// Result of calibrating one sensor against the reference.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CalibrationFit {
+    /// Name of the sensor calibrated.
     pub sensor: String,
+    /// The fitted calibration (offset only, scale 1, when `scale_fitted` is false).
     pub calibration: Calibration,
     /// RMS of reference − calibrated reading over the period (°C).
     pub residual_rms_c: f64,
+    /// Log samples in the calibration period.
     pub samples: usize,
     /// False when the period held too little temperature range to fit a scale (scale kept at 1).
     pub scale_fitted: bool,

@@ -103,6 +103,7 @@ CREATE TABLE IF NOT EXISTS models (
 
 /// An open store.
 pub struct Store {
+    /// The SQLite file.
     pub path: PathBuf,
     conn: Connection,
 }
@@ -123,32 +124,49 @@ pub struct IngestFaults<'a> {
 /// What an ingest added.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct IngestSummary {
+    /// Name of the campaign added.
     pub campaign: String,
+    /// Its row id in the `campaigns` table.
     pub campaign_id: i64,
+    /// Sensors stored with the campaign.
     pub sensors: usize,
+    /// Temperature samples stored (calibrated °C, before filtering).
     pub temperature_samples: u64,
+    /// Laser readings stored.
     pub laser_readings: u64,
+    /// Whether a stored campaign of the same name was replaced (`--replace`).
     pub replaced: bool,
 }
 
 /// One stored model version.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModelEntry {
+    /// Model name (default: the axis).
     pub name: String,
+    /// Version number, counting from 1 per name.
     pub version: i64,
+    /// When the version was saved, seconds since the Unix epoch (wall clock).
     pub created_unix: i64,
+    /// Names of the campaigns it was fitted to.
     pub campaigns: Vec<String>,
+    /// Pooled leave-one-campaign-out RMS, µm; `None` when no campaign had one.
     pub loco_rms_um: Option<f64>,
 }
 
 /// Counts of every table, for checks and `models --json`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct StoreCounts {
+    /// Rows of `sensors`.
     pub sensors: i64,
+    /// Rows of `calibrations`.
     pub calibrations: i64,
+    /// Rows of `campaigns`.
     pub campaigns: i64,
+    /// Rows of `temperature_samples`.
     pub temperature_samples: i64,
+    /// Rows of `laser_readings`.
     pub laser_readings: i64,
+    /// Rows of `models` (every version of every model).
     pub models: i64,
 }
 
