@@ -115,6 +115,7 @@ impl GpuTrainer {
         self
     }
 
+    /// The open device this trainer trains on.
     pub fn context(&self) -> &GpuContext {
         &self.ctx
     }
