@@ -18,7 +18,7 @@ pub const TRAIN_WGSL: &str = concat!(
 const FORWARD_WORKGROUP: u32 = 64;
 
 /// The compiled training kernels of `train.wgsl` (forward-backward, gradient-and-Adam, loss
-/// reduction) and their layouts; the row kernels of [`super::fixed`] are added per
+/// reduction) and their layouts; the row kernels of `gpu::fixed` are added per
 /// architecture.
 pub struct TrainPipelines {
     data_layout: wgpu::BindGroupLayout,
