@@ -381,7 +381,8 @@ pub fn part_name(k: usize) -> String {
     format!("p{:02}", k + 1)
 }
 
-/// Write the family into `out`: `probes/pNN.csv`, `truth.json`, `outliers.csv`, `finish.ngc`,
+/// Write the family into `out`: `probes/pNN.<ext>` (CSV unless [`WebPlateSpec::probe_format`]
+/// says otherwise), `truth.json`, `outliers.csv`, `finish.ngc`,
 /// `job.toml`, `README.md`. `command` is the command line recorded in the README.
 pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Generated> {
     validate(spec)?;

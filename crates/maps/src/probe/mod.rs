@@ -118,7 +118,8 @@ pub struct ProbePoint {
     pub u_mm: f64,
     /// Nominal coordinate along the second plane axis.
     pub v_mm: f64,
-    /// Error along the normal, measured − nominal, in µm (mean over repeats).
+    /// Error E = measured − nominal, µm, along the normal axis, or along the point's vector
+    /// where the file gives one (mean over repeats).
     pub e_um: f64,
     /// Number of rows averaged into this point.
     pub repeats: u32,
