@@ -20,15 +20,22 @@ use std::path::{Path, PathBuf};
 /// What to generate; the defaults plant every term.
 #[derive(Debug, Clone, Serialize)]
 pub struct CircularSynthConfig {
+    /// Seed of the reading noise (ChaCha8).
     pub seed: u64,
+    /// What the instrument reads: radial deviations (ballbar) or the two axis positions.
     pub form: Form,
+    /// Nominal radius R of the circle, mm (the ballbar's length).
     pub radius_mm: f64,
+    /// Contouring feed along the circle, mm/min: with the servo lags it sets how far each
+    /// axis trails its command.
     pub feed_mm_per_min: f64,
+    /// Angle between two readings, degrees; it must divide 360 and be at most 10.
     pub step_deg: f64,
-    /// Overshoot arc before and after each turn.
+    /// Overshoot arc before and after each turn, degrees (its rows are labelled `overshoot`).
     pub overshoot_deg: f64,
-    /// Write the ccw run, the cw run.
+    /// Write the counter-clockwise run (first).
     pub ccw: bool,
+    /// Write the clockwise run (after the ccw one).
     pub cw: bool,
     /// Standard deviation of each reading (radial, or each axis).
     pub noise_um: f64,
@@ -36,14 +43,26 @@ pub struct CircularSynthConfig {
     pub centre_mm: [f64; 2],
     /// Set-up offset: centre of the measured path minus nominal centre.
     pub centre_offset_um: [f64; 2],
+    /// Squareness S, µm/m: the first axis moves by −S·(second axis position), the second
+    /// axis tilted toward −first for S > 0.
     pub squareness_um_per_m: f64,
+    /// Scale error of each axis (first, second), µm per m of position from the centre;
+    /// positive: the axis travels further than commanded.
     pub scale_um_per_m: [f64; 2],
+    /// Backlash b of each axis, µm: b > 0 lost motion (a play of width b), b < 0 a
+    /// controller over-compensation that jumps by |b| at the reversal.
     pub backlash_um: [f64; 2],
+    /// Height h of each axis' reversal spike, µm, outward along the axis after its reversal.
     pub spike_um: [f64; 2],
+    /// Decay length λ of each axis' spike, mm of path since the reversal.
     pub spike_decay_mm: [f64; 2],
+    /// Servo lag of each axis, ms: the axis follows its command this much later.
     pub lag_ms: [f64; 2],
+    /// Amplitude A of each axis' cyclic error, µm.
     pub cyclic_um: [f64; 2],
+    /// Period P of each axis' cyclic error, mm of axis position from the centre.
     pub cyclic_period_mm: [f64; 2],
+    /// Phase φ of each axis' cyclic error at the centre, degrees.
     pub cyclic_phase_deg: [f64; 2],
 }
 
@@ -105,26 +124,42 @@ impl Default for CircularSynthConfig {
 /// The planted terms, keyed as `errmap circular --json` reports them.
 #[derive(Debug, Clone, Serialize)]
 pub struct CircularTruth {
+    /// Planted squareness S, µm/m (sign as [`CircularSynthConfig::squareness_um_per_m`]).
     pub squareness_um_per_m: f64,
+    /// Scale error of the first axis minus that of the second, µm/m.
     pub scale_mismatch_um_per_m: f64,
+    /// Backlash of the first axis, µm (negative: over-compensation).
     pub backlash_first_um: f64,
+    /// Backlash of the second axis, µm (negative: over-compensation).
     pub backlash_second_um: f64,
+    /// Reversal spike height of the first axis, µm.
     pub reversal_spike_first_um: f64,
+    /// Reversal spike height of the second axis, µm.
     pub reversal_spike_second_um: f64,
+    /// Servo lag of the first axis minus that of the second, ms.
     pub servo_mismatch_ms: f64,
+    /// Cyclic error amplitude of the first axis, µm.
     pub cyclic_first_um: f64,
+    /// Cyclic error amplitude of the second axis, µm.
     pub cyclic_second_um: f64,
+    /// Spike decay lengths (first, second axis), mm of path.
     pub spike_decay_mm: [f64; 2],
+    /// Cyclic error periods (first, second axis), mm.
     pub cyclic_period_mm: [f64; 2],
+    /// The whole configuration generated from.
     pub config: CircularSynthConfig,
 }
 
 /// One generated row: direction label, commanded angle, reading.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthRow {
+    /// `ccw` or `cw`, or `overshoot` for a reading outside the measured turn.
     pub label: &'static str,
+    /// Commanded angle, degrees counter-clockwise from the first axis: a ccw run goes from
+    /// −overshoot to 360 + overshoot, a cw run back.
     pub angle_deg: f64,
-    /// Radial form: deviation (µm); two-axis form: (x_mm, y_mm).
+    /// Radial form: `[deviation, 0]`, the deviation (distance from the set-up centre − R)
+    /// in µm; two-axis form: `[x_mm, y_mm]`, the positions in mm.
     pub reading: [f64; 2],
 }
 
@@ -134,6 +169,7 @@ struct Axis {
 }
 
 impl CircularSynthConfig {
+    /// The planted terms of this configuration, as `truth.json` records them.
     pub fn truth(&self) -> CircularTruth {
         CircularTruth {
             squareness_um_per_m: self.squareness_um_per_m,

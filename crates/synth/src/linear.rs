@@ -21,22 +21,35 @@ use std::path::Path;
 /// The planted axis and campaign.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LinearTruth {
+    /// Travel of the axis from 0, mm.
     pub travel_mm: f64,
+    /// Nominal target positions in ascending order, 0 and the travel included, mm.
     pub targets_mm: Vec<f64>,
+    /// Runs in each direction (each run is a forward then a reverse pass).
     pub runs: u32,
+    /// Period P of the periodic error, mm: the ball-screw lead.
     pub lead_mm: f64,
+    /// Offset a of the error, µm.
     pub a_um: f64,
+    /// Slope k of the error (linear scale error), µm per m of travel.
     pub k_um_per_m: f64,
+    /// Amplitude d of the periodic error, µm.
     pub d_um: f64,
+    /// Phase φ of the periodic error at x = 0, radians.
     pub phi_rad: f64,
+    /// Reversal B = e↑ − e↓, forward minus reverse error at the same target, µm.
     pub reversal_um: f64,
+    /// Standard deviation σ of the Gaussian noise of each reading, µm.
     pub noise_um: f64,
     /// Expansion coefficient of the axis, µm/(m·K); readings are taken at material_temp_c.
     pub expansion_ppm_per_k: f64,
+    /// Seed of the generator (ChaCha8): targets and noise follow from it.
     pub seed: u64,
     /// Laser datum (zeroed here), mm.
     pub datum_mm: f64,
+    /// Refractive-index formula `runs_raw.csv` is put on the vacuum scale with (`ciddor`).
     pub air_formula: &'static str,
+    /// Vacuum wavelength of the laser, nm (helium-neon).
     pub wavelength_nm: f64,
 }
 
@@ -57,14 +70,24 @@ impl LinearTruth {
 /// One generated reading.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthRow {
+    /// Run number, from 1.
     pub run: u32,
+    /// Approach direction: `true` forward (+, ascending targets), `false` reverse.
     pub forward: bool,
+    /// Nominal position, mm.
     pub target_mm: f64,
+    /// Reading − target at the material temperature, µm, on the air-corrected scale: the
+    /// planted error, the noise and the axis' thermal expansion.
     pub deviation_um: f64,
+    /// Air temperature logged with the reading, °C.
     pub air_temp_c: f64,
+    /// Air pressure logged with the reading, kPa.
     pub pressure_kpa: f64,
+    /// Relative humidity logged with the reading, %.
     pub humidity_pct: f64,
+    /// Temperature of the axis (scale or workpiece material) logged with the reading, °C.
     pub material_temp_c: f64,
+    /// Time of the reading since the campaign started, s (8 s per reading).
     pub time_s: f64,
 }
 

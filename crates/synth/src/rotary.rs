@@ -20,28 +20,40 @@ use std::path::{Path, PathBuf};
 /// sphere, 0.5 µm probe noise, 200 mm bar.
 #[derive(Debug, Clone, Serialize)]
 pub struct RotarySynthConfig {
+    /// The rotary axis probed (A, B or C: nominally about X, Y or Z).
     pub axis: RotaryAxis,
+    /// Seed of the probe noise (ChaCha8).
     pub seed: u64,
+    /// Angle between commanded positions, degrees; it must divide 360 and be at least
+    /// [`MIN_STEP_DEG`].
     pub step_deg: f64,
+    /// Runs in each direction (+ runs ascending, − runs descending).
     pub repeats: u32,
+    /// Radial distance from sphere 1 to sphere 2 along the bar, mm.
     pub bar_length_mm: f64,
     /// Distance of sphere 1 from the axis.
     pub inner_radius_mm: f64,
     /// Heights of the sphere centres along the axis.
     pub heights_mm: [f64; 2],
+    /// Diameter of each reference sphere, mm.
     pub sphere_diameter_mm: f64,
+    /// Radius of the stylus tip, mm: touch points (stylus centres) lie at sphere radius +
+    /// this from the sphere's centre.
     pub stylus_radius_mm: f64,
+    /// Touch points per sphere and position (at least 4).
     pub points_per_sphere: usize,
     /// Touch points lie within this angle of the sphere's pole (90° = hemisphere).
     pub cap_half_angle_deg: f64,
     /// Standard deviation of each touch point along the surface normal (and of each centre
     /// coordinate in the centres file).
     pub probe_noise_um: f64,
-    /// Once-per-turn term: amplitude and phase.
+    /// Amplitude of err's once-per-turn term `sin(α + φ₁)`, arcsec.
     pub once_per_turn_arcsec: f64,
+    /// Phase φ₁ of the once-per-turn term, degrees.
     pub once_per_turn_phase_deg: f64,
-    /// Smooth part: twice- and three-times-per-turn terms.
+    /// Amplitude of err's twice-per-turn term `sin(2α + 0.3 rad)`, arcsec.
     pub twice_per_turn_arcsec: f64,
+    /// Amplitude of err's three-times-per-turn term `sin(3α + 1.1 rad)`, arcsec.
     pub thrice_per_turn_arcsec: f64,
     /// Added to err in the − direction.
     pub reversal_arcsec: f64,
@@ -80,41 +92,63 @@ impl Default for RotarySynthConfig {
 /// Planted truth at one commanded angle.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TruthRow {
+    /// Commanded angle α, degrees in [0, 360).
     pub angle_deg: f64,
+    /// Approach direction (written `+` or `-`).
     #[serde(with = "errmap_core::direction::symbol")]
     pub direction: Direction,
+    /// Planted err = α − β (commanded − actual), arcsec; 0 at 0° in the + direction.
     pub error_arcsec: f64,
 }
 
 /// The planted axis and errors.
 #[derive(Debug, Clone, Serialize)]
 pub struct RotaryTruth {
+    /// The rotary axis probed.
     pub axis: RotaryAxis,
+    /// Unit direction of the real (tilted) axis, machine coordinates.
     pub direction: [f64; 3],
+    /// Angle between the real and the nominal axis direction, arcsec.
     pub tilt_arcsec: f64,
     /// Keyed by axis letter, as `rotary analyze --fit-axis` reports it.
     pub tilt_toward_arcsec: std::collections::BTreeMap<String, f64>,
+    /// Where the real axis crosses the plane through the origin normal to the nominal axis,
+    /// machine coordinates, mm.
     pub location_mm: [f64; 3],
+    /// The planted err at every commanded angle, the + direction first.
     pub table: Vec<TruthRow>,
+    /// The whole configuration generated from.
     pub config: RotarySynthConfig,
 }
 
 /// One generated CSV row.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthRow {
+    /// Direction of the run.
     pub direction: Direction,
+    /// Repeat of the run, from 0.
     pub repeat: u32,
+    /// Commanded angle α, degrees.
     pub angle_deg: f64,
+    /// 1 for the inner sphere, 2 for the one at the end of the bar.
     pub sphere: u8,
+    /// Touch point number on the sphere, from 1; `None` for a centre row.
     pub point: Option<usize>,
+    /// The touch point (stylus centre) or the sphere centre, noise included, machine
+    /// coordinates, mm.
     pub xyz_mm: [f64; 3],
 }
 
 /// Generated data: touch points, noisy centres and the truth.
 #[derive(Debug, Clone)]
 pub struct RotarySynth {
+    /// Touch points of both spheres at every position of every run, in probing order
+    /// (`touch_points.csv`).
     pub touch_points: Vec<SynthRow>,
+    /// One centre per sphere and position, each coordinate with the probe noise
+    /// (`centres.csv`).
     pub centres: Vec<SynthRow>,
+    /// The planted axis and errors (`truth.json`).
     pub truth: RotaryTruth,
 }
 

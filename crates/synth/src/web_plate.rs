@@ -34,22 +34,40 @@ pub const WALL_MM: f64 = 10.0;
 #[serde(rename_all = "lowercase")]
 pub enum Layout {
     /// A regular `nx × ny` grid (seed 001: 12 × 12).
-    Grid { nx: usize, ny: usize },
+    Grid {
+        /// Probe columns along x, edges included (at least 3).
+        nx: usize,
+        /// Probe rows along y, edges included (at least 3).
+        ny: usize,
+    },
     /// `n` scattered points (seeded), plus the four corners of the probed rectangle.
-    Irregular { n: usize },
+    Irregular {
+        /// Scattered points besides the four corners (at least 8).
+        n: usize,
+    },
 }
 
 /// Everything that defines a generated family.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WebPlateSpec {
+    /// Family name: the job's `family` and the title line of the instrument files.
     pub family: String,
+    /// Number of parts (1 to 999), named `p01`, `p02`, ….
     pub parts: usize,
+    /// Seed of the family: each part's truth, outliers, repeats and noise, and an irregular
+    /// layout, follow from it.
     pub seed: u64,
+    /// Outer size of the plate along X, walls included, mm.
     pub size_x_mm: f64,
+    /// Outer size of the plate along Y, walls included, mm.
     pub size_y_mm: f64,
+    /// X of the plate's lower-left corner, machine coordinates, mm.
     pub origin_x_mm: f64,
+    /// Y of the plate's lower-left corner, machine coordinates, mm.
     pub origin_y_mm: f64,
+    /// Nominal Z of the web floor (the probed surface), mm: the job's nominal plane.
     pub floor_z_mm: f64,
+    /// How the probe points are laid out over the web.
     pub layout: Layout,
     /// Probe noise, 1σ, µm.
     pub noise_um: f64,
@@ -131,33 +149,49 @@ impl Default for WebPlateSpec {
 /// Analytic truth of one part (µm; see the module docs for the formula).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PartTruth {
+    /// Part name (`p01`, …).
     pub part: String,
+    /// Amplitude A of the first plate mode (the mid-web bulge), µm.
     pub a_um: f64,
+    /// Skew a of the first mode along the feed (x): its amplitude scales by 1 + a·(s − ½).
     pub skew: f64,
+    /// Amplitude B of the second mode along x, µm.
     pub b_um: f64,
+    /// Set-up offset c0, µm.
     pub c0_um: f64,
+    /// Set-up tilt c1 along x, µm across the web's width.
     pub c1_um: f64,
+    /// Set-up tilt c2 along y, µm across the web's depth.
     pub c2_um: f64,
 }
 
 /// A gross error planted in a probe file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlantedOutlier {
+    /// Part name (`p01`, …).
     pub part: String,
+    /// The probe point's `id` (`P001`, …).
     pub id: String,
+    /// X of the point, mm (to 0.001 mm).
     pub x_mm: f64,
+    /// Y of the point, mm (to 0.001 mm).
     pub y_mm: f64,
+    /// What the chip adds to the point's E, µm.
     pub added_um: f64,
 }
 
 /// The ground truth of a generated family (`truth.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Truth {
+    /// The settings the family was generated with.
     pub spec: WebPlateSpec,
+    /// Width of the wall all round the web, mm ([`WALL_MM`]).
     pub wall_mm: f64,
     /// The rectangle the probes span (x_min, y_min, x_max, y_max), mm.
     pub probed_mm: [f64; 4],
+    /// The truth of every part, in part order.
     pub parts: Vec<PartTruth>,
+    /// Every planted outlier, by part, then in file order.
     pub outliers: Vec<PlantedOutlier>,
 }
 
@@ -206,8 +240,11 @@ impl PartTruth {
 /// What [`generate`] wrote.
 #[derive(Debug, Clone)]
 pub struct Generated {
+    /// The family's truth, as written to `truth.json`.
     pub truth: Truth,
+    /// One probe file per part, in part order, under `probes/`.
     pub probe_files: Vec<std::path::PathBuf>,
+    /// Probe positions per part (the two repeated measurements not counted).
     pub points_per_part: usize,
 }
 
@@ -344,7 +381,8 @@ pub fn part_name(k: usize) -> String {
     format!("p{:02}", k + 1)
 }
 
-/// Write the family into `out`: `probes/pNN.csv`, `truth.json`, `outliers.csv`, `finish.ngc`,
+/// Write the family into `out`: `probes/pNN.<ext>` (CSV unless [`WebPlateSpec::probe_format`]
+/// says otherwise), `truth.json`, `outliers.csv`, `finish.ngc`,
 /// `job.toml`, `README.md`. `command` is the command line recorded in the README.
 pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Generated> {
     validate(spec)?;

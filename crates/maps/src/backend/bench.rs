@@ -11,9 +11,13 @@ use errmap_core::{Error, Result};
 /// What `errmap bench training` trains.
 #[derive(Debug, Clone)]
 pub struct TrainingBench {
+    /// Networks trained together in one batch, one per synthetic part (1 to 4096).
     pub parts: usize,
+    /// Training samples per network, on a grid over a synthetic plate (8 to 2²²).
     pub samples: usize,
+    /// Full-batch Adam steps timed (after one warm-up epoch).
     pub epochs: u32,
+    /// The backend to measure; `auto` measures the one it chooses.
     pub backend: Backend,
     /// Hidden layer widths (default 32, 32).
     pub hidden: Vec<usize>,
@@ -28,12 +32,17 @@ pub struct TrainingBenchReport {
     pub device: String,
     /// Why this backend, for `auto`.
     pub reason: String,
+    /// Networks trained together.
     pub parts: usize,
+    /// Training samples per network.
     pub samples: usize,
+    /// Adam steps timed.
     pub epochs: u32,
+    /// Units per layer, the 2 inputs and the 1 output included.
     pub layer_sizes: Vec<usize>,
     /// parts × samples × epochs / training seconds (pipeline build excluded).
     pub sample_epochs_per_s: f64,
+    /// Seconds of the timed epochs, the pipeline build and warm-up excluded.
     pub train_s: f64,
     /// Opening the device, building the pipelines and the warm-up epoch (0 for the CPU
     /// trainers apart from their warm-up).
@@ -44,6 +53,9 @@ pub struct TrainingBenchReport {
 const MAX_SAMPLES: usize = 1 << 22;
 const MAX_PARTS: usize = 4096;
 
+/// Opens the bench's backend (as `--backend` would), trains `parts` synthetic plate networks
+/// on it and reports the throughput; refuses `parts` or `samples` out of range and a model
+/// that does not validate.
 pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
     if !(1..=MAX_PARTS).contains(&bench.parts) || !(8..=MAX_SAMPLES).contains(&bench.samples) {
         return Err(Error::usage(

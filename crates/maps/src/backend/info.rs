@@ -10,14 +10,17 @@ use serde::Serialize;
 /// The GPU adapters of this machine and the choice `--backend auto|gpu` makes.
 #[derive(Debug, Serialize)]
 pub struct GpuInfo {
+    /// Every adapter wgpu finds, best first (hardware before software).
     pub adapters: Vec<AdapterSummary>,
     /// The adapter `--backend gpu` uses (hardware first, else software).
     pub chosen: Option<AdapterSummary>,
+    /// The limits the chosen adapter's device grants; `None` when no device opened.
     pub limits: Option<LimitsSummary>,
     /// What `--backend auto` trains the default architecture on: "gpu" or "cpu".
     pub auto_backend: &'static str,
     /// Why: the probe's figures (cached per machine, driver and architecture).
     pub auto_reason: String,
+    /// The probe's CPU and GPU figures; `None` when no device opened (auto then takes the CPU).
     pub auto_probe: Option<Verdict>,
     /// Where the probe's figures are cached.
     pub probe_cache: Option<String>,

@@ -21,6 +21,8 @@ pub use errmap_core::progress::{silent, Notes};
 
 /// The trainer chosen for a backend and why.
 pub struct Selection {
+    /// The opened trainer (for `auto` on a GPU, one that hands the batch to the CPU if the
+    /// device fails mid-batch).
     pub trainer: Box<dyn Trainer>,
     /// The backend that trains: `gpu`, `cpu` or `cpu-reference` (never `auto`).
     pub backend: Backend,

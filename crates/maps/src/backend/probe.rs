@@ -35,7 +35,9 @@ pub struct Measure {
 /// The probe's outcome for one machine and architecture.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Verdict {
+    /// The fast CPU trainer's figures.
     pub cpu: Measure,
+    /// The wgpu adapter's figures.
     pub gpu: Measure,
     /// Read from the cache rather than measured now.
     #[serde(default)]
@@ -43,6 +45,8 @@ pub struct Verdict {
 }
 
 impl Verdict {
+    /// Whether the GPU trained more sample·epochs per second than the CPU (the pipeline
+    /// build not counted); a tie goes to the CPU.
     pub fn gpu_is_faster(&self) -> bool {
         self.gpu.sample_epochs_per_s > self.cpu.sample_epochs_per_s
     }

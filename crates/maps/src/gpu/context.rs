@@ -9,10 +9,16 @@ use errmap_core::{Error, Result};
 /// What `errmap gpu-info` reports about one adapter.
 #[derive(Debug, Clone, Serialize)]
 pub struct AdapterSummary {
+    /// The adapter's name as its driver reports it (e.g. `NVIDIA GeForce RTX 4090`,
+    /// `llvmpipe (LLVM 17.0.6, 256 bits)`).
     pub name: String,
+    /// The graphics API wgpu reaches it through, e.g. `Vulkan`, `Metal`, `Dx12` or `Gl`.
     pub backend: String,
+    /// wgpu's device type: `DiscreteGpu`, `IntegratedGpu`, `VirtualGpu`, `Cpu` or `Other`.
     pub device_type: String,
+    /// The driver's name; empty where the API does not report one.
     pub driver: String,
+    /// The driver's version text; empty where the API does not report one.
     pub driver_info: String,
     /// A CPU implementation such as Mesa lavapipe (llvmpipe).
     pub software: bool,
@@ -21,16 +27,25 @@ pub struct AdapterSummary {
 /// The limits errmap depends on, as the chosen device grants them.
 #[derive(Debug, Clone, Serialize)]
 pub struct LimitsSummary {
+    /// Largest buffer, bytes.
     pub max_buffer_size: u64,
+    /// Largest storage-buffer binding, bytes: bounds the samples or points of one dispatch.
     pub max_storage_buffer_binding_size: u64,
+    /// Storage buffers one shader may bind.
     pub max_storage_buffers_per_shader_stage: u32,
+    /// Most workgroups of one dispatch along each dimension.
     pub max_compute_workgroups_per_dimension: u32,
+    /// Most invocations (threads) in one workgroup.
     pub max_compute_invocations_per_workgroup: u32,
+    /// Workgroup shared memory, bytes.
     pub max_compute_workgroup_storage_size: u32,
+    /// Alignment of a uniform binding's offset, bytes (per-epoch steps and networks start
+    /// on it).
     pub min_uniform_buffer_offset_alignment: u32,
 }
 
 impl LimitsSummary {
+    /// The limits errmap depends on, taken from a device's (or adapter's) full set.
     pub fn of(limits: &wgpu::Limits) -> LimitsSummary {
         LimitsSummary {
             max_buffer_size: limits.max_buffer_size,
@@ -89,9 +104,13 @@ pub fn list_adapters() -> Vec<AdapterSummary> {
 
 /// An open device and what went wrong on it since the last check.
 pub struct GpuContext {
+    /// The open device (every limit the adapter offers).
     pub device: wgpu::Device,
+    /// The device's command queue.
     pub queue: wgpu::Queue,
+    /// The adapter the device was opened on.
     pub adapter: AdapterSummary,
+    /// The limits the device grants.
     pub limits: wgpu::Limits,
     /// The subgroup size when subgroup operations are enabled and the adapter has a single
     /// size (lavapipe: 8 with 256-bit SIMD); the CPU-adapter kernels use it.

@@ -7,6 +7,7 @@ use super::layout::dims_for;
 use crate::nn::Mlp;
 use errmap_core::{Error, Result};
 
+/// WGSL source: the shared declarations, then the evaluation kernel.
 pub const EVALUATE_WGSL: &str = concat!(
     include_str!("../../../../shaders/common.wgsl"),
     include_str!("../../../../shaders/evaluate.wgsl")
@@ -14,12 +15,15 @@ pub const EVALUATE_WGSL: &str = concat!(
 
 const WORKGROUP: u32 = 64;
 
+/// The compiled evaluation kernel (one thread per point and network) and its bind group
+/// layout.
 pub struct EvalPipeline {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl EvalPipeline {
+    /// Compiles `evaluate.wgsl` on the device; a device error while compiling is an error.
     pub fn new(ctx: &GpuContext) -> Result<EvalPipeline> {
         let device = &ctx.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

@@ -367,13 +367,21 @@ fn reduce_and_adam(line: &mut dyn FnMut(&str), params: usize, stride: usize) {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct AdamConstants {
+    /// β₁ ([`crate::nn::ADAM_BETA1`]).
     pub beta1: f32,
+    /// 1 − β₁ ([`crate::nn::ADAM_ONE_MINUS_BETA1`]).
     pub one_minus_beta1: f32,
+    /// β₂ ([`crate::nn::ADAM_BETA2`]).
     pub beta2: f32,
+    /// 1 − β₂ ([`crate::nn::ADAM_ONE_MINUS_BETA2`]).
     pub one_minus_beta2: f32,
+    /// ε ([`crate::nn::ADAM_EPSILON`]).
     pub epsilon: f32,
+    /// Padding of the struct to 32 bytes; 0.
     pub _pad0: u32,
+    /// Padding, as `_pad0`; 0.
     pub _pad1: u32,
+    /// Padding, as `_pad0`; 0.
     pub _pad2: u32,
 }
 
@@ -397,9 +405,13 @@ impl AdamConstants {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct BatchInfo {
+    /// Index in the batch of the dispatch's first network.
     pub first_net: u32,
+    /// Padding of the struct to 16 bytes; 0.
     pub _pad0: u32,
+    /// Padding, as `_pad0`; 0.
     pub _pad1: u32,
+    /// Padding, as `_pad0`; 0.
     pub _pad2: u32,
 }
 
@@ -443,6 +455,7 @@ pub struct EpochPipeline {
 }
 
 impl EpochPipeline {
+    /// Where this kernel expects the networks in the parameter buffers.
     pub fn plan(&self) -> ParamPlan {
         self.plan
     }

@@ -11,9 +11,14 @@ pub const MAX_LAYERS: usize = MAX_HIDDEN_LAYERS + 1;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct LayerInfo {
+    /// Units feeding the layer.
     pub inputs: u32,
+    /// Units of the layer.
     pub outputs: u32,
+    /// Offset of the layer's `W[0][0]` within one network's parameters (its biases follow
+    /// the `outputs × inputs` weights).
     pub weight_offset: u32,
+    /// First of this layer's outputs among a sample's stored units (activations, deltas).
     pub unit_offset: u32,
 }
 
@@ -21,14 +26,24 @@ pub struct LayerInfo {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
 pub struct Dims {
+    /// Networks in the batch (or in this evaluation dispatch); all share one architecture.
     pub net_count: u32,
+    /// Parameters of one network; network k's start at `k × param_count`.
     pub param_count: u32,
+    /// Weight layers used in `layers` (hidden layers + output layer).
     pub layer_count: u32,
+    /// Units stored per sample: the outputs of every layer, hidden and output.
     pub unit_count: u32,
+    /// Training: samples of the whole batch. Evaluation: points of this dispatch.
     pub sample_count: u32,
+    /// Hidden-layer activation code ([`crate::nn::Activation::shader_code`]: 0 tanh, 1 relu).
     pub activation: u32,
+    /// Padding so `layers` starts at byte 32, 16-byte aligned as a struct array in WGSL's
+    /// uniform address space must be; 0.
     pub _pad0: u32,
+    /// Padding, as `_pad0`; 0.
     pub _pad1: u32,
+    /// The weight layers in order; slots past `layer_count` are zero.
     pub layers: [LayerInfo; MAX_LAYERS],
 }
 
@@ -36,9 +51,14 @@ pub struct Dims {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct NetInfo {
+    /// Index of the network's first sample in the batch's flattened sample array.
     pub sample_offset: u32,
+    /// Samples of the network's training set.
     pub sample_count: u32,
+    /// First float of the network's activations and deltas in the unit storage
+    /// (`sample_offset × unit_count`; unit u of sample s at `act_offset + u·sample_count + s`).
     pub act_offset: u32,
+    /// `2 / sample_count`, the factor of the mean-squared-error gradient, computed on the host.
     pub grad_scale: f32,
 }
 
@@ -46,9 +66,13 @@ pub struct NetInfo {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct Sample {
+    /// Scaled u of the sample, in [-1, 1].
     pub x: f32,
+    /// Scaled v of the sample, in [-1, 1].
     pub y: f32,
+    /// Standardised target error of the sample.
     pub target_value: f32,
+    /// Index of the network (training set) the sample belongs to.
     pub net: u32,
 }
 
@@ -56,13 +80,18 @@ pub struct Sample {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct Step {
+    /// Adam step size of the epoch.
     pub learning_rate: f32,
+    /// 1/(1 − β₁ᵗ), the first moment's bias correction.
     pub correction1: f32,
+    /// 1/(1 − β₂ᵗ), the second moment's bias correction.
     pub correction2: f32,
+    /// Padding of the struct to 16 bytes; 0.
     pub _pad: u32,
 }
 
 impl Step {
+    /// The step of epoch `epoch` (0-based) of `config`'s schedule ([`AdamScalars::at`]).
     pub fn at(config: &ModelConfig, epoch: u32) -> Step {
         let s = AdamScalars::at(config, epoch);
         Step {

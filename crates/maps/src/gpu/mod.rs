@@ -1,9 +1,9 @@
 //! The wgpu path: adapter choice, device limits, buffers and pipelines for training and evaluating networks in WGSL compute shaders.
 //!
-//! One host file per shader family: [`train`] (`shaders/train.wgsl`) and [`fixed`] for
+//! One host file per shader family: [`train`] (`shaders/train.wgsl`) and `fixed` for
 //! hardware GPUs, [`lavapipe`] (generated WGSL) for CPU adapters, [`evaluate`]
-//! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; [`context`] picks the
-//! adapter and turns device failures into [`Error::device`].
+//! (`shaders/evaluate.wgsl`); [`layout`] mirrors the WGSL structs; `context` picks the
+//! adapter ([`GpuContext`]) and turns device failures into [`Error::device`].
 
 pub(crate) mod context;
 pub(crate) mod epochs;
@@ -26,7 +26,7 @@ pub enum KernelFamily {
     /// [`KernelFamily::Hardware`].
     #[default]
     Auto,
-    /// `shaders/train.wgsl` and [`fixed`]: a workgroup per tile of samples, 64 gradient
+    /// `shaders/train.wgsl` and `gpu::fixed`: a workgroup per tile of samples, 64 gradient
     /// lanes (the order of `CpuTrainer::with_lanes(GRAD_LANES)`).
     Hardware,
     /// [`lavapipe`]: one 8-invocation workgroup per network and epoch, the reference order
@@ -115,6 +115,7 @@ impl GpuTrainer {
         self
     }
 
+    /// The open device this trainer trains on.
     pub fn context(&self) -> &GpuContext {
         &self.ctx
     }

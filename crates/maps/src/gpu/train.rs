@@ -17,6 +17,9 @@ pub const TRAIN_WGSL: &str = concat!(
 
 const FORWARD_WORKGROUP: u32 = 64;
 
+/// The compiled training kernels of `train.wgsl` (forward-backward, gradient-and-Adam, loss
+/// reduction) and their layouts; the row kernels of `gpu::fixed` are added per
+/// architecture.
 pub struct TrainPipelines {
     data_layout: wgpu::BindGroupLayout,
     step_layout: wgpu::BindGroupLayout,
@@ -62,6 +65,7 @@ fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
 }
 
 impl TrainPipelines {
+    /// Compiles `train.wgsl` on the device; a device error while compiling is an error.
     pub fn new(ctx: &GpuContext) -> Result<TrainPipelines> {
         let device = &ctx.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

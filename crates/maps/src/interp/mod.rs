@@ -403,10 +403,15 @@ impl<'a> Sampler<'a> {
 /// `i < nu`, `j < nv`; node index `j·nu + i` (u fastest).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Grid {
+    /// u of the first column of nodes (`i = 0`), mm; the domain's lower u edge.
     pub u0_mm: f64,
+    /// v of the first row of nodes (`j = 0`), mm; the domain's lower v edge.
     pub v0_mm: f64,
+    /// Node spacing, the same along u and v, mm.
     pub step_mm: f64,
+    /// Number of nodes along u.
     pub nu: usize,
+    /// Number of nodes along v.
     pub nv: usize,
 }
 

@@ -10,13 +10,21 @@ use std::path::{Path, PathBuf};
 /// What to interpolate and how.
 #[derive(Debug, Clone)]
 pub struct GridRequest {
+    /// The probe file, in any format [`crate::probe::detect_format`] recognises.
     pub probes: PathBuf,
+    /// The interpolant evaluated at the nodes.
     pub method: Method,
+    /// Node spacing along both plane axes, mm.
     pub step_mm: f64,
     /// The grid's domain; `None`: the probes' bounding box.
     pub domain: Option<Domain>,
+    /// Axis E is measured along; the grid spans its plane axes ([`ProbeSpec::normal`]).
     pub normal: Axis,
+    /// Nominal coordinate along the normal for a file without nominal columns, mm
+    /// ([`ProbeSpec::nominal_plane_mm`]).
     pub nominal_plane_mm: Option<f64>,
+    /// Largest believable |measured − nominal| along the normal, mm
+    /// ([`ProbeSpec::max_deviation_mm`]).
     pub max_deviation_mm: f64,
     /// Column mapping of a CSV export, see [`ProbeSpec::columns`].
     pub columns: Option<String>,
@@ -35,6 +43,7 @@ pub struct GridOutcome {
     pub skipped_features: usize,
     /// Nodes inside the probes' hull (the rows written).
     pub inside: usize,
+    /// The grid interpolated on, every node (written or not).
     pub grid: Grid,
 }
 

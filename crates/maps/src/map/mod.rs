@@ -26,6 +26,7 @@ pub type PartDomain<'a> = (Option<&'a Vec<[f64; 2]>>, Option<[f64; 2]>);
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FittedModel {
+    /// Format tag, [`MODEL_FORMAT`]; reading refuses a file with another.
     pub format: String,
     /// Part (or `family`) the map belongs to.
     pub name: String,
@@ -33,7 +34,9 @@ pub struct FittedModel {
     pub normal: Axis,
     /// Where the map is defined (plane axes, mm); outside it [`ErrorField::error_mm`] is `None`.
     pub domain: Domain,
+    /// Scaling between `(u, v)` in mm, E in µm and the network's inputs and output.
     pub normalisation: Normalisation,
+    /// The trained network; the delivered map unless `kriging` is present.
     pub network: Mlp,
     /// When present, the delivered map is this kriging of the probe points (it fitted the
     /// held-out points better than the network), and [`FittedModel::e_um`] evaluates it.
@@ -99,6 +102,8 @@ impl Benefit {
 }
 
 impl FittedModel {
+    /// A network map of part `name`, tagged [`MODEL_FORMAT`], with no kriging, hull, surface
+    /// extent or benefit recorded yet.
     pub fn new(
         name: &str,
         normal: Axis,
@@ -356,8 +361,12 @@ pub fn load_error_field(model_json: &Path) -> Result<Box<dyn ErrorField>> {
 /// A map on a regular grid of the plane: one value per node (index `j·nu + i`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorMap {
+    /// The nodes, on the plane axes of `normal`.
     pub grid: Grid,
+    /// Axis the values are errors along.
     pub normal: Axis,
+    /// One value per node, µm, index `j·nu + i`: E (measured − nominal), or for the family's
+    /// standard-deviation map the node-wise spread of E.
     pub values: Vec<f64>,
 }
 

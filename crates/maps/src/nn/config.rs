@@ -51,6 +51,7 @@ impl Activation {
             Activation::Relu => 1,
         }
     }
+    /// The name a job file's `activation` key uses: `tanh` or `relu`.
     pub fn name(self) -> &'static str {
         match self {
             Activation::Tanh => "tanh",
@@ -118,6 +119,8 @@ pub enum Backend {
 }
 
 impl Backend {
+    /// The name a job file's `backend` key and `--backend` use: `auto`, `gpu`, `cpu` or
+    /// `cpu-reference`.
     pub fn name(self) -> &'static str {
         match self {
             Backend::Auto => "auto",
@@ -174,6 +177,7 @@ pub enum Stop {
 pub struct ModelConfig {
     /// Hidden layer widths, input side first (input 2 and output 1 are implied).
     pub hidden: Vec<usize>,
+    /// Activation of every hidden layer (the output layer is linear).
     pub activation: Activation,
     /// Full-batch optimiser steps.
     pub epochs: u32,
@@ -185,10 +189,14 @@ pub struct ModelConfig {
     pub seed: u64,
     /// Share of probe points held out of the first fit to measure the map's accuracy.
     pub holdout_fraction: f64,
+    /// Where the networks are trained.
     pub backend: Backend,
     /// The loss is read back (for progress and divergence checks) every this many epochs.
     pub loss_every: u32,
+    /// The optimiser of every fit; with L-BFGS, `epochs` bounds the loss evaluations.
     pub optimizer: Optimizer,
+    /// Whether each part's networks start from seeded random weights or from the family
+    /// network.
     pub warm_start: WarmStart,
     /// Steps of a part's fit when it starts from the family network.
     pub warm_epochs: u32,

@@ -114,6 +114,9 @@ pub struct FastGradient {
 }
 
 impl FastGradient {
+    /// Scratch for `net`'s architecture and `set`'s size, in chunks of [`CHUNK_BLOCKS`]
+    /// blocks of samples; the parameters themselves are given to each
+    /// [`FastGradient::compute`].
     pub fn new(net: &Mlp, set: &TrainingSet) -> FastGradient {
         let spans = layer_spans(&net.layer_sizes);
         let unit_offset = unit_offsets(&spans);

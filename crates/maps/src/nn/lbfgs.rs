@@ -29,9 +29,13 @@ pub enum Stop {
 /// The outcome: the best point found, its objective, evaluations used and why it stopped.
 #[derive(Debug, Clone)]
 pub struct Minimum {
+    /// The last accepted point, the lowest found (`x0` when no step was accepted).
     pub x: Vec<f64>,
+    /// The objective at `x`.
     pub value: f64,
+    /// Objective evaluations spent, the one at `x0` included.
     pub evaluations: u32,
+    /// Why the minimiser stopped.
     pub stop: Stop,
 }
 

@@ -13,15 +13,20 @@ use super::config::Activation;
 /// Hidden layers apply the activation; the output layer is linear.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Mlp {
+    /// Units per layer, the 2 inputs first and the 1 output last.
     pub layer_sizes: Vec<usize>,
+    /// Activation of the hidden layers.
     pub activation: Activation,
+    /// Every weight and bias, in the layout above ([`layer_spans`] says where each layer's sit).
     pub params: Vec<f32>,
 }
 
 /// Where one layer's parameters sit in [`Mlp::params`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LayerSpan {
+    /// Units feeding the layer (the previous layer's width, 2 for the first).
     pub inputs: usize,
+    /// Units of the layer (its bias count, 1 for the output layer).
     pub outputs: usize,
     /// Offset of `W[0][0]`.
     pub weight_offset: usize,
@@ -47,7 +52,6 @@ pub fn layer_spans(layer_sizes: &[usize]) -> Vec<LayerSpan> {
         .collect()
 }
 
-/// Number of parameters of a network with these sizes.
 /// First unit of each layer's outputs when a network's units are numbered layer after layer
 /// (the activation and delta layout of the trainers and the shaders).
 pub fn unit_offsets(spans: &[LayerSpan]) -> Vec<usize> {
@@ -61,6 +65,7 @@ pub fn unit_offsets(spans: &[LayerSpan]) -> Vec<usize> {
         .collect()
 }
 
+/// Number of parameters (weights and biases) of a network with these layer sizes.
 pub fn param_count(layer_sizes: &[usize]) -> usize {
     layer_sizes.windows(2).map(|w| w[0] * w[1] + w[1]).sum()
 }

@@ -7,11 +7,18 @@ use errmap_core::geom::Domain;
 /// Inputs map the domain onto [-1, 1]²; targets are standardised (e − mean) / std.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Normalisation {
+    /// Lower u edge of the map domain, mm: maps to input −1.
     pub u_min_mm: f64,
+    /// Upper u edge of the map domain, mm: maps to input +1.
     pub u_max_mm: f64,
+    /// Lower v edge of the map domain, mm: maps to input −1.
     pub v_min_mm: f64,
+    /// Upper v edge of the map domain, mm: maps to input +1.
     pub v_max_mm: f64,
+    /// Mean of the finite training targets E, µm: the network's output 0.
     pub e_mean_um: f64,
+    /// Population standard deviation of the finite training targets E, µm (1 when they are
+    /// constant or empty): one unit of the network's output.
     pub e_std_um: f64,
 }
 
@@ -54,10 +61,13 @@ impl Normalisation {
         ]
     }
 
+    /// Error E in µm → standardised training target `(e − mean) / std`.
     pub fn scale_target(&self, e_um: f64) -> f32 {
         ((e_um - self.e_mean_um) / self.e_std_um) as f32
     }
 
+    /// Network output → error E in µm, `mean + std · y` (the inverse of
+    /// [`Normalisation::scale_target`]).
     pub fn unscale_output(&self, y: f32) -> f64 {
         self.e_mean_um + self.e_std_um * y as f64
     }

@@ -17,8 +17,11 @@ pub const ACCURACY_TOLERANCE: f64 = 0.05;
 /// µm, and the normalisation that turns its output into µm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Holdout {
+    /// Scaled `(u, v)` of each held-out point, in [-1, 1]² over the map domain.
     pub inputs: Vec<[f32; 2]>,
+    /// Measured error E of each held-out point, µm, one per input.
     pub e_um: Vec<f64>,
+    /// The normalisation of the network judged on these points.
     pub norm: Normalisation,
 }
 
@@ -39,16 +42,23 @@ impl Holdout {
 /// member (the judge included) ends with its parameters of the judge's best check.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StopGroup {
+    /// Index of the network whose hold-out RMS decides, in the batch given to
+    /// [`train_until_holdout_stops`].
     pub judge: usize,
+    /// Indices of the networks that stop with the judge, the judge included.
     pub members: Vec<usize>,
+    /// The points the judge is measured on (points it was not trained on).
     pub holdout: Holdout,
 }
 
 /// One hold-out check: steps done, training seconds so far, the judge's hold-out RMS.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct CurvePoint {
+    /// Optimiser steps done at the check.
     pub epochs: u32,
+    /// Wall-clock seconds of training up to the check (hold-out evaluations not counted).
     pub seconds: f64,
+    /// RMS of (held-out E − network), µm, at the check; NaN for no held-out points.
     pub holdout_rmse_um: f64,
 }
 
@@ -66,8 +76,11 @@ pub struct GroupOutcome {
 /// When a curve first came within `tolerance` of its converged (lowest) hold-out RMS.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Accuracy {
+    /// The lowest finite hold-out RMS of the curve, µm.
     pub converged_rmse_um: f64,
+    /// Steps at the first check within the tolerance of it.
     pub epochs: u32,
+    /// Training seconds at that check.
     pub seconds: f64,
 }
 

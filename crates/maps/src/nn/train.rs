@@ -10,14 +10,18 @@ use errmap_core::{Error, Result};
 /// (see [`super::Normalisation`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TrainingSet {
+    /// Scaled `(u, v)` of each sample, in [-1, 1]² over the map domain.
     pub inputs: Vec<[f32; 2]>,
+    /// Standardised error `(e − mean) / std` of each sample, one per input.
     pub targets: Vec<f32>,
 }
 
 impl TrainingSet {
+    /// Number of samples (targets).
     pub fn len(&self) -> usize {
         self.targets.len()
     }
+    /// Whether the set has no samples.
     pub fn is_empty(&self) -> bool {
         self.targets.is_empty()
     }
@@ -101,9 +105,13 @@ pub trait Trainer: Send + Sync {
 /// second moments, and the steps done.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdamRun {
+    /// The network with its current parameters.
     pub net: Mlp,
+    /// Adam's first moment (decaying mean of the gradient), one per parameter.
     pub m: Vec<f32>,
+    /// Adam's second moment (decaying mean of the squared gradient), one per parameter.
     pub v: Vec<f32>,
+    /// Steps done; the next step is epoch `epoch` (0-based) of the schedule.
     pub epoch: u32,
 }
 
@@ -171,22 +179,32 @@ pub const GRAD_LANES: usize = 64;
 /// Adam (Kingma & Ba 2015, Algorithm 1) constants. 1 − β is written out, not computed,
 /// so CPU and shader use the very same f32 values.
 /// The shader spells them as hex floats with these bits.
+///
+/// β₁ = 0.9, the decay of the first moment.
 pub const ADAM_BETA1: f32 = f32::from_bits(0x3f66_6666); // 0.9
+/// 1 − β₁ = 0.1, the weight of the new gradient in the first moment.
 pub const ADAM_ONE_MINUS_BETA1: f32 = f32::from_bits(0x3dcc_cccd); // 0.1
+/// β₂ = 0.999, the decay of the second moment.
 pub const ADAM_BETA2: f32 = f32::from_bits(0x3f7f_be77); // 0.999
+/// 1 − β₂ = 0.001, the weight of the new squared gradient in the second moment.
 pub const ADAM_ONE_MINUS_BETA2: f32 = f32::from_bits(0x3a83_126f); // 0.001
+/// ε = 1e-8, added to √v̂ in the step's denominator.
 pub const ADAM_EPSILON: f32 = f32::from_bits(0x322b_cc77); // 1e-8
 
 /// Per-step Adam scalars, computed on the host in f64: learning rate and the bias
 /// corrections 1/(1 − β₁ᵗ), 1/(1 − β₂ᵗ) for step t = epoch + 1.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AdamScalars {
+    /// Step size of this epoch ([`ModelConfig::learning_rate_at`]).
     pub learning_rate: f32,
+    /// 1/(1 − β₁ᵗ), the first moment's bias correction.
     pub correction1: f32,
+    /// 1/(1 − β₂ᵗ), the second moment's bias correction.
     pub correction2: f32,
 }
 
 impl AdamScalars {
+    /// The scalars of epoch `epoch` (0-based) of `config`'s schedule.
     pub fn at(config: &ModelConfig, epoch: u32) -> AdamScalars {
         let t = epoch as f64 + 1.0;
         AdamScalars {
@@ -307,6 +325,7 @@ impl CpuTrainer {
         Ok(CpuTrainer { lanes })
     }
 
+    /// The number of gradient lanes this trainer sums in.
     pub fn lanes(&self) -> usize {
         self.lanes
     }

@@ -43,7 +43,9 @@ pub const MIN_POINTS_TO_JUDGE: usize = 5;
 /// A point removed as a gross error, with its leave-one-out residual when it was removed.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Rejected {
+    /// The point as read.
     pub point: ProbePoint,
+    /// Its error minus the value its neighbours predict for it, `e − ê`, µm (not studentised).
     pub residual_um: f64,
 }
 

@@ -34,6 +34,8 @@ use std::path::{Path, PathBuf};
 /// nominal columns) and, optionally, the domain every point must lie in.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProbeSpec {
+    /// Machine axis normal to the probed surface: E is measured along it (positive towards its
+    /// + direction), and the other two axes are the map plane `(u, v)`.
     pub normal: Axis,
     /// Nominal coordinate along the normal axis for every point, used when the file has no
     /// `nx_mm,ny_mm,nz_mm` columns (the columns win when both are given).
@@ -81,7 +83,9 @@ pub fn validate_max_deviation(max_mm: f64, flag: &str) -> Result<()> {
     }
 }
 
-/// What a deviation of `deviation_mm` between `measured_mm` and `nominal_mm` most likely means.
+/// The hint for a deviation between `measured_mm` and `nominal_mm` above the bound `max_mm`:
+/// which unit slip (µm, m or inches written as mm) would bring the measured value within
+/// `max_mm` of the nominal, and the setting `key` that raises the bound.
 pub fn unit_slip_hint(measured_mm: f64, nominal_mm: f64, max_mm: f64, key: &str) -> String {
     let near = |x: f64| (x - nominal_mm).abs() <= max_mm;
     let likely = if near(measured_mm / 1000.0) {
@@ -114,7 +118,8 @@ pub struct ProbePoint {
     pub u_mm: f64,
     /// Nominal coordinate along the second plane axis.
     pub v_mm: f64,
-    /// Error along the normal, measured − nominal, in µm (mean over repeats).
+    /// Error E = measured − nominal, µm, along the normal axis, or along the point's vector
+    /// where the file gives one (mean over repeats).
     pub e_um: f64,
     /// Number of rows averaged into this point.
     pub repeats: u32,
@@ -125,8 +130,12 @@ pub struct ProbePoint {
 /// The points of one probe file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProbeSet {
+    /// The probe file the points were read from.
     pub path: PathBuf,
+    /// Axis the errors are measured along (the [`ProbeSpec::normal`] the file was read with).
     pub normal: Axis,
+    /// The points, repeats averaged, in the order of their first row; at least 3, not all on
+    /// one line.
     pub points: Vec<ProbePoint>,
 }
 

@@ -32,7 +32,9 @@ pub fn read_probes(path: &Path, spec: &ProbeSpec) -> Result<ProbeSet> {
 /// What [`read_probe_file`] read besides the points.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProbeRead {
+    /// The points read.
     pub set: ProbeSet,
+    /// The format the file was read as ([`detect_format`]).
     pub format: ProbeFormat,
     /// Lines with text before a CSV export's header, skipped.
     pub preamble_lines: usize,
@@ -94,6 +96,7 @@ pub enum ProbeFormat {
 }
 
 impl ProbeFormat {
+    /// The format's name as messages write it: `CSV`, `DMIS`, `XYZ`, `PLY`.
     pub fn name(self) -> &'static str {
         match self {
             ProbeFormat::Csv => "CSV",
