@@ -745,7 +745,7 @@ fn readme(spec: &WebPlateSpec, command: &str) -> String {
          probe noise {noise} µm (1σ), {nout} chips of +{oum} µm planted per part, two points per part\n\
          measured twice (same `id`). The error field is the web's deflection under the cutting force\n\
          (largest mid-web, ~0 at the walls) plus a small per-part set-up offset and tilt; its formula\n\
-         is in `src/synth/web_plate.rs` and the parameters of every part in `truth.json`.\n\n\
+         is in `crates/synth/src/web_plate.rs` and the parameters of every part in `truth.json`.\n\n\
          | file | what |\n|---|---|\n\
          | `probes/pNN.csv` | probe points `id,x_mm,y_mm,z_mm` (measured; nominal is the plane Z {z}) |\n\
          | `job.toml` | the batch job: `errmap batch data/web-plate/job.toml` |\n\

@@ -21,7 +21,8 @@ pub fn plate_field_um(u_mm: f64, v_mm: f64, k: usize) -> f64 {
         + 0.5 * k as f64 * (v_mm / 300.0)
 }
 
-/// Grid columns and rows for `samples` points at the plate's 3:2 aspect
+/// Grid columns and rows for `samples` points, 3 columns to 2 rows (the plate itself is 2:1,
+/// so the nodes lie closer along v than along u)
 /// (1536 samples → 48 × 32, the benchmark's grid).
 pub fn plate_grid(samples: usize) -> (usize, usize) {
     let nu = ((1.5 * samples as f64).sqrt().ceil() as usize).max(2);

@@ -247,7 +247,7 @@ fn parse_reference(text: &str) -> Result<Option<Reference>> {
         other => Reference::parse(other).map(Some).ok_or_else(|| {
             Error::usage(
                 format!("--reference {other} is not a reference"),
-                "give shared, own-start, campaign-offset or cv",
+                "give shared, own-start, campaign-offset, room or cv",
             )
         }),
     }
