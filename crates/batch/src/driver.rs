@@ -14,8 +14,11 @@ use std::path::{Path, PathBuf};
 /// A committed run: its summary and folder, and which parts `--resume` kept.
 #[derive(Debug)]
 pub struct JobRun {
+    /// What the run did, as written to its `summary.json`.
     pub summary: BatchSummary,
+    /// The committed run folder (the shard's own `shard-I-of-N` folder for a shard).
     pub folder: PathBuf,
+    /// Parts kept from the previous run by `--resume`, by name; empty without it.
     pub reused: Vec<String>,
 }
 
@@ -380,6 +383,8 @@ pub struct MergeRequest {
     pub shards: Option<usize>,
     /// The job file, instead of the one the shards' manifests name.
     pub job: Option<PathBuf>,
+    /// `--backend` for the family network the merge trains, replacing the job's; `None` =
+    /// the job's.
     pub backend: Option<errmap_maps::nn::Backend>,
     /// Wait this long for missing shards before reporting them.
     pub wait: Option<std::time::Duration>,

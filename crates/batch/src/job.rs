@@ -40,9 +40,13 @@ pub struct Job {
     /// the first line naming every mapped column).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub header_line: Option<u64>,
+    /// `[clean]`: gross-error rejection of probe points.
     pub clean: CleanConfig,
+    /// `[interp]`: how the probes are interpolated into the network's training set.
     pub interp: InterpConfig,
+    /// `[model]`: the network, its training and the backend that trains it.
     pub model: ModelConfig,
+    /// `[toolpaths]`: the programs compensated with the fitted map, and how.
     pub toolpaths: ToolpathConfig,
     /// `[metadata]`: free-form facts for the report (machine, serial, operator, temperatures …),
     /// each a string or a number; they decide no result and are left out of the job hash.
@@ -186,7 +190,9 @@ impl Default for ToolpathConfig {
 /// A job read from a file, with the folder its relative paths are taken from.
 #[derive(Debug, Clone)]
 pub struct JobFile {
+    /// The job file as given; relative probe and toolpath paths are taken from its folder.
     pub path: PathBuf,
+    /// The job it holds, validated.
     pub job: Job,
 }
 

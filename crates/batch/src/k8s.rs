@@ -10,16 +10,21 @@ use std::path::{Path, PathBuf};
 /// What the manifests run and where.
 #[derive(Debug, Clone)]
 pub struct K8sPlan {
+    /// The job's family; names the Jobs (`errmap-<family>-shards`, `-merge`) and labels them.
     pub family: String,
+    /// Number of shards: the Indexed Job's completions and parallelism.
     pub shards: usize,
+    /// Container image that holds the errmap binary (run as `errmap` on its PATH).
     pub image: String,
     /// The PersistentVolumeClaim that holds the job, the probe files and the outputs.
     pub pvc: String,
     /// Where the claim is mounted in the containers; also their working directory.
     pub mount: String,
-    /// The job file and output folder, relative to the mount (or absolute in the container).
+    /// The job file, relative to the mount (or absolute in the container).
     pub job: String,
+    /// The batch's output folder, relative to the mount (or absolute in the container).
     pub out: String,
+    /// `--backend` passed to every shard and to the merge; `None` = the job's.
     pub backend: Option<String>,
     /// How long the merge waits for the shards, s.
     pub wait_s: u64,

@@ -32,7 +32,9 @@ use std::path::{Path, PathBuf};
 /// parts whose position in the sorted file list is `index` modulo `count`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
+    /// This shard's number, 0-based, below `count`.
     pub index: usize,
+    /// How many shards the job is split into (at least 1).
     pub count: usize,
 }
 
@@ -55,6 +57,7 @@ impl Shard {
             .ok_or_else(|| Error::usage(format!("--shard {index}/{count} is out of range"), hint))
     }
 
+    /// Shard `index` of `count`; `None` unless 0 ≤ `index` < `count`.
     pub fn new(index: usize, count: usize) -> Option<Shard> {
         (count > 0 && index < count).then_some(Shard { index, count })
     }
@@ -104,6 +107,7 @@ impl Shard {
         Ok(None)
     }
 
+    /// Whether this shard maps the part at 0-based `position` of the sorted probe files.
     pub fn takes(&self, position: usize) -> bool {
         position % self.count == self.index
     }
@@ -134,8 +138,14 @@ fn stems(files: &[PathBuf]) -> Vec<String> {
 /// Options of `errmap batch` that override or add to the job file.
 #[derive(Debug, Clone, Default)]
 pub struct BatchOptions {
+    /// `--backend`: the trainer backend, replacing the job's `[model] backend`; `None` = the
+    /// job's.
     pub backend: Option<errmap_maps::nn::Backend>,
+    /// `--shard` (or the scheduler's environment): map only this shard's parts into its own
+    /// `shard-I-of-N` folder; `None` = every part.
     pub shard: Option<Shard>,
+    /// `--out-dir`: the batch's output folder (a shard writes into its `shard-I-of-N` folder
+    /// there); `None` = the job's `output`, else `out/<family>`.
     pub output: Option<PathBuf>,
     /// Keep the parts of the folder's run whose input and outputs still match its `run.json`.
     pub resume: bool,

@@ -19,7 +19,9 @@ pub const RUN_FORMAT: &str = "errmap-run/1";
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RunManifest {
+    /// The manifest's format, [`RUN_FORMAT`].
     pub format: String,
+    /// Version of the errmap that wrote the run.
     pub errmap_version: String,
     /// `batch`, `shard` or `reduce`.
     pub kind: String,
@@ -54,9 +56,14 @@ pub struct RunManifest {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PartRecord {
+    /// The part's name, which is also its folder in the run.
     pub part: String,
+    /// The part's probe file, as the job's glob found it.
     pub probe_file: PathBuf,
+    /// SHA-256 of the probe file when the run read it (empty when it was not among the
+    /// run's inputs).
     pub input_sha256: String,
+    /// Whether the part was mapped; `false` when it failed (its error is in `summary.json`).
     pub ok: bool,
     /// Kept from the previous run by `--resume` (not recomputed).
     pub reused: bool,

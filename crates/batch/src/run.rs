@@ -27,15 +27,25 @@ use std::path::{Path, PathBuf};
 /// Everything the pipeline needs, from a job file or from `errmap map` flags.
 #[derive(Debug, Clone)]
 pub struct Settings {
+    /// Family name for titles and the summary (a single part's own name without a job).
     pub family: String,
+    /// Error direction: the maps give E along it over the two other axes.
     pub normal: Axis,
+    /// Nominal coordinate along the normal for every point, mm, when the probe files have no
+    /// nominal columns; `None` = the files' own.
     pub nominal_plane_mm: Option<f64>,
     /// Fixed map domain; `None`: bounding box of all probe points of the batch.
     pub domain: Option<Domain>,
+    /// Node spacing of the output map grids, mm.
     pub grid_step_mm: f64,
+    /// Gross-error threshold: a probe whose leave-one-out residual exceeds k·σ (robust σ) is
+    /// rejected.
     pub k_sigma: f64,
+    /// How the probes are interpolated into the training sets.
     pub method: Method,
+    /// Node spacing of the training sets inside the probes' hull, mm.
     pub spacing_mm: f64,
+    /// The networks, their training and the backend that trains them.
     pub model: ModelConfig,
     /// Plausibility bound of probe deviations and map values, mm.
     pub max_deviation_mm: f64,
@@ -50,15 +60,20 @@ pub struct Settings {
 /// One part to map and where its files go.
 #[derive(Debug, Clone)]
 pub struct PartInput {
+    /// The part's name (its folder's name, from the probe file's stem).
     pub name: String,
+    /// The part's probe file.
     pub probe_file: PathBuf,
+    /// Folder the part's files ([`PART_OUTPUTS`]) are written to.
     pub out_dir: PathBuf,
 }
 
 /// Toolpaths to compensate after fitting.
 #[derive(Debug, Clone)]
 pub struct ToolpathPlan {
+    /// The programs (G-code or CSV) to compensate.
     pub files: Vec<PathBuf>,
+    /// How to compensate them (zone, dialect, units, segment length …).
     pub settings: errmap_toolpath::CompensationSettings,
     /// `true`: each part's map (outputs in the part's folder); `false`: the family map.
     pub per_part: bool,
@@ -70,7 +85,9 @@ pub struct ToolpathPlan {
 /// A whole run.
 #[derive(Debug, Clone)]
 pub struct Plan {
+    /// What every part is mapped with.
     pub settings: Settings,
+    /// The parts this run maps (a shard's share, or those `--resume` did not keep).
     pub parts: Vec<PartInput>,
     /// Every part of the family in batch order, when this run maps only some of them (a shard,
     /// a resumed run) and its parts start from the family network: the family network is then
@@ -78,8 +95,12 @@ pub struct Plan {
     pub family_parts: Vec<PartInput>,
     /// Folder of the family maps; `None` for a single part.
     pub family_dir: Option<PathBuf>,
+    /// Toolpaths to compensate; `None` when there are none (or, in a shard, when they take
+    /// the family map, which only an unsharded run or the merge builds).
     pub toolpaths: Option<ToolpathPlan>,
+    /// The job file; `None` for a single part without one (`errmap map`).
     pub job: Option<PathBuf>,
+    /// `[index, count]` of the shard this run maps; `None` when the job is not split.
     pub shard: Option<[usize; 2]>,
 }
 
@@ -1124,7 +1145,8 @@ fn check_map_plausible(map: &ErrorMap, max_deviation_mm: f64, probe_file: &Path)
     ))
 }
 
-/// The files [`write_part`] writes into a part's folder.
+/// The files a mapped part gets in its folder: the map grid, the fitted model, the kept and the
+/// rejected probe points, the heatmap and the part's summary.
 pub const PART_OUTPUTS: [&str; 6] = [
     "map.csv",
     "model.json",

@@ -16,7 +16,9 @@ pub const REPORT_FILE: &str = "report.html";
 pub struct RunInput<'a> {
     /// The run's folder (or its staging folder while the batch writes it).
     pub dir: &'a Path,
+    /// The run's `run.json`: job, inputs, backend, date and metadata.
     pub manifest: &'a RunManifest,
+    /// The run's `summary.json`: the family, every part's figures and the toolpaths.
     pub summary: &'a BatchSummary,
 }
 

@@ -13,20 +13,35 @@ use std::path::PathBuf;
 /// The settings of one part's map, as `errmap map` takes them.
 #[derive(Debug, Clone)]
 pub struct MapRequest {
+    /// The part's probe file (errmap CSV, a CSV export with `columns`, DMIS, XYZ or PLY); its
+    /// stem names the part.
     pub probes: PathBuf,
+    /// Folder the part's map, pictures, model and summary are written to.
     pub out_dir: PathBuf,
+    /// Error direction: the map gives E along it over the two other axes.
     pub normal: Axis,
+    /// Nominal coordinate along the normal for every point, mm, when the file has no nominal
+    /// columns; `None` = the file's own.
     pub nominal_plane_mm: Option<f64>,
+    /// Map domain in the plane, mm; `None` = the probes' bounding box.
     pub domain: Option<Domain>,
+    /// Node spacing of the output map grid, mm.
     pub grid_step_mm: f64,
+    /// How the probes are interpolated into the training set.
     pub method: Method,
+    /// Node spacing of the training set inside the probes' hull, mm.
     pub spacing_mm: f64,
+    /// Gross-error threshold: a probe whose leave-one-out residual exceeds k·σ (robust σ) is
+    /// rejected.
     pub k_sigma: f64,
     /// Training epochs; `None`: the job file's default.
     pub epochs: Option<u32>,
     /// Seed of the random choices; `None`: the job file's default.
     pub seed: Option<u64>,
+    /// The trainer: `auto`, `gpu`, `cpu` or `cpu-reference`.
     pub backend: Backend,
+    /// Plausibility bound, mm: a probe deviation or map value beyond it is an error that names
+    /// the likely unit slip.
     pub max_deviation_mm: f64,
     /// Column mapping of the probe file (a CSV export), see [`errmap_maps::probe::ProbeSpec::columns`].
     pub columns: Option<String>,

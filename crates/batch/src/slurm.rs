@@ -12,9 +12,14 @@ pub struct SlurmPlan {
     pub job: PathBuf,
     /// The batch's output folder (absolute): shard folders, family, summary, logs.
     pub out: PathBuf,
+    /// The job's family; names the Slurm jobs (`errmap-<family>`, `errmap-<family>-merge`).
     pub family: String,
+    /// Number of shards: the array's tasks (`--array=0-(shards−1)`).
     pub shards: usize,
+    /// `#SBATCH --partition` of both jobs; `None` = the cluster's default.
     pub partition: Option<String>,
+    /// `#SBATCH --time` limit of each task and of the merge, in Slurm's format (`02:00:00`);
+    /// `None` = the partition's default.
     pub time: Option<String>,
     /// `--backend` passed to every task and to the merge.
     pub backend: Option<String>,

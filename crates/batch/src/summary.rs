@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 /// What happened to one part.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PartSummary {
+    /// The part's name, which is also its folder in the run.
     pub part: String,
+    /// The part's probe file, as the job's glob found it.
     pub probe_file: PathBuf,
     /// True when every output of the part was written.
     pub ok: bool,
@@ -22,6 +24,8 @@ pub struct PartSummary {
     /// DMIS features that are not points (planes, circles …), skipped; absent when none.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub skipped_features: usize,
+    /// Probe points rejected as gross errors (leave-one-out residual beyond k·σ), listed in
+    /// the part's `rejected.csv`.
     pub rejected: usize,
     /// Robust σ of the leave-one-out residuals of the clean points, µm.
     pub sigma_um: Option<f64>,
@@ -42,16 +46,18 @@ pub struct PartSummary {
     /// Share of E the delivered map removes there: 1 − (its hold-out RMSE) / `holdout_e_rms_um`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub benefit_share: Option<f64>,
-    /// RMS (about 0) and peak-to-valley of the map over the grid nodes in the measured domain
-    /// (the probes' hull), µm.
+    /// RMS (about 0) of the map over the grid nodes in the measured domain (the probes' hull),
+    /// µm.
     pub rms_um: Option<f64>,
+    /// Peak-to-valley of the map over the same nodes, µm.
     pub pv_um: Option<f64>,
     /// Share of grid nodes outside the measured domain, where the map extrapolates.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extrapolated_fraction: Option<f64>,
-    /// RMS and PV over the extrapolated nodes alone, µm (not accuracy figures).
+    /// RMS of the map over the extrapolated nodes alone, µm (not an accuracy figure).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rms_extrapolated_um: Option<f64>,
+    /// Peak-to-valley over the extrapolated nodes alone, µm (not an accuracy figure).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pv_extrapolated_um: Option<f64>,
     /// Hold-out stopping (`stop = "holdout"`): the steps kept and trained, and the
@@ -66,6 +72,7 @@ pub struct PartSummary {
 }
 
 impl PartSummary {
+    /// The summary of a part that failed: no figures, `ok` false and the error as a record.
     pub fn failed(part: &str, probe_file: &Path, error: &Error) -> PartSummary {
         PartSummary {
             part: part.into(),
@@ -102,7 +109,9 @@ fn is_zero(n: &usize) -> bool {
 /// One compensated toolpath.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ToolpathSummary {
+    /// The program, its path taken from the job file's folder.
     pub input: PathBuf,
+    /// The compensated program, in the folder of the map that compensated it (family or part).
     pub output: PathBuf,
     /// `family` or the part name whose map was used.
     pub map: String,
@@ -115,17 +124,24 @@ pub struct ToolpathSummary {
 /// The family maps.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FamilySummary {
+    /// Parts the family maps were built from.
     pub parts: usize,
+    /// The family folder (mean and std maps, the family network's `model.json`).
     pub output_dir: PathBuf,
+    /// RMS (about 0) of the mean map over the measured domain, µm.
     pub mean_rms_um: f64,
+    /// Peak-to-valley of the mean map over the measured domain, µm.
     pub mean_pv_um: f64,
+    /// Largest part-to-part standard deviation of E over the grid, µm.
     pub std_max_um: f64,
 }
 
 /// `summary.json` of a batch (or of one shard of it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BatchSummary {
+    /// The family name (a single part's own name without a job).
     pub family: String,
+    /// The job file as given; `None` for a single part mapped without one.
     pub job: Option<PathBuf>,
     /// The trainer that fitted the networks ("cpu", "gpu (…)").
     pub backend: String,
@@ -135,10 +151,15 @@ pub struct BatchSummary {
     pub shard: Option<[usize; 2]>,
     /// Map domain `[u_min, v_min, u_max, v_max]`, mm.
     pub domain_mm: Option<[f64; 4]>,
+    /// Node spacing of the map grids, mm.
     pub grid_step_mm: f64,
+    /// Every part of the run, in batch order.
     pub parts: Vec<PartSummary>,
+    /// Parts that failed (their `error` says why).
     pub failed_parts: usize,
+    /// The family maps; `None` for a shard or a single part.
     pub family_map: Option<FamilySummary>,
+    /// The compensated toolpaths; empty when the job has none.
     pub toolpaths: Vec<ToolpathSummary>,
     /// Hold-out curves and time-to-accuracy (`stop = "holdout"`): written to `timing.json`,
     /// never to `summary.json` (seconds differ from run to run).
@@ -156,6 +177,8 @@ impl BatchSummary {
         }
     }
 
+    /// Read a `summary.json` written by a batch or a shard; an error names the line and column
+    /// where it is not one.
     pub fn read(path: &Path) -> Result<BatchSummary> {
         let text = errmap_core::io::read_text(path)?;
         serde_json::from_str(&text).map_err(|e| {

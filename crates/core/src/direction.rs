@@ -8,7 +8,9 @@
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Direction {
+    /// `+`: approached with the coordinate or angle increasing.
     Forward,
+    /// `-`: approached with the coordinate or angle decreasing.
     Reverse,
 }
 
@@ -61,10 +63,12 @@ impl std::fmt::Display for Direction {
 pub mod symbol {
     use super::Direction;
 
+    /// Write a direction as `"+"` or `"-"`.
     pub fn serialize<S: serde::Serializer>(d: &Direction, s: S) -> Result<S::Ok, S::Error> {
         s.serialize_str(d.symbol())
     }
 
+    /// Read `"+"` or `"-"` (surrounding blanks ignored); anything else is an error.
     pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Direction, D::Error> {
         let text = <std::borrow::Cow<'de, str> as serde::Deserialize>::deserialize(d)?;
         Direction::parse_symbol(&text).ok_or_else(|| {

@@ -7,12 +7,16 @@ use std::path::{Path, PathBuf};
 /// `column` is the CSV column name (or 1-based field number) or a G-code word.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Location {
+    /// The input file, as the user named it.
     pub file: PathBuf,
+    /// 1-based line number; `None` when the problem is the file as a whole.
     pub line: Option<u64>,
+    /// CSV column name (or 1-based field number) or G-code word; `None` for the whole line.
     pub column: Option<String>,
 }
 
 impl Location {
+    /// The whole file, no line.
     pub fn file(file: impl AsRef<Path>) -> Self {
         Location {
             file: file.as_ref().to_path_buf(),
@@ -20,6 +24,7 @@ impl Location {
             column: None,
         }
     }
+    /// One line (1-based) of a file.
     pub fn line(file: impl AsRef<Path>, line: u64) -> Self {
         Location {
             file: file.as_ref().to_path_buf(),
@@ -27,6 +32,7 @@ impl Location {
             column: None,
         }
     }
+    /// One cell: a line (1-based) and a column name, field number or G-code word.
     pub fn cell(file: impl AsRef<Path>, line: u64, column: impl Into<String>) -> Self {
         Location {
             file: file.as_ref().to_path_buf(),
@@ -54,10 +60,15 @@ impl fmt::Display for Location {
 pub struct ErrorReport {
     /// `input`, `io`, `device` or `internal` (see [`Error::kind`]).
     pub kind: String,
+    /// What went wrong, without the location or hint.
     pub message: String,
+    /// The file at fault; `None` for errors not tied to a file (options, GPU, internal).
     pub file: Option<PathBuf>,
+    /// 1-based line in `file`; `None` when the whole file is at fault or there is no file.
     pub line: Option<u64>,
+    /// CSV column name (or field number) or G-code word; `None` when not known.
     pub column: Option<String>,
+    /// What would fix it; `None` when the error has no hint.
     pub hint: Option<String>,
 }
 
@@ -127,32 +138,53 @@ pub enum Error {
     /// Bad content in an input file (CSV, TOML, G-code …).
     #[error("{location}: {message}{}", hint_suffix(.hint))]
     Input {
+        /// File, line and column of the bad content.
         location: Location,
+        /// What is wrong there.
         message: String,
+        /// What would fix it (empty for none).
         hint: String,
     },
 
     /// A bad option or combination of options, not tied to a file.
     #[error("{message}{}", hint_suffix(.hint))]
-    Usage { message: String, hint: String },
+    Usage {
+        /// What is wrong with the options.
+        message: String,
+        /// What would fix it (empty for none).
+        hint: String,
+    },
 
     /// A file could not be read or written.
     #[error("cannot {action} {}: {source}", .path.display())]
     Io {
+        /// What was attempted, as a verb phrase after "cannot": `read`, `write`, `create folder` …
         action: &'static str,
+        /// The file or folder it was attempted on.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
 
     /// The GPU could not be used (no adapter, device lost, out of memory, limits too small).
     #[error("GPU: {message}{}", hint_suffix(.hint))]
-    Device { message: String, hint: String },
+    Device {
+        /// What failed on the GPU.
+        message: String,
+        /// What would fix it (empty for none).
+        hint: String,
+    },
 
     /// A numerical method could not produce a result from otherwise valid input
     /// (singular system, no convergence).
     #[error("{message}{}", hint_suffix(.hint))]
-    Numeric { message: String, hint: String },
+    Numeric {
+        /// Which method failed on which data.
+        message: String,
+        /// What would fix it (empty for none).
+        hint: String,
+    },
 
     /// A bug in errmap: an invariant that should have held did not.
     #[error("internal error: {0}")]
@@ -167,6 +199,7 @@ fn hint_suffix(hint: &str) -> String {
     }
 }
 
+/// errmap's result: [`Error`] unless another error type is named.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
@@ -178,24 +211,29 @@ impl Error {
             hint: hint.into(),
         }
     }
+    /// A bad option or combination of options, with what would fix it.
     pub fn usage(message: impl Into<String>, hint: impl Into<String>) -> Self {
         Error::Usage {
             message: message.into(),
             hint: hint.into(),
         }
     }
+    /// The GPU could not be used, with what would fix it.
     pub fn device(message: impl Into<String>, hint: impl Into<String>) -> Self {
         Error::Device {
             message: message.into(),
             hint: hint.into(),
         }
     }
+    /// A numerical method failed on valid input (singular system, no convergence), with what
+    /// would fix it.
     pub fn numeric(message: impl Into<String>, hint: impl Into<String>) -> Self {
         Error::Numeric {
             message: message.into(),
             hint: hint.into(),
         }
     }
+    /// A file could not be read.
     pub fn read(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io {
             action: "read",
@@ -203,6 +241,7 @@ impl Error {
             source,
         }
     }
+    /// A file could not be written.
     pub fn write(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io {
             action: "write",
@@ -274,7 +313,8 @@ impl Error {
         }
     }
 
-    /// CLI exit code: 2 bad input or usage, 3 internal or device failure.
+    /// CLI exit code: 2 bad input, usage, a numeric failure or a file that cannot be read;
+    /// 3 any other I/O failure, the device or an internal error.
     /// (Exit code 1, "a batch finished but some parts failed", is decided by the batch.)
     pub fn exit_code(&self) -> i32 {
         match self {

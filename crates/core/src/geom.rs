@@ -7,8 +7,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Axis {
+    /// The machine's X axis.
     X,
+    /// The machine's Y axis.
     Y,
+    /// The machine's Z axis.
     Z,
 }
 
@@ -60,22 +63,29 @@ impl Axis {
 /// An axis-aligned rectangle in the map plane, in mm.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Domain {
+    /// Lower bound along the first plane axis ([`Axis::plane_axes`]`.0`), mm.
     pub u_min_mm: f64,
+    /// Lower bound along the second plane axis ([`Axis::plane_axes`]`.1`), mm.
     pub v_min_mm: f64,
+    /// Upper bound along the first plane axis, mm.
     pub u_max_mm: f64,
+    /// Upper bound along the second plane axis, mm.
     pub v_max_mm: f64,
 }
 
 impl Domain {
+    /// Whether plane point (u, v), mm, lies inside the rectangle or on its edge.
     pub fn contains(&self, u_mm: f64, v_mm: f64) -> bool {
         u_mm >= self.u_min_mm
             && u_mm <= self.u_max_mm
             && v_mm >= self.v_min_mm
             && v_mm <= self.v_max_mm
     }
+    /// Extent along the first plane axis (u), mm.
     pub fn width_mm(&self) -> f64 {
         self.u_max_mm - self.u_min_mm
     }
+    /// Extent along the second plane axis (v), mm.
     pub fn height_mm(&self) -> f64 {
         self.v_max_mm - self.v_min_mm
     }

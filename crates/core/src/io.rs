@@ -114,8 +114,11 @@ pub fn open(path: &Path) -> Result<std::fs::File> {
 /// Columns are looked up by name; every error names file, line and column.
 #[derive(Debug, Clone)]
 pub struct CsvTable {
+    /// The file read; every error about the table names it.
     pub path: PathBuf,
+    /// Column names as written in the header, trimmed (a leading byte-order mark removed).
     pub headers: Vec<String>,
+    /// The records in file order, without blank and `#` lines.
     pub rows: Vec<CsvRow>,
     /// 1-based line of the header (1 unless lines before it were skipped).
     pub header_line: u64,
@@ -136,7 +139,9 @@ pub enum HeaderAt<'a> {
 /// One record of a [`CsvTable`].
 #[derive(Debug, Clone)]
 pub struct CsvRow {
+    /// 1-based line of the file where the record starts, for messages.
     pub line: u64,
+    /// The record's cells, trimmed, one per header column.
     pub fields: csv::StringRecord,
 }
 

@@ -65,8 +65,11 @@ impl Reporter for Silent {
 /// One thing a [`Recorder`] was told.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Event {
+    /// A line for a normal run ([`Reporter::info`]).
     Info(String),
+    /// A line for a verbose run ([`Reporter::detail`]).
     Detail(String),
+    /// A warning ([`Reporter::warn`]).
     Warn(String),
     /// A progress handle opened: its message and length.
     Stage(String, u64),

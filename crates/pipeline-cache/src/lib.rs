@@ -8,6 +8,7 @@
 //! or foreign file never reaches the driver. (wgpu itself checks its own header: adapter,
 //! driver validation key, wgpu version, length.) The errmap crate keeps
 //! `#![forbid(unsafe_code)]`.
+#![warn(missing_docs)]
 
 use sha2::{Digest, Sha256};
 
@@ -52,11 +53,12 @@ impl Saved {
         })
     }
 
-    /// The bytes handed to the driver.
+    /// Size of the cache data handed to the driver, bytes (the key and header not counted).
     pub fn len(&self) -> usize {
         self.data.len()
     }
 
+    /// Whether there is no cache data at all.
     pub fn is_empty(&self) -> bool {
         self.data.is_empty()
     }

@@ -67,8 +67,9 @@ pub fn encode_png(
 /// a report can find what was drawn at a value.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
-    /// Data ranges of the axes (x, y).
+    /// Data range of the x axis (first, last), in the chart's x unit.
     pub x_range: (f64, f64),
+    /// Data range of the y axis (first, last), in the chart's y unit.
     pub y_range: (f64, f64),
     /// Pixels of the corners (x_range.0, y_range.0) and (x_range.1, y_range.1).
     lo_px: (i32, i32),

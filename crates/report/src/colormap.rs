@@ -67,14 +67,19 @@ pub fn luminance(c: RGBColor) -> f64 {
 /// right and `label` (quantity and unit) above it.
 #[derive(Debug, Clone)]
 pub struct ColourBar<'a> {
+    /// The colour map the bar shows (the one the chart's cells were drawn with).
     pub map: ColourMap,
+    /// Value at the bottom of the bar, in the unit of `label`.
     pub lo: f64,
+    /// Value at the top of the bar, in the unit of `label`.
     pub hi: f64,
     /// Quantity and unit, e.g. "E, deviation from nominal (µm)".
     pub label: &'a str,
-    /// Left edge and vertical extent of the bar, pixels of the drawing area.
+    /// Left edge of the bar, pixels from the drawing area's left.
     pub x_px: i32,
+    /// Top edge of the bar (where `hi` is drawn), pixels from the drawing area's top.
     pub top_px: i32,
+    /// Bottom edge of the bar (where `lo` is drawn), pixels from the drawing area's top.
     pub bottom_px: i32,
 }
 

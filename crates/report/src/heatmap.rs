@@ -37,16 +37,21 @@ impl Scale {
 pub struct Heatmap<'a> {
     /// Title line, e.g. `web-plate p01 — PV 41.2 µm, RMS 12.0 µm` (see [`pv_rms_um`]).
     pub title: String,
-    /// Axis names of the plane, e.g. ("x", "y").
+    /// Name of the first plane axis (horizontal in the picture), e.g. "x".
     pub u_name: &'a str,
+    /// Name of the second plane axis (vertical in the picture), e.g. "y".
     pub v_name: &'a str,
     /// What the colour shows, quantity and unit, e.g. "E (µm)"; written above the colour bar.
     pub value_label: &'a str,
-    /// First node and step of the grid, mm; node (i, j) sits at (u0 + i·step, v0 + j·step).
+    /// u of the first grid node, mm; node (i, j) sits at (u0 + i·step, v0 + j·step).
     pub u0_mm: f64,
+    /// v of the first grid node, mm.
     pub v0_mm: f64,
+    /// Node spacing along both plane axes, mm (a value ≤ 0 is drawn as 1 mm).
     pub step_mm: f64,
+    /// Nodes along u.
     pub nu: usize,
+    /// Nodes along v.
     pub nv: usize,
     /// Values at the nodes, index j·nu + i; `None` is drawn grey (no value there).
     pub values: &'a [Option<f64>],
@@ -56,6 +61,7 @@ pub struct Heatmap<'a> {
     pub rejected: &'a [(f64, f64)],
     /// The measured hull (u, v) mm, in order around it; empty = not drawn.
     pub hull: &'a [[f64; 2]],
+    /// How values map to colours: diverging for signed E, sequential for magnitudes.
     pub scale: Scale,
     /// Nodes outside the measured domain (index j·nu + i), drawn lightened; empty = none.
     pub extrapolated: &'a [bool],

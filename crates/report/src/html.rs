@@ -55,13 +55,16 @@ pub fn num(value: Option<f64>, digits: usize) -> String {
 /// One table cell: escaped text, or a number (right-aligned).
 #[derive(Debug, Clone)]
 pub enum Cell {
+    /// Text, escaped when rendered, left-aligned.
     Text(String),
+    /// A number already formatted (as by [`num`]), escaped, right-aligned in tabular figures.
     Num(String),
     /// Already-escaped HTML (a `<code>` span, a figure with its `data-` attributes).
     Raw(String),
 }
 
 impl Cell {
+    /// A text cell.
     pub fn text(t: impl Into<String>) -> Cell {
         Cell::Text(t.into())
     }
@@ -143,7 +146,10 @@ pub fn para(class: &str, text: &str) -> String {
 pub struct Section {
     /// Anchor id (made safe here).
     pub id: String,
+    /// Heading of the section and its entry in the contents list (escaped when rendered).
     pub title: String,
+    /// The section's content as HTML, inserted as it stands (build it from this module's
+    /// escaping helpers).
     pub body: String,
 }
 
@@ -151,8 +157,11 @@ pub struct Section {
 /// same content.
 #[derive(Debug, Clone, Default)]
 pub struct Page {
+    /// The document's `<title>` and top heading (escaped when rendered).
     pub title: String,
+    /// A note paragraph under the heading (escaped); empty for none.
     pub lead: String,
+    /// The sections in page order, each listed in the contents.
     pub sections: Vec<Section>,
 }
 
@@ -170,6 +179,7 @@ pub fn anchor(text: &str) -> String {
 }
 
 impl Page {
+    /// Append a section; `id` is turned into a safe anchor ([`anchor`]).
     pub fn section(&mut self, id: &str, title: &str, body: String) {
         self.sections.push(Section {
             id: anchor(id),

@@ -18,10 +18,13 @@ pub const RESULT_FORMAT: &str = "errmap-result/1";
 /// One analysis result, written beside its chart(s).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AnalysisResult {
+    /// The file format, [`RESULT_FORMAT`].
     pub format: String,
     /// `linear-analysis`, `thermal-difference`, `thermal-evaluate`, `rotary-analysis`, `circular`.
     pub kind: String,
+    /// Heading of the result's report section, e.g. "Rotary axis B".
     pub title: String,
+    /// Version of the errmap that wrote the file.
     pub errmap_version: String,
     /// When the analysis ran, UTC (`SOURCE_DATE_EPOCH` when set).
     pub created_utc: String,
@@ -63,10 +66,15 @@ pub fn beside(chart: &Path) -> PathBuf {
 
 /// What [`write_result`] records.
 pub struct ResultSpec<'a> {
+    /// The analysis kind ([`AnalysisResult::kind`]), e.g. `rotary-analysis`.
     pub kind: &'a str,
+    /// Heading of the result's report section.
     pub title: String,
+    /// Input files, recorded with their SHA-256.
     pub inputs: &'a [&'a Path],
+    /// Charts written beside the result; recorded relative to its folder.
     pub charts: &'a [&'a Path],
+    /// A controller table the analysis read, copied into the result; `None` for none.
     pub table: Option<&'a Path>,
 }
 

@@ -10,8 +10,11 @@ use std::f64::consts::PI;
 /// The selected plane.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Plane {
+    /// G17: the XY plane, arcs about Z.
     G17,
+    /// G18: the ZX plane (first axis Z, second X), arcs about Y.
     G18,
+    /// G19: the YZ plane, arcs about X.
     G19,
 }
 
@@ -30,12 +33,20 @@ impl Plane {
 /// exact even when I/J/K give slightly different radii), axis coordinate linear in angle.
 #[derive(Debug, Clone)]
 pub struct Arc {
+    /// The plane the arc turns in.
     pub plane: Plane,
+    /// Start point `[x, y, z]`, program units (mm or inch).
     pub start: [f64; 3],
+    /// End point `[x, y, z]`, program units.
     pub end: [f64; 3],
+    /// Centre in the plane's (first, second) coordinates ([`Plane::axes`]), program units.
     pub centre: (f64, f64),
+    /// Distance from the centre to the start in the plane, program units.
     pub r_start: f64,
+    /// Distance from the centre to the end in the plane, program units.
     pub r_end: f64,
+    /// Angle of the start about the centre, radians, counter-clockwise from the plane's first
+    /// axis.
     pub theta_start: f64,
     /// Signed sweep in radians: positive counter-clockwise (G3), negative clockwise (G2).
     pub sweep: f64,

@@ -36,6 +36,8 @@ impl Dialect {
         }
     }
 
+    /// The name `--dialect` and the job file take (`linuxcnc`, `fanuc`, `sinumerik`,
+    /// `heidenhain`).
     pub fn name(self) -> &'static str {
         match self {
             Dialect::Linuxcnc => "linuxcnc",
@@ -53,13 +55,18 @@ impl Dialect {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FanucNumbers {
+    /// Pocket-calculator input (DPI = 1): `X10` is 10 mm (10 in under G20).
     Calculator,
+    /// Increment system IS-A: `X10` is 0.1 mm (0.01 in).
     IsA,
+    /// Increment system IS-B, the common one: `X10` is 0.01 mm (0.001 in).
     IsB,
+    /// Increment system IS-C: `X10` is 0.001 mm (0.0001 in).
     IsC,
 }
 
 impl FanucNumbers {
+    /// Parse a `--fanuc-numbers` value: `calculator`, `is-a`, `is-b` (or `increment`), `is-c`.
     pub fn parse(text: &str) -> Option<FanucNumbers> {
         match text.trim().to_ascii_lowercase().as_str() {
             "calculator" => Some(FanucNumbers::Calculator),
@@ -99,6 +106,7 @@ pub enum PowerOnMotion {
 }
 
 impl PowerOnMotion {
+    /// Parse a power-on motion value: `g0`/`g00` or `g1`/`g01` (any case).
     pub fn parse(text: &str) -> Option<PowerOnMotion> {
         match text.trim().to_ascii_lowercase().as_str() {
             "g0" | "g00" => Some(PowerOnMotion::Rapid),
@@ -112,11 +120,14 @@ impl PowerOnMotion {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Units {
+    /// Millimetres (G21; G71 on a Heidenhain).
     Mm,
+    /// Inches (G20; G70 on a Heidenhain).
     Inch,
 }
 
 impl Units {
+    /// Parse a units value: `mm`, `inch` or `in` (any case).
     pub fn parse(text: &str) -> Option<Units> {
         match text.trim().to_ascii_lowercase().as_str() {
             "mm" => Some(Units::Mm),
@@ -129,9 +140,13 @@ impl Units {
 /// Kind of a motion mode (group 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Motion {
+    /// Rapid traverse (G0).
     Rapid,
+    /// Linear interpolation at feed (G1).
     Linear,
+    /// Clockwise arc (G2).
     ArcCw,
+    /// Counter-clockwise arc (G3).
     ArcCcw,
     /// Drilling/boring canned cycle (G73, G74, G76, G81–G89 …).
     Canned,
@@ -167,6 +182,7 @@ pub enum Frame {
 /// ([`g_code`]) gives it a meaning.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct GCode {
+    /// The whole part of the code (G38.2 → 38).
     pub number: u16,
     /// The digit after the decimal point (G38.2 → 2; G1 → 0).
     pub decimal: u8,
@@ -205,9 +221,11 @@ impl std::fmt::Display for GCode {
 /// What a G code means to the rewrite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum G {
+    /// Selects a motion mode (modal group 1).
     Motion(Motion),
     /// Cancel the motion mode (G80).
     MotionCancel,
+    /// Selects the arc plane (G17, G18, G19).
     Plane(super::arc::Plane),
     /// Units: `true` for inches.
     Units(bool),

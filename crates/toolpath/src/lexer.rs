@@ -20,7 +20,12 @@ use std::ops::Range;
 #[derive(Debug, Clone, PartialEq)]
 pub enum TokenKind {
     /// A word: upper-cased letter (or `@`/`^`) and its value.
-    Word { letter: u8, value: WordValue },
+    Word {
+        /// The address: an upper-case ASCII letter, or `@`/`^` for polar words.
+        letter: u8,
+        /// The word's value as written.
+        value: WordValue,
+    },
     /// `( … )` comment (also `(msg, …)`, `(debug, …)`).
     Comment,
     /// `;` comment to the end of the line.
@@ -29,16 +34,26 @@ pub enum TokenKind {
     Percent,
     /// `#n = value` or `#<name> = value`: `target` is the normalised parameter name.
     Assignment {
+        /// The parameter assigned, normalised ([`param_name`]): `1`, `<level>`.
         target: String,
+        /// Byte range of the right-hand side in the program text (not evaluated here).
         value_span: Range<usize>,
     },
     /// An O-word line: `keyword` is `sub`, `endsub`, `call`, `while`, … (lower case).
-    OWord { name: String, keyword: String },
+    OWord {
+        /// The O-word's number or `<name>`, normalised ([`param_name`]): `100`, `<probe>`.
+        name: String,
+        /// The flow-control keyword after it, lower case; empty when there is none.
+        keyword: String,
+    },
     /// Spaces and tabs.
     Space,
     /// A dialect statement or instruction (`WHILE`, `GOTO`, `TRANS`, `DEF`, a Heidenhain `%`
     /// header …): `name` upper-cased; the token runs to the end of the block.
-    Keyword { name: String },
+    Keyword {
+        /// The statement's name, upper case (`WHILE`, `TRANS`).
+        name: String,
+    },
     /// Anything else (a letter without a value, a stray character).
     Other,
 }
@@ -56,9 +71,12 @@ pub enum WordValue {
     Inc(f64),
 }
 
+/// One token of a line: its kind and where it lies in the program text.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Token {
+    /// What the token is.
     pub kind: TokenKind,
+    /// Byte range of the token in the whole program text (not the line).
     pub span: Range<usize>,
 }
 
@@ -68,8 +86,11 @@ pub struct Token {
 pub struct Line {
     /// 1-based line number as an editor shows it.
     pub number: u64,
+    /// Byte range of the line's content in the program text, without its terminator.
     pub span: Range<usize>,
+    /// Byte offset just after the line's terminator: where the next line starts.
     pub end: usize,
+    /// The line's tokens in order; they tile `span` exactly.
     pub tokens: Vec<Token>,
 }
 

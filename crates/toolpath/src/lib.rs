@@ -247,8 +247,9 @@ pub struct CompensationReport {
     /// Unchanged lines that got their modal motion word (e.g. `G2 `) prefixed because an inserted
     /// return changed the modal motion (G-code only; rare).
     pub lines_prefixed: u64,
-    /// Lines read and written.
+    /// Lines (G-code lines or CSV lines, header included) read from the input.
     pub lines_in: u64,
+    /// Lines written to the compensated output.
     pub lines_out: u64,
     /// What a machinist should know about the compensated program (e.g. a path tolerance of
     /// the program's own larger than the compensation it carries).
@@ -295,7 +296,8 @@ fn trace_settings(settings: &CompensationSettings) -> CompensationSettings {
     }
 }
 
-/// Compensate a G-code program (RS274/NGC, LinuxCNC dialect). `source` names the file in errors.
+/// Compensate a G-code program in its dialect (`settings.dialect`, or detected; Heidenhain
+/// Klartext too): the compensated text and what was done. `source` names the file in errors.
 ///
 /// A map that measured the part 10 µm high everywhere moves every cut 10 µm down (P' = P − E):
 ///
@@ -418,8 +420,11 @@ fn expand_refused(
 pub struct TracedMove {
     /// 1-based line of the block.
     pub line: u64,
+    /// The block's motion mode (rapid, feed, arc, cycle …).
     pub kind: dialect::Motion,
+    /// Where the move starts, `[x, y, z]` mm in work coordinates.
     pub start_mm: [f64; 3],
+    /// Where the move ends, `[x, y, z]` mm in work coordinates.
     pub end_mm: [f64; 3],
     /// The arc of a G2/G3 block, mm.
     pub arc_mm: Option<Arc>,
@@ -455,8 +460,11 @@ pub fn compensate_csv(
 /// done.
 #[derive(Debug, Serialize)]
 pub struct CompensationDocument<'a> {
+    /// The toolpath read, as given.
     pub input: &'a Path,
+    /// The compensated toolpath written, as given.
     pub output: &'a Path,
+    /// What the compensation did.
     pub report: &'a CompensationReport,
 }
 

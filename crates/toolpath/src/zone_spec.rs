@@ -61,18 +61,33 @@ fn choice<T>(
 /// The compensation settings in words, as the command line gives them.
 #[derive(Debug, Clone, Default)]
 pub struct SettingsText<'a> {
+    /// `--zone`: `MIN,MAX` along the map's normal in the units the program starts in, or `all`;
+    /// `None` = the map's probed surface ± `surface_tol_mm`.
     pub zone: Option<&'a str>,
+    /// `--surface-tol`: half-width of the default zone around the probed surface, mm.
     pub surface_tol_mm: f64,
+    /// `--max-segment`: longest segment emitted in the zone, mm.
     pub max_segment_mm: f64,
+    /// `--chord-tol`: largest distance between an arc and its chords, mm.
     pub chord_tol_mm: f64,
+    /// `--dialect` (`linuxcnc`, `fanuc`, `sinumerik`, `heidenhain`); `None` = detect.
     pub dialect: Option<&'a str>,
+    /// `--units` of a program that does not say (`mm`, `inch`); `None` = refuse such a program.
     pub units: Option<&'a str>,
+    /// `--fanuc-numbers` (`calculator`, `is-a`, `is-b`, `is-c`); `None` = refuse decimal-less
+    /// Fanuc coordinates.
     pub fanuc_numbers: Option<&'a str>,
+    /// `--extrapolate`: also compensate outside the measured domain.
     pub extrapolate: bool,
+    /// `--domain-margin`: margin around the probes' hull that still counts as measured, mm.
     pub domain_margin_mm: f64,
+    /// `--power-on-motion` (`g0`, `g1`); `None` = refuse axis words before any motion word.
     pub power_on_motion: Option<&'a str>,
+    /// `--expand`: run subprograms, loops and parameters and write the flattened program.
     pub expand: bool,
+    /// `--compensate-holes`: move canned-cycle depths by −E at holes in the zone.
     pub compensate_holes: bool,
+    /// `--same-part-per-offset`: apply the map in each work offset's coordinates.
     pub same_part_per_offset: bool,
 }
 

@@ -12,7 +12,10 @@ use crate::io::CsvTable;
 /// A value in a column's unit → the reader's unit: `v * scale + offset`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Conversion {
+    /// Reader's units per column unit (1000 for a column in mm read as µm).
     pub scale: f64,
+    /// Added after scaling, in the reader's unit (non-zero only for units with another zero,
+    /// such as K or °F read as °C).
     pub offset: f64,
 }
 
@@ -23,6 +26,7 @@ impl Conversion {
         offset: 0.0,
     };
 
+    /// A value in the column's unit converted to the reader's unit.
     pub fn apply(self, value: f64) -> f64 {
         value * self.scale + self.offset
     }
@@ -36,6 +40,7 @@ pub type Units = &'static [(&'static str, f64, f64)];
 pub struct FieldTable<F: 'static> {
     /// `(key, field)` in the order messages list them.
     pub fields: &'static [(&'static str, F)],
+    /// The units each field accepts in brackets (empty for a field without a unit).
     pub units: fn(F) -> Units,
     /// The hint of every error in the mapping text (how to write `--columns` for this reader).
     pub usage: &'static str,
@@ -61,14 +66,18 @@ impl<F: Copy + PartialEq> FieldTable<F> {
 /// Where a field's column is, as given.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ColumnRef {
+    /// A header name: the whole text after `=`, brackets included.
     Name(String),
+    /// A 1-based column number.
     Index(usize),
 }
 
 /// One `FIELD=COLUMN[unit]` of a mapping.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Entry<F> {
+    /// The reader's field the column feeds.
     pub field: F,
+    /// The column as written: header name or 1-based number.
     pub column: ColumnRef,
     /// The text after `=`, for messages.
     pub text: String,

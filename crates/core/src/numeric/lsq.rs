@@ -12,22 +12,39 @@ pub const DEFAULT_RANK_TOLERANCE: f64 = 1e-10;
 pub enum Refusal {
     /// The design has `values` entries, not `rows`×`columns`, or no column.
     Shape {
+        /// Values given: observations y ([`solve`]) or regressors row by row ([`solve_rows`]).
         values: usize,
+        /// Observations the design has (rows of A, or y's length in [`solve_rows`]).
         rows: usize,
+        /// Unknowns (columns of A).
         columns: usize,
     },
     /// Fewer observations than unknowns.
-    TooFew { rows: usize, columns: usize },
+    TooFew {
+        /// Observations (rows of A).
+        rows: usize,
+        /// Unknowns (columns of A).
+        columns: usize,
+    },
     /// Column `column` is zero for every observation.
-    ZeroColumn { column: usize },
+    ZeroColumn {
+        /// 0-based index of the zero column.
+        column: usize,
+    },
     /// Column `column` holds a value that is not finite.
-    NotFinite { column: usize },
+    NotFinite {
+        /// 0-based index of the column with a NaN or infinite value.
+        column: usize,
+    },
     /// Column `column` is (to the tolerance) a combination of the columns before it:
     /// the numerical rank is below the number of unknowns. `condition` is the condition
     /// number of the column-scaled design (infinite when exactly singular).
     RankDeficient {
+        /// 0-based index of the first column found dependent.
         column: usize,
+        /// Numerical rank: the columns independent to the tolerance.
         rank: usize,
+        /// Condition number of the column-scaled design (σ_max/σ_min of R).
         condition: f64,
     },
 }
@@ -245,7 +262,9 @@ fn condition_of(r: &DMatrix<f64>) -> f64 {
 /// The straight line y = intercept + slope·x through points in the least-squares sense.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Line {
+    /// y at x = 0, in y's unit.
     pub intercept: f64,
+    /// Change of y per unit of x.
     pub slope: f64,
     /// Root mean square of the residuals (over n, not n − 2).
     pub rms: f64,
