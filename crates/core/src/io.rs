@@ -85,6 +85,15 @@ impl<W: Write> Write for Limited<W> {
 }
 
 /// [`write_atomic`] for content already in memory.
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("table.txt");
+/// errmap_core::io::write_atomic_bytes(&path, b"0 0.000 0.000\n").unwrap();
+/// assert_eq!(std::fs::read(&path).unwrap(), b"0 0.000 0.000\n");
+/// // Nothing else is left in the folder: the temporary file was renamed into place.
+/// assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+/// ```
 pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes))
 }

@@ -274,6 +274,15 @@ pub struct Line {
 ///
 /// Solved in closed form about the mean of x (the normal equations of the centred design are
 /// diagonal, so this is as accurate as QR and needs no factorization).
+///
+/// ```
+/// use errmap_core::numeric::lsq::fit_line;
+///
+/// // y = 1 + 2x with residuals +0.1, −0.2, +0.1 (they sum to zero and are orthogonal to x)
+/// let line = fit_line(&[0.0, 1.0, 2.0], &[1.1, 2.8, 5.1]).unwrap();
+/// assert!((line.intercept - 1.0).abs() < 1e-12 && (line.slope - 2.0).abs() < 1e-12);
+/// assert!((line.rms - (0.06f64 / 3.0).sqrt()).abs() < 1e-12);
+/// ```
 pub fn fit_line(xs: &[f64], ys: &[f64]) -> Option<Line> {
     let n = xs.len() as f64;
     if xs.len() < 2 || xs.len() != ys.len() {

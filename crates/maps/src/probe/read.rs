@@ -25,6 +25,27 @@ pub const COLLINEAR_RELATIVE_TOLERANCE: f64 = 1e-6;
 /// Read and validate a probe file: columns, numbers, nominal, domain; repeats of one nominal
 /// point (same nominal within [`REPEAT_TOLERANCE_MM`], or same `id`) are averaged. Points keep
 /// the order of their first row. The format follows from the file ([`detect_format`]).
+///
+/// Four points of a plate whose nominal is the plane Z 0, the third probed twice:
+///
+/// ```
+/// use errmap_maps::probe::{read_probes, ProbeSpec};
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("p01.csv");
+/// std::fs::write(
+///     &path,
+///     "id,x_mm,y_mm,z_mm\na,0,0,0.010\nb,10,0,0.020\nc,0,10,-0.005\nc,0,10,-0.015\nd,10,10,0\n",
+/// )
+/// .unwrap();
+/// let spec = ProbeSpec { nominal_plane_mm: Some(0.0), ..ProbeSpec::default() };
+/// let set = read_probes(&path, &spec).unwrap();
+/// let e_um: Vec<f64> = set.points.iter().map(|p| p.e_um).collect();
+/// // E = measured − nominal along Z, in µm; the repeat of `c` is averaged: (−5 − 15) / 2.
+/// let expected = [10.0, 20.0, -10.0, 0.0];
+/// assert!(e_um.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-9), "{e_um:?}");
+/// assert_eq!(set.points[2].repeats, 2);
+/// ```
 pub fn read_probes(path: &Path, spec: &ProbeSpec) -> Result<ProbeSet> {
     read_probe_file(path, spec).map(|r| r.set)
 }
