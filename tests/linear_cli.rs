@@ -21,7 +21,7 @@ fn close(v: &serde_json::Value, expected: f64, what: &str) {
     );
 }
 
-/// The 3 × 2 × 3 hand data set of tests/linear_eval.rs (figures worked out there).
+/// The 3 × 2 × 3 hand data set of crates/metrology/tests/linear_eval.rs (figures worked out there).
 const HAND: &str = "run,direction,target_mm,deviation_um\n\
 1,+,0,1\n1,+,100,4\n1,+,200,-1\n1,-,200,-7\n1,-,100,2\n1,-,0,-1\n\
 2,+,0,2\n2,+,100,6\n2,+,200,-1\n2,-,200,-5\n2,-,100,3\n2,-,0,0\n\
@@ -690,7 +690,7 @@ fn fanuc_reference_point_elsewhere_than_the_first_target() {
     );
 }
 
-/// Forward-only hand data (figures worked out in tests/linear_eval.rs):
+/// Forward-only hand data (figures worked out in crates/metrology/tests/linear_eval.rs):
 /// target 0: 1, 2, 3 → x̄ = 2, s = 1; target 10: 4, 6, 8 → x̄ = 6, s = 2; target 20: −1, 0, 1 → x̄ = 0, s = 1.
 const FORWARD_ONLY: &str = "run,direction,target_mm,deviation_um\n\
 1,+,0,1\n1,+,10,4\n1,+,20,-1\n\

@@ -3,7 +3,7 @@
 //! Same model, loss and Adam step as [`super::CpuTrainer`], and the same gradient lanes
 //! (sample s to lane s mod 8, lanes summed in ascending sample order, then the tree
 //! +4, +2, +1), but every multiply-add is fused, so results differ from the reference in the
-//! last bits; `tests/nn.rs` bounds the difference. The order of every sum depends only on the
+//! last bits; `crates/maps/tests/nn.rs` bounds the difference. The order of every sum depends only on the
 //! training set's size (chunks of [`CHUNK_BLOCKS`] blocks, added in chunk order), never on
 //! the number of cores, so a run gives the same bytes on any machine with the same SIMD path.
 

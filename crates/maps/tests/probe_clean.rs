@@ -1,7 +1,7 @@
 //! Gross-error rejection on a synthetic plate with known truth: chips rejected, good points and a real sharp bump kept.
 
-use errmap::geom::Axis;
-use errmap::probe::{reject_gross_errors, ProbePoint, ProbeSet, SIGMA_FLOOR_UM};
+use errmap_core::geom::Axis;
+use errmap_maps::probe::{reject_gross_errors, ProbePoint, ProbeSet, SIGMA_FLOOR_UM};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

@@ -1,7 +1,7 @@
 //! Tests of the CPU reference trainer: layout, initialisation, normalisation, backprop, Adam, fitting, determinism, config validation.
 
-use errmap::geom::Domain;
-use errmap::nn::*;
+use errmap_core::geom::Domain;
+use errmap_maps::nn::*;
 
 fn small_set() -> TrainingSet {
     // 70 samples (more than the 64 gradient lanes) of a smooth function on [-1, 1]².
@@ -373,7 +373,7 @@ fn bad_batches_are_errors_not_panics() {
     broken[0].params.pop();
     assert!(broken[0].forward([0.0, 0.0]).is_nan());
     // A network whose sizes and parameters disagree is refused as bad input, saying so.
-    let refused = |err: errmap::Error, words: &str| {
+    let refused = |err: errmap_core::Error, words: &str| {
         assert_eq!(err.kind(), "input", "{err}");
         assert!(err.to_string().contains(words), "{err}");
     };

@@ -1,7 +1,7 @@
 //! `grid` never leaves a node inside or on the probes' hull without a finite value: many convex layouts on fine lattices, every method, nodes that rounding puts on or next to the hull's edges.
 
-use errmap::geom::Domain;
-use errmap::interp::{resample, Grid, Method, Surface};
+use errmap_core::geom::Domain;
+use errmap_maps::interp::{resample, Grid, Method, Surface};
 
 const METHODS: [Method; 3] = [Method::NaturalNeighbour, Method::SibsonC1, Method::Linear];
 

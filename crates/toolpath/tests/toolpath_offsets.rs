@@ -1,7 +1,7 @@
 //! Work offsets G54–G59 (G54.1 P…): a second offset refused in the zone by default, followed with `--same-part-per-offset` (the map applied in each offset's coordinates), and the position unknown after any change of offset.
 
-use errmap::geom::{Axis, ErrorField};
-use errmap::toolpath::{compensate_gcode, CompensationSettings, Dialect};
+use errmap_core::geom::{Axis, ErrorField};
+use errmap_toolpath::{compensate_gcode, CompensationSettings, Dialect};
 use std::path::Path;
 
 /// E = 0.02 + 0.001·x mm along Z, everywhere measured.

@@ -1,7 +1,7 @@
 //! Toolpath compensation per dialect (Fanuc, Sinumerik, Heidenhain ISO, LinuxCNC), checked point by point against P' = P − E, each refusal with its message, and one test per failure measured in the field.
 
-use errmap::geom::{Axis, ErrorField};
-use errmap::toolpath::{
+use errmap_core::geom::{Axis, ErrorField};
+use errmap_toolpath::{
     compensate_gcode, CompensationReport, CompensationSettings, Dialect, FanucNumbers, Units,
 };
 use std::path::Path;
@@ -639,7 +639,7 @@ fn random_programs_compensate_to_the_original_minus_e_inside_and_unchanged_outsi
 
 #[test]
 fn coordinates_are_fixed_point_without_minus_zero() {
-    use errmap::toolpath::format_coord;
+    use errmap_toolpath::format_coord;
     assert_eq!(format_coord(-0.00001, false), "0.0000");
     assert_eq!(format_coord(1.23456, false), "1.2346");
     assert_eq!(format_coord(-2.5, true), "-2.50000");

@@ -1,6 +1,6 @@
 //! Positioning figures of every standard against hand arithmetic, and the run-file reader's validation.
 
-use errmap::linear::{evaluate, parse_runs, Direction, Sample, Standard};
+use errmap_metrology::linear::{evaluate, parse_runs, Direction, Sample, Standard};
 use std::path::Path;
 
 const TOL: f64 = 1e-12;
@@ -445,7 +445,7 @@ fn reader_errors_name_file_line_and_what_to_fix() {
 
 #[test]
 fn malformed_tables_are_errors_not_panics() {
-    use errmap::linear::{read_table, TableFormat, TableOptions};
+    use errmap_metrology::linear::{read_table, TableFormat, TableOptions};
     let dir = tempfile::tempdir().unwrap();
     let cases: [(&str, Option<TableFormat>); 12] = [
         ("0 1\n", Some(TableFormat::Linuxcnc)),
@@ -510,7 +510,7 @@ fn worked_example() -> Vec<Sample> {
     out
 }
 
-fn figure(ev: &errmap::linear::Evaluation, symbol: &str, want: f64) {
+fn figure(ev: &errmap_metrology::linear::Evaluation, symbol: &str, want: f64) {
     match ev.figure(symbol) {
         Some(Some(v)) => close(v, want, symbol),
         other => panic!("{}: {symbol} is {other:?}, expected {want}", ev.standard),
@@ -569,7 +569,7 @@ fn gb10931_every_figure_of_the_worked_example_by_hand() {
         "{names:?}"
     );
     assert_eq!(
-        errmap::linear::target_symbols(Standard::Gb10931_1989)[0],
+        errmap_metrology::linear::target_symbols(Standard::Gb10931_1989)[0],
         "X̄_j↑"
     );
 }

@@ -1,7 +1,7 @@
 //! Probe files: the error sign and axes, repeats, and one test per rejected input, each asserting its message.
 
-use errmap::geom::{Axis, Domain};
-use errmap::probe::{read_probes, write_points_csv, write_rejected_csv, ProbeSpec, Rejected};
+use errmap_core::geom::{Axis, Domain};
+use errmap_maps::probe::{read_probes, write_points_csv, write_rejected_csv, ProbeSpec, Rejected};
 use std::path::PathBuf;
 
 /// Write `text` to a file named `name` in a fresh temp dir; keep the dir alive with the path.
@@ -324,13 +324,17 @@ fn absurd_but_finite_coordinates_do_not_panic() {
     assert_eq!(set.points[0].repeats, 2);
     // Two sites 1e-300 apart are one site (positions are snapped to 1e-12 of the extent), so
     // two distinct sites remain and the surface is refused.
-    let err = errmap::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1.0, 1.0]])
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("2 distinct site(s)"), "{err}");
     let err =
-        errmap::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1e-300, 1.0]])
+        errmap_maps::interp::Surface::new(&[[0.0, 0.0, 1.0], [1e-300, 0.0, 1.0], [0.0, 1.0, 1.0]])
             .unwrap_err()
             .to_string();
+    assert!(err.contains("2 distinct site(s)"), "{err}");
+    let err = errmap_maps::interp::Surface::new(&[
+        [0.0, 0.0, 1.0],
+        [1e-300, 0.0, 1.0],
+        [0.0, 1e-300, 1.0],
+    ])
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("cannot triangulate"), "{err}");
 }

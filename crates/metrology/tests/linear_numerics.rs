@@ -1,6 +1,6 @@
 //! Air refractive index against NIST and IAPWS published values; air and material corrections, pitch fit and error budget against hand arithmetic.
 
-use errmap::linear::{
+use errmap_metrology::linear::{
     compute_budget, correct_air, fit_pitch, normalise_material, parse_runs, refractive_index,
     saturation_vapour_pressure_pa, sensitivities, AirConditions, AirCorrection, AirFormula,
     BudgetSetup,
@@ -436,7 +436,7 @@ fn air_index_refuses_conditions_outside_the_valid_range() {
 }
 
 /// Assert that `result` is refused with an error of `kind` whose message holds `words`.
-fn assert_refused<T: std::fmt::Debug>(result: errmap::Result<T>, kind: &str, words: &str) {
+fn assert_refused<T: std::fmt::Debug>(result: errmap_core::Result<T>, kind: &str, words: &str) {
     let err = result.expect_err(words);
     assert_eq!(err.kind(), kind, "{err}");
     assert!(err.to_string().contains(words), "{err}");

@@ -1,7 +1,7 @@
 //! Interpolation checked against closed forms: plane reproduction, exactness at the sites, Sibson C1 on a quadratic, hull limits, grids.
 
-use errmap::geom::Domain;
-use errmap::interp::{resample, Grid, Method, Surface};
+use errmap_core::geom::Domain;
+use errmap_maps::interp::{resample, Grid, Method, Surface};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
