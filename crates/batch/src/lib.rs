@@ -8,6 +8,7 @@ pub mod folder_report;
 pub mod job;
 pub mod k8s;
 pub mod manifest;
+pub mod nested;
 mod part_record;
 pub mod reduce;
 pub mod run;
@@ -232,6 +233,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
         },
         per_part: job.toolpaths.map == MapChoice::Part,
         allow_weak_map: job.toolpaths.allow_weak_map,
+        max_uncertainty_um: job.max_uncertainty_um,
     });
     // A shard sees only some parts, so family maps (and toolpaths compensated with the family
     // map) come from an unsharded run; each shard maps its own parts and per-part toolpaths.
