@@ -212,7 +212,7 @@ fn check_family(data: &Path, out: &Path, truth: &Truth) {
         );
         // Map vs truth inside the probed area.
         let (header, map) = read_csv(&dir.join("map.csv"));
-        assert_eq!(header, ["x_mm", "y_mm", "e_um"]);
+        assert_eq!(header, ["x_mm", "y_mm", "e_um", "u_um"]);
         let errors: Vec<f64> = map
             .iter()
             .filter(|r| r[0] >= x0 && r[0] <= x1 && r[1] >= y0 && r[1] <= y1)
@@ -619,7 +619,7 @@ fn map_one_part_and_bad_inputs_name_file_line_and_column() {
         0,
     );
     let (header, map) = read_csv(&d.join("wall/map.csv"));
-    assert_eq!(header, ["y_mm", "z_mm", "e_um"]);
+    assert_eq!(header, ["y_mm", "z_mm", "e_um", "u_um"]);
     // Nodes run u (y) fastest over the bounding box y 0…140, z 0…40.
     assert_eq!((map[1][0], map[1][1]), (4.0, 0.0));
     assert_eq!(map.last().unwrap()[1], 40.0);

@@ -92,6 +92,10 @@ pub struct CompensateArgs {
     /// the surface's scatter is noise).
     #[arg(long)]
     pub allow_weak_map: bool,
+    /// Leave points where the map's u(E) (model.json's uncertainty, map.csv's u_um) exceeds
+    /// UM µm nominal, as points outside the measured domain.
+    #[arg(long, value_name = "UM")]
+    pub max_uncertainty_um: Option<f64>,
 }
 
 pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
@@ -117,7 +121,13 @@ pub fn run(args: CompensateArgs, _globals: Globals) -> Result<i32> {
     let benefit_warning =
         model.check_benefit(args.allow_weak_map, "pass --allow-weak-map", &args.model)?;
     errmap::io::safety::protect(&args.input);
-    let report = compensate_file(&args.input, &args.output, &model, &settings)?;
+    let report = match args.max_uncertainty_um {
+        None => compensate_file(&args.input, &args.output, &model, &settings)?,
+        Some(max_um) => {
+            let bounded = model.bounded_by_uncertainty(max_um, &args.model)?;
+            compensate_file(&args.input, &args.output, &bounded, &settings)?
+        }
+    };
     // Said once the map was used: a refused program's message stays the only line.
     if let Some(warning) = benefit_warning {
         super::terminal::warn(&format!("warning: {warning}"));

@@ -40,6 +40,10 @@ pub struct Job {
     /// the first line naming every mapped column).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub header_line: Option<u64>,
+    /// Toolpaths leave points where the map's u(E) exceeds this many µm nominal, as points
+    /// outside the domain (`--max-uncertainty-um`); none: no bound.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_uncertainty_um: Option<f64>,
     /// `[clean]`: gross-error rejection of probe points.
     pub clean: CleanConfig,
     /// `[interp]`: how the probes are interpolated into the network's training set.
@@ -67,6 +71,7 @@ impl Default for Job {
             max_deviation_mm: errmap_maps::probe::DEFAULT_MAX_DEVIATION_MM,
             columns: None,
             header_line: None,
+            max_uncertainty_um: None,
             clean: CleanConfig::default(),
             interp: InterpConfig::default(),
             model: ModelConfig::default(),
@@ -392,6 +397,15 @@ impl Job {
                     key,
                     format!("{v} must be a positive number"),
                     "see docs/job.md for the default",
+                ));
+            }
+        }
+        if let Some(u) = self.max_uncertainty_um {
+            if !(u.is_finite() && u >= 0.0) {
+                return Err(bad(
+                    "max_uncertainty_um",
+                    format!("{u} must be a number ≥ 0 (µm)"),
+                    "give the largest u(E) in µm at which a toolpath point is still compensated, e.g. 2.5",
                 ));
             }
         }

@@ -9,6 +9,7 @@ pub mod folder_report;
 pub(crate) mod job;
 pub mod k8s;
 pub mod manifest;
+pub mod nested;
 mod part_record;
 pub(crate) mod reduce;
 pub(crate) mod run;
@@ -243,6 +244,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
         },
         per_part: job.toolpaths.map == MapChoice::Part,
         allow_weak_map: job.toolpaths.allow_weak_map,
+        max_uncertainty_um: job.max_uncertainty_um,
     });
     // A shard sees only some parts, so family maps (and toolpaths compensated with the family
     // map) come from an unsharded run; each shard maps its own parts and per-part toolpaths.

@@ -20,6 +20,10 @@ struct ReduceFile {
     train_nodes_bits: Vec<Option<String>>,
     /// The delivered network's map on the output grid (µm), u fastest.
     map_e_um_bits: Vec<String>,
+    /// The map's u(E) on the output grid (µm), u fastest; absent in records of an errmap that
+    /// did not compute it, or when the part's points could not be kriged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    map_u_um_bits: Option<Vec<String>>,
     /// The part's measured domain (`model.json`'s `hull_mm`, `surface_mm`), for the family's.
     #[serde(default)]
     hull_mm: Option<Vec<[f64; 2]>>,
@@ -39,6 +43,7 @@ pub struct PartReduce {
     pub holdout_fit: bool,
     pub train_nodes: Vec<Option<f64>>,
     pub map_e_um: Vec<f64>,
+    pub map_u_um: Option<Vec<f64>>,
     pub hull_mm: Option<Vec<[f64; 2]>>,
     pub surface_mm: Option<[f64; 2]>,
     /// The part's probe and rejected points, for the family maps.
@@ -57,6 +62,10 @@ impl PartReduce {
             holdout_fit: self.holdout_fit,
             train_nodes_bits: self.train_nodes.iter().map(|v| v.map(bits)).collect(),
             map_e_um_bits: self.map_e_um.iter().map(|&v| bits(v)).collect(),
+            map_u_um_bits: self
+                .map_u_um
+                .as_ref()
+                .map(|u| u.iter().map(|&v| bits(v)).collect()),
             hull_mm: self.hull_mm.clone(),
             surface_mm: self.surface_mm,
             probes_mm_bits: self
@@ -115,6 +124,10 @@ impl PartReduce {
                 .iter()
                 .map(|v| parse(v))
                 .collect::<Result<_>>()?,
+            map_u_um: file
+                .map_u_um_bits
+                .map(|u| u.iter().map(|v| parse(v)).collect::<Result<_>>())
+                .transpose()?,
             hull_mm: file.hull_mm,
             surface_mm: file.surface_mm,
             marks: Marks {

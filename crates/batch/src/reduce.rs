@@ -47,7 +47,8 @@ pub fn reduce_family(
     let train_grid = Grid::covering(domain, s.spacing_mm)?;
     let grid = Grid::covering(domain, s.grid_step_mm)?;
     for p in parts {
-        if p.train_nodes.len() != train_grid.len() || p.map_e_um.len() != grid.len() {
+        let u_len_ok = p.map_u_um.as_ref().is_none_or(|u| u.len() == grid.len());
+        if p.train_nodes.len() != train_grid.len() || p.map_e_um.len() != grid.len() || !u_len_ok {
             return Err(Error::usage(
                 format!("part '{}' was mapped on another grid", p.part),
                 "merge the shards of one job (same domain, spacing and grid step)",
@@ -91,7 +92,8 @@ pub fn reduce_family(
         marks.probes.extend_from_slice(&p.marks.probes);
         marks.rejected.extend_from_slice(&p.marks.rejected);
     }
-    let family = write_family(dir, &mean, &std, &model, maps.len(), &marks, s)?;
+    let u_parts: Option<Vec<&[f64]>> = parts.iter().map(|p| p.map_u_um.as_deref()).collect();
+    let (family, model) = write_family(dir, &mean, &std, model, u_parts, maps.len(), &marks, s)?;
     let mut out = FamilyOutcome {
         family: Some(family),
         toolpaths: Vec::new(),
@@ -122,6 +124,7 @@ mod tests {
                 Some(f64::MIN_POSITIVE),
             ],
             map_e_um: vec![1.0 / 3.0, -0.0, 12_345.678_901_234_567],
+            map_u_um: Some(vec![0.1, 2.0 / 3.0, 0.0]),
             hull_mm: Some(vec![[0.1, 0.2], [600.0 / 7.0, 1.0 / 3.0], [5.5, 290.0]]),
             surface_mm: Some([4.999_999_999_999_999, 5.0]),
             marks: Marks {

@@ -13,6 +13,7 @@ use errmap_core::error::{Error, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::progress::Reporter;
 use errmap_maps::interp::{self, Grid, Method, Surface};
+use errmap_maps::map::uncertainty::{self, Uncertainty};
 use errmap_maps::map::{family_stats, Benefit, ErrorMap, FittedModel};
 use errmap_maps::nn::stop::Holdout;
 use errmap_maps::nn::{Mlp, ModelConfig, Normalisation, Trainer, TrainingSet};
@@ -80,6 +81,9 @@ pub struct ToolpathPlan {
     /// Use maps that remove less than [`errmap_maps::map::MIN_BENEFIT_SHARE`] of E at their
     /// held-out points (job key `[toolpaths] allow_weak_map`).
     pub allow_weak_map: bool,
+    /// Leave points where the map's u(E) exceeds this (µm) nominal, as points outside the
+    /// domain (job key `max_uncertainty_um`); `None`: no bound.
+    pub max_uncertainty_um: Option<f64>,
 }
 
 /// A whole run.
@@ -147,6 +151,8 @@ struct Interpolated {
     holdout_nodes: Option<Vec<Option<f64>>>,
     /// Hold-out RMSE of the kriging baseline (fitted on the same kept points), µm.
     kriging_holdout_rmse_um: Option<f64>,
+    /// The kriging baseline's misses at the held-out points, µm (empty without a hold-out).
+    kriging_misses_um: Vec<f64>,
 }
 
 /// Which points lie on the boundary of their convex hull (vertices and points on its edges).
@@ -250,7 +256,8 @@ fn interpolate(
         Ok(nodes) => nodes,
         Err(e) => return Err(Box::new((prep.input, e))),
     };
-    let kriging_holdout_rmse_um = kriging_holdout_rmse(&prep);
+    let kriging_misses_um = kriging_holdout_misses(&prep).unwrap_or_default();
+    let kriging_holdout_rmse_um = errmap_maps::map::rms_um(&kriging_misses_um);
     let holdout_nodes = if prep.holdout.is_empty() {
         None
     } else {
@@ -275,6 +282,7 @@ fn interpolate(
         full_nodes: full,
         holdout_nodes,
         kriging_holdout_rmse_um,
+        kriging_misses_um,
     })
 }
 
@@ -289,22 +297,22 @@ fn kept_points(prep: &Prepared) -> Vec<ProbePoint> {
 }
 
 /// The kriging baseline a metrologist would compare the map with: fitted on the points the
-/// hold-out network saw, RMS of its misses at the held-out points (µm); `None` without a
-/// hold-out or when the points cannot be kriged.
-fn kriging_holdout_rmse(prep: &Prepared) -> Option<f64> {
+/// hold-out network saw, its misses at the held-out points (µm); `None` without a hold-out or
+/// when the points cannot be kriged.
+fn kriging_holdout_misses(prep: &Prepared) -> Option<Vec<f64>> {
     if prep.holdout.is_empty() {
         return None;
     }
     let k = interp::kriging::Kriging::fit(&probe::uve(&kept_points(prep))).ok()?;
-    let sq: f64 = prep
-        .holdout
-        .iter()
-        .map(|&i| {
-            let q = &prep.clean[i];
-            (q.e_um - k.predict(q.u_mm, q.v_mm)).powi(2)
-        })
-        .sum();
-    Some((sq / prep.holdout.len() as f64).sqrt())
+    Some(
+        prep.holdout
+            .iter()
+            .map(|&i| {
+                let q = &prep.clean[i];
+                q.e_um - k.predict(q.u_mm, q.v_mm)
+            })
+            .collect(),
+    )
 }
 
 /// The training-grid values of the parts the family network is fitted to, in batch order:
@@ -723,6 +731,13 @@ struct PartMap {
     model: FittedModel,
 }
 
+impl PartMap {
+    /// The map's u(E) per node, when it has one.
+    fn u_um(&self) -> Option<&[f64]> {
+        self.model.uncertainty.as_ref().map(|u| u.u_um.as_slice())
+    }
+}
+
 /// Step 6's outcome: every part's summary, the delivered maps, and every part's probe and
 /// rejected points in batch order (for the family maps).
 struct Delivered {
@@ -792,24 +807,31 @@ fn deliver_part(
             .collect(),
     };
     let model = fit.model(&p.prep.input.name, d).with_probes(&p.prep.clean);
-    let holdout_rmse_um = h.map(|h| holdout_rmse(p, &fit.model("holdout", h)));
+    let network_misses_um = h.map(|h| holdout_misses(p, &fit.model("holdout", h)));
+    let holdout_rmse_um = network_misses_um
+        .as_deref()
+        .and_then(errmap_maps::map::rms_um);
     let (map, model) = match kriging_if_better(p, holdout_rmse_um) {
         Some(k) => (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k)),
         None => (map, model),
     };
-    // The delivered surface's own hold-out figure: the kriging's when it is delivered.
-    let delivered_rmse_um = if model.kriging.is_some() {
-        p.kriging_holdout_rmse_um
-    } else {
-        holdout_rmse_um
-    };
+    // The delivered map's hold-out figure, nested: each held-out point is predicted by the kind
+    // chosen on the other held-out points, so the choice never sees the point it is judged on.
+    let delivered_rmse_um = network_misses_um
+        .as_deref()
+        .and_then(|n| super::nested::nested_holdout_rmse(n, &p.kriging_misses_um));
     let benefit = holdout_e_rms(p)
         .zip(delivered_rmse_um)
         .and_then(|(e, r)| Benefit::from_rms(e, r));
-    let model = model.with_benefit(benefit);
+    let uncertainty = part_uncertainty(p, &map);
+    let model = model.with_benefit(benefit).with_uncertainty(uncertainty);
     let stopping = timing.map(PartTiming::stopping);
     let axes = s.normal.plane_axes();
-    match write_part(p, &map, &model, holdout_rmse_um, stopping, s, axes) {
+    let holdout = Holdouts {
+        network_rmse_um: holdout_rmse_um,
+        delivered_rmse_um,
+    };
+    match write_part(p, &map, &model, holdout, stopping, s, axes) {
         Ok(summary) => (summary, Some((map, model, part_marks(p)))),
         Err(e) => (failed_part(&p.prep.input, &e), None),
     }
@@ -826,18 +848,61 @@ fn holdout_e_rms(p: &Interpolated) -> Option<f64> {
     errmap_maps::map::rms_um(&e)
 }
 
-/// RMS of a hold-out network's misses at the part's held-out points, µm.
-fn holdout_rmse(p: &Interpolated, holdout_model: &FittedModel) -> f64 {
-    let sq: f64 = p
-        .prep
+/// A hold-out network's misses at the part's held-out points, µm.
+fn holdout_misses(p: &Interpolated, holdout_model: &FittedModel) -> Vec<f64> {
+    p.prep
         .holdout
         .iter()
         .map(|&i| {
             let q = &p.prep.clean[i];
-            (q.e_um - holdout_model.e_um(q.u_mm, q.v_mm)).powi(2)
+            q.e_um - holdout_model.e_um(q.u_mm, q.v_mm)
         })
-        .sum();
-    (sq / p.prep.holdout.len() as f64).sqrt()
+        .collect()
+}
+
+/// The part's hold-out figures: the network's, and the delivered map's (nested).
+#[derive(Debug, Clone, Copy)]
+struct Holdouts {
+    network_rmse_um: Option<f64>,
+    delivered_rmse_um: Option<f64>,
+}
+
+/// The delivered map's u(E) on its grid (`errmap_maps::map::uncertainty`): c·max(σ_K, |E_map −
+/// E_K|) at each node, σ_K and E_K the local kriging's of every clean point, c the factor its
+/// cross-validation folds give; `None` when the points cannot be kriged (the map is delivered
+/// without u).
+fn part_uncertainty(p: &Interpolated, map: &ErrorMap) -> Option<Uncertainty> {
+    let seed = super::train_step::fnv1a(&p.prep.input.name) ^ 0x75_6e_63_65_72_74;
+    let cal = uncertainty::calibrate(&probe::uve(&p.prep.clean), seed).ok()?;
+    let noise_um = cal.kriging.parameters.noise_um();
+    let factor = cal.factor;
+    let g = map.grid;
+    let nodes: Vec<[f64; 2]> = (0..g.nv)
+        .flat_map(|j| (0..g.nu).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let (u, v) = g.node(i, j);
+            [u, v]
+        })
+        .collect();
+    let u_um: Option<Vec<f64>> = cal
+        .kriging
+        .predict_many(&nodes)
+        .into_iter()
+        .zip(&map.values)
+        .map(|(q, e)| q.map(|q| round4(factor * q.sd_um.max((e - q.e_um).abs()))))
+        .collect();
+    Some(Uncertainty {
+        method: "local-kriging-cv".into(),
+        grid: g,
+        u_um: u_um?,
+        factor: Some(factor),
+        noise_um: Some(noise_um),
+    })
+}
+
+/// To 1e-4 (µm): what `map.csv` prints, so the file and `model.json` agree.
+fn round4(x: f64) -> f64 {
+    (x * 1e4).round() / 1e4
 }
 
 /// The kriging of every clean point, when it fits the held-out points better than the network
@@ -886,7 +951,17 @@ fn write_family_maps(
     check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
     let parts: Vec<&FittedModel> = delivered.maps.iter().map(|m| &m.model).collect();
     let model = fit.model("family", fslot).with_parts(&parts);
-    let summary = write_family(dir, &mean, &std, &model, maps.len(), &delivered.marks, s)?;
+    let u_parts: Option<Vec<&[f64]>> = delivered.maps.iter().map(PartMap::u_um).collect();
+    let (summary, model) = write_family(
+        dir,
+        &mean,
+        &std,
+        model,
+        u_parts,
+        maps.len(),
+        &delivered.marks,
+        s,
+    )?;
     Ok((Some(model), Some(summary)))
 }
 
@@ -977,17 +1052,44 @@ fn part_marks(p: &Interpolated) -> Marks {
     }
 }
 
+/// The family map's u(E) per node: √(std² + Σ u_i² / N²) — how far the next part may stand
+/// from the family mean, and how well the parts' maps know their own parts.
+fn family_uncertainty(std: &ErrorMap, u_parts: &[&[f64]]) -> Option<Uncertainty> {
+    let n = u_parts.len();
+    if n == 0 || u_parts.iter().any(|u| u.len() != std.values.len()) {
+        return None;
+    }
+    let u_um = (0..std.values.len())
+        .map(|k| {
+            let own: f64 = u_parts.iter().map(|u| u[k] * u[k]).sum::<f64>() / (n * n) as f64;
+            round4((std.values[k].powi(2) + own).sqrt())
+        })
+        .collect();
+    Some(Uncertainty {
+        method: "family".into(),
+        grid: std.grid,
+        u_um,
+        factor: None,
+        noise_um: None,
+    })
+}
+
 /// The family folder: mean and std maps (CSV, heatmaps with every part's probe and rejected
-/// points and the family's measured hull) and the family network's `model.json`.
+/// points and the family's measured hull), the family map's u(E) (`uncertainty.png`, from the
+/// parts' `u_parts` when every part has one) and the family network's `model.json`, which
+/// is returned with that u.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn write_family(
     dir: &Path,
     mean: &ErrorMap,
     std: &ErrorMap,
-    model: &FittedModel,
+    model: FittedModel,
+    u_parts: Option<Vec<&[f64]>>,
     parts: usize,
     marks: &Marks,
     s: &Settings,
-) -> Result<FamilySummary> {
+) -> Result<(FamilySummary, FittedModel)> {
+    let model = model.with_uncertainty(u_parts.and_then(|u| family_uncertainty(std, &u)));
     let axes = s.normal.plane_axes();
     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
     std.write_csv(&dir.join("std.csv"), "std_um")?;
@@ -1027,14 +1129,30 @@ pub(crate) fn write_family(
         "σ of E (µm)",
         &extrapolated,
     )?;
-    errmap_core::io::write_json(&dir.join("model.json"), model)?;
-    Ok(FamilySummary {
+    let u_um = model.uncertainty.as_ref().map(|u| u.u_um.as_slice());
+    let u_figures = u_um.and_then(|u| uncertainty::median_max_um(u, &extrapolated));
+    draw_uncertainty(
+        &dir.join("uncertainty.png"),
+        &format!("{} family", s.family),
+        mean,
+        u_um,
+        u_figures,
+        marks,
+        hull,
+        axes,
+        &extrapolated,
+    )?;
+    errmap_core::io::write_json(&dir.join("model.json"), &model)?;
+    let summary = FamilySummary {
         parts,
         output_dir: dir.to_path_buf(),
         mean_rms_um: rms,
         mean_pv_um: pv,
         std_max_um: std_max,
-    })
+        u_median_um: u_figures.map(|f| f.0),
+        u_max_um: u_figures.map(|f| f.1),
+    };
+    Ok((summary, model))
 }
 
 /// `finish.ngc` → `finish-compensated.ngc` in `dir`.
@@ -1064,7 +1182,13 @@ pub(crate) fn compensate_one(
             "set [toolpaths] allow_weak_map = true in the job",
             &model_file,
         )
-        .and_then(|_| errmap_toolpath::compensate_file(input, &output, model, &tp.settings));
+        .and_then(|_| match tp.max_uncertainty_um {
+            None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings),
+            Some(max_um) => {
+                let bounded = model.bounded_by_uncertainty(max_um, &model_file)?;
+                errmap_toolpath::compensate_file(input, &output, &bounded, &tp.settings)
+            }
+        });
     match checked {
         Ok(report) => ToolpathSummary {
             input: input.to_path_buf(),
@@ -1145,14 +1269,15 @@ fn check_map_plausible(map: &ErrorMap, max_deviation_mm: f64, probe_file: &Path)
     ))
 }
 
-/// The files a mapped part gets in its folder: the map grid, the fitted model, the kept and the
-/// rejected probe points, the heatmap and the part's summary.
-pub const PART_OUTPUTS: [&str; 6] = [
+/// The files a mapped part gets in its folder: the map grid (with u(E)), the fitted model, the
+/// kept and the rejected probe points, the heatmaps of E and of u(E), and the part's summary.
+pub const PART_OUTPUTS: [&str; 7] = [
     "map.csv",
     "model.json",
     "clean.csv",
     "rejected.csv",
     "map.png",
+    "uncertainty.png",
     "summary.json",
 ];
 
@@ -1161,7 +1286,7 @@ fn write_part(
     p: &Interpolated,
     map: &ErrorMap,
     model: &FittedModel,
-    holdout_rmse_um: Option<f64>,
+    holdout: Holdouts,
     stopping: Option<Stopping>,
     s: &Settings,
     axes: (Axis, Axis),
@@ -1169,7 +1294,8 @@ fn write_part(
     let dir = &p.prep.input.out_dir;
     let name = &p.prep.input.name;
     check_map_plausible(map, s.max_deviation_mm, &p.prep.input.probe_file)?;
-    map.write_csv(&dir.join("map.csv"), "e_um")?;
+    let u_um = model.uncertainty.as_ref().map(|u| u.u_um.as_slice());
+    map.write_csv_with_u(&dir.join("map.csv"), "e_um", u_um)?;
     errmap_core::io::write_json(&dir.join("model.json"), model)?;
     probe::write_points_csv(&dir.join("clean.csv"), s.normal, &p.prep.clean)?;
     probe::write_rejected_csv(&dir.join("rejected.csv"), &p.prep.rejected)?;
@@ -1180,6 +1306,7 @@ fn write_part(
             holdout_fit: p.holdout_nodes.is_some(),
             train_nodes: p.full_nodes.clone(),
             map_e_um: map.values.clone(),
+            map_u_um: u_um.map(<[f64]>::to_vec),
             hull_mm: model.hull_mm.clone(),
             surface_mm: model.surface_mm,
             marks: marks.clone(),
@@ -1208,7 +1335,23 @@ fn write_part(
         "E (µm)",
         &acc.extrapolated,
     )?;
-    let summary = part_summary(p, holdout_rmse_um, model.benefit, stopping, &acc);
+    let u_figures = u_um.and_then(|u| uncertainty::median_max_um(u, &acc.extrapolated));
+    draw_uncertainty(
+        &dir.join("uncertainty.png"),
+        &label,
+        map,
+        u_um,
+        u_figures,
+        &marks,
+        model.hull_mm.as_deref().unwrap_or(&[]),
+        axes,
+        &acc.extrapolated,
+    )?;
+    let mut summary = part_summary(p, holdout, model.benefit, stopping, &acc);
+    summary.u_median_um = u_figures.map(|f| f.0);
+    summary.u_max_um = u_figures.map(|f| f.1);
+    summary.u_factor = model.uncertainty.as_ref().and_then(|u| u.factor);
+    summary.noise_um = model.uncertainty.as_ref().and_then(|u| u.noise_um);
     errmap_core::io::write_json(&dir.join("summary.json"), &summary)?;
     Ok(summary)
 }
@@ -1239,10 +1382,52 @@ impl Accuracy {
     }
 }
 
+/// The heatmap of a map's u(E) (`uncertainty.png`; viridis from 0), or of zeros with a title
+/// saying it is unknown when the points could not be kriged.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn draw_uncertainty(
+    path: &Path,
+    label: &str,
+    map: &ErrorMap,
+    u_um: Option<&[f64]>,
+    figures: Option<(f64, f64)>,
+    marks: &Marks,
+    hull: &[[f64; 2]],
+    axes: (Axis, Axis),
+    extrapolated: &[bool],
+) -> Result<()> {
+    let (values, title) = match (u_um, figures) {
+        (Some(u), Some((median, max))) => (
+            u.to_vec(),
+            format!("{label} — u(E): median {median:.2} µm, max {max:.2} µm (measured area)"),
+        ),
+        _ => (
+            vec![0.0; map.values.len()],
+            format!("{label} — u(E) unknown (the points could not be kriged)"),
+        ),
+    };
+    let u_map = ErrorMap {
+        grid: map.grid,
+        normal: map.normal,
+        values,
+    };
+    draw_shaded(
+        path,
+        &title,
+        &u_map,
+        marks,
+        hull,
+        Scale::Sequential,
+        axes,
+        "u(E) (µm)",
+        extrapolated,
+    )
+}
+
 /// The summary of a delivered part.
 fn part_summary(
     p: &Interpolated,
-    holdout_rmse_um: Option<f64>,
+    holdout: Holdouts,
     benefit: Option<Benefit>,
     stopping: Option<Stopping>,
     acc: &Accuracy,
@@ -1259,9 +1444,10 @@ fn part_summary(
         rejected: p.prep.rejected.len(),
         sigma_um: Some(p.prep.sigma_um),
         holdout_points: p.prep.holdout.len(),
-        holdout_rmse_um,
+        holdout_rmse_um: holdout.network_rmse_um,
         kriging_holdout_rmse_um: p.kriging_holdout_rmse_um,
-        better_fit: better_fit(p, holdout_rmse_um).map(str::to_string),
+        better_fit: better_fit(p, holdout.network_rmse_um).map(str::to_string),
+        delivered_holdout_rmse_um: holdout.delivered_rmse_um,
         holdout_e_rms_um: benefit.map(|b| b.holdout_e_rms_um),
         benefit_share: benefit.map(|b| b.share),
         rms_um: Some(acc.rms_um),
@@ -1272,6 +1458,10 @@ fn part_summary(
         rms_extrapolated_um: acc.outside_um.map(|o| o.1),
         pv_extrapolated_um: acc.outside_um.map(|o| o.0),
         stopping,
+        u_median_um: None,
+        u_max_um: None,
+        u_factor: None,
+        noise_um: None,
         output_dir: Some(p.prep.input.out_dir.clone()),
         error: None,
     }

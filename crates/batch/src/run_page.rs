@@ -161,6 +161,16 @@ fn family_section(input: &RunInput, f: &super::summary::FamilySummary) -> Result
             figure_cell("family.benefit_share", None, 3),
             Cell::text("unknown: the family map has no held-out points to judge it by"),
         ],
+        vec![
+            Cell::text("u(E) median, µm"),
+            figure_cell("family.u_median_um", f.u_median_um, 3),
+            Cell::text("median over the measured domain of √(std² + Σ u_i² / N²): the next part's spread and the parts' maps' own uncertainty"),
+        ],
+        vec![
+            Cell::text("u(E) max, µm"),
+            figure_cell("family.u_max_um", f.u_max_um, 3),
+            Cell::text("the largest of the same"),
+        ],
     ];
     let mut body = table(&["figure", "value", "definition"], &rows);
     body.push_str(&picture(
@@ -173,6 +183,13 @@ fn family_section(input: &RunInput, f: &super::summary::FamilySummary) -> Result
         "family/std.png",
         "Part-to-part spread: standard deviation of the parts' maps at each node (µm)",
     )?);
+    if input.dir.join("family/uncertainty.png").is_file() {
+        body.push_str(&picture(
+            input.dir,
+            "family/uncertainty.png",
+            "Standard uncertainty u(E) of the family map (µm)",
+        )?);
+    }
     body.push_str("<h3>Measured domain (convex hull of the probes)</h3>\n");
     body.push_str(&hull_block(input.dir, input.summary.domain_mm)?);
     Ok(body)
@@ -305,7 +322,12 @@ fn part_section(input: &RunInput, p: &PartSummary) -> Result<String> {
         f("holdout_rmse_um", "hold-out RMSE (network), µm", p.holdout_rmse_um, 3, "RMS of held-out probe value − network fitted without them: the accuracy of the map"),
         f("kriging_holdout_rmse_um", "hold-out RMSE (kriging), µm", p.kriging_holdout_rmse_um, 3, "the same for the kriging baseline (Matérn 5/2 + nugget, maximum likelihood) on the same points"),
         f("holdout_e_rms_um", "hold-out E RMS, µm", p.holdout_e_rms_um, 3, "RMS about 0 of E at the held-out points: what compensation there has to remove"),
+        f("delivered_holdout_rmse_um", "hold-out RMSE (delivered, nested), µm", p.delivered_holdout_rmse_um, 3, "each held-out point judged by the kind (network or kriging) the other held-out points chose: the honest accuracy of the map delivered"),
         f("benefit_share", "benefit share", p.benefit_share, 3, "1 − (delivered map's hold-out RMSE) / (hold-out E RMS): the share of E the map removes; below 0.10 compensate refuses the map"),
+        f("u_median_um", "u(E) median, µm", p.u_median_um, 3, "median standard uncertainty of the map over the grid nodes in the measured domain (map.csv's u_um)"),
+        f("u_max_um", "u(E) max, µm", p.u_max_um, 3, "largest u(E) there; |E_true − E_map| ≤ 2u at about 95 % of the nodes"),
+        f("u_factor", "u calibration factor", p.u_factor, 3, "c in u = c·max(σ_K, |E_map − E_K|), fitted on 10 cross-validation folds of the probe points"),
+        f("noise_um", "probe noise s, µm", p.noise_um, 3, "the noise the kriging's nugget stands for: left-out points lie within 2·√(u² + s²) of the map"),
         f("rms_um", "map RMS, µm", p.rms_um, 2, "RMS about 0 of the map over the grid nodes in the measured domain (the probes' hull)"),
         f("pv_um", "map PV, µm", p.pv_um, 2, "peak-to-valley of the map over the same nodes"),
     ];
@@ -342,6 +364,16 @@ fn part_section(input: &RunInput, p: &PartSummary) -> Result<String> {
         &format!("{folder}map.png"),
         &format!("Error map of part {} (µm)", p.part),
     )?);
+    if input.dir.join(format!("{folder}uncertainty.png")).is_file() {
+        body.push_str(&picture(
+            input.dir,
+            &format!("{folder}uncertainty.png"),
+            &format!(
+                "Standard uncertainty u(E) of the map of part {} (µm)",
+                p.part
+            ),
+        )?);
+    }
     body.push_str("<h3>Rejected points</h3>\n");
     body.push_str(&rejected_block(input, p, &folder)?);
     Ok(body)

@@ -40,6 +40,10 @@ pub struct PartSummary {
     /// `network` or `kriging`: the lower hold-out RMSE (a tie goes to the network).
     #[serde(default)]
     pub better_fit: Option<String>,
+    /// The delivered map's hold-out RMSE, nested: each held-out point judged by the kind (network
+    /// or kriging) chosen on the other held-out points, µm. The benefit share uses it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delivered_holdout_rmse_um: Option<f64>,
     /// RMS of E (about zero) at the held-out points, µm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout_e_rms_um: Option<f64>,
@@ -64,6 +68,17 @@ pub struct PartSummary {
     /// epochs to within 5 % of the converged hold-out RMS. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopping: Option<super::timing::Stopping>,
+    /// Median and largest u(E) of the map over the grid nodes in the measured domain, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_median_um: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_max_um: Option<f64>,
+    /// The calibration factor c of u = c·σ_K (cross-validation folds), and the probe noise s
+    /// the kriging's nugget stands for, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_factor: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_um: Option<f64>,
     /// Folder of the part's files.
     pub output_dir: Option<PathBuf>,
     /// Why the part failed: `{kind, message, file, line, column, hint}` (kind `input`, `io`,
@@ -88,6 +103,7 @@ impl PartSummary {
             holdout_rmse_um: None,
             kriging_holdout_rmse_um: None,
             better_fit: None,
+            delivered_holdout_rmse_um: None,
             holdout_e_rms_um: None,
             benefit_share: None,
             rms_um: None,
@@ -96,6 +112,10 @@ impl PartSummary {
             rms_extrapolated_um: None,
             pv_extrapolated_um: None,
             stopping: None,
+            u_median_um: None,
+            u_max_um: None,
+            u_factor: None,
+            noise_um: None,
             output_dir: None,
             error: Some(error.report()),
         }
@@ -134,6 +154,12 @@ pub struct FamilySummary {
     pub mean_pv_um: f64,
     /// Largest part-to-part standard deviation of E over the grid, µm.
     pub std_max_um: f64,
+    /// Median and largest u(E) of the family map over its measured domain, µm:
+    /// u = √(std² + Σ u_i² / N²), the parts' spread and their maps' own uncertainty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_median_um: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_max_um: Option<f64>,
 }
 
 /// `summary.json` of a batch (or of one shard of it).
@@ -194,20 +220,28 @@ impl BatchSummary {
     pub fn table(&self) -> String {
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |x| format!("{x:.d$}"));
         let mut s = format!(
-            "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10}\n",
-            "part", "points", "rejected", "hold-out RMS µm", "RMS µm", "PV µm", "benefit %"
+            "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10} {:>11}\n",
+            "part",
+            "points",
+            "rejected",
+            "hold-out RMS µm",
+            "RMS µm",
+            "PV µm",
+            "benefit %",
+            "u(E) max µm"
         );
         for p in &self.parts {
             if p.ok {
                 s.push_str(&format!(
-                    "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10}\n",
+                    "{:<12} {:>7} {:>9} {:>16} {:>8} {:>8} {:>10} {:>11}\n",
                     p.part,
                     p.points,
                     p.rejected,
-                    opt(p.holdout_rmse_um, 2),
+                    opt(p.delivered_holdout_rmse_um.or(p.holdout_rmse_um), 2),
                     opt(p.rms_um, 2),
                     opt(p.pv_um, 2),
-                    opt(p.benefit_share.map(|b| b * 100.0), 1)
+                    opt(p.benefit_share.map(|b| b * 100.0), 1),
+                    opt(p.u_max_um, 2)
                 ));
             } else {
                 s.push_str(&format!(

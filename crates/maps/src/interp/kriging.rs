@@ -33,7 +33,7 @@ pub struct Kriging {
 
 /// Matérn 5/2 correlation at distance `r` for length `l`.
 #[inline]
-fn matern52(r: f64, l: f64) -> f64 {
+pub(crate) fn matern52(r: f64, l: f64) -> f64 {
     let t = 5f64.sqrt() * r / l;
     (1.0 + t + t * t / 3.0) * (-t).exp()
 }

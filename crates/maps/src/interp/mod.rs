@@ -19,6 +19,7 @@
 mod gradient;
 
 pub mod kriging;
+pub mod local;
 mod sweep;
 
 use errmap_core::error::{Error, Result};

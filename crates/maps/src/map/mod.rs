@@ -2,11 +2,12 @@
 //!
 //! - [`FittedModel`] is `model.json`: the network, its normalisation, the domain and the normal —
 //!   enough to evaluate the map anywhere without retraining ([`load_error_field`]).
-//! - [`ErrorMap`] is the network evaluated on the output grid: `map.csv` (`x_mm,y_mm,e_um` for
-//!   normal z; the plane's two axes otherwise).
+//! - [`ErrorMap`] is the network evaluated on the output grid: `map.csv` (`x_mm,y_mm,e_um,u_um`
+//!   for normal z; the plane's two axes otherwise; `u_um` is [`uncertainty`]'s u(E)).
 //! - [`family_stats`] gives the family mean and standard-deviation maps.
 
 pub mod grid_file;
+pub mod uncertainty;
 
 use crate::interp::Grid;
 use crate::nn::{Mlp, Normalisation};
@@ -53,6 +54,10 @@ pub struct FittedModel {
     /// before errmap recorded it, and in maps without held-out points (the family map).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub benefit: Option<Benefit>,
+    /// u(E) on the map grid ([`uncertainty::Uncertainty`]). Absent in maps written before
+    /// errmap recorded it (`--max-uncertainty-um` then refuses the map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<uncertainty::Uncertainty>,
 }
 
 /// Below this share of E removed at the held-out points, `errmap compensate` refuses a map
@@ -122,7 +127,14 @@ impl FittedModel {
             hull_mm: None,
             surface_mm: None,
             benefit: None,
+            uncertainty: None,
         }
+    }
+
+    /// Record the map's u(E) on its grid.
+    pub fn with_uncertainty(mut self, uncertainty: Option<uncertainty::Uncertainty>) -> Self {
+        self.uncertainty = uncertainty;
+        self
     }
 
     /// Record the map's benefit at the held-out points.
@@ -160,6 +172,28 @@ impl FittedModel {
             ),
             format!("the surface's scatter is mostly noise: compensating with it moves the tool for nothing; {how_to_allow} to use it anyway"),
         ))
+    }
+
+    /// The map with nodes whose u(E) exceeds `max_um` treated as outside its domain (left
+    /// nominal by a compensation); refused when the map has no u(E), naming `path`.
+    pub fn bounded_by_uncertainty(
+        &self,
+        max_um: f64,
+        path: &Path,
+    ) -> Result<uncertainty::Bounded<'_>> {
+        uncertainty::validate_max_uncertainty(max_um, "--max-uncertainty-um")?;
+        let u = self.uncertainty.as_ref().ok_or_else(|| {
+            Error::input(
+                Location::file(path),
+                "the map records no u(E) (written before errmap computed it, or its probe points could not be kriged), so --max-uncertainty-um cannot be applied",
+                "refit the map with this version of errmap, or leave out --max-uncertainty-um (job key max_uncertainty_um)",
+            )
+        })?;
+        Ok(uncertainty::Bounded {
+            field: self,
+            uncertainty: u,
+            max_um,
+        })
     }
 
     /// The same model delivering `kriging` instead of the network.
@@ -289,6 +323,13 @@ impl FittedModel {
                 "the file is damaged: refit the map",
             ));
         }
+        if let Some(Err(m)) = model.uncertainty.as_ref().map(|u| u.validate()) {
+            return Err(Error::input(
+                Location::file(path),
+                m,
+                "the file is damaged: refit the map",
+            ));
+        }
         if let Some(Err(m)) = model.kriging.as_ref().map(|k| k.validate()) {
             return Err(Error::input(
                 Location::file(path),
@@ -408,18 +449,31 @@ impl ErrorMap {
 
     /// Write as CSV `<u>_mm,<v>_mm,<value_column>` (e.g. `x_mm,y_mm,e_um`), atomically.
     pub fn write_csv(&self, path: &Path, value_column: &str) -> Result<()> {
+        self.write_csv_with_u(path, value_column, None)
+    }
+
+    /// Write as CSV `<u>_mm,<v>_mm,<value_column>[,u_um]`, atomically: with `u_um` (one value
+    /// per node), u(E) is the fourth column (`map.csv`).
+    pub fn write_csv_with_u(
+        &self,
+        path: &Path,
+        value_column: &str,
+        u_um: Option<&[f64]>,
+    ) -> Result<()> {
         let (ua, va) = self.normal.plane_axes();
         errmap_core::io::write_atomic(path, |w| {
-            writeln!(w, "{}_mm,{}_mm,{value_column}", ua.name(), va.name())?;
+            let extra = if u_um.is_some() { ",u_um" } else { "" };
+            writeln!(w, "{}_mm,{}_mm,{value_column}{extra}", ua.name(), va.name())?;
             for j in 0..self.grid.nv {
                 for i in 0..self.grid.nu {
+                    let k = j * self.grid.nu + i;
                     let (u, v) = self.grid.node(i, j);
-                    let e = self
-                        .values
-                        .get(j * self.grid.nu + i)
-                        .copied()
-                        .unwrap_or(f64::NAN);
-                    writeln!(w, "{},{},{:.4}", round_mm(u), round_mm(v), e)?;
+                    let e = self.values.get(k).copied().unwrap_or(f64::NAN);
+                    write!(w, "{},{},{:.4}", round_mm(u), round_mm(v), e)?;
+                    if let Some(us) = u_um {
+                        write!(w, ",{:.4}", us.get(k).copied().unwrap_or(f64::NAN))?;
+                    }
+                    writeln!(w)?;
                 }
             }
             Ok(())
@@ -431,15 +485,21 @@ impl ErrorMap {
     /// Read a map file written by [`ErrorMap::write_csv`] (`<u>_mm,<v>_mm,<value>`, u fastest)
     /// and recover its grid; rows that do not form a regular grid are an error naming the line.
     pub fn read_csv(path: &Path, normal: Axis) -> Result<ErrorMap> {
+        Ok(ErrorMap::read_csv_with_u(path, normal)?.0)
+    }
+
+    /// [`ErrorMap::read_csv`] and the `u_um` column when the file has one (`map.csv` since
+    /// errmap wrote u(E); older three-column files give `None`). The value is the column after
+    /// the coordinates (`e_um`, `std_um`, …) that is not `u_um`.
+    pub fn read_csv_with_u(path: &Path, normal: Axis) -> Result<(ErrorMap, Option<Vec<f64>>)> {
         let table = errmap_core::io::CsvTable::read(path)?;
         let (ua, va) = normal.plane_axes();
         let cu = table.require(&format!("{}_mm", ua.name()))?;
         let cv = table.require(&format!("{}_mm", va.name()))?;
-        let ce = table
-            .headers
-            .len()
-            .checked_sub(1)
-            .filter(|&c| c != cu && c != cv)
+        let cu_um = table.headers.iter().position(|h| h == "u_um");
+        let ce = (0..table.headers.len())
+            .rev()
+            .find(|&c| c != cu && c != cv && Some(c) != cu_um)
             .ok_or_else(|| {
                 Error::input(
                     Location::line(path, 1),
@@ -448,6 +508,7 @@ impl ErrorMap {
                 )
             })?;
         let mut rows = Vec::with_capacity(table.rows.len());
+        let mut u_values = Vec::new();
         for row in &table.rows {
             rows.push((
                 table.f64(row, cu)?,
@@ -455,6 +516,9 @@ impl ErrorMap {
                 table.f64(row, ce)?,
                 row.line,
             ));
+            if let Some(c) = cu_um {
+                u_values.push(table.f64(row, c)?);
+            }
         }
         let first = rows.first().ok_or_else(|| {
             Error::input(
@@ -495,11 +559,12 @@ impl ErrorMap {
                 ));
             }
         }
-        Ok(ErrorMap {
+        let map = ErrorMap {
             grid,
             normal,
             values: rows.iter().map(|r| r.2).collect(),
-        })
+        };
+        Ok((map, cu_um.map(|_| u_values)))
     }
 }
 
@@ -662,6 +727,43 @@ mod tests {
             err.contains("mean.csv:4") && err.contains("regular grid"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn map_files_with_and_without_the_u_column_read_alike() {
+        let grid = Grid {
+            u0_mm: 0.0,
+            v0_mm: 0.0,
+            step_mm: 2.5,
+            nu: 2,
+            nv: 2,
+        };
+        let map = ErrorMap {
+            grid,
+            normal: Axis::Z,
+            values: vec![1.0, -2.0, 3.5, 0.25],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("map.csv");
+        map.write_csv_with_u(&path, "e_um", Some(&[0.5, 0.75, 1.0, 1.25]))
+            .unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(
+            text.starts_with("x_mm,y_mm,e_um,u_um\n0,0,1.0000,0.5000\n2.5,0,-2.0000,0.7500\n"),
+            "{text}"
+        );
+        let (back, u) = ErrorMap::read_csv_with_u(&path, Axis::Z).unwrap();
+        assert_eq!(back, map);
+        assert_eq!(u, Some(vec![0.5, 0.75, 1.0, 1.25]));
+        // A three-column file of an older errmap: the same map, no u.
+        std::fs::write(
+            &path,
+            "x_mm,y_mm,e_um\n0,0,1\n2.5,0,-2\n0,2.5,3.5\n2.5,2.5,0.25\n",
+        )
+        .unwrap();
+        let (old, u) = ErrorMap::read_csv_with_u(&path, Axis::Z).unwrap();
+        assert_eq!((old, u), (map.clone(), None));
+        assert_eq!(ErrorMap::read_csv(&path, Axis::Z).unwrap(), map);
     }
 
     #[test]

@@ -1,0 +1,341 @@
+//! u(E), the standard uncertainty of a delivered map at every grid node: the local kriging's σ_K (or the map's distance to the kriging, when larger) scaled by one calibration factor per part chosen on cross-validation folds, stored in `model.json`, and the field that leaves nodes with u above a bound nominal.
+//!
+//! The shape of u comes from the kriging variance ([`crate::interp::local`]): it grows away
+//! from the probes and with the noise the likelihood finds. Where the delivered map (a network)
+//! stands further from the kriging's mean E_K than σ_K, that distance counts instead:
+//! `u = c·max(σ_K, |E_map − E_K|)`. The scale c is calibrated on the data: the clean points are
+//! split into [`FOLDS`] seeded folds, each fold is predicted by the local kriging of the others,
+//! and c maximises the likelihood of the folds' misses r_i ~ N(0, c²·σ_K,i² + s²) (s the noise
+//! the nugget stands for), with a log-normal prior of width [`PRIOR_WIDTH`] about c = 1 — the
+//! likelihood fit's own scale — because at a few µm of noise a hundred misses tell c only to
+//! some 30 % ([`likelihood_factor`]).
+
+use crate::interp::local::LocalKriging;
+use crate::interp::Grid;
+use errmap_core::error::{Error, Result};
+use errmap_core::geom::{Axis, ErrorField};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use serde::{Deserialize, Serialize};
+
+/// Cross-validation folds of the calibration.
+pub const FOLDS: usize = 10;
+
+/// Width (standard deviation of ln c) of the prior about c = 1.
+pub const PRIOR_WIDTH: f64 = 0.5;
+
+/// The calibration of one part: the fitted covariance, the factor and the folds' figures.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The local kriging of every clean point (σ_K anywhere).
+    pub kriging: LocalKriging,
+    /// c: u = c·σ_K for the kriging.
+    pub factor: f64,
+    /// Folds' misses r_i (µm) and the σ_K,i of their predictions (µm).
+    pub misses_um: Vec<f64>,
+    pub sd_um: Vec<f64>,
+}
+
+/// The c of largest posterior density given the misses r_i ~ N(0, c²·σ_i² + s²) and the prior
+/// ln c ~ N(0, [`PRIOR_WIDTH`]²): golden-section search of ln c over [ln 0.1, ln 10].
+pub fn likelihood_factor(misses_um: &[f64], sd_um: &[f64], noise_um: f64) -> Option<f64> {
+    if misses_um.is_empty() {
+        return None;
+    }
+    let s2 = noise_um * noise_um;
+    let nll = |log_c: f64| -> f64 {
+        let c2 = (2.0 * log_c).exp();
+        (log_c / PRIOR_WIDTH).powi(2)
+            + misses_um
+                .iter()
+                .zip(sd_um)
+                .map(|(r, s)| {
+                    let v = (c2 * s * s + s2).max(1e-30);
+                    v.ln() + r * r / v
+                })
+                .sum::<f64>()
+    };
+    let (mut a, mut b) = (0.1f64.ln(), 10f64.ln());
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..80 {
+        let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+        if nll(x1) <= nll(x2) {
+            b = x2;
+        } else {
+            a = x1;
+        }
+    }
+    Some((0.5 * (a + b)).exp())
+}
+
+/// Calibrate the local kriging of `points_uve` on [`FOLDS`] folds drawn with `seed`.
+pub fn calibrate(points_uve: &[[f64; 3]], seed: u64) -> Result<Calibration> {
+    let kriging = LocalKriging::fit(points_uve)?;
+    let n = points_uve.len();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+    let folds = FOLDS.min(n / 4).max(2);
+    let mut fold_of = vec![0usize; n];
+    for (pos, &i) in order.iter().enumerate() {
+        fold_of[i] = pos % folds;
+    }
+    let (mut misses_um, mut sd_um) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for f in 0..folds {
+        let rest: Vec<[f64; 3]> = (0..n)
+            .filter(|&i| fold_of[i] != f)
+            .map(|i| points_uve[i])
+            .collect();
+        let held: Vec<usize> = (0..n).filter(|&i| fold_of[i] == f).collect();
+        if rest.len() < 3 || held.is_empty() {
+            continue;
+        }
+        let fold = LocalKriging::with_parameters(&rest, kriging.parameters)?;
+        let at: Vec<[f64; 2]> = held
+            .iter()
+            .map(|&i| [points_uve[i][0], points_uve[i][1]])
+            .collect();
+        for (&i, p) in held.iter().zip(fold.predict_many(&at)) {
+            if let Some(p) = p {
+                misses_um.push(points_uve[i][2] - p.e_um);
+                sd_um.push(p.sd_um);
+            }
+        }
+    }
+    let factor =
+        likelihood_factor(&misses_um, &sd_um, kriging.parameters.noise_um()).ok_or_else(|| {
+            Error::numeric(
+                "no cross-validation fold could be predicted to calibrate the uncertainty",
+                "probe more points, spread over the part",
+            )
+        })?;
+    Ok(Calibration {
+        kriging,
+        factor,
+        misses_um,
+        sd_um,
+    })
+}
+
+/// A map's u(E) on its grid, as `model.json` keeps it (`uncertainty`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Uncertainty {
+    /// How u was made, in words (`local-kriging-cv`, or `family` for a family map).
+    pub method: String,
+    /// The grid of `u_um` (node (i, j) at (u0 + i·step, v0 + j·step), u fastest).
+    pub grid: Grid,
+    /// u(E) per node, µm.
+    pub u_um: Vec<f64>,
+    /// The calibration factor c (u = c·σ_K); absent for a family map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub factor: Option<f64>,
+    /// The probe noise s the nugget stands for, µm; absent for a family map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_um: Option<f64>,
+}
+
+impl Uncertainty {
+    /// Consistency of a record read from a file (the message says what is wrong).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let g = &self.grid;
+        if g.nu == 0 || g.nv == 0 || g.nu.checked_mul(g.nv) != Some(self.u_um.len()) {
+            return Err(format!(
+                "uncertainty has {} values for a {} × {} grid",
+                self.u_um.len(),
+                g.nu,
+                g.nv
+            ));
+        }
+        if !(g.step_mm.is_finite() && g.step_mm > 0.0 && g.u0_mm.is_finite() && g.v0_mm.is_finite())
+            || self.u_um.iter().any(|u| !(u.is_finite() && *u >= 0.0))
+        {
+            return Err("uncertainty holds a non-finite number, a negative u or a step ≤ 0".into());
+        }
+        Ok(())
+    }
+
+    /// u at (u, v): the largest u of the nodes of the grid cell holding the point (a node's
+    /// own value on a node); `None` outside the grid.
+    pub fn at_um(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
+        let g = &self.grid;
+        let fu = (u_mm - g.u0_mm) / g.step_mm;
+        let fv = (v_mm - g.v0_mm) / g.step_mm;
+        let tol = 1e-9;
+        if !(fu >= -tol
+            && fv >= -tol
+            && fu <= (g.nu - 1) as f64 + tol
+            && fv <= (g.nv - 1) as f64 + tol)
+        {
+            return None;
+        }
+        let span = |f: f64, n: usize| {
+            let near = f.round();
+            if (f - near).abs() <= tol {
+                let k = (near.max(0.0) as usize).min(n - 1);
+                (k, k)
+            } else {
+                let lo = (f.floor().max(0.0) as usize).min(n - 1);
+                (lo, (lo + 1).min(n - 1))
+            }
+        };
+        let (i0, i1) = span(fu, g.nu);
+        let (j0, j1) = span(fv, g.nv);
+        let mut worst = 0.0_f64;
+        for j in [j0, j1] {
+            for i in [i0, i1] {
+                worst = worst.max(self.u_um[j * g.nu + i]);
+            }
+        }
+        Some(worst)
+    }
+}
+
+/// Median and largest of u over the nodes not flagged (`skip`: e.g. the extrapolated ones), µm.
+pub fn median_max_um(u_um: &[f64], skip: &[bool]) -> Option<(f64, f64)> {
+    let mut kept: Vec<f64> = u_um
+        .iter()
+        .zip(skip.iter().chain(std::iter::repeat(&false)))
+        .filter(|(_, &s)| !s)
+        .map(|(&u, _)| u)
+        .collect();
+    if kept.is_empty() {
+        return None;
+    }
+    kept.sort_by(f64::total_cmp);
+    let n = kept.len();
+    let median = if n % 2 == 1 {
+        kept[n / 2]
+    } else {
+        0.5 * (kept[n / 2 - 1] + kept[n / 2])
+    };
+    Some((median, kept[n - 1]))
+}
+
+/// A map whose nodes with u(E) above `max_um` count as outside its domain: there E is `None`
+/// (the point is left nominal, whatever `--extrapolate` says) and the point is not measured.
+pub struct Bounded<'a> {
+    pub field: &'a dyn ErrorField,
+    pub uncertainty: &'a Uncertainty,
+    pub max_um: f64,
+}
+
+impl Bounded<'_> {
+    fn trusted(&self, u_mm: f64, v_mm: f64) -> bool {
+        self.uncertainty
+            .at_um(u_mm, v_mm)
+            .is_some_and(|u| u <= self.max_um)
+    }
+}
+
+impl ErrorField for Bounded<'_> {
+    fn normal(&self) -> Axis {
+        self.field.normal()
+    }
+    fn error_mm(&self, u_mm: f64, v_mm: f64) -> Option<f64> {
+        if self.trusted(u_mm, v_mm) {
+            self.field.error_mm(u_mm, v_mm)
+        } else {
+            None
+        }
+    }
+    fn measured(&self, u_mm: f64, v_mm: f64, margin_mm: f64) -> Option<bool> {
+        let inner = self.field.measured(u_mm, v_mm, margin_mm)?;
+        Some(inner && self.trusted(u_mm, v_mm))
+    }
+    fn surface_mm(&self) -> Option<(f64, f64)> {
+        self.field.surface_mm()
+    }
+}
+
+/// Check a `--max-uncertainty-um` value: a finite number ≥ 0.
+pub fn validate_max_uncertainty(max_um: f64, flag: &str) -> Result<()> {
+    if max_um.is_finite() && max_um >= 0.0 {
+        return Ok(());
+    }
+    Err(Error::usage(
+        format!("{flag} {max_um} is not a number ≥ 0 (µm)"),
+        format!("give {flag} a bound in µm, e.g. 2.5"),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn likelihood_factor_by_hand() {
+        // Noise-free misses (s = 0) of σ_i = 1: the posterior's −2·log density is
+        // n·ln c² + Σr²/c² + (ln c / w)²; at ln c = x its derivative is
+        // 2n − 2Σr²·e^(−2x) + 2x/w². With r = ±2 (Σr² = 4n), n = 100, w = 0.5 the root is
+        // found here by bisection, independently of the golden sections.
+        let n = 100usize;
+        let misses: Vec<f64> = (0..n)
+            .map(|k| if k % 2 == 0 { 2.0 } else { -2.0 })
+            .collect();
+        let sd = vec![1.0; n];
+        let g = |x: f64| 2.0 * n as f64 - 8.0 * n as f64 * (-2.0 * x).exp() + 2.0 * x / 0.25;
+        let (mut lo, mut hi) = (0.0f64, 2.0f64);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if g(mid) > 0.0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        let want = (0.5 * (lo + hi)).exp();
+        let got = likelihood_factor(&misses, &sd, 0.0).unwrap();
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+        // Without the prior it would be exactly 2; the prior pulls it a little towards 1.
+        assert!(got < 2.0 && got > 1.95, "{got}");
+        assert_eq!(likelihood_factor(&[], &[], 1.0), None);
+    }
+
+    fn hand_made() -> Uncertainty {
+        // 3 × 2 nodes, step 10: u = 1 2 3 / 4 5 9 µm.
+        Uncertainty {
+            method: "test".into(),
+            grid: Grid {
+                u0_mm: 0.0,
+                v0_mm: 0.0,
+                step_mm: 10.0,
+                nu: 3,
+                nv: 2,
+            },
+            u_um: vec![1.0, 2.0, 3.0, 4.0, 5.0, 9.0],
+            factor: None,
+            noise_um: None,
+        }
+    }
+
+    #[test]
+    fn u_at_a_point_is_the_worst_node_of_its_cell() {
+        let u = hand_made();
+        assert_eq!(u.at_um(0.0, 0.0), Some(1.0));
+        assert_eq!(u.at_um(20.0, 10.0), Some(9.0));
+        assert_eq!(u.at_um(10.0, 0.0), Some(2.0));
+        assert_eq!(u.at_um(5.0, 5.0), Some(5.0));
+        assert_eq!(u.at_um(15.0, 5.0), Some(9.0));
+        assert_eq!(u.at_um(5.0, 0.0), Some(2.0));
+        assert_eq!(u.at_um(-0.1, 0.0), None);
+        assert_eq!(u.at_um(20.0, 10.1), None);
+        assert!(u.validate().is_ok());
+        let mut bad = hand_made();
+        bad.u_um.pop();
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .contains("5 values for a 3 × 2 grid"));
+    }
+
+    #[test]
+    fn median_and_max_skip_flagged_nodes() {
+        let u = [1.0, 7.0, 3.0, 2.0, 100.0];
+        assert_eq!(
+            median_max_um(&u, &[false, false, false, false, true]),
+            Some((2.5, 7.0))
+        );
+        assert_eq!(median_max_um(&u, &[]), Some((3.0, 100.0)));
+        assert_eq!(median_max_um(&u, &[true; 5]), None);
+    }
+}
