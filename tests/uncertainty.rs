@@ -124,8 +124,11 @@ fn bilinear(map: &[Vec<f64>], x: f64, y: f64, col: usize) -> f64 {
         + a * b * at(i + 1, j + 1)
 }
 
-/// The probe points of a synthetic part file, as (id, x, y, line) without the planted chips.
-fn probe_lines(path: &Path, chips: &[&str]) -> (String, Vec<(String, f64, f64, f64, String)>) {
+/// A probe row: id, x, y, z (mm) and the line as written.
+type ProbeRow = (String, f64, f64, f64, String);
+
+/// The header and probe rows of a synthetic part file, without the planted chips.
+fn probe_lines(path: &Path, chips: &[&str]) -> (String, Vec<ProbeRow>) {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap().to_string();

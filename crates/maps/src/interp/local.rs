@@ -310,9 +310,9 @@ mod tests {
 
     #[test]
     fn one_site_system_has_the_closed_form() {
-        // Three sites at one spot far (≫ ℓ) from p: r ≈ 0, R = (1+g)·I + off-diagonals 1 → the
-        // weights are 1/3 each and λ = −(1 + g/3)... checked through σ_K² = σ²·(1 + (1+2)/3 + g/3)
-        // for sites at one point: 1ᵀR⁻¹1 = 3/(3 + g), so σ_K² = σ²(1 + (3 + g)/3).
+        // Three sites at one spot, p far (≫ ℓ) away: r = 0 and R = J + g·I (J all ones), so
+        // R⁻¹1 = 1/(3 + g), λ = −1/(1ᵀR⁻¹1) = −(3 + g)/3, w = 1/3 each and
+        // σ_K² = σ²·(1 − 0 − λ) = σ²·(1 + (3 + g)/3); the value is the sites' mean.
         let pts = [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.0, 0.0, 3.0]];
         let p = Parameters {
             length_mm: 1.0,
