@@ -68,15 +68,16 @@ pub struct PartSummary {
     /// epochs to within 5 % of the converged hold-out RMS. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopping: Option<super::timing::Stopping>,
-    /// Median and largest u(E) of the map over the grid nodes in the measured domain, µm.
+    /// Median u(E) of the map over the grid nodes in the measured domain, µm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_median_um: Option<f64>,
+    /// Largest u(E) of the map over the grid nodes in the measured domain, µm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_max_um: Option<f64>,
-    /// The calibration factor c of u = c·σ_K (cross-validation folds), and the probe noise s
-    /// the kriging's nugget stands for, µm.
+    /// The calibration factor c of u = c·σ_K, fitted on cross-validation folds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_factor: Option<f64>,
+    /// The probe noise s (1σ) the local kriging's nugget stands for, µm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_um: Option<f64>,
     /// Folder of the part's files.

@@ -171,6 +171,7 @@ impl Cells {
 pub struct LocalKriging {
     sites: Vec<[f64; 2]>,
     values: Vec<f64>,
+    /// The Matérn 5/2 + nugget parameters fitted by likelihood on a subsample.
     pub parameters: Parameters,
     cells: Cells,
 }
@@ -179,7 +180,9 @@ pub struct LocalKriging {
 /// estimate of the noise-free surface, µm.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Prediction {
+    /// Kriged E at the point, µm (measured − nominal).
     pub e_um: f64,
+    /// σ_K: standard deviation of the kriged E about the noise-free surface, µm.
     pub sd_um: f64,
 }
 

@@ -1,8 +1,8 @@
 //! Scattered-point interpolation on the map plane: Delaunay surface (spade), natural-neighbour, Sibson C1 and linear resampling onto grids.
 //!
 //! A [`Surface`] is the Delaunay triangulation of scattered sites `(u, v, e)` with a gradient
-//! estimated at every site. It answers three interpolants inside the convex hull of the sites
-//! and `None` outside it (never an extrapolated number):
+//! estimated at every site. It answers these methods inside the convex hull of the sites and
+//! `None` outside it (never an extrapolated number):
 //!
 //! - [`Method::NaturalNeighbour`]: Sibson's natural-neighbour (C0) interpolant.
 //! - [`Method::SibsonC1`]: Sibson's C1 interpolant, which blends the natural-neighbour value
@@ -12,7 +12,8 @@
 //! - [`Method::Kriging`]: the posterior mean of a Gaussian process (Matérn 5/2 with a nugget,
 //!   hyper-parameters by maximum likelihood; see [`kriging`]) of all sites, inside the hull.
 //!
-//! All three reproduce a plane exactly (linear precision). [`resample`] evaluates a surface on
+//! The three interpolants (natural-neighbour, Sibson C1, linear) reproduce a plane exactly
+//! (linear precision); kriging smooths through its nugget, so it need not pass through the sites. [`resample`] evaluates a surface on
 //! a regular [`Grid`] in parallel (rayon over blocks of rows, each block with its own copy of the
 //! triangulation so spade's walk hint and interpolation buffers stay local to one thread).
 

@@ -31,8 +31,9 @@ pub struct Calibration {
     pub kriging: LocalKriging,
     /// c: u = c·σ_K for the kriging.
     pub factor: f64,
-    /// Folds' misses r_i (µm) and the σ_K,i of their predictions (µm).
+    /// The folds' misses r_i: held-out measured E − the fold's prediction, µm.
     pub misses_um: Vec<f64>,
+    /// σ_K,i of each fold prediction, in the order of `misses_um`, µm.
     pub sd_um: Vec<f64>,
 }
 
@@ -214,8 +215,11 @@ pub fn median_max_um(u_um: &[f64], skip: &[bool]) -> Option<(f64, f64)> {
 /// A map whose nodes with u(E) above `max_um` count as outside its domain: there E is `None`
 /// (the point is left nominal, whatever `--extrapolate` says) and the point is not measured.
 pub struct Bounded<'a> {
+    /// The delivered map whose E is bounded.
     pub field: &'a dyn ErrorField,
+    /// Its u(E) grid.
     pub uncertainty: &'a Uncertainty,
+    /// Largest u(E) still trusted, µm (`--max-uncertainty-um`).
     pub max_um: f64,
 }
 
