@@ -21,6 +21,7 @@ pub mod gpu;
 pub mod interp;
 pub mod io;
 pub mod linear;
+pub mod live;
 pub mod map;
 pub mod nn;
 pub mod numeric;

@@ -1,0 +1,65 @@
+//! `errmap live`: the composite thermal model applied while the machine works. Temperatures,
+//! coolant state and axis positions come in from sources (a CSV stream, Modbus TCP, OPC UA),
+//! each cycle computes every axis's compensation from its fitted model, the safety rules bound
+//! and rate-limit it, targets write it into the controller, and every cycle is logged into the
+//! temperature history store, with a state file for the monitor (`errmap serve`).
+
+pub mod alarms;
+pub mod axis;
+pub mod config;
+pub mod cycle;
+pub mod filter;
+pub mod log;
+pub mod plausibility;
+pub mod replay;
+pub mod source;
+pub mod state;
+pub mod target;
+
+pub use config::LiveConfig;
+pub use cycle::{run, RunOptions, RunSummary, StopFlags};
+
+use crate::error::{Error, Result};
+use config::{SourceConfig, SourceKind};
+use source::Source;
+use target::Target;
+
+/// Connect a network source (exit 3 when it cannot be reached).
+fn connect_source(
+    config: &LiveConfig,
+    s: &SourceConfig,
+    kind: SourceKind,
+) -> Result<Box<dyn Source>> {
+    let _ = config;
+    Err(Error::usage(
+        format!(
+            "source '{}': {} sources are not built into this errmap",
+            s.name,
+            kind.name()
+        ),
+        "use a csv source",
+    ))
+}
+
+/// Connect every target an axis names (exit 3 when one cannot be reached).
+fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
+    let targets: Vec<Box<dyn Target>> = Vec::new();
+    for t in &config.targets {
+        if !config
+            .axes
+            .iter()
+            .any(|a| a.target.as_deref() == Some(t.name.as_str()))
+        {
+            continue;
+        }
+        return Err(Error::usage(
+            format!(
+                "target '{}': {} targets are not built into this errmap",
+                t.name,
+                t.kind.name()
+            ),
+            "run with --dry-run",
+        ));
+    }
+    Ok(targets)
+}
