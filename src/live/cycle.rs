@@ -616,8 +616,8 @@ impl Live {
                     ));
                 }
             }
-            let ramp_stop = matches!(self.on_stop, OnStop::RampToZero) && stopping.is_some();
-            let mode = self.step(t, ramp_stop, &mut notes_of_cycle)?;
+            let stop_goal = stopping.as_ref().map(|_| self.on_stop);
+            let mode = self.step(t, stop_goal, &mut notes_of_cycle)?;
             let mut done = self.once;
             if let Some((why, since)) = &stopping {
                 let at_zero = self.axes.iter().all(|a| a.written == Line::default());
@@ -666,7 +666,9 @@ impl Live {
     }
 
     /// One cycle's decisions and writes; returns the mode.
-    fn step(&mut self, t: f64, ramp_stop: bool, notes: &mut Vec<String>) -> Result<Mode> {
+    fn step(&mut self, t: f64, stop_goal: Option<OnStop>, notes: &mut Vec<String>) -> Result<Mode> {
+        let ramp_stop = stop_goal == Some(OnStop::RampToZero);
+        let hold_stop = stop_goal == Some(OnStop::Hold);
         let utc = self.utc_at(t);
         self.apply_commands(&utc, notes);
 
@@ -807,6 +809,8 @@ impl Live {
         }
         if self.ramp_latched && !ramp_cause && !hold && self.alarms.all_acknowledged() {
             self.ramp_latched = false;
+            // The way back up is a start: at the rate limit, mode `starting` until reached.
+            self.starting = true;
             notes.push("ramp to zero released: causes gone, alarms acknowledged".into());
         }
 
@@ -820,7 +824,7 @@ impl Live {
         let mut any_held = false;
         let mut axis_holds = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
-            let (goal, held, problem) = self.goal_of(a, hold, ramp_stop);
+            let (goal, held, problem) = self.goal_of(a, hold || hold_stop, ramp_stop);
             if let Some((key, message)) = problem {
                 if let Some(id) = self.alarms.raise(
                     &key,
