@@ -824,6 +824,7 @@ impl Live {
         let mut any_held = false;
         let mut axis_holds = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
+            self.direction_of(a);
             let (goal, held, problem) = self.goal_of(a, hold || hold_stop, ramp_stop);
             if let Some((key, message)) = problem {
                 if let Some(id) = self.alarms.raise(
@@ -1108,8 +1109,9 @@ impl Live {
         let mut axis_states = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
             let x = self.position_of(a);
-            let direction = self.axes[a].last_direction;
             let demand = self.demand_of(a);
+            // (After demand_of, which takes in this cycle's direction.)
+            let direction = self.axes[a].last_direction;
             let axis = &self.axes[a];
             let px = axis.model.px_mm();
             let geometric = |d: &super::axis::Demand| d.geometric_comp_um.unwrap_or(0.0);
