@@ -10,7 +10,7 @@ use std::io::Write;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Appends one row every 50 ms while `on` is set, cycling through `rows`.
 fn logger(
@@ -34,20 +34,6 @@ fn logger(
             std::thread::sleep(Duration::from_millis(50));
         }
     })
-}
-
-fn wait_for<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
-    let start = Instant::now();
-    loop {
-        if let Some(v) = f() {
-            return v;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "timed out waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
 }
 
 fn db(d: &Path) -> rusqlite::Connection {
@@ -74,25 +60,6 @@ fn outcome(d: &Path, id: i64) -> Option<String> {
             |r| r.get(0),
         )
         .ok()
-}
-
-/// Cycles after `from` (by cycle number) once `f` holds for the newest.
-fn newest(d: &Path) -> Option<Cycle> {
-    if !d.join("live.sqlite").exists() {
-        return None;
-    }
-    let conn = db(d);
-    let has: i64 = conn
-        .query_row(
-            "SELECT COUNT(*) FROM sqlite_master WHERE name = 'live_cycles'",
-            [],
-            |r| r.get(0),
-        )
-        .ok()?;
-    if has == 0 {
-        return None;
-    }
-    cycles(&d.join("live.sqlite")).pop()
 }
 
 fn setup(on_stop: &str) -> (tempfile::TempDir, Vec<String>) {

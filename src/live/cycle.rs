@@ -129,6 +129,8 @@ struct AxisSlot {
     target_name: String,
     written: Line,
     last_direction: Option<Direction>,
+    /// What the target last took (a write is skipped while it would be the same).
+    last_output: Option<Output>,
 }
 
 /// The coolant state's channel and the model labels of its two states.
@@ -270,7 +272,7 @@ impl Live {
 
         // Sources: a source that cannot be reached is exit 3.
         let mut sources = Vec::new();
-        for s in &config.sources {
+        for (index, s) in config.sources.iter().enumerate() {
             let source: Box<dyn Source> = match s.kind {
                 SourceKind::Csv => {
                     let path =
@@ -283,7 +285,7 @@ impl Live {
                         s.timeout_ms,
                     )?)
                 }
-                other => super::connect_source(config, s, other)?,
+                other => super::connect_source(config, index, s, other)?,
             };
             sources.push(SourceSlot {
                 source,
@@ -416,6 +418,7 @@ impl Live {
                 target_name,
                 written: Line::default(),
                 last_direction: None,
+                last_output: None,
             });
         }
 
@@ -846,11 +849,8 @@ impl Live {
             }
             any_held |= held;
             axis_holds.push(held);
-            let changed = next != axis.written || self.cycle == 0;
             axis.written = next;
-            if changed {
-                self.write_axis(a, &utc, notes);
-            }
+            self.write_axis(a, &utc, notes);
         }
         let _ = axis_holds;
 
@@ -996,6 +996,15 @@ impl Live {
                 .zip(geometric)
                 .map(|(x, g)| axis.written.at(x, axis.model.px_mm()) + g),
         };
+        // A point target takes the value at the position; a line target the line.
+        let same = match &axis.last_output {
+            Some(last) if self.targets[t].is_point() => last.value_um == output.value_um,
+            Some(last) => last.line == output.line && last.px_mm == output.px_mm,
+            None => false,
+        };
+        if same {
+            return;
+        }
         let name = axis.model.name.clone();
         let key = format!("write:{name}");
         let mut last_err = None;
@@ -1013,6 +1022,7 @@ impl Live {
                 Err(e) => last_err = Some(e.to_string()),
             }
         }
+        self.axes[a].last_output = last_err.is_none().then_some(output);
         match last_err {
             None => self.alarms.clear(&key),
             Some(e) => {

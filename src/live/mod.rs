@@ -10,6 +10,7 @@ pub mod config;
 pub mod cycle;
 pub mod filter;
 pub mod log;
+pub mod modbus;
 pub mod plausibility;
 pub mod replay;
 pub mod source;
@@ -27,24 +28,29 @@ use target::Target;
 /// Connect a network source (exit 3 when it cannot be reached).
 fn connect_source(
     config: &LiveConfig,
+    index: usize,
     s: &SourceConfig,
     kind: SourceKind,
 ) -> Result<Box<dyn Source>> {
-    let _ = config;
-    Err(Error::usage(
-        format!(
-            "source '{}': {} sources are not built into this errmap",
-            s.name,
-            kind.name()
-        ),
-        "use a csv source",
-    ))
+    match kind {
+        SourceKind::Modbus => Ok(Box::new(source::modbus::ModbusSource::connect(
+            config, index, s,
+        )?)),
+        other => Err(Error::usage(
+            format!(
+                "source '{}': {} sources are not built into this errmap",
+                s.name,
+                other.name()
+            ),
+            "use a csv or modbus source",
+        )),
+    }
 }
 
 /// Connect every target an axis names (exit 3 when one cannot be reached).
 fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
-    let targets: Vec<Box<dyn Target>> = Vec::new();
-    for t in &config.targets {
+    let mut targets: Vec<Box<dyn Target>> = Vec::new();
+    for (i, t) in config.targets.iter().enumerate() {
         if !config
             .axes
             .iter()
@@ -52,14 +58,18 @@ fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
         {
             continue;
         }
-        return Err(Error::usage(
-            format!(
-                "target '{}': {} targets are not built into this errmap",
-                t.name,
-                t.kind.name()
-            ),
-            "run with --dry-run",
-        ));
+        match t.kind {
+            config::TargetKind::ModbusRegisters => targets.push(Box::new(
+                target::modbus::ModbusTarget::connect(config, i, t)?,
+            )),
+            other => {
+                return Err(config.key_error(
+                    &format!("targets.{i}.kind"),
+                    format!("{} targets are not built into this errmap", other.name()),
+                    "use a modbus-registers target, or run with --dry-run",
+                ))
+            }
+        }
     }
     Ok(targets)
 }

@@ -297,3 +297,176 @@ impl Causal {
         coef[0]
     }
 }
+
+/// The Python of the CI virtualenv (`ERRMAP_LIVE_VENV`, else `ERRMAP_NCI_VENV`, else
+/// `.ci/venv`) when it can import `module`; otherwise None, and a test whose
+/// `ERRMAP_REQUIRE_<require>` is 1 fails.
+pub fn venv_python(module: &str, require: &str) -> Option<PathBuf> {
+    let venv = std::env::var_os("ERRMAP_LIVE_VENV")
+        .or_else(|| std::env::var_os("ERRMAP_NCI_VENV"))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join(".ci/venv"));
+    let python = venv.join("bin/python");
+    let ok = Command::new(&python)
+        .args(["-c", &format!("import {module}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(python);
+    }
+    let var = format!("ERRMAP_REQUIRE_{require}");
+    if std::env::var(&var).as_deref() == Ok("1") {
+        panic!(
+            "{var}=1 but {} cannot import {module}: run .ci/run or pip install it there",
+            python.display()
+        );
+    }
+    eprintln!(
+        "skipped: {} cannot import {module} (set ERRMAP_LIVE_VENV)",
+        python.display()
+    );
+    None
+}
+
+/// A free loopback port (the OS picks it; released for the server to bind).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A Python server process driven by JSON lines on its stdin.
+pub struct PyServer {
+    pub child: std::process::Child,
+    stdin: std::process::ChildStdin,
+    stdout: std::io::BufReader<std::process::ChildStdout>,
+    pub port: u16,
+}
+
+impl PyServer {
+    /// Start `script` (in tests/live_support) with the port as its argument; waits for `ready`.
+    pub fn start(python: &Path, script: &str, args: &[&str]) -> PyServer {
+        PyServer::start_on(python, script, args, free_port())
+    }
+
+    /// [`PyServer::start`] on a given port (a server started again where it was).
+    pub fn start_on(python: &Path, script: &str, args: &[&str], port: u16) -> PyServer {
+        use std::io::BufRead;
+        let mut child = Command::new(python)
+            .arg(repo().join("tests/live_support").join(script))
+            .arg(port.to_string())
+            .args(args)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let mut stdout = std::io::BufReader::new(child.stdout.take().unwrap());
+        let mut line = String::new();
+        stdout.read_line(&mut line).unwrap();
+        assert_eq!(line.trim(), "ready", "server {script} did not start");
+        PyServer {
+            child,
+            stdin,
+            stdout,
+            port,
+        }
+    }
+
+    /// Send one command, return its answer line.
+    pub fn ask(&mut self, command: &Value) -> String {
+        use std::io::{BufRead, Write};
+        writeln!(self.stdin, "{command}").unwrap();
+        self.stdin.flush().unwrap();
+        let mut line = String::new();
+        self.stdout.read_line(&mut line).unwrap();
+        line.trim().to_string()
+    }
+
+    pub fn stop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for PyServer {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// Waits for a condition (a state of the system under test, never a fixed time), 60 s at most.
+pub fn wait_for<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(60),
+            "timed out waiting for {what}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// The newest logged cycle, once the store has any.
+pub fn newest(dir: &Path) -> Option<Cycle> {
+    let db = dir.join("live.sqlite");
+    if !db.exists() {
+        return None;
+    }
+    let conn = rusqlite::Connection::open(&db).ok()?;
+    conn.busy_timeout(std::time::Duration::from_millis(2000))
+        .ok()?;
+    let has: i64 = conn
+        .query_row(
+            "SELECT COUNT(*) FROM sqlite_master WHERE name = 'live_cycles'",
+            [],
+            |r| r.get(0),
+        )
+        .ok()?;
+    if has == 0 {
+        return None;
+    }
+    let (cycle, at_utc, mode, inputs, outputs, note) = conn
+        .query_row(
+            "SELECT cycle, at_utc, mode, inputs_json, outputs_json, note FROM live_cycles ORDER BY cycle DESC LIMIT 1",
+            [],
+            |r| {
+                Ok((
+                    r.get::<_, i64>(0)?,
+                    r.get::<_, String>(1)?,
+                    r.get::<_, String>(2)?,
+                    r.get::<_, String>(3)?,
+                    r.get::<_, String>(4)?,
+                    r.get::<_, Option<String>>(5)?,
+                ))
+            },
+        )
+        .ok()?;
+    Some(Cycle {
+        cycle,
+        at_utc,
+        mode,
+        inputs: serde_json::from_str(&inputs).ok()?,
+        outputs: serde_json::from_str(&outputs).ok()?,
+        note,
+    })
+}
+
+/// Whether any logged note contains `needle`.
+pub fn noted(dir: &Path, needle: &str) -> bool {
+    let conn = rusqlite::Connection::open(dir.join("live.sqlite")).unwrap();
+    conn.busy_timeout(std::time::Duration::from_millis(2000))
+        .unwrap();
+    conn.query_row(
+        "SELECT COUNT(*) FROM live_cycles WHERE note LIKE ?1",
+        [format!("%{needle}%")],
+        |r| r.get::<_, i64>(0),
+    )
+    .unwrap()
+        > 0
+}

@@ -3,6 +3,7 @@
 //! watchdog) from those times.
 
 pub mod csv;
+pub mod modbus;
 
 use std::collections::HashMap;
 

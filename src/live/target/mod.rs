@@ -2,6 +2,8 @@
 //! (offset, slope, reference position); a point target (LinuxCNC external offsets, a generic
 //! node or register) takes the value at the axis's present position.
 
+pub mod modbus;
+
 use super::axis::Line;
 use crate::error::Result;
 
