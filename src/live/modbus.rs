@@ -295,7 +295,7 @@ mod tests {
         );
         assert_eq!(
             layout(DataType::U16, true, 0.1, 0.0).decode(&[0xFF38]),
-            6534.4
+            6533.6
         );
         // 21.5f32 = 0x41AC0000: high word 0x41AC first (big) or second (little).
         assert_eq!(
