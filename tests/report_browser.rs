@@ -254,12 +254,12 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
     let pdf = dt.call(s, "Page.printToPDF", json!({"printBackground": true}));
     dt.drain(Duration::from_millis(500));
 
-    // Every image decoded: 2 family maps and one heatmap per part.
+    // Every image decoded: the family's mean, std and u(E) maps, and a map and a u(E) map per part.
     let summary: Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
     let parts = summary["parts"].as_array().unwrap();
     let images = page["images"].as_array().unwrap();
-    assert_eq!(images.len(), 2 + parts.len(), "{page}");
+    assert_eq!(images.len(), 3 + 2 * parts.len(), "{page}");
     for img in images {
         assert!(
             img["complete"] == true && img["width"].as_u64().unwrap() > 0,

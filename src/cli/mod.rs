@@ -34,6 +34,7 @@ mod deprecated;
 mod gpu;
 mod grid;
 mod linear;
+mod live;
 mod part;
 mod report;
 mod rotary;
@@ -101,6 +102,8 @@ pub enum Command {
     Rotary(rotary::RotaryCommand),
     /// Dynamic circular test (ISO 230-4, ballbar or grid encoder): G, F, H and a diagnosis of axis errors.
     Circular(circular::CircularArgs),
+    /// Live thermal compensation: temperatures in, compensation out to the controller, every cycle logged.
+    Live(live::LiveArgs),
     /// Write the self-contained report.html of a batch run or an analysis's outputs (and --pdf).
     Report(report::ReportArgs),
     /// Generate sample data with known ground truth.
@@ -120,6 +123,8 @@ pub enum SynthCommand {
     Rotary(rotary::SynthRotaryArgs),
     /// Circular-test runs (ballbar or two-axis) with planted axis errors and noise.
     Circular(circular::SynthCircularArgs),
+    /// A machine log of a thermal campaign to replay through `errmap live`.
+    LiveReplay(live::SynthLiveReplayArgs),
 }
 
 /// Notes from the library (a trainer falling back to the CPU) go to stderr unless `--quiet`.
@@ -186,6 +191,8 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Synth(SynthCommand::Rotary(args)) => rotary::run_synth(args, globals),
         Command::Circular(args) => circular::run(args, globals),
         Command::Report(args) => report::run(args, globals),
+        Command::Live(args) => live::run(args, globals),
+        Command::Synth(SynthCommand::LiveReplay(args)) => live::run_synth_replay(args, globals),
         Command::Synth(SynthCommand::Circular(args)) => circular::run_synth(args, globals),
     }
 }

@@ -142,7 +142,6 @@ impl SgProjection {
     }
 }
 
-#[cfg(test)]
 /// Savitzky–Golay weights of a `window`-sample least-squares polynomial of `order`, evaluated at
 /// sample `at` (0-based within the window). `weights · samples` is the smoothed value.
 pub fn sg_weights(window: usize, order: usize, at: usize) -> Result<Vec<f64>> {

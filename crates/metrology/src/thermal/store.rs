@@ -259,11 +259,12 @@ impl Store {
         Ok(summary)
     }
 
-    /// Names of stored campaigns, in name order.
+    /// Names of stored laser campaigns, in name order. The temperature logs `errmap live`
+    /// adds (source `errmap live`, no laser readings) are not campaigns to fit from.
     pub fn campaign_names(&self) -> Result<Vec<String>> {
         let mut stmt = self
             .conn
-            .prepare("SELECT name FROM campaigns ORDER BY name")
+            .prepare("SELECT name FROM campaigns WHERE source != 'errmap live' ORDER BY name")
             .map_err(|e| read_err(&self.path, e))?;
         let names = stmt
             .query_map([], |r| r.get::<_, String>(0))

@@ -1,0 +1,78 @@
+//! `errmap live`: the composite thermal model applied while the machine works. Temperatures,
+//! coolant state and axis positions come in from sources (a CSV stream, Modbus TCP, OPC UA),
+//! each cycle computes every axis's compensation from its fitted model, the safety rules bound
+//! and rate-limit it, targets write it into the controller, and every cycle is logged into the
+//! temperature history store, with a state file for the monitor (`errmap serve`).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+#![deny(rustdoc::broken_intra_doc_links)]
+
+pub mod alarms;
+pub mod axis;
+pub mod config;
+pub mod cycle;
+pub mod filter;
+pub mod log;
+pub mod modbus;
+pub mod plausibility;
+pub mod replay;
+pub mod source;
+pub mod state;
+pub mod target;
+
+pub use config::LiveConfig;
+pub use cycle::{run, RunOptions, RunSummary, StopFlags};
+
+use errmap_core::error::{Error, Result};
+use config::{SourceConfig, SourceKind};
+use source::Source;
+use target::Target;
+
+/// Connect a network source (exit 3 when it cannot be reached).
+fn connect_source(
+    config: &LiveConfig,
+    index: usize,
+    s: &SourceConfig,
+    kind: SourceKind,
+) -> Result<Box<dyn Source>> {
+    match kind {
+        SourceKind::Modbus => Ok(Box::new(source::modbus::ModbusSource::connect(
+            config, index, s,
+        )?)),
+        other => Err(Error::usage(
+            format!(
+                "source '{}': {} sources are not built into this errmap",
+                s.name,
+                other.name()
+            ),
+            "use a csv or modbus source",
+        )),
+    }
+}
+
+/// Connect every target an axis names (exit 3 when one cannot be reached).
+fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
+    let mut targets: Vec<Box<dyn Target>> = Vec::new();
+    for (i, t) in config.targets.iter().enumerate() {
+        if !config
+            .axes
+            .iter()
+            .any(|a| a.target.as_deref() == Some(t.name.as_str()))
+        {
+            continue;
+        }
+        match t.kind {
+            config::TargetKind::ModbusRegisters => targets.push(Box::new(
+                target::modbus::ModbusTarget::connect(config, i, t)?,
+            )),
+            other => {
+                return Err(config.key_error(
+                    &format!("targets.{i}.kind"),
+                    format!("{} targets are not built into this errmap", other.name()),
+                    "use a modbus-registers target, or run with --dry-run",
+                ))
+            }
+        }
+    }
+    Ok(targets)
+}
