@@ -28,6 +28,7 @@ pub mod probe;
 pub mod progress;
 pub mod report;
 pub mod rotary;
+pub mod serve;
 pub mod synth;
 pub mod thermal;
 pub mod toolpath;

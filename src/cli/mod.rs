@@ -37,6 +37,7 @@ mod part;
 mod report;
 mod rotary;
 mod scale;
+mod serve;
 mod synth_web_plate;
 mod terminal;
 mod thermal;
@@ -105,6 +106,8 @@ pub enum Command {
     /// Generate sample data with known ground truth.
     #[command(subcommand)]
     Synth(SynthCommand),
+    /// The monitor web server with login (live loop, history, runs), and its users.
+    Serve(serve::ServeArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -186,5 +189,6 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Circular(args) => circular::run(args, globals),
         Command::Report(args) => report::run(args, globals),
         Command::Synth(SynthCommand::Circular(args)) => circular::run_synth(args, globals),
+        Command::Serve(args) => serve::run(args, globals),
     }
 }
