@@ -804,3 +804,33 @@ fn run_files_are_served_from_inside_the_runs_folder_only_with_their_types() {
         );
     }
 }
+
+#[test]
+fn removing_a_user_ends_their_sessions_on_the_running_server() {
+    let site = Site::new();
+    let server = Server::start(&site, &[]);
+    let c = client();
+    let view = login(&c, &server.url, "view");
+    let op = login(&c, &server.url, "op");
+    let rm = errmap()
+        .args(["serve", "user", "remove", "view", "--users"])
+        .arg(&site.users)
+        .output()
+        .unwrap();
+    assert!(rm.status.success());
+    // The server re-reads the file within a second of the change.
+    std::thread::sleep(Duration::from_millis(2500));
+    let gone = c
+        .get(format!("{}/live", server.url))
+        .header("cookie", &view.cookie)
+        .send()
+        .unwrap();
+    assert_eq!(gone.status(), 302);
+    let still = c
+        .get(format!("{}/live", server.url))
+        .header("cookie", &op.cookie)
+        .send()
+        .unwrap();
+    assert_eq!(still.status(), 200);
+    assert_eq!(post_login(&c, &server.url, "view", PASSWORD).status(), 401);
+}

@@ -3,13 +3,15 @@
 //! Modules: `users` (the users file, argon2id), `session` (ids, CSRF tokens, cookies),
 //! `throttle` (failed logins), `store` (live_commands, audit_log, history queries), `live`
 //! (the state file feed), `runs` (paths confined to the runs folder), `svg` (charts), `pages`
-//! (HTML), `app` (routes and layers), `login`, `views` (handlers), `clock` (UTC stamps).
+//! (HTML), `app` (shared state and helpers), `routes` (routes and layers), `login`, `views`
+//! (handlers), `clock` (UTC stamps).
 
 pub mod app;
 pub mod clock;
 pub mod live;
 pub mod login;
 pub mod pages;
+pub mod routes;
 pub mod runs;
 pub mod session;
 pub mod store;
@@ -164,7 +166,7 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<()> {
             max_live_clients: cfg.max_live_clients,
         });
         tokio::spawn(reload_users(app.clone()));
-        let service = app::router(app.clone()).into_make_service_with_connect_info::<SocketAddr>();
+        let service = routes::router(app.clone()).into_make_service_with_connect_info::<SocketAddr>();
         let handle = axum_server::Handle::new();
         tokio::spawn(shutdown_on_signal(handle.clone()));
         let scheme = if tls.is_some() { "https" } else { "http" };
