@@ -33,9 +33,9 @@ fn options() -> Options {
     while i < args.len() {
         let next = args.get(i + 1).cloned().unwrap_or_default();
         match args[i].as_str() {
-            "--clients" => o.clients = next.parse().expect("--clients N").clamp(1, 2000),
-            "--seconds" => o.seconds = next.parse().expect("--seconds S").clamp(1, 600),
-            "--rate" => o.rate = next.parse().expect("--rate R").clamp(1, 1000),
+            "--clients" => o.clients = next.parse::<usize>().expect("--clients N").clamp(1, 2000),
+            "--seconds" => o.seconds = next.parse::<u64>().expect("--seconds S").clamp(1, 600),
+            "--rate" => o.rate = next.parse::<u64>().expect("--rate R").clamp(1, 1000),
             "--errmap" => o.errmap = PathBuf::from(next),
             "--json" => {
                 o.json = true;
@@ -362,7 +362,7 @@ fn main() {
                 }
             }));
             i += 1;
-            if i % 10 == 0 {
+            if i.is_multiple_of(10) {
                 peak_rss_kib = peak_rss_kib.max(status_kib(pid, "VmRSS:").unwrap_or(0));
             }
         }
