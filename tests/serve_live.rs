@@ -395,3 +395,41 @@ fn tls_serves_https_with_secure_host_prefixed_cookies() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("TLS"), "{err}");
 }
+
+#[test]
+fn live_streams_beyond_the_limit_get_503() {
+    let site = Site::new();
+    let state = site.path().join("state.json");
+    write_state(&state, 1, 20.0, 0.0, &[]);
+    let server = Server::start(
+        &site,
+        &["--live", state.to_str().unwrap(), "--max-live-clients", "1"],
+    );
+    let c = stream_client();
+    let s = login(&c, &server.url, "view");
+    let first = stream(&c, &server.url, &s);
+    let second = c
+        .get(format!("{}/api/live", server.url))
+        .header("cookie", &s.cookie)
+        .send()
+        .unwrap();
+    assert_eq!(second.status(), 503);
+    drop(first);
+    // The place is given back when a stream closes.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let r = c
+            .get(format!("{}/api/live", server.url))
+            .header("cookie", &s.cookie)
+            .send()
+            .unwrap();
+        if r.status() == 200 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the closed stream's place never came back"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
