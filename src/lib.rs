@@ -21,6 +21,7 @@ pub use errmap_core::{direction, error, geom, io, numeric, progress};
 pub use errmap_maps::{backend, gpu, interp, map, nn, probe};
 pub use errmap_metrology::{circular, controller, linear, rotary, thermal};
 pub use errmap_report as report;
+pub use errmap_serve as serve;
 pub use errmap_synth as synth;
 pub use errmap_toolpath as toolpath;
 

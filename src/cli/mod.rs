@@ -39,6 +39,7 @@ mod part;
 mod report;
 mod rotary;
 mod scale;
+mod serve;
 mod synth_web_plate;
 mod terminal;
 mod thermal;
@@ -109,6 +110,8 @@ pub enum Command {
     /// Generate sample data with known ground truth.
     #[command(subcommand)]
     Synth(SynthCommand),
+    /// The monitor web server with login (live loop, history, runs), and its users.
+    Serve(serve::ServeArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -194,5 +197,6 @@ pub fn run(cli: Cli) -> Result<i32> {
         Command::Live(args) => live::run(args, globals),
         Command::Synth(SynthCommand::LiveReplay(args)) => live::run_synth_replay(args, globals),
         Command::Synth(SynthCommand::Circular(args)) => circular::run_synth(args, globals),
+        Command::Serve(args) => serve::run(args, globals),
     }
 }
