@@ -122,9 +122,10 @@ fn log_in_watch_the_live_page_follow_the_state_file_and_open_a_report() {
     // An operator pauses: the form posts with its token, the command lands in the store.
     dt.eval(
         &s,
-        "document.querySelector('#controls button[value=pause]').click(); true",
+        "window.errmapOldPage = true; document.querySelector('#controls button[value=pause]').click(); true",
     );
-    dt.wait_until(&s, "location.pathname === '/live' && document.readyState === 'complete' && document.getElementById('cycle').textContent === '4'", Duration::from_secs(30), "back on the live page");
+    // A new document (the old one was marked), back on /live after the 303.
+    dt.wait_until(&s, "window.errmapOldPage === undefined && location.pathname === '/live' && document.readyState === 'complete' && document.getElementById('cycle').textContent === '4'", Duration::from_secs(30), "back on the live page");
     let conn = rusqlite::Connection::open(&site.db).unwrap();
     let cmd: (String, String) = conn
         .query_row("SELECT user, command FROM live_commands", [], |r| {

@@ -253,6 +253,45 @@ fn history_draws_the_live_cycles_and_lists_the_campaigns() {
         .unwrap();
     }
     drop(conn);
+    // A second campaign and a model fitted from the store.
+    for args in [
+        vec![
+            "thermal".to_string(),
+            "ingest".into(),
+            "-q".into(),
+            "--db".into(),
+            site.db.display().to_string(),
+            root()
+                .join("data/thermal/campaign-2-coolant-on")
+                .display()
+                .to_string(),
+        ],
+        vec![
+            "thermal".to_string(),
+            "fit".into(),
+            "--from-store".into(),
+            "-q".into(),
+            "--db".into(),
+            site.db.display().to_string(),
+            "-o".into(),
+            site.path().join("model.json").display().to_string(),
+        ],
+    ] {
+        let out = errmap().args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let loco: Option<f64> = rusqlite::Connection::open(&site.db)
+        .unwrap()
+        .query_row(
+            "SELECT loco_rms_um FROM models WHERE name = 'X' AND version = 1",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
     let server = Server::start(&site, &[]);
     let c = client();
     let s = login(&c, &server.url, "view");
@@ -291,6 +330,16 @@ fn history_draws_the_live_cycles_and_lists_the_campaigns() {
         "{samples}"
     );
     assert!(page.contains("/history/campaign?name=campaign-1-coolant-off"));
+    assert!(page.contains("/history/campaign?name=campaign-2-coolant-on"));
+    // The model version, with its leave-one-campaign-out RMS as stored.
+    let models = &page[page.find("<table id=\"models\">").expect("models table")..];
+    assert!(models.contains("<td>X</td><td>1</td>"), "{models}");
+    // (This fit of two campaigns stores no LOCO RMS: the page shows —.)
+    let shown = loco.map_or("—".to_string(), |v| format!("{v:.3}"));
+    assert!(
+        models.contains(&format!("<td>{shown}</td>")),
+        "{loco:?} {models}"
+    );
     let r = c
         .get(format!(
             "{}/history/campaign?name=campaign-1-coolant-off",
