@@ -32,17 +32,33 @@ use std::time::Duration;
 /// Everything `errmap serve` is started with.
 #[derive(Debug, Clone)]
 pub struct Config {
+    /// The temperature-history store (`--db`, SQLite); must exist. Opened in WAL mode with a
+    /// 2000 ms busy timeout, as `errmap live` opens it.
     pub db: PathBuf,
+    /// The folder of batch runs served read-only under `/runs/` (`--runs`); `None`: no runs pages.
     pub runs: Option<PathBuf>,
+    /// The state file a running `errmap live --state` rewrites (`--live`); it may not exist yet.
+    /// `None`: the live page has no feed.
     pub live: Option<PathBuf>,
+    /// Address and port to listen on (`--bind`); port 0 lets the system pick a free port.
     pub bind: SocketAddr,
-    /// Certificate chain and private key, PEM.
+    /// Certificate chain and private key, PEM (`--tls-cert`, `--tls-key`); `None`: plain HTTP,
+    /// which [`check_transport`] allows only on loopback or with `insecure_http`.
     pub tls: Option<(PathBuf, PathBuf)>,
+    /// The users file (`--users`; by default [`default_users_path`]); must exist at start.
     pub users: PathBuf,
+    /// Reverse proxies whose `X-Forwarded-For` is believed (`--trusted-proxy`); from any other
+    /// peer the header is ignored.
     pub trusted_proxies: Vec<IpAddr>,
+    /// Allow plain HTTP on a non-loopback address (`--insecure-http`; a warning is logged).
     pub insecure_http: bool,
+    /// A session unused this long ends (`--idle-timeout`, default 1800 s); an open live stream
+    /// does not count as idle.
     pub idle_timeout: Duration,
+    /// A session ends this long after its login, used or not (`--session-lifetime`, default 8 h).
     pub absolute_timeout: Duration,
+    /// Live streams (`/api/live`) open at once; beyond it a new stream gets 503
+    /// (`--max-live-clients`, default 1000, at least 1).
     pub max_live_clients: usize,
 }
 

@@ -18,67 +18,113 @@ pub const READ_INTERVAL: Duration = Duration::from_millis(100);
 /// Largest state file read.
 pub const MAX_STATE_BYTES: u64 = 1 << 20;
 
+/// One temperature sensor of the live loop, as the state file's `sensors` lists it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SensorState {
+    /// The sensor's name in the live loop's configuration (e.g. `T1`).
     pub name: String,
+    /// The temperature the model used this cycle (calibrated, filtered), °C; `None` when unknown.
     pub value_c: Option<f64>,
+    /// Whether the reading is usable: a value and no problem.
     pub ok: bool,
+    /// The name of the source (e.g. a Modbus rack) the sensor is read from.
     pub source: String,
+    /// Time since the sensor's last reading, ms (a `null` here makes the file refused).
     pub age_ms: f64,
+    /// Why the reading is not usable, in words (e.g. an open RTD); `None` when fine.
     #[serde(default)]
     pub problem: Option<String>,
 }
 
+/// One compensated axis of the live loop, as the state file's `axes` lists it. Compensation
+/// values are −E (E = measured − nominal), in the live loop's sign: P' = P − E.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AxisState {
+    /// The axis name (e.g. `X`).
     pub axis: String,
+    /// The axis's present position, mm; `None` when unknown.
     pub position_mm: Option<f64>,
+    /// The direction of travel the model uses (`forward` or `reverse`); `None` when unknown.
     pub direction: Option<String>,
+    /// The compensation the model asks for at the present position, µm.
     pub computed_um: f64,
+    /// The compensation written to the controller at the present position (rate-limited,
+    /// or held), µm.
     pub written_um: f64,
+    /// Largest |compensation| allowed anywhere on the fitted travel, µm; beyond it the axis holds.
     pub limit_um: f64,
+    /// Fastest change of the written compensation anywhere on the travel, µm/s.
     pub rate_limit_um_s: f64,
+    /// The name of the controller target written (e.g. `sinumerik-opcua`, or `dry-run`).
     pub target: String,
+    /// Whether the written value is held instead of following the model (holding, paused, or
+    /// a bounds or rate limit in force).
     pub held: bool,
 }
 
+/// One input source of the live loop (a Modbus rack, an OPC UA server, a replayed file), as
+/// the state file's `sources` lists it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SourceState {
+    /// The source's name in the live loop's configuration.
     pub name: String,
+    /// The kind of source (e.g. `modbus`).
     pub kind: String,
+    /// Whether the source answered within its timeout.
     pub healthy: bool,
+    /// When the source last answered, RFC 3339 UTC; `None` when it never has.
     #[serde(default)]
     pub last_ok_utc: Option<String>,
+    /// What is wrong with the source, in words; `None` when healthy.
     #[serde(default)]
     pub problem: Option<String>,
 }
 
+/// An alarm of the live loop, as the state file's `alarms` lists it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AlarmState {
+    /// The alarm's number, which an operator's `ack` command names (`live_commands.alarm_id`).
     pub id: i64,
+    /// When the alarm was raised, RFC 3339 UTC.
     pub raised_utc: String,
+    /// What raised it (a source's name, or e.g. `store`).
     pub source: String,
+    /// The alarm in words, as the live loop wrote it (untrusted text: escape it to show it).
     pub message: String,
+    /// Whether an operator has acknowledged it.
     pub acknowledged: bool,
 }
 
 /// The state file as the contract defines it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LiveState {
+    /// The schema string; [`parse_state`] accepts only [`SCHEMA`].
     pub schema: String,
+    /// When the live loop wrote the file, RFC 3339 UTC with ms; the staleness counts from it.
     pub written_utc: String,
+    /// The live loop's cycle number.
     pub cycle: u64,
+    /// The live loop's cycle period, ms.
     pub period_ms: u64,
+    /// The loop's mode, one of [`MODES`].
     pub mode: String,
+    /// Whether the loop computes and logs only, writing to no controller.
     pub dry_run: bool,
+    /// Whether the coolant is on; `None` when unknown.
     pub coolant_on: Option<bool>,
+    /// The temperature sensors.
     pub sensors: Vec<SensorState>,
+    /// The compensated axes.
     pub axes: Vec<AxisState>,
+    /// The input sources and their health.
     pub sources: Vec<SourceState>,
+    /// The alarms, acknowledged or not.
     pub alarms: Vec<AlarmState>,
 }
 
-/// The modes the contract names.
+/// The modes the contract names: `holding` (a source silent past its first timeout, or a
+/// plausibility failure), `paused` (an operator's pause: values held), `ramping_to_zero`
+/// (every axis on its way to zero compensation at its rate limit).
 pub const MODES: [&str; 6] = [
     "starting",
     "running",
@@ -88,7 +134,9 @@ pub const MODES: [&str; 6] = [
     "stopped",
 ];
 
-/// Parse and check a state file's text.
+/// Parse and check a state file's text: JSON of the contract's shape (unknown fields dropped),
+/// schema [`SCHEMA`], a mode of [`MODES`] and a `written_utc` that parses. The error is the
+/// problem in words, shown on the live page.
 pub fn parse_state(text: &str) -> Result<LiveState, String> {
     let state: LiveState =
         serde_json::from_str(text).map_err(|e| format!("not a state file: {e}"))?;
@@ -113,9 +161,15 @@ pub fn parse_state(text: &str) -> Result<LiveState, String> {
 /// What every client gets.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Snapshot {
+    /// The state file's content; `None` when it cannot be used (then `problem` says why).
     pub state: Option<LiveState>,
+    /// Why there is no state (no `--live`, missing, over [`MAX_STATE_BYTES`], not JSON, another
+    /// schema, an unknown mode, a missing field); `None` with a state.
     pub problem: Option<String>,
+    /// Whether the state was written more than three periods ago (at least 2 s); always true
+    /// without a state.
     pub stale: bool,
+    /// When the server read the file, RFC 3339 UTC with ms.
     pub read_utc: String,
 }
 
@@ -133,7 +187,9 @@ impl Snapshot {
 /// A snapshot and its JSON, shared by every stream.
 #[derive(Debug)]
 pub struct Published {
+    /// The snapshot.
     pub snapshot: Snapshot,
+    /// The snapshot as JSON, serialised once for every stream (the SSE event's data).
     pub json: String,
     /// Counts the publications (the SSE event id).
     pub seq: u64,
@@ -148,6 +204,8 @@ fn is_stale(state: &LiveState, now_ms: i64) -> bool {
 
 /// The state file's watcher: start it once; subscribers get every new snapshot.
 pub struct Feed {
+    /// The latest publication; clone it to follow changes (a new value only when the state,
+    /// its problem or its staleness changed).
     pub rx: watch::Receiver<Arc<Published>>,
     /// How many times the file was read (for the bench and the docs' claim).
     pub reads: Arc<std::sync::atomic::AtomicU64>,
@@ -163,7 +221,9 @@ fn stamp(meta: &std::fs::Metadata) -> (Option<std::time::SystemTime>, u64, u64) 
 }
 
 impl Feed {
-    /// Watch `path` (none: a snapshot saying no state file was given).
+    /// Watch `path` in a background task (needs a Tokio runtime): every 100 ms, re-read only when
+    /// the file's modification time, size or inode changed. `None`: one snapshot saying no state
+    /// file was given.
     pub fn start(path: Option<PathBuf>) -> Feed {
         let first = match &path {
             Some(_) => Snapshot::problem("the state file has not been read yet".into()),

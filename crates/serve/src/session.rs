@@ -24,7 +24,9 @@ pub fn random_token() -> String {
     base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(bytes)
 }
 
-/// Equality of two secrets in time independent of where they differ.
+/// Equality of two secrets in time independent of where they differ (for session ids and CSRF
+/// tokens). Strings of different lengths return `false` at once, so the length is not hidden:
+/// use it on fixed-length values such as [`random_token`]'s.
 pub fn same_secret(a: &str, b: &str) -> bool {
     let (a, b) = (a.as_bytes(), b.as_bytes());
     if a.len() != b.len() {
@@ -40,12 +42,16 @@ fn key_of(id: &str) -> [u8; 32] {
 /// One logged-in user's session.
 #[derive(Debug, Clone)]
 pub struct Session {
+    /// The user name, lower case as in the users file.
     pub user: String,
     /// The role at login; every request also checks the users file as it is now.
     pub role: Role,
     /// The synchronizer token every state-changing request of this session must carry.
     pub csrf: String,
+    /// When the session was created (the login); the absolute lifetime counts from it.
     pub created: Instant,
+    /// The last request that used the session ([`Sessions::touch`]); the idle timeout counts
+    /// from it.
     pub last_seen: Instant,
 }
 
@@ -64,10 +70,12 @@ pub const MAX_SESSIONS: usize = 10_000;
 /// The server's sessions, by SHA-256 of their id.
 pub struct Sessions {
     map: Mutex<HashMap<[u8; 32], Session>>,
+    /// The idle and absolute expiry every session of this server follows.
     pub timeouts: Timeouts,
 }
 
 impl Sessions {
+    /// No sessions yet, with these expiry rules.
     pub fn new(timeouts: Timeouts) -> Sessions {
         Sessions {
             map: Mutex::new(HashMap::new()),
@@ -84,7 +92,10 @@ impl Sessions {
             || now.duration_since(s.created) >= self.timeouts.absolute
     }
 
-    /// A new session (a new id, never one the client offered); `None` when full.
+    /// A new session for a user with a new random id and CSRF token (never an id the client
+    /// offered); returns the id (for the cookie; only its SHA-256 is kept) and the session.
+    /// `None` when [`MAX_SESSIONS`] live sessions exist. The caller must end the session the
+    /// browser carried before (no fixation) and check the password first.
     pub fn create(&self, user: &str, role: Role) -> Option<(String, Session)> {
         let now = Instant::now();
         let mut map = self.lock();
@@ -106,7 +117,9 @@ impl Sessions {
         Some((id, session))
     }
 
-    /// The live session of an id, its idle clock restarted; an expired one is removed.
+    /// The session of an id if neither its idle nor its absolute timeout has passed, with its
+    /// idle clock restarted; an expired one is removed and `None` returned, as for an unknown id.
+    /// It does not look at the users file: the caller must check the user still exists.
     pub fn touch(&self, id: &str) -> Option<Session> {
         let now = Instant::now();
         let key = key_of(id);
@@ -120,8 +133,10 @@ impl Sessions {
         Some(s.clone())
     }
 
-    /// Whether an id is a live session, without restarting its idle clock (a live stream
-    /// checks this: watching alone does not keep a session alive past its absolute expiry).
+    /// Whether an id is a session that has not been removed and is within its absolute
+    /// lifetime. The idle timeout is not checked and the idle clock not restarted: a live
+    /// stream checks this, so an open live page lives on past the idle timeout but not past the
+    /// absolute lifetime, logout or the user's removal.
     pub fn alive(&self, id: &str) -> bool {
         let now = Instant::now();
         self.lock()
@@ -129,20 +144,23 @@ impl Sessions {
             .is_some_and(|s| now.duration_since(s.created) < self.timeouts.absolute)
     }
 
-    /// End a session (logout, or a new login replacing it).
+    /// End a session (logout, or a new login replacing it); an unknown id is ignored.
     pub fn remove(&self, id: &str) {
         self.lock().remove(&key_of(id));
     }
 
-    /// End every session of a user no longer in the users file.
+    /// Keep only the sessions whose user `keep` accepts: after a users file reload, every
+    /// session of a removed user ends.
     pub fn retain_users(&self, keep: impl Fn(&str) -> bool) {
         self.lock().retain(|_, s| keep(&s.user));
     }
 
+    /// Sessions held, expired ones not yet removed included.
     pub fn len(&self) -> usize {
         self.lock().len()
     }
 
+    /// Whether no session is held.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -159,6 +177,8 @@ pub struct LoginTokens {
 pub const LOGIN_FORM_LIFETIME_S: i64 = 3600;
 
 impl LoginTokens {
+    /// A new 256-bit HMAC key from the operating system's generator (the process exits with
+    /// code 3 if the generator fails); forms issued by another process do not check.
     pub fn new() -> LoginTokens {
         let mut key = [0u8; 32];
         if rand::rngs::OsRng.try_fill_bytes(&mut key).is_err() {
@@ -183,7 +203,10 @@ impl LoginTokens {
         (pre, token)
     }
 
-    /// Whether a form token belongs to this pre-session value and the form is recent enough.
+    /// Whether a form token is the HMAC of this pre-session value under this server's key
+    /// (compared in constant time) and the value was issued at most [`LOGIN_FORM_LIFETIME_S`]
+    /// before `now_s` (and not after it). It does not check the password or the throttle; the
+    /// caller must take `pre` from the request's login cookie, not from the form.
     pub fn check(&self, pre: &str, token: &str, now_s: i64) -> bool {
         let Some((issued, _)) = pre.split_once('.') else {
             return false;
@@ -207,10 +230,12 @@ impl Default for LoginTokens {
 /// Cookie names and attributes: `__Host-` names and `Secure` under TLS.
 #[derive(Debug, Clone, Copy)]
 pub struct CookieStyle {
+    /// Serving TLS: cookies get `Secure` and the `__Host-` name prefix.
     pub secure: bool,
 }
 
 impl CookieStyle {
+    /// The session cookie's name.
     pub fn session_name(self) -> &'static str {
         if self.secure {
             "__Host-errmap_session"
@@ -218,6 +243,7 @@ impl CookieStyle {
             "errmap_session"
         }
     }
+    /// The name of the login form's pre-session cookie.
     pub fn login_name(self) -> &'static str {
         if self.secure {
             "__Host-errmap_login"
@@ -234,17 +260,20 @@ impl CookieStyle {
             "Path=/; HttpOnly; SameSite=Strict"
         }
     }
-    /// `Set-Cookie` value setting a cookie.
+    /// `Set-Cookie` value setting a cookie: `Path=/`, `HttpOnly`, `SameSite=Strict`, `Secure`
+    /// under TLS, no `Domain`, no expiry (gone when the browser closes). `value` is not escaped:
+    /// pass tokens only.
     pub fn set(self, name: &str, value: &str) -> String {
         format!("{name}={value}; {}", self.attributes())
     }
-    /// `Set-Cookie` value deleting a cookie.
+    /// `Set-Cookie` value deleting a cookie (empty value, `Max-Age=0`, the same attributes).
     pub fn clear(self, name: &str) -> String {
         format!("{name}=; Max-Age=0; {}", self.attributes())
     }
 }
 
-/// The value of a cookie in a request's `Cookie` headers (the first of that name).
+/// The value of a cookie in a request's `Cookie` headers (the first of that name); `None` when
+/// absent, empty, over 256 bytes or in a header that is not visible ASCII.
 pub fn cookie<'a>(headers: &'a axum::http::HeaderMap, name: &str) -> Option<&'a str> {
     headers
         .get_all(axum::http::header::COOKIE)
