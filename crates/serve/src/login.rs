@@ -31,10 +31,12 @@ fn login_page(app: &App, status: StatusCode, message: Option<&str>) -> Response 
     r
 }
 
+/// `GET /login`: the login form, with a new pre-session cookie and the form token tied to it.
 pub async fn form(State(app): State<Arc<App>>) -> Response {
     login_page(&app, StatusCode::OK, None)
 }
 
+/// The fields `POST /login` needs: `user`, `password` and `csrf` (the form's token).
 #[derive(Deserialize)]
 pub struct LoginForm {
     user: String,
@@ -42,6 +44,14 @@ pub struct LoginForm {
     csrf: String,
 }
 
+/// `POST /login`, in order: a form that parses (else 400, or 413 over 16 KiB); the form's token
+/// must be the HMAC of this browser's pre-session cookie and under an hour old (else 403 and a
+/// fresh form); the throttle (5 failures in 15 min per name or address: 429 with `Retry-After`,
+/// audited); the password, checked against the user's argon2id hash or a dummy one for an
+/// unknown name, at most 2 at once (401 with one message for both cases, counted and audited;
+/// 503 after waiting 10 s for a slot). On success the user's failures are forgotten, the
+/// session the browser carried ends, a new session is made and its cookie set, the pre-session
+/// cookie cleared, the login audited, and the answer is 303 to `/live`.
 pub async fn submit(
     State(app): State<Arc<App>>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
@@ -177,12 +187,15 @@ fn truncate(text: &str) -> String {
     text.chars().take(MAX_NAME_CHARS).collect()
 }
 
+/// A form carrying only the session's CSRF token (`csrf`), as `POST /logout` sends it.
 #[derive(Deserialize)]
 pub struct CsrfForm {
     csrf: String,
 }
 
-/// Whether a state-changing request carries its session's token; a refusal is logged and audited.
+/// Whether a state-changing request carries its session's token (compared in constant time;
+/// `None`: no token sent); a refusal is logged and audited as `refused` with `what`. The caller
+/// must still answer 403 on `false`, and check the role where the action needs one.
 pub async fn csrf_ok(
     app: &App,
     auth: &Auth,
@@ -207,6 +220,9 @@ pub async fn csrf_ok(
     false
 }
 
+/// `POST /logout`: with the session's CSRF token (else 403, audited), ends the session on the
+/// server, audits it, clears the session cookie and answers 303 to `/login`. Its live stream
+/// ends at its next check.
 pub async fn logout(
     State(app): State<Arc<App>>,
     Extension(auth): Extension<Auth>,

@@ -33,12 +33,17 @@ pub const AUDIT_LOG_DDL: &str = "CREATE TABLE IF NOT EXISTS audit_log (
 /// A live loop command an operator may issue.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Command {
+    /// Pause the loop: it holds the written values until resumed.
     Pause,
+    /// Resume following the model after a pause.
     Resume,
+    /// Acknowledge an alarm (its id goes into `live_commands.alarm_id`).
     Ack,
 }
 
 impl Command {
+    /// The command of a form's `command` value (`pause`, `resume`, `ack`; exact, lower case);
+    /// `None` for anything else.
     pub fn parse(text: &str) -> Option<Command> {
         match text {
             "pause" => Some(Command::Pause),
@@ -47,6 +52,7 @@ impl Command {
             _ => None,
         }
     }
+    /// The command as `live_commands.command` and `audit_log.action` spell it.
     pub fn as_str(self) -> &'static str {
         match self {
             Command::Pause => "pause",
@@ -64,7 +70,8 @@ fn db_err(path: &Path, e: rusqlite::Error) -> Error {
     )
 }
 
-/// One connection to the store, opened as the contract says.
+/// One connection to the store, opened as the contract says: WAL journal mode (an error if
+/// SQLite cannot switch to it, e.g. on a network file system) and a 2000 ms busy timeout.
 pub fn connect(path: &Path) -> Result<Connection> {
     let conn = Connection::open(path).map_err(|e| db_err(path, e))?;
     let mode: String = conn
@@ -84,13 +91,15 @@ pub fn connect(path: &Path) -> Result<Connection> {
 
 /// The store, one connection for writes and one for the history queries.
 pub struct Db {
+    /// The store's file, named in error messages.
     pub path: PathBuf,
     write: Mutex<Connection>,
     read: Mutex<Connection>,
 }
 
 impl Db {
-    /// Open an existing store and create the monitor's tables in it.
+    /// Open an existing store (an error if there is no file: it is never created here) and
+    /// create `live_commands` and `audit_log` in it if missing.
     pub fn open(path: &Path) -> Result<Db> {
         if !path.is_file() {
             return Err(Error::input(
@@ -112,15 +121,18 @@ impl Db {
         })
     }
 
+    /// The write connection, locked (one writer at a time in this process).
     pub fn writer(&self) -> std::sync::MutexGuard<'_, Connection> {
         self.write.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// The connection for the history queries, locked.
     pub fn reader(&self) -> std::sync::MutexGuard<'_, Connection> {
         self.read.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// One audit row.
+    /// One `audit_log` row stamped now (UTC, ms): the user acting (or the name tried), the
+    /// client address, the action and an optional detail. Values are bound, not interpolated.
     pub fn audit(
         &self,
         user: Option<&str>,
@@ -137,7 +149,9 @@ impl Db {
             .map_err(|e| db_err(&self.path, e))
     }
 
-    /// An operator's command and its audit row, in one transaction; the command's id.
+    /// An operator's command and its audit row, in one transaction; the command's
+    /// `live_commands` id. It checks nothing: the caller must have checked the session, the
+    /// CSRF token and the operator role (and that an `ack` names an alarm).
     pub fn issue(
         &self,
         user: &str,
@@ -184,14 +198,21 @@ pub fn has_table(conn: &Connection, name: &str) -> bool {
 /// One live cycle of the history.
 #[derive(Debug, Clone)]
 pub struct Cycle {
+    /// The cycle's `at_utc`, ms since the Unix epoch.
     pub at_ms: i64,
+    /// The loop's mode in that cycle (as the state file's `mode`).
     pub mode: String,
+    /// `inputs_json`: each sensor's °C as the model used it, `coolant_on`, positions, …; empty
+    /// when the column is not a JSON object.
     pub inputs: serde_json::Map<String, serde_json::Value>,
+    /// `outputs_json`: per axis `computed_um`, `written_um`, `target`, …; empty when the column
+    /// is not a JSON object.
     pub outputs: serde_json::Map<String, serde_json::Value>,
 }
 
-/// Cycles between two contract time stamps, at most `max_points` of them spread evenly over
-/// the rows there (every k-th row); also how many rows the range holds.
+/// Cycles between two contract time stamps (both included, compared as text, so both must be
+/// in the contract's form), at most `max_points` of them spread evenly over the rows there
+/// (every k-th row); also how many rows the range holds. No `live_cycles` table: none.
 pub fn cycles(
     conn: &Connection,
     from_utc: &str,
@@ -239,7 +260,7 @@ pub fn cycles(
     Ok((out, total))
 }
 
-/// The time stamp of the newest live cycle, if any.
+/// The `at_utc` of the newest live cycle; `None` when there is none (or no `live_cycles` yet).
 pub fn latest_cycle_utc(conn: &Connection) -> rusqlite::Result<Option<String>> {
     if !has_table(conn, "live_cycles") {
         return Ok(None);
@@ -250,13 +271,19 @@ pub fn latest_cycle_utc(conn: &Connection) -> rusqlite::Result<Option<String>> {
 /// A stored campaign, as the history page lists it.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct CampaignRow {
+    /// The campaign's unique name (e.g. `live-<start time>` for the live loop's own).
     pub name: String,
+    /// The axis the campaign measured.
     pub axis: String,
+    /// The coolant state during the campaign, as ingested.
     pub coolant: String,
+    /// Number of temperature sensors of the campaign.
     pub sensors: i64,
+    /// Number of temperature samples, all sensors together.
     pub samples: i64,
 }
 
+/// The stored campaigns by name (at most 1000); none when the store has no `campaigns` table.
 pub fn campaigns(conn: &Connection) -> rusqlite::Result<Vec<CampaignRow>> {
     if !has_table(conn, "campaigns") {
         return Ok(Vec::new());
@@ -279,8 +306,9 @@ pub fn campaigns(conn: &Connection) -> rusqlite::Result<Vec<CampaignRow>> {
     rows.collect()
 }
 
-/// A campaign's temperatures per sensor, (time_s, °C), at most `max_points` per sensor;
-/// `None` when there is no campaign of that name.
+/// A campaign's temperatures per sensor, by sensor name: (time_s of the campaign's log, °C as
+/// `temperature_samples` holds them), at most `max_points` per sensor (every k-th sample);
+/// `None` when there is no campaign of that name. `name` is bound, not interpolated.
 #[allow(clippy::type_complexity)]
 pub fn campaign_temperatures(
     conn: &Connection,
@@ -331,13 +359,19 @@ pub fn campaign_temperatures(
 /// A stored model version, as the history page lists it.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ModelRow {
+    /// The model's name (by default its axis).
     pub name: String,
+    /// The version, counting from 1 per name.
     pub version: i64,
+    /// When the version was saved, seconds since the Unix epoch.
     pub created_unix: i64,
+    /// The names of the campaigns it was fitted to, comma-separated.
     pub campaigns: String,
+    /// Pooled leave-one-campaign-out RMS, µm; `None` when no campaign had one.
     pub loco_rms_um: Option<f64>,
 }
 
+/// The stored model versions by name and version (at most 1000); none without a `models` table.
 pub fn models(conn: &Connection) -> rusqlite::Result<Vec<ModelRow>> {
     if !has_table(conn, "models") {
         return Ok(Vec::new());

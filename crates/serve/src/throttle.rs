@@ -77,11 +77,20 @@ pub struct Throttle {
 /// Why a login may not be tried now.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Blocked {
-    User { retry_after_s: u64 },
-    Address { retry_after_s: u64 },
+    /// The user name has [`MAX_FAILURES`] failures in the [`WINDOW`].
+    User {
+        /// Seconds (rounded up) until the oldest of them leaves the window.
+        retry_after_s: u64,
+    },
+    /// The client address has [`MAX_FAILURES`] failures in the [`WINDOW`].
+    Address {
+        /// Seconds (rounded up) until the oldest of them leaves the window.
+        retry_after_s: u64,
+    },
 }
 
 impl Blocked {
+    /// Seconds to wait, for the `Retry-After` header.
     pub fn retry_after_s(self) -> u64 {
         match self {
             Blocked::User { retry_after_s } | Blocked::Address { retry_after_s } => retry_after_s,
@@ -94,7 +103,10 @@ impl Throttle {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Whether a login of `user` from `addr` must wait (the longer wait when both are blocked).
+    /// Whether a login of `user` from `addr` must wait (the longer wait when both are blocked);
+    /// `None`: it may be tried. Call it before checking the password, and refuse a blocked
+    /// attempt even when its password would be right; `user` must be the same key later given to
+    /// [`Throttle::fail`] (the login uses the normalised name, or the typed one cut and lower-cased).
     pub fn check(&self, user: &str, addr: IpAddr) -> Option<Blocked> {
         self.check_at(user, addr, Instant::now())
     }
@@ -111,7 +123,8 @@ impl Throttle {
         }
     }
 
-    /// Count a failure; returns the failures now in the window for the user and the address.
+    /// Count a failed login; returns the failures now in the window for the user and for the
+    /// address (each at most [`MAX_FAILURES`]: older ones no longer matter).
     pub fn fail(&self, user: &str, addr: IpAddr) -> (usize, usize) {
         self.fail_at(user, addr, Instant::now())
     }

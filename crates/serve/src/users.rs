@@ -38,6 +38,7 @@ pub enum Role {
 }
 
 impl Role {
+    /// The role as the users file, the log and the audit log spell it.
     pub fn as_str(self) -> &'static str {
         match self {
             Role::Viewer => "viewer",
@@ -50,8 +51,11 @@ impl Role {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct User {
+    /// The user name as stored: lower case, 1 to 64 of letters, digits, `.`, `_`, `-`, `@`.
     pub name: String,
+    /// What the user may do; read afresh from the file on every request.
     pub role: Role,
+    /// The password's argon2id hash as a PHC string (algorithm, parameters, salt, hash).
     pub password_hash: String,
 }
 
@@ -59,6 +63,7 @@ pub struct User {
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Users {
+    /// The users, the file's `[[user]]` tables (sorted by name when written by [`Users::add`]).
     #[serde(default, rename = "user")]
     pub users: Vec<User>,
 }
@@ -76,7 +81,10 @@ pub fn normalise_name(name: &str) -> Option<String> {
 }
 
 impl Users {
-    /// Read a users file; a missing file is an empty list when `missing_ok`.
+    /// Read a users file; a missing file is an empty list when `missing_ok`. Refused (with the
+    /// file and line): TOML that is not a users file, unknown keys, a name not in stored form
+    /// (lower case), a name twice, a hash that is not an argon2id PHC string. The hashes' parameters
+    /// are not checked.
     pub fn load(path: &Path, missing_ok: bool) -> Result<Users> {
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
@@ -162,11 +170,15 @@ impl Users {
         Ok(())
     }
 
+    /// The user of a stored name (exact match: normalise a typed name first with
+    /// [`normalise_name`]); `None` when there is none.
     pub fn get(&self, name: &str) -> Option<&User> {
         self.users.iter().find(|u| u.name == name)
     }
 
-    /// Add a user, or replace one when `replace`.
+    /// Add a user (name normalised, password checked by [`check_password`] and hashed with
+    /// [`hash_password`]), or replace one of that name when `replace`; an error for a bad name,
+    /// a bad password, or an existing user without `replace`. The file is written by [`Users::save`].
     pub fn add(&mut self, name: &str, role: Role, password: &str, replace: bool) -> Result<()> {
         let name = normalise_name(name).ok_or_else(|| {
             Error::usage(
@@ -207,7 +219,8 @@ impl Users {
     }
 }
 
-/// A new password's length rules.
+/// A new password's length rules: at least [`MIN_PASSWORD_CHARS`] characters, at most
+/// [`MAX_PASSWORD_BYTES`] bytes, any characters, no composition rules.
 pub fn check_password(password: &str) -> Result<()> {
     if password.chars().count() < MIN_PASSWORD_CHARS {
         return Err(Error::usage(
@@ -224,7 +237,9 @@ pub fn check_password(password: &str) -> Result<()> {
     Ok(())
 }
 
-/// An argon2id PHC string of a password with a random salt.
+/// An argon2id PHC string of a password with a random 16-byte salt and the argon2 crate's
+/// default parameters (19 MiB, 2 passes, 1 lane); takes 19 MiB and tens of ms. It does not
+/// check the length: call [`check_password`] first for a new password.
 pub fn hash_password(password: &str) -> Result<String> {
     Argon2::default()
         .hash_password(password.as_bytes())
@@ -232,7 +247,9 @@ pub fn hash_password(password: &str) -> Result<String> {
         .map_err(|e| Error::Internal(format!("argon2 hashing failed: {e}")))
 }
 
-/// Whether a password matches a PHC string (argon2 compares in constant time).
+/// Whether a password matches a PHC string (argon2 compares in constant time, with the
+/// parameters the string names). A password over [`MAX_PASSWORD_BYTES`] or a string that does
+/// not parse is `false` without hashing.
 pub fn verify_password(password: &str, phc: &str) -> bool {
     if password.len() > MAX_PASSWORD_BYTES {
         return false;
