@@ -6,8 +6,12 @@ use std::fmt::Write as _;
 
 /// Who is looking, for the page header and the operator's forms.
 pub struct Viewer<'a> {
+    /// The logged-in user's name, shown in the header (escaped).
     pub user: &'a str,
+    /// The user's role now: the operator's forms are drawn only for [`Role::Operator`] (the
+    /// server checks the role again when a command arrives).
     pub role: Role,
+    /// The session's CSRF token, put in every form that changes state.
     pub csrf: &'a str,
 }
 

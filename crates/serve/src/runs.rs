@@ -5,12 +5,18 @@ use std::path::{Component, Path, PathBuf};
 /// What a request path names under the runs folder.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Resolved {
+    /// A regular file, by its canonical path (inside the root).
     File(PathBuf),
+    /// A folder, by its canonical path (inside the root): answer with its listing.
     Dir(PathBuf),
 }
 
-/// Resolve a request path (already percent-decoded) under `root` (canonical). `None` for
-/// anything outside, hidden, or missing: the answer is the same 404 for all of them.
+/// Resolve a request path (already percent-decoded) under `root`, which must itself be
+/// canonical. Refused: over 1024 bytes, a NUL, a backslash, `..`, a root or prefix, a name
+/// starting with `.`, a name that is not UTF-8; then the joined path is canonicalised (symlinks
+/// resolved) and must lie under `root`. `None` for anything refused, outside, missing or neither
+/// file nor folder: the answer is the same 404 for all of them. The check is made at request
+/// time: the caller opens the returned canonical path, not the request's.
 pub fn resolve(root: &Path, request: &str) -> Option<Resolved> {
     if request.len() > 1024 || request.contains('\0') || request.contains('\\') {
         return None;

@@ -307,7 +307,7 @@ pub fn campaigns(conn: &Connection) -> rusqlite::Result<Vec<CampaignRow>> {
 }
 
 /// A campaign's temperatures per sensor, by sensor name: (time_s of the campaign's log, °C as
-/// `temperature_samples` holds them), at most `max_points` per sensor (every k-th sample);
+/// `temperature_samples` holds them: calibrated, Pt100 ohms already converted), at most `max_points` per sensor (every k-th sample);
 /// `None` when there is no campaign of that name. `name` is bound, not interpolated.
 #[allow(clippy::type_complexity)]
 pub fn campaign_temperatures(

@@ -5,17 +5,23 @@ use std::fmt::Write as _;
 /// One line of a chart.
 #[derive(Debug, Clone)]
 pub struct Series {
+    /// The line's name in the legend (e.g. a sensor or an axis), escaped when drawn.
     pub name: String,
     /// (x, y) in the chart's units; non-finite points break the line.
     pub points: Vec<(f64, f64)>,
 }
 
-/// A chart's layout, px.
+/// A chart's width, px (the SVG's view box).
 pub const WIDTH: f64 = 760.0;
+/// A chart's height, px.
 pub const HEIGHT: f64 = 300.0;
+/// Margin left of the plot area (the y tick labels), px.
 pub const LEFT: f64 = 64.0;
+/// Margin right of the plot area (the legend), px.
 pub const RIGHT: f64 = 150.0;
+/// Margin above the plot area (the title), px.
 pub const TOP: f64 = 28.0;
+/// Margin below the plot area (the x tick labels and the axis label), px.
 pub const BOTTOM: f64 = 44.0;
 
 /// Colour-blind-safe line colours (Okabe–Ito).

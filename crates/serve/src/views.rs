@@ -21,10 +21,12 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
+/// `GET /live`: the live page (its values arrive by the stream of `/api/live`).
 pub async fn live_page(Extension(auth): Extension<Auth>) -> Response {
     html(StatusCode::OK, pages::live(&auth.viewer()))
 }
 
+/// `GET /api/state`: the latest snapshot as JSON (`{"state", "problem", "stale", "read_utc"}`).
 pub async fn live_state(State(app): State<Arc<App>>) -> Response {
     let p = app.feed.rx.borrow().clone();
     json(StatusCode::OK, p.json.clone())
@@ -42,8 +44,11 @@ impl Drop for ClientSlot {
 /// How often an idle stream checks that its session still lives.
 const SESSION_CHECK: Duration = Duration::from_secs(5);
 
-/// Server-Sent Events: the current snapshot at once, then every new one (at most 10 a
-/// second, as the feed reads the file); the stream ends when its session does.
+/// `GET /api/live`, Server-Sent Events: the current snapshot at once, then every new one
+/// (event `state`, id the publication count; at most 10 a second, as the feed reads the file),
+/// with a keep-alive every 15 s. Before each event and every 5 s the session is checked with
+/// [`crate::session::Sessions::alive`]: the stream ends at logout, the user's removal or the
+/// absolute lifetime, not at the idle timeout. Beyond `max_live_clients` streams: 503.
 pub async fn live_stream(
     State(app): State<Arc<App>>,
     Extension(auth): Extension<Auth>,
@@ -85,6 +90,8 @@ pub async fn live_stream(
         .into_response()
 }
 
+/// The fields of `POST /live/command`: `csrf`, `command` (`pause`, `resume`, `ack`) and, for
+/// `ack`, `alarm_id`; all optional here so that a missing one gets its own refusal.
 #[derive(Deserialize)]
 pub struct CommandForm {
     csrf: Option<String>,
@@ -92,7 +99,11 @@ pub struct CommandForm {
     alarm_id: Option<String>,
 }
 
-/// An operator's pause, resume or alarm acknowledgement: into live_commands and the audit log.
+/// `POST /live/command`, an operator's pause, resume or alarm acknowledgement. Checked in order:
+/// the session's CSRF token (else 403, audited), the operator role as the users file says now
+/// (else 403, audited), the command (else 400), for `ack` a whole `alarm_id` ≥ 0 (else 400; it
+/// is not checked against the live alarms: the live loop records `unknown alarm N`). Then one
+/// row in `live_commands` and one in `audit_log`, in one transaction, and 303 to `/live`.
 pub async fn command(
     State(app): State<Arc<App>>,
     Extension(auth): Extension<Auth>,
@@ -187,6 +198,8 @@ pub const MAX_RANGE_MS: i64 = 31 * 24 * 3600 * 1000;
 /// Most points of one chart line.
 pub const MAX_POINTS: usize = 2000;
 
+/// The query of `/history`: `from` and `to`, UTC times (`YYYY-MM-DDThh:mm[:ss[.fff]][Z]`,
+/// at most 40 characters each); absent or empty: the hour up to the newest cycle.
 #[derive(Deserialize)]
 pub struct RangeQuery {
     from: Option<String>,
@@ -376,12 +389,14 @@ pub async fn history(
     )
 }
 
+/// The query of `/history/campaign`: `name`, a stored campaign's name (1 to 256 bytes).
 #[derive(Deserialize)]
 pub struct CampaignQuery {
     name: Option<String>,
 }
 
-/// One campaign's temperatures from the store.
+/// `GET /history/campaign?name=…`: one campaign's temperatures from the store as a chart
+/// (at most 2000 points per sensor); 400 for a missing or over-long name, 404 for an unknown one.
 pub async fn campaign(
     State(app): State<Arc<App>>,
     Extension(auth): Extension<Auth>,
@@ -442,10 +457,14 @@ pub async fn campaign(
     )
 }
 
+/// `GET /runs/`: the listing of the runs folder (404 without `--runs`).
 pub async fn runs_root(State(app): State<Arc<App>>, Extension(auth): Extension<Auth>) -> Response {
     serve_run_path(&app, &auth, String::new()).await
 }
 
+/// `GET /runs/{path}`: a folder listing or a file of the runs folder, the path confined to it
+/// by [`crate::runs::resolve`] (anything refused or outside: 404). Files carry [`RUN_FILE_CSP`]
+/// and their content type; types not shown inline are sent as downloads.
 pub async fn run_file(
     State(app): State<Arc<App>>,
     Extension(auth): Extension<Auth>,
