@@ -55,7 +55,8 @@ pub struct App {
     pub max_live_clients: usize,
 }
 
-/// The logged-in user of a request (put there by [`require_session`]).
+/// The logged-in user of a request, put in its extensions by the session check of
+/// [`crate::routes::router`] (a live session of a user still in the users file).
 #[derive(Debug, Clone)]
 pub struct Auth {
     /// The session id as the cookie carried it (a secret: never log or show it).
