@@ -439,6 +439,9 @@ fn x_forwarded_for_counts_only_from_a_trusted_proxy() {
     assert_eq!(login_as(&server.url, "203.0.113.7"), 429);
     // A client spoofing an address in front of the proxy's entry: the proxy's entry counts.
     assert_eq!(login_as(&server.url, "198.51.100.1, 203.0.113.7"), 429);
+    // Garbage written in front of the proxy's entry does not make the proxy the client (which
+    // would lock out everyone behind it): the proxy's entry still counts.
+    assert_eq!(login_as(&server.url, "not-an-address, 203.0.113.7"), 429);
     assert_eq!(login_as(&server.url, "203.0.113.8"), 303);
     assert_eq!(
         sql_count(&site.db, "SELECT COUNT(*) FROM audit_log WHERE action = 'login_failed' AND address = '203.0.113.7'"),

@@ -23,8 +23,8 @@ pub mod target;
 pub use config::LiveConfig;
 pub use cycle::{run, RunOptions, RunSummary, StopFlags};
 
-use errmap_core::error::{Error, Result};
 use config::{SourceConfig, SourceKind};
+use errmap_core::error::{Error, Result};
 use source::Source;
 use target::Target;
 

@@ -15,7 +15,10 @@ pub struct Implausible {
 
 /// A raw Pt100 reading outside the convertible range: an open RTD reads high, a short low.
 pub fn unconvertible(name: &str, raw: f64) -> Implausible {
-    let open = raw > errmap_metrology::thermal::pt100::resistance_ohm(errmap_metrology::thermal::pt100::T_MAX_C);
+    let open = raw
+        > errmap_metrology::thermal::pt100::resistance_ohm(
+            errmap_metrology::thermal::pt100::T_MAX_C,
+        );
     Implausible {
         kind: if open { "open" } else { "shorted" },
         message: format!(

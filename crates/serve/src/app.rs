@@ -96,26 +96,29 @@ impl App {
 
     /// The client's address, for throttling and the audit log: the peer's, or, when the peer is
     /// a trusted proxy, the right-most address in `X-Forwarded-For` (all such headers, in order)
-    /// that is not itself a trusted proxy. When any entry does not parse as an IP address, or
-    /// every entry is a trusted proxy, the peer's address is used.
+    /// that is not itself a trusted proxy. Entries are read from the right, the side the proxies
+    /// append to, so what a client writes in front of them is never reached; when the right-most
+    /// untrusted entry does not parse as an IP address, or every entry is a trusted proxy, the
+    /// peer's address is used.
     pub fn client_addr(&self, peer: SocketAddr, headers: &HeaderMap) -> IpAddr {
         let peer_ip = canonical_ip(peer.ip());
         if !self.trusted_proxies.contains(&peer_ip) {
             return peer_ip;
         }
-        let forwarded: Vec<IpAddr> = headers
+        let entries: Vec<&str> = headers
             .get_all("x-forwarded-for")
             .iter()
             .filter_map(|v| v.to_str().ok())
             .flat_map(|v| v.split(','))
-            .map(|s| s.trim().parse::<IpAddr>().map(canonical_ip))
-            .collect::<Result<_, _>>()
-            .unwrap_or_default();
-        forwarded
-            .into_iter()
-            .rev()
-            .find(|ip| !self.trusted_proxies.contains(ip))
-            .unwrap_or(peer_ip)
+            .collect();
+        for entry in entries.into_iter().rev() {
+            match entry.trim().parse::<IpAddr>().map(canonical_ip) {
+                Ok(ip) if self.trusted_proxies.contains(&ip) => continue,
+                Ok(ip) => return ip,
+                Err(_) => return peer_ip,
+            }
+        }
+        peer_ip
     }
 
     /// Write an `audit_log` row (`user`: the user acting, or the name tried for a failed login;

@@ -29,8 +29,8 @@ pub struct SensorState {
     pub ok: bool,
     /// The name of the source (e.g. a Modbus rack) the sensor is read from.
     pub source: String,
-    /// Time since the sensor's last reading, ms (a `null` here makes the file refused).
-    pub age_ms: f64,
+    /// Time since the sensor's last reading, ms; `None` when it was never read.
+    pub age_ms: Option<f64>,
     /// Why the reading is not usable, in words (e.g. an open RTD); `None` when fine.
     #[serde(default)]
     pub problem: Option<String>,
@@ -46,11 +46,12 @@ pub struct AxisState {
     pub position_mm: Option<f64>,
     /// The direction of travel the model uses (`forward` or `reverse`); `None` when unknown.
     pub direction: Option<String>,
-    /// The compensation the model asks for at the present position, µm.
-    pub computed_um: f64,
+    /// The compensation the model asks for at the present position, µm; `None` when it cannot
+    /// be computed (position or temperatures unknown).
+    pub computed_um: Option<f64>,
     /// The compensation written to the controller at the present position (rate-limited,
-    /// or held), µm.
-    pub written_um: f64,
+    /// or held), µm; `None` before anything was written.
+    pub written_um: Option<f64>,
     /// Largest |compensation| allowed anywhere on the fitted travel, µm; beyond it the axis holds.
     pub limit_um: f64,
     /// Fastest change of the written compensation anywhere on the travel, µm/s.
@@ -334,12 +335,27 @@ mod tests {
   "a_field_from_later": {"x": 1}
 }"#;
 
+    /// What the live loop writes before a sensor was read or while an axis's position is
+    /// unknown: `null` ages and compensations, shown as unknown instead of refusing the file.
+    #[test]
+    fn unknown_ages_and_compensations_are_read_as_unknown() {
+        let text = SAMPLE
+            .replace(r#""age_ms": 80"#, r#""age_ms": null"#)
+            .replace(
+                r#""computed_um": 12.3, "written_um": 12.1"#,
+                r#""computed_um": null, "written_um": null"#,
+            );
+        let s = parse_state(&text).unwrap();
+        assert_eq!(s.sensors[0].age_ms, None);
+        assert_eq!((s.axes[0].computed_um, s.axes[0].written_um), (None, None));
+    }
+
     #[test]
     fn the_contract_sample_parses_and_unknown_fields_are_ignored() {
         let s = parse_state(SAMPLE).unwrap();
         assert_eq!(s.cycle, 1234);
         assert_eq!(s.sensors[0].value_c, Some(21.3));
-        assert_eq!(s.axes[0].written_um, 12.1);
+        assert_eq!(s.axes[0].written_um, Some(12.1));
         assert_eq!(s.alarms[0].id, 7);
         // 10:00:00.123 + 2 s is not stale, + 2.2 s is (3 × 100 ms < 2 s).
         let t = crate::clock::parse_utc_ms("2026-11-27T10:00:00.123Z").unwrap();

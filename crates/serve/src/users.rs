@@ -11,10 +11,10 @@
 //! crate's defaults (19 MiB, 2 passes, 1 lane), the OWASP Password Storage Cheat Sheet's
 //! minimum for argon2id.
 
-use errmap_core::error::{Error, Location, Result};
 use argon2::password_hash::phc::PasswordHash;
 use argon2::password_hash::{PasswordHasher, PasswordVerifier};
 use argon2::Argon2;
+use errmap_core::error::{Error, Location, Result};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;

@@ -440,9 +440,9 @@ pub async fn campaign(
         .collect();
     let mut b = String::from("<p><a href=\"/history\">History</a></p>");
     b.push_str(&svg::line_chart(
-        &format!("Temperatures of {name} (as stored: raw readings in each sensor's unit)"),
+        &format!("Temperatures of {name} (calibrated, as stored)"),
         "time since the campaign's start (min)",
-        "reading",
+        "temperature (°C)",
         &series,
     ));
     html(

@@ -3,9 +3,9 @@
 //! and the thread reconnects on the next poll.
 
 use super::{Snapshot, Source, Value};
-use errmap_core::error::{Error, Result};
 use crate::config::{LiveConfig, SourceConfig};
 use crate::modbus::{Client, Layout, ReadValue, Table};
+use errmap_core::error::{Error, Result};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 

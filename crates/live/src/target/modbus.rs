@@ -3,9 +3,9 @@
 //! holds value/scale counts), read back at start so the loop ramps from the present value.
 
 use super::{Output, Present, Target};
-use errmap_core::error::{Error, Result};
 use crate::config::{ChannelConfig, LiveConfig, TargetConfig};
 use crate::modbus::{Client, Layout, Table};
+use errmap_core::error::{Error, Result};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
