@@ -90,8 +90,9 @@ pub struct AxisState {
     pub rate_limit_um_s: f64,
     /// The name of the target the axis is written to (`dry-run` in a dry run).
     pub target: String,
-    /// Whether the written line is held away from the model's (holding, paused, or not following
-    /// the demand outside a start or a ramp to zero).
+    /// Whether the axis is held: the loop is holding or paused, or, outside the start and a ramp
+    /// to zero, the written line differs from the model's (a bound exceeded, a rate limit
+    /// catching up).
     pub held: bool,
     /// tanβ the model gives (µm/m) and the slope written (compensation sign, µm/m).
     pub computed_slope_um_per_m: f64,
