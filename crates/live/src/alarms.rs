@@ -18,6 +18,8 @@ struct Alarm {
 /// At most this many alarms are listed; the oldest finished ones go first.
 const MAX_LISTED: usize = 100;
 
+/// The alarms of one run: the listed alarms (at most 100), the next id to give and how many
+/// were raised in all.
 #[derive(Debug, Clone)]
 pub struct Alarms {
     list: Vec<Alarm>,
@@ -80,6 +82,8 @@ impl Alarms {
         Some(key)
     }
 
+    /// Whether every listed alarm is acknowledged (true with none listed): after a ramp to zero the
+    /// loop stays at zero until this holds and the cause is gone.
     pub fn all_acknowledged(&self) -> bool {
         self.list.iter().all(|a| a.acknowledged)
     }
@@ -89,6 +93,7 @@ impl Alarms {
         self.raised
     }
 
+    /// The listed alarms as the state file shows them, oldest first.
     pub fn states(&self) -> Vec<AlarmState> {
         self.list
             .iter()

@@ -14,7 +14,10 @@ use errmap_metrology::thermal::model::{ThermalModel, ThermalState};
 /// The thermal compensation line: value at x = offset + slope·(x − Px)/1000 (µm).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Line {
+    /// The compensation at Px (µm, compensation sign: −E); zero except while ramping from a
+    /// controller's present value.
     pub offset_um: f64,
+    /// The compensation's slope along the axis (µm per m of travel, compensation sign: −tanβ).
     pub slope_um_per_m: f64,
 }
 
@@ -41,17 +44,25 @@ pub struct Demand {
 /// The limits of an axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
+    /// Bound on |compensation| anywhere on the fitted travel (µm).
     pub limit_um: f64,
+    /// Bound on |tanβ| of the written line (µm/m).
     pub slope_limit_um_per_m: f64,
+    /// Fastest allowed change of the compensation at the worst point of the travel (µm/s).
     pub rate_limit_um_s: f64,
 }
 
 /// An axis: model, limits and the lever of its travel.
 #[derive(Debug, Clone)]
 pub struct AxisModel {
+    /// The axis's name, as in the model and the config (`X`, ...).
     pub name: String,
+    /// The axis's fitted thermal model (the file `errmap thermal fit` writes).
     pub model: ThermalModel,
+    /// The axis's bounds and rate limit.
     pub limits: Limits,
+    /// Whether a point target's value adds the geometric compensation −Er(x) (false: Er(x) is in the
+    /// controller's pitch table).
     pub include_geometric: bool,
     /// Largest |x − Px| over the fitted travel (m): the rate limit and bounds act there.
     pub lever_m: f64,
@@ -61,6 +72,8 @@ pub struct AxisModel {
 const BOUND_SAMPLES: usize = 41;
 
 impl AxisModel {
+    /// An axis of a model: the lever is the larger distance from Px to either end of the model's
+    /// fitted travel (`x_min_mm` … `x_max_mm`).
     pub fn new(name: String, model: ThermalModel, limits: Limits, include_geometric: bool) -> Self {
         let px = model.reference_point_mm;
         let lever_m = (model.x_min_mm - px).abs().max((model.x_max_mm - px).abs()) / 1000.0;
@@ -73,6 +86,7 @@ impl AxisModel {
         }
     }
 
+    /// The model's reference point Px (mm, machine coordinates), about which the line turns.
     pub fn px_mm(&self) -> f64 {
         self.model.reference_point_mm
     }

@@ -11,15 +11,22 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LiveConfig {
+    /// The `[loop]` table: period, stop behaviour, replay speed, write retries.
     #[serde(rename = "loop", default)]
     pub cycle: LoopConfig,
+    /// The `[store]` table: the temperature history store and its retention.
     pub store: StoreConfig,
+    /// The `[[sources]]` the readings come from, in file order.
     pub sources: Vec<SourceConfig>,
     /// Model sensor name → where its reading comes from and what is plausible.
     #[serde(default)]
     pub sensors: BTreeMap<String, SensorConfig>,
+    /// The `[coolant]` table; None: every model must have a single coolant state, which is used
+    /// (a model with gains for more than one is a config error).
     pub coolant: Option<CoolantConfig>,
+    /// The `[[axes]]` compensated, in file order.
     pub axes: Vec<AxisConfig>,
+    /// The `[[targets]]` the axes are written to (empty is allowed with `--dry-run`).
     #[serde(default)]
     pub targets: Vec<TargetConfig>,
     /// The file read (messages, relative paths).
@@ -42,6 +49,7 @@ pub enum OnStop {
 }
 
 impl OnStop {
+    /// The value's spelling in the config (`hold`, `ramp_to_zero`).
     pub fn name(self) -> &'static str {
         match self {
             OnStop::Hold => "hold",
@@ -50,11 +58,13 @@ impl OnStop {
     }
 }
 
+/// The `[loop]` table: how the cycle runs and how it stops.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopConfig {
     /// Cycle period (ms).
     pub period_ms: u64,
+    /// What the targets are left with at SIGTERM, SIGINT or the end of a replay.
     pub on_stop: OnStop,
     /// Longest ramp to zero at a stop (s); past it the values are held and errmap stops.
     pub stop_ramp_s: f64,
@@ -77,6 +87,7 @@ impl Default for LoopConfig {
     }
 }
 
+/// The `[store]` table: the temperature history store the cycles and samples are logged into.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StoreConfig {
@@ -104,6 +115,7 @@ pub enum SourceKind {
 }
 
 impl SourceKind {
+    /// The kind's spelling in the config (`csv`, `modbus`, `opcua`).
     pub fn name(self) -> &'static str {
         match self {
             SourceKind::Csv => "csv",
@@ -117,7 +129,9 @@ impl SourceKind {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SourceConfig {
+    /// The source's name, the `<source>` of `source.channel` references.
     pub name: String,
+    /// Which kind of source; the keys of other kinds are refused.
     pub kind: SourceKind,
     /// Silent this long: the loop holds (ms).
     pub timeout_ms: u64,
@@ -133,14 +147,19 @@ pub struct SourceConfig {
     // modbus
     /// `host:port`.
     pub address: Option<String>,
+    /// Modbus unit (slave) id of the device (default 1).
     pub unit_id: Option<u8>,
     /// Modbus registers or OPC UA nodes, one per channel.
     #[serde(default)]
     pub channels: Vec<ChannelConfig>,
     // opcua
+    /// OPC UA: the server's endpoint URL (`opc.tcp://host:port`).
     pub endpoint: Option<String>,
+    /// OPC UA: the security policy of the session.
     pub security_policy: Option<String>,
+    /// OPC UA: the user name to log in with.
     pub user: Option<String>,
+    /// OPC UA: the password of `user`.
     pub password: Option<String>,
 }
 
@@ -148,6 +167,7 @@ pub struct SourceConfig {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelConfig {
+    /// The channel's name, the `<channel>` of `source.channel` references.
     pub name: String,
     /// Modbus: `input`, `holding`, `coil`, `discrete`.
     pub table: Option<String>,
@@ -160,6 +180,7 @@ pub struct ChannelConfig {
     pub word_order: Option<String>,
     /// value = scale·raw + offset.
     pub scale: Option<f64>,
+    /// Added after scaling, in the channel's unit (default 0).
     pub offset: Option<f64>,
     /// OPC UA: the node id, e.g. `ns=2;s=Temperatures.T1`.
     pub node: Option<String>,
@@ -182,13 +203,17 @@ pub enum FilterChoice {
 pub struct SensorConfig {
     /// `source.channel`.
     pub channel: String,
+    /// Lowest plausible temperature after calibration (°C; default 0).
     #[serde(default = "default_min_c")]
     pub min_c: f64,
+    /// Highest plausible temperature after calibration (°C; default 60).
     #[serde(default = "default_max_c")]
     pub max_c: f64,
     /// Largest plausible change between two readings: max_step_c + max_rate_c_per_s·Δt.
     #[serde(default = "default_rate")]
     pub max_rate_c_per_s: f64,
+    /// The step part of the largest plausible change (°C; default 0.5); the rate part is
+    /// `max_rate_c_per_s` (°C/s; default 0.1).
     #[serde(default = "default_step")]
     pub max_step_c: f64,
     /// A reading above this is an open RTD (a module's overrange value).
@@ -197,6 +222,7 @@ pub struct SensorConfig {
     /// A reading below this is a shorted RTD.
     #[serde(default = "default_short")]
     pub short_below_c: f64,
+    /// The denoising of the sensor's readings (default: the model's own filter).
     #[serde(default)]
     pub filter: FilterChoice,
 }
@@ -224,9 +250,13 @@ fn default_short() -> f64 {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoolantConfig {
+    /// `source.channel` of the coolant state: a bit (on/off), a number (≠ 0: on) or the state's
+    /// label itself.
     pub channel: String,
+    /// The model's label of the coolant-on state (default `on`).
     #[serde(default = "default_on")]
     pub on: String,
+    /// The model's label of the coolant-off state (default `off`).
     #[serde(default = "default_off")]
     pub off: String,
 }
@@ -242,6 +272,7 @@ fn default_off() -> String {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AxisConfig {
+    /// The axis's name; must be the axis of its model.
     pub name: String,
     /// The model file `errmap thermal fit` wrote (relative to the config's folder).
     pub model: PathBuf,
@@ -279,6 +310,7 @@ pub enum TargetKind {
 }
 
 impl TargetKind {
+    /// The kind's spelling in the config (`sinumerik-opcua`, `modbus-registers`, ...).
     pub fn name(self) -> &'static str {
         match self {
             TargetKind::SinumerikOpcua => "sinumerik-opcua",
@@ -293,14 +325,23 @@ impl TargetKind {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TargetConfig {
+    /// The target's name, as an axis's `target` names it.
     pub name: String,
+    /// Which kind of target (only `modbus-registers` is built).
     pub kind: TargetKind,
+    /// OPC UA targets: the server's endpoint URL.
     pub endpoint: Option<String>,
+    /// Modbus: `host:port` of the PLC gateway.
     pub address: Option<String>,
+    /// Modbus: the unit (slave) id (default 1).
     pub unit_id: Option<u8>,
+    /// OPC UA targets: the security policy of the session.
     pub security_policy: Option<String>,
+    /// OPC UA targets: the user name to log in with.
     pub user: Option<String>,
+    /// OPC UA targets: the password of `user`.
     pub password: Option<String>,
+    /// Axis name → where this target writes that axis.
     #[serde(default)]
     pub axes: BTreeMap<String, TargetAxisConfig>,
 }
@@ -311,15 +352,20 @@ pub struct TargetConfig {
 pub struct TargetAxisConfig {
     /// Sinumerik: node ids of SD43900, SD43910, SD43920 of the axis.
     pub sd43900: Option<String>,
+    /// Sinumerik: node id of SD43910 `$SA_TEMP_COMP_SLOPE` (tanβ).
     pub sd43910: Option<String>,
+    /// Sinumerik: node id of SD43920 `$SA_TEMP_COMP_REF_POSITION` (P0).
     pub sd43920: Option<String>,
     /// Generic OPC UA: the node receiving the value (µm unless `unit`).
     pub node: Option<String>,
     /// Modbus: holding register, type and scale of the written value (raw = value/scale).
     pub register: Option<u16>,
+    /// Modbus: the register type, `u16`, `s16`, `u32`, `s32` (default) or `f32`.
     #[serde(rename = "type")]
     pub data_type: Option<String>,
+    /// Modbus 32-bit types: `big` (high word first, default) or `little`.
     pub word_order: Option<String>,
+    /// Modbus: µm per count (the register holds value/scale, rounded).
     pub scale: Option<f64>,
     /// Units of the written value: `um` or `mm`.
     pub unit: Option<String>,
@@ -328,7 +374,9 @@ pub struct TargetAxisConfig {
 /// A `source.channel` reference.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct ChannelRef {
+    /// The source's name.
     pub source: String,
+    /// The channel's name within the source.
     pub channel: String,
 }
 

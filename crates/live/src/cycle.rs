@@ -45,11 +45,18 @@ pub struct RunOptions {
 /// What a run did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct RunSummary {
+    /// Cycles counted in the run, the missed ones included (the loop's last cycle number + 1).
     pub cycles: u64,
+    /// Why the run stopped: "stopped by SIGTERM", "stopped by SIGINT", "end of the replay data",
+    /// or "--once".
     pub stop_reason: String,
+    /// The store campaign the run's temperatures were logged under (`live-<start time>`).
     pub campaign: String,
+    /// Cycles skipped because the loop fell more than a whole period behind its clock.
     pub missed_cycles: u64,
+    /// Alarms raised during the run.
     pub alarms_raised: u64,
+    /// The mode of the last cycle (`stopped`, or the cycle's own mode with `--once`).
     pub final_mode: &'static str,
 }
 
@@ -61,6 +68,7 @@ pub struct StopFlags {
 }
 
 impl StopFlags {
+    /// Flags with no stop requested; signals are not yet registered.
     pub fn new() -> StopFlags {
         StopFlags::default()
     }
@@ -81,6 +89,8 @@ impl StopFlags {
         self.term.store(true, Ordering::SeqCst);
     }
 
+    /// The stop asked for, if any: `SIGTERM` (also a caller's [`request`](StopFlags::request)) or
+    /// `SIGINT`, SIGTERM winning when both are set.
     pub fn reason(&self) -> Option<&'static str> {
         if self.term.load(Ordering::SeqCst) {
             Some("SIGTERM")

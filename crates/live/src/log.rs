@@ -42,11 +42,20 @@ pub const LIVE_SOURCE: &str = "errmap live";
 /// One cycle's record.
 #[derive(Debug, Clone)]
 pub struct CycleRecord {
+    /// The cycle's number in the run.
     pub cycle: u64,
+    /// The cycle's time (RFC 3339 UTC, ms; in a replay the start time plus the replayed time).
     pub at_utc: String,
+    /// The cycle's mode, as [`Mode::name`](crate::state::Mode::name) spells it.
     pub mode: &'static str,
+    /// The cycle's inputs as JSON: each sensor's °C as the model used it, `raw` readings,
+    /// coolant, each axis's position and direction, `time_s`.
     pub inputs_json: String,
+    /// The cycle's outputs as JSON, per axis: `computed_um`, `written_um`, `error_um`,
+    /// `tan_beta_um_per_m`, the written line, `px_mm`, `held`, `target`.
     pub outputs_json: String,
+    /// What happened in the cycle (alarms raised, commands applied, write retries, why it
+    /// stopped); None when nothing did.
     pub note: Option<String>,
     /// Loop time (s): the time of the temperature samples.
     pub time_s: f64,
@@ -57,10 +66,15 @@ pub struct CycleRecord {
 /// An operator's command.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Command {
+    /// The command's row id in `live_commands`.
     pub id: i64,
+    /// When the operator issued it (RFC 3339 UTC, ms).
     pub issued_utc: String,
+    /// The operator who issued it (an `errmap serve` user).
     pub user: String,
+    /// `pause`, `resume` or `ack`.
     pub command: String,
+    /// The alarm acknowledged (`ack` only; None for the others).
     pub alarm_id: Option<i64>,
 }
 
@@ -83,7 +97,9 @@ pub struct StoreLink {
     commands: mpsc::Receiver<Command>,
     thread: Option<std::thread::JoinHandle<()>>,
     failure: Arc<Mutex<Option<String>>>,
+    /// The run's campaign name in the store (`live-<start time>`).
     pub campaign: String,
+    /// The store's path.
     pub path: PathBuf,
 }
 
@@ -194,12 +210,19 @@ fn add_campaign(
 
 /// How the store link starts.
 pub struct LinkSettings<'a> {
+    /// The store's path.
     pub path: &'a Path,
+    /// The run's campaign name (`live-<start time>`).
     pub campaign: String,
+    /// The axis recorded on the campaign (the config's first axis).
     pub axis: &'a str,
+    /// The reference point Px recorded on the campaign (mm, the first axis's model).
     pub px_mm: f64,
+    /// The logged sensors with their calibrations, in the order [`CycleRecord::samples`] indexes.
     pub sensors: &'a [Sensor],
+    /// The run's start (RFC 3339 UTC, ms): commands issued before it are marked not applied.
     pub start_utc: &'a str,
+    /// The start as Unix seconds (the campaign's `ingested_unix`).
     pub now_unix: i64,
 }
 

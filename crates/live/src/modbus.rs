@@ -16,23 +16,33 @@ use tokio_modbus::Slave;
 /// Where a channel lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Table {
+    /// Input registers (function code 4, read-only 16-bit words).
     Input,
+    /// Holding registers (function codes 3 and 16, read-write 16-bit words).
     Holding,
+    /// Coils (function code 1, read-write bits).
     Coil,
+    /// Discrete inputs (function code 2, read-only bits).
     Discrete,
 }
 
 /// How a register value is encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DataType {
+    /// Unsigned 16-bit integer, one register.
     U16,
+    /// Two's-complement signed 16-bit integer, one register.
     S16,
+    /// Unsigned 32-bit integer, two registers.
     U32,
+    /// Two's-complement signed 32-bit integer, two registers.
     S32,
+    /// IEEE 754 single-precision float, two registers.
     F32,
 }
 
 impl DataType {
+    /// How many 16-bit registers a value of this type spans (1 or 2).
     pub fn words(self) -> u16 {
         match self {
             DataType::U16 | DataType::S16 => 1,
@@ -44,13 +54,19 @@ impl DataType {
 /// One channel's layout.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Layout {
+    /// The channel's name (a source's channel, or the axis a target writes).
     pub name: String,
+    /// The table the value lives in.
     pub table: Table,
+    /// The 0-based protocol address of the (first) register or bit.
     pub register: u16,
+    /// The encoding of a register value (`U16` for bits, unused there).
     pub data_type: DataType,
     /// High word first.
     pub big_words: bool,
+    /// Engineering units per count: value = scale·raw + offset (≠ 0; default 1).
     pub scale: f64,
+    /// Added after scaling, in engineering units (default 0).
     pub offset: f64,
 }
 
@@ -192,6 +208,7 @@ impl Layout {
 
 /// A connected Modbus TCP client.
 pub struct Client {
+    /// The device's `host:port`, as configured.
     pub address: String,
     ctx: Context,
 }
@@ -266,7 +283,9 @@ impl Client {
 /// A channel's value as read.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ReadValue {
+    /// A register's engineering value (scale·raw + offset).
     Number(f64),
+    /// A coil's or discrete input's bit.
     Flag(bool),
 }
 

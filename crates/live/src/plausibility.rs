@@ -10,6 +10,7 @@ use super::config::SensorConfig;
 pub struct Implausible {
     /// `open`, `shorted`, `range`, `rate`.
     pub kind: &'static str,
+    /// What is wrong, naming the sensor and the reading (the alarm's and the cycle note's text).
     pub message: String,
 }
 

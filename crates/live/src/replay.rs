@@ -15,11 +15,15 @@ use std::path::Path;
 /// What to generate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplayOptions {
+    /// Seed of `errmap synth thermal`'s truth and of the replay's sensor noise (same seed, same log).
     pub seed: u64,
     /// 1-based campaign of `errmap synth thermal` (1, 3: coolant off; 2, 4: on).
     pub campaign: usize,
+    /// Length of the log (s of machine time); rows at 0, `period_s`, … up to it.
     pub duration_s: f64,
+    /// Time between rows (s).
     pub period_s: f64,
+    /// The axis's feed while it moves back and forth over the travel (mm/min).
     pub feed_mm_per_min: f64,
     /// Switch the coolant label every this many seconds (None: the campaign's state throughout).
     pub coolant_every_s: Option<f64>,

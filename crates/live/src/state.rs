@@ -10,21 +10,33 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// The schema string of the state file; it changes only when a field changes meaning (the
+/// contract with `errmap serve`).
 pub const SCHEMA: &str = "errmap-live-state/1";
 
 /// The loop's modes, as the state file and `live_cycles.mode` spell them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Mode {
+    /// Ramping at the rate limit from the controller's present value (zero in a dry run, or after
+    /// a ramp to zero) toward the model's line.
     Starting,
+    /// Following the model's line.
     Running,
+    /// Values held: a source silent past its `timeout_ms`, an implausible reading, a bound
+    /// exceeded, or an unknown coolant state, position or input.
     Holding,
+    /// Values held by an operator's `pause` command until `resume`.
     Paused,
+    /// Every axis ramping to zero at its rate limit (a source silent or a reading implausible past
+    /// `ramp_timeout_ms`, or a stop with `on_stop = "ramp_to_zero"`).
     RampingToZero,
+    /// The last cycle of a run (SIGTERM, SIGINT or the end of a replay); nothing more is written.
     Stopped,
 }
 
 impl Mode {
+    /// The mode's name as the state file and `live_cycles.mode` spell it (`ramping_to_zero`, ...).
     pub fn name(self) -> &'static str {
         match self {
             Mode::Starting => "starting",
@@ -37,62 +49,111 @@ impl Mode {
     }
 }
 
+/// One model sensor in the state file.
 #[derive(Debug, Clone, Serialize)]
 pub struct SensorState {
+    /// The sensor's name in the axes' models (`T1`, `nut`, ...).
     pub name: String,
+    /// The temperature the model uses (°C, calibrated and filtered); None before the first
+    /// accepted reading.
     pub value_c: Option<f64>,
+    /// Whether the sensor has a value and no problem (its last reading was plausible).
     pub ok: bool,
+    /// The name of the source the sensor's channel comes from.
     pub source: String,
+    /// Loop time since the source's last reading of the channel (ms); None before any reading.
     pub age_ms: Option<u64>,
+    /// What is wrong with the sensor (an implausible reading, no reading); None when it is fine.
     pub problem: Option<String>,
 }
 
+/// One compensated axis in the state file. The values are compensations (−E, µm) at the axis's
+/// present position, the geometric part included when the axis carries it.
 #[derive(Debug, Clone, Serialize)]
 pub struct AxisState {
+    /// The axis's name (the model's axis: `X`, ...).
     pub axis: String,
+    /// The axis's position (mm, machine coordinates) from its position channel; None when unknown.
     pub position_mm: Option<f64>,
+    /// The direction of travel in force (`forward` or `reverse`: the last one reported, kept while
+    /// the axis stands); None without a direction channel (the mean of both models is used).
     pub direction: Option<&'static str>,
+    /// The compensation the model asks for at the position (µm); None without a position or a
+    /// demand (unknown input).
     pub computed_um: Option<f64>,
+    /// The compensation written (or, in a dry run, that would have been) at the position (µm), after
+    /// bounds and rate limit; None without a position.
     pub written_um: Option<f64>,
+    /// The bound on |compensation| anywhere on the fitted travel (µm, the config's `limit_um`).
     pub limit_um: f64,
+    /// The fastest allowed change of the compensation anywhere on the travel (µm/s).
     pub rate_limit_um_s: f64,
+    /// The name of the target the axis is written to (`dry-run` in a dry run).
     pub target: String,
+    /// Whether the axis is held: the loop is holding or paused, or, outside the start and a ramp
+    /// to zero, the written line differs from the model's (a bound exceeded, a rate limit
+    /// catching up).
     pub held: bool,
     /// tanβ the model gives (µm/m) and the slope written (compensation sign, µm/m).
     pub computed_slope_um_per_m: f64,
+    /// The slope of the written line (compensation sign, µm/m).
     pub written_slope_um_per_m: f64,
 }
 
+/// One source's health in the state file.
 #[derive(Debug, Clone, Serialize)]
 pub struct SourceState {
+    /// The source's name in the config.
     pub name: String,
+    /// The source's kind (`csv`, `modbus`, ...).
     pub kind: &'static str,
+    /// Whether the source has been heard from within its `timeout_ms` and reports no problem.
     pub healthy: bool,
+    /// When the source last delivered a good reading (RFC 3339 UTC, ms); None if it never did.
     pub last_ok_utc: Option<String>,
+    /// What is wrong (a failed poll, a bad row, "silent for N s"); None when healthy.
     pub problem: Option<String>,
 }
 
+/// One listed alarm in the state file.
 #[derive(Debug, Clone, Serialize)]
 pub struct AlarmState {
+    /// The alarm's number in this run (from 1), as an operator's `ack` names it.
     pub id: u64,
+    /// When it was raised (RFC 3339 UTC, ms; loop time in a replay).
     pub raised_utc: String,
+    /// What raised it: a source's, sensor's, axis's or target's name.
     pub source: String,
+    /// What happened (e.g. "T3 open RTD (reading 850.0 °C above 200.0 °C)").
     pub message: String,
+    /// Whether an operator has acknowledged it (it stays listed while its cause is active).
     pub acknowledged: bool,
 }
 
+/// The state file's content (schema `errmap-live-state/1`, the contract with `errmap serve`).
 #[derive(Debug, Clone, Serialize)]
 pub struct State {
+    /// Always [`SCHEMA`].
     pub schema: &'static str,
+    /// When the cycle was written (RFC 3339 UTC, ms; loop time in a replay).
     pub written_utc: String,
+    /// The cycle's number in this run.
     pub cycle: u64,
+    /// The loop's cycle period (ms).
     pub period_ms: u64,
+    /// The loop's mode in this cycle.
     pub mode: Mode,
+    /// Whether this is a dry run (nothing is written to any target).
     pub dry_run: bool,
+    /// Whether the coolant is on; None when there is no coolant channel or its state is unknown.
     pub coolant_on: Option<bool>,
+    /// Every model sensor, in config order.
     pub sensors: Vec<SensorState>,
+    /// Every compensated axis, in config order.
     pub axes: Vec<AxisState>,
+    /// Every source, in config order.
     pub sources: Vec<SourceState>,
+    /// The listed alarms: active or not yet acknowledged, oldest first.
     pub alarms: Vec<AlarmState>,
     /// Cycles that started later than a whole period after their time (wall clock only).
     pub missed_cycles: u64,
@@ -108,6 +169,8 @@ pub struct StateWriter {
 }
 
 impl StateWriter {
+    /// A writer of the state file at `path` (its folder is created; its temporary file is
+    /// `.<name>.<pid>.tmp` beside it). Fails when the path is not a safe output.
     pub fn new(path: &Path) -> Result<StateWriter> {
         errmap_core::io::safety::check_output(path)?;
         let dir = match path.parent() {
@@ -126,6 +189,7 @@ impl StateWriter {
         })
     }
 
+    /// Rewrite the state file with `state`: pretty JSON into the temporary file, then a rename.
     pub fn write(&mut self, state: &State) -> Result<()> {
         self.buf.clear();
         serde_json::to_writer_pretty(&mut self.buf, state)

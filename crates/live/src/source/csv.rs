@@ -26,6 +26,9 @@ struct Row {
     fields: Vec<String>,
 }
 
+/// A CSV source: a machine log in the format of `errmap thermal compensate`, read from a file
+/// or standard input, every column a channel; replayed by its `time_s` column or taken as
+/// lines arrive on the wall clock.
 pub struct CsvSource {
     name: String,
     path: PathBuf,

@@ -10,12 +10,17 @@ use std::collections::HashMap;
 /// A channel's value as the source delivered it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Value {
+    /// A number (a register's engineering value, a CSV field that parses as one).
     Number(f64),
+    /// A bit (a coil or discrete input).
     Flag(bool),
+    /// Text as delivered (a CSV field that is not a number, e.g. a coolant label or `+`/`-`).
     Text(String),
 }
 
 impl Value {
+    /// The value as a number: a bit as 1 or 0, text parsed after trimming; None for text that is
+    /// not a number.
     pub fn as_number(&self) -> Option<f64> {
         match self {
             Value::Number(v) => Some(*v),
@@ -28,7 +33,9 @@ impl Value {
 /// The newest value of a channel and the loop time (s) it arrived at.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reading {
+    /// The channel's newest value.
     pub value: Value,
+    /// The loop time it arrived at (s).
     pub at_s: f64,
     /// Counts the readings of this channel: a new one has a larger sequence number.
     pub seq: u64,
@@ -37,6 +44,7 @@ pub struct Reading {
 /// What a source holds now.
 #[derive(Debug, Clone, Default)]
 pub struct Snapshot {
+    /// Channel name → its newest reading.
     pub channels: HashMap<String, Reading>,
     /// Loop time of the last complete, good update (s).
     pub last_ok_s: Option<f64>,
@@ -68,7 +76,9 @@ impl Snapshot {
 }
 
 /// A live source.
+/// A source of live readings (a CSV stream, a Modbus device), polled once per cycle.
 pub trait Source: Send {
+    /// The source's name in the config.
     fn name(&self) -> &str;
     /// `csv`, `modbus`, `opcua`.
     fn kind(&self) -> &'static str;
@@ -76,6 +86,7 @@ pub trait Source: Send {
     fn channel_names(&self) -> Vec<String>;
     /// Take in what has arrived by loop time `now_s` (never blocks for long).
     fn poll(&mut self, now_s: f64);
+    /// The newest readings and health, as of the last [`poll`](Source::poll).
     fn snapshot(&self) -> &Snapshot;
     /// A replay whose data is used up.
     fn finished(&self) -> bool {

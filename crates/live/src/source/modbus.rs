@@ -19,6 +19,8 @@ struct Shared {
     quit: bool,
 }
 
+/// A Modbus TCP source: a thread polls every channel each period and hands the values over;
+/// a failed poll is the source's problem and the next poll reconnects.
 pub struct ModbusSource {
     name: String,
     channels: Vec<String>,

@@ -10,7 +10,9 @@ use errmap_core::error::Result;
 /// What is written for one axis this cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Output {
+    /// The written thermal line (compensation sign: offset about Px and slope), for a line target.
     pub line: Line,
+    /// The line's reference point Px (mm, machine coordinates: the model's).
     pub px_mm: f64,
     /// The compensation at the axis's position (µm), geometric part included when configured;
     /// None without a position.
@@ -20,12 +22,19 @@ pub struct Output {
 /// What the controller holds now, read at start so the loop ramps from it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Present {
+    /// A line target's present thermal line (offset and slope about Px).
     Line(Line),
+    /// A point target's present compensation value (µm; taken as the line's offset, the start
+    /// ramps from it).
     Value(f64),
 }
 
+/// A controller interface the compensation is written to, one connection per `[[targets]]`
+/// entry.
 pub trait Target: Send {
+    /// The target's name in the config.
     fn name(&self) -> &str;
+    /// The target's kind, as the config spells it (`modbus-registers`, ...).
     fn kind(&self) -> &'static str;
     /// Writes a value at the axis's position (needs the position channel).
     fn is_point(&self) -> bool;

@@ -64,6 +64,8 @@ impl Reference {
         Reference::CampaignOffset,
     ];
 
+    /// The reference's name in model.json and on the command line (`room`, `shared`, `own-start`,
+    /// `campaign-offset`).
     pub fn name(self) -> &'static str {
         match self {
             Reference::Room => "room",
@@ -73,6 +75,7 @@ impl Reference {
         }
     }
 
+    /// The reference a name (as [`Reference::name`] spells it) stands for; None for an unknown name.
     pub fn parse(text: &str) -> Option<Reference> {
         Reference::ALL.into_iter().find(|r| r.name() == text)
     }
@@ -81,6 +84,7 @@ impl Reference {
 /// Cross-validation score of one reference.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ReferenceScore {
+    /// The reference scored.
     pub reference: Reference,
     /// Pooled leave-one-campaign-out RMS (µm) of the measurements after each cold one.
     pub loco_rms_um: Option<f64>,
@@ -124,16 +128,21 @@ impl Default for FitOptions {
 /// Gains of one coolant state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CoolantGains {
+    /// The coolant state's label, as the campaigns give it (e.g. `on`, `off`).
     pub coolant: String,
     /// k_j in µm/m/K, keyed by sensor name.
     pub k_um_per_m_k: BTreeMap<String, f64>,
+    /// Standard error of each k_j (µm/m/K), by sensor name; None when the fit has no degrees of
+    /// freedom left.
     pub k_se_um_per_m_k: BTreeMap<String, Option<f64>>,
 }
 
 /// The model of one direction.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DirectionModel {
+    /// The direction of travel this model is for.
     pub direction: Direction,
+    /// The order of the Legendre series of Er(x) (0: a constant).
     pub order: usize,
     /// "cross-validation" or "given".
     pub order_chosen_by: String,
@@ -141,24 +150,37 @@ pub struct DirectionModel {
     pub cv_rms_um_by_order: Vec<Option<f64>>,
     /// Er(x) = Σ c_n·P_n(s), µm.
     pub legendre_um: Vec<f64>,
+    /// Standard error of each Legendre coefficient (µm), same order; None without degrees of freedom.
     pub legendre_se_um: Vec<Option<f64>>,
+    /// The gains k_j of each coolant state, in the model's `coolant_states` order.
     pub gains: Vec<CoolantGains>,
+    /// ρ, the gain of the room's change ΔT_env (µm/m/K): fitted, given, or 0 without an ambient
+    /// sensor.
     pub rho_um_per_m_k: f64,
+    /// Standard error of ρ (µm/m/K); None when ρ was given, not fitted, or the fit has no degrees
+    /// of freedom left.
     pub rho_se_um_per_m_k: Option<f64>,
+    /// Whether ρ was fitted (an ambient sensor and no given ρ), rather than given or 0.
     pub rho_fitted: bool,
     /// With reference "campaign-offset": each campaign's tanβ offset (µm/m, sum zero).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub campaign_offsets_um_per_m: BTreeMap<String, f64>,
+    /// RMS of measured − modelled E over every reading of this direction in the fit (µm).
     pub residual_rms_um: f64,
+    /// Readings of this direction in the fit (every campaign, every measurement).
     pub points: usize,
 }
 
 /// Residuals of one campaign.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CampaignReport {
+    /// The campaign's name.
     pub name: String,
+    /// The campaign's coolant state label.
     pub coolant: String,
+    /// Measurements in the campaign (each: the laser readings taken at one thermal state).
     pub measurements: usize,
+    /// The campaign's readings in the fit, both directions.
     pub points: usize,
     /// RMS of measured − modelled error of the full fit (µm), both directions.
     pub residual_rms_um: f64,

@@ -17,8 +17,9 @@ pub const C: f64 = -4.183e-12;
 /// Nominal resistance of a Pt100 at 0 °C (Ω).
 pub const R0_OHM: f64 = 100.0;
 
-/// Lowest and highest temperature IEC 60751 defines the curve for (°C).
+/// Lowest temperature IEC 60751 defines the curve for (°C).
 pub const T_MIN_C: f64 = -200.0;
+/// Highest temperature IEC 60751 defines the curve for (°C).
 pub const T_MAX_C: f64 = 850.0;
 
 /// Resistance of an ideal Pt100 at `t_c` (°C), IEC 60751.
