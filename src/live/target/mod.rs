@@ -3,6 +3,7 @@
 //! node or register) takes the value at the axis's present position.
 
 pub mod modbus;
+pub mod opcua;
 
 use super::axis::Line;
 use crate::error::Result;
@@ -22,6 +23,12 @@ pub struct Output {
 pub enum Present {
     Line(Line),
     Value(f64),
+    /// Sinumerik K3 setting data: SD43900 (mm), SD43910, SD43920 (mm).
+    K3 {
+        abs_mm: f64,
+        slope: f64,
+        reference_mm: f64,
+    },
 }
 
 pub trait Target: Send {
