@@ -10,6 +10,9 @@ pub enum BenchCommand {
     /// Time the training of N networks (one per part, the default network size) on synthetic
     /// web-plate data and print the throughput in sample·epochs/s (training only).
     Training(TrainingArgs),
+    /// Time the cycle of `errmap live` (N sensors, M axes, at a rate; dry run, store and state
+    /// file written every cycle) and its CPU share of one core.
+    Live(super::live::BenchLiveArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -42,6 +45,7 @@ pub struct TrainingArgs {
 
 pub fn run(cmd: BenchCommand, _globals: Globals) -> Result<i32> {
     match cmd {
+        BenchCommand::Live(args) => super::live::run_bench(args),
         BenchCommand::Training(args) => {
             let report = bench::run(&TrainingBench {
                 parts: args.parts,

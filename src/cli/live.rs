@@ -91,3 +91,51 @@ pub fn run_synth_replay(a: SynthLiveReplayArgs, _g: Globals) -> Result<i32> {
     info!("wrote {rows} rows to {}", a.output.display());
     Ok(0)
 }
+
+#[derive(Debug, clap::Args)]
+pub struct BenchLiveArgs {
+    /// Temperature sensors (gain sensors of every axis's model).
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    pub sensors: usize,
+    /// Axes, each with its own model.
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    pub axes: usize,
+    /// Cycle rate, Hz.
+    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    pub hz: f64,
+    /// How long to run, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run_bench(a: BenchLiveArgs) -> Result<i32> {
+    let report = errmap::live::bench::run(&errmap::live::bench::LiveBench {
+        sensors: a.sensors,
+        axes: a.axes,
+        hz: a.hz,
+        seconds: a.seconds,
+    })?;
+    if a.json {
+        let text = serde_json::to_string_pretty(&report)
+            .map_err(|e| errmap::Error::Internal(format!("bench JSON: {e}")))?;
+        outln!("{text}");
+    } else {
+        outln!(
+            "{} sensors, {} axes at {} Hz: {} cycles, {} missed; cycle {:.0} µs mean, {:.0} µs largest; CPU {:.2} s in {:.2} s = {:.1} % of one core",
+            report.sensors,
+            report.axes,
+            report.hz,
+            report.cycles,
+            report.missed_cycles,
+            report.cycle_mean_us,
+            report.cycle_max_us,
+            report.cpu_s,
+            report.wall_s,
+            100.0 * report.cpu_share_of_one_core
+        );
+    }
+    Ok(0)
+}

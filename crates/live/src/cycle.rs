@@ -56,6 +56,10 @@ pub struct RunSummary {
     pub missed_cycles: u64,
     /// Alarms raised during the run.
     pub alarms_raised: u64,
+    /// Time a cycle took from polling the sources to the state file, mean, µs.
+    pub cycle_mean_us: f64,
+    /// Time the slowest cycle took from polling the sources to the state file, µs.
+    pub cycle_max_us: f64,
     /// The mode of the last cycle (`stopped`, or the cycle's own mode with `--once`).
     pub final_mode: &'static str,
 }
@@ -552,6 +556,11 @@ impl Live {
             let present = self.targets[t].present(&a.model.name)?;
             a.written = match present {
                 Present::Line(l) => l,
+                Present::K3 {
+                    abs_mm,
+                    slope,
+                    reference_mm,
+                } => super::target::opcua::line_of_k3(abs_mm, slope, reference_mm, a.model.px_mm()),
                 Present::Value(v) => {
                     // A point target: its value as an offset of the thermal line (the geometric
                     // part, when carried, is not ramped).
@@ -584,6 +593,8 @@ impl Live {
         let wall_start = Instant::now();
         let mut stopping: Option<(String, f64)> = None;
         let mut final_mode;
+        // (sum µs, largest µs, cycles) of the cycles' own work
+        let mut timed = (0.0f64, 0.0f64, 0u64);
         loop {
             let t = self.t0_s + self.cycle as f64 * self.period_s;
             // Pace the cycle: the wall clock, a time-accelerated replay, or as fast as it runs.
@@ -607,6 +618,7 @@ impl Live {
                     continue;
                 }
             }
+            let began = Instant::now();
             for s in &mut self.sources {
                 s.source.poll(t);
             }
@@ -662,6 +674,10 @@ impl Live {
                 notes_of_cycle,
                 stopping.as_ref().filter(|_| done).map(|s| s.0.clone()),
             )?;
+            let took_us = began.elapsed().as_secs_f64() * 1e6;
+            timed.0 += took_us;
+            timed.1 = timed.1.max(took_us);
+            timed.2 += 1;
             self.cycle += 1;
             if done {
                 break;
@@ -674,6 +690,8 @@ impl Live {
             campaign: self.link.campaign.clone(),
             missed_cycles: self.missed,
             alarms_raised: self.alarms.raised(),
+            cycle_mean_us: timed.0 / timed.2.max(1) as f64,
+            cycle_max_us: timed.1,
             final_mode: final_mode.name(),
         })
     }

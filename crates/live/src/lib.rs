@@ -9,11 +9,13 @@
 
 pub mod alarms;
 pub mod axis;
+pub mod bench;
 pub mod config;
 pub mod cycle;
 pub mod filter;
 pub mod log;
 pub mod modbus;
+pub mod opcua;
 pub mod plausibility;
 pub mod replay;
 pub mod source;
@@ -39,14 +41,10 @@ fn connect_source(
         SourceKind::Modbus => Ok(Box::new(source::modbus::ModbusSource::connect(
             config, index, s,
         )?)),
-        other => Err(Error::usage(
-            format!(
-                "source '{}': {} sources are not built into this errmap",
-                s.name,
-                other.name()
-            ),
-            "use a csv or modbus source",
-        )),
+        SourceKind::Opcua => Ok(Box::new(source::opcua::OpcUaSource::connect(
+            config, index, s,
+        )?)),
+        SourceKind::Csv => Err(Error::Internal("a csv source is opened by the loop".into())),
     }
 }
 
@@ -65,11 +63,14 @@ fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
             config::TargetKind::ModbusRegisters => targets.push(Box::new(
                 target::modbus::ModbusTarget::connect(config, i, t)?,
             )),
+            config::TargetKind::SinumerikOpcua | config::TargetKind::OpcuaNodes => targets.push(
+                Box::new(target::opcua::OpcUaTarget::connect(config, i, t)?),
+            ),
             other => {
                 return Err(config.key_error(
                     &format!("targets.{i}.kind"),
                     format!("{} targets are not built into this errmap", other.name()),
-                    "use a modbus-registers target, or run with --dry-run",
+                    "use a modbus-registers, sinumerik-opcua or opcua-nodes target, or run with --dry-run",
                 ))
             }
         }

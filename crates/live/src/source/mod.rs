@@ -4,6 +4,7 @@
 
 pub mod csv;
 pub mod modbus;
+pub mod opcua;
 
 use std::collections::HashMap;
 

@@ -3,6 +3,7 @@
 //! node or register) takes the value at the axis's present position.
 
 pub mod modbus;
+pub mod opcua;
 
 use super::axis::Line;
 use errmap_core::error::Result;
@@ -27,6 +28,15 @@ pub enum Present {
     /// A point target's present compensation value (µm; taken as the line's offset, the start
     /// ramps from it).
     Value(f64),
+    /// Sinumerik K3 setting data: SD43900 (mm), SD43910, SD43920 (mm).
+    K3 {
+        /// SD43900, the position-independent value, mm.
+        abs_mm: f64,
+        /// SD43910, the slope of the position-dependent line (tanβ, mm per mm).
+        slope: f64,
+        /// SD43920, the reference position Px of the line, machine coordinates, mm.
+        reference_mm: f64,
+    },
 }
 
 /// A controller interface the compensation is written to, one connection per `[[targets]]`
