@@ -193,7 +193,7 @@ mod tests {
     fn axis() -> AxisModel {
         let text = std::fs::read_to_string(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/data/thermal-live/model.json"
+            "/../../data/thermal-live/model.json"
         ))
         .unwrap();
         let model: ThermalModel = serde_json::from_str(&text).unwrap();
