@@ -1,6 +1,6 @@
 //! The state file the real `errmap live` writes is the one `errmap serve` reads: the sample
-//! live config run once in `--dry-run`, its state file parsed by the monitor's own reader, and
-//! each axis's values equal to the cycle the loop logged in the store.
+//! live config's replay run through in `--dry-run`, its last state file parsed by the monitor's
+//! own reader, and each axis's values equal to the cycle the loop logged in the store.
 
 use std::path::Path;
 use std::process::Command;
@@ -18,7 +18,14 @@ fn sample_live(dir: &Path) {
         .lines()
         .find(|l| l.trim_start().starts_with("path = \"../../out/"))
         .expect("the sample config names its store under out/");
-    let config = config.replace(store_line, "path = \"live.sqlite\"");
+    let speed_line = config
+        .lines()
+        .find(|l| l.trim_start().starts_with("replay_speed"))
+        .expect("the sample config replays its log");
+    // The store beside the copy; the replay as fast as it computes.
+    let config = config
+        .replace(store_line, "path = \"live.sqlite\"")
+        .replace(speed_line, "replay_speed = 0");
     std::fs::write(dir.join("live.toml"), config).unwrap();
 }
 
@@ -29,7 +36,7 @@ fn the_monitor_reads_the_state_file_the_live_loop_writes() {
     sample_live(d);
     let state_path = d.join("state.json");
     let out = Command::new(ERRMAP)
-        .args(["live", "live.toml", "--dry-run", "--once", "--state"])
+        .args(["live", "live.toml", "--dry-run", "--state"])
         .arg(&state_path)
         .current_dir(d)
         .output()
