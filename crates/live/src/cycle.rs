@@ -684,6 +684,9 @@ impl Live {
             }
         }
         self.link.close()?;
+        if let Some(w) = self.state_writer.as_mut() {
+            w.close()?;
+        }
         Ok(RunSummary {
             cycles: self.cycle,
             stop_reason: stopping.map(|s| s.0).unwrap_or_else(|| "--once".into()),

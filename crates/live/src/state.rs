@@ -3,7 +3,8 @@
 //! in the same folder, then a rename, so a reader never sees half a file).
 //!
 //! The file is not synced to disk each cycle: it is rewritten many times a second and only
-//! describes the present; the store holds the record.
+//! describes the present; the store holds the record. A thread of its own writes it, so the
+//! file system's latency never stretches a cycle.
 
 use errmap_core::error::{Error, Result};
 use serde::Serialize;
@@ -161,11 +162,27 @@ pub struct State {
     pub stop_reason: Option<String>,
 }
 
-/// Writes the state file atomically, reusing one buffer.
+/// Writes the state file atomically from a thread of its own, so a slow file system delays
+/// the file, never the cycle: each cycle hands over its state, and when the thread is still
+/// writing the previous one only the newest waits (the file is never more than one write
+/// behind). A failed write is returned by the next `write`.
 pub struct StateWriter {
-    path: PathBuf,
-    tmp: PathBuf,
+    shared: std::sync::Arc<Shared>,
+    thread: Option<std::thread::JoinHandle<()>>,
     buf: Vec<u8>,
+}
+
+#[derive(Default)]
+struct Slot {
+    next: Option<Vec<u8>>,
+    closing: bool,
+    failure: Option<Error>,
+}
+
+#[derive(Default)]
+struct Shared {
+    slot: std::sync::Mutex<Slot>,
+    ready: std::sync::Condvar,
 }
 
 impl StateWriter {
@@ -182,25 +199,91 @@ impl StateWriter {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "state.json".into());
+        let tmp = dir.join(format!(".{file_name}.{}.tmp", std::process::id()));
+        let path = path.to_path_buf();
+        let shared = std::sync::Arc::new(Shared::default());
+        let mine = shared.clone();
+        let thread = std::thread::Builder::new()
+            .name("live-state".into())
+            .spawn(move || writer(&mine, &path, &tmp))
+            .map_err(|e| Error::io("start the state writer for", &dir, e))?;
         Ok(StateWriter {
-            path: path.to_path_buf(),
-            tmp: dir.join(format!(".{file_name}.{}.tmp", std::process::id())),
+            shared,
+            thread: Some(thread),
             buf: Vec::with_capacity(4096),
         })
     }
 
-    /// Rewrite the state file with `state`: pretty JSON into the temporary file, then a rename.
+    /// Hand over a cycle's state (the previous one is dropped if it is not written yet).
     pub fn write(&mut self, state: &State) -> Result<()> {
         self.buf.clear();
         serde_json::to_writer_pretty(&mut self.buf, state)
             .map_err(|e| Error::Internal(format!("state JSON: {e}")))?;
         self.buf.push(b'\n');
-        let mut f = std::fs::File::create(&self.tmp).map_err(|e| Error::write(&self.tmp, e))?;
-        f.write_all(&self.buf)
-            .map_err(|e| Error::write(&self.tmp, e))?;
-        drop(f);
-        std::fs::rename(&self.tmp, &self.path)
-            .map_err(|e| Error::io("rename the state file to", &self.path, e))
+        let mut slot = self
+            .shared
+            .slot
+            .lock()
+            .map_err(|_| Error::Internal("state writer lock".into()))?;
+        if let Some(e) = slot.failure.take() {
+            return Err(e);
+        }
+        slot.next = Some(std::mem::replace(&mut self.buf, Vec::with_capacity(4096)));
+        self.shared.ready.notify_one();
+        Ok(())
+    }
+
+    /// Write the last state handed over and stop the thread.
+    pub fn close(&mut self) -> Result<()> {
+        if let Ok(mut slot) = self.shared.slot.lock() {
+            slot.closing = true;
+            self.shared.ready.notify_one();
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        match self.shared.slot.lock().map(|mut s| s.failure.take()) {
+            Ok(Some(e)) => Err(e),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Drop for StateWriter {
+    fn drop(&mut self) {
+        let _ = self.close();
+    }
+}
+
+fn writer(shared: &Shared, path: &Path, tmp: &Path) {
+    loop {
+        let bytes = {
+            let Ok(mut slot) = shared.slot.lock() else {
+                return;
+            };
+            while slot.next.is_none() && !slot.closing {
+                slot = match shared.ready.wait(slot) {
+                    Ok(s) => s,
+                    Err(_) => return,
+                };
+            }
+            match slot.next.take() {
+                Some(b) => b,
+                None => return,
+            }
+        };
+        let written = std::fs::File::create(tmp)
+            .and_then(|mut f| f.write_all(&bytes))
+            .map_err(|e| Error::write(tmp, e))
+            .and_then(|()| {
+                std::fs::rename(tmp, path)
+                    .map_err(|e| Error::io("rename the state file to", path, e))
+            });
+        if let Err(e) = written {
+            if let Ok(mut slot) = shared.slot.lock() {
+                slot.failure = Some(e);
+            }
+        }
     }
 }
 
