@@ -136,7 +136,6 @@ const TOKENS: &[&[u8]] = &[
 /// Largest fuzzed input, bytes.
 const MAX_LEN: usize = 1 << 16;
 
-
 /// Most CPU one case may take. A program whose control flow runs until `--expand`'s iteration
 /// bound (an endless loop the mutation made) costs about a second in the test profile, 1.0–1.2 s
 /// on a busy 2-core machine; a blow-up worse than the bounds allow takes far longer.
