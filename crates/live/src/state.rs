@@ -290,10 +290,7 @@ fn writer(shared: &Shared, path: &Path, tmp: &Path) {
 /// Now as RFC 3339 UTC with milliseconds and `Z` (the contract's time stamps).
 pub fn utc_ms(t: std::time::SystemTime) -> String {
     let d = t.duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
-    let secs = d.as_secs() as i64;
-    let s = errmap_core::io::stamp::utc_rfc3339(secs);
-    // "YYYY-MM-DDThh:mm:ssZ" → "YYYY-MM-DDThh:mm:ss.mmmZ"
-    format!("{}.{:03}Z", &s[..s.len() - 1], d.subsec_millis())
+    errmap_core::io::stamp::utc_rfc3339_ms(i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
 }
 
 #[cfg(test)]

@@ -9,11 +9,7 @@ pub fn now_ms() -> i64 {
 
 /// `YYYY-MM-DDThh:mm:ss.mmmZ` of a time in ms since the epoch.
 pub fn utc_ms(ms: i64) -> String {
-    let secs = ms.div_euclid(1000);
-    let milli = ms.rem_euclid(1000);
-    let whole = errmap_core::io::stamp::utc_rfc3339(secs);
-    // utc_rfc3339 ends in `Z` after the seconds: put the milliseconds before it.
-    format!("{}.{milli:03}Z", &whole[..whole.len() - 1])
+    errmap_core::io::stamp::utc_rfc3339_ms(ms)
 }
 
 /// Now as `YYYY-MM-DDThh:mm:ss.mmmZ`.

@@ -21,6 +21,28 @@ pub fn utc_now() -> String {
 /// Seconds since 1970-01-01T00:00:00Z as `YYYY-MM-DDThh:mm:ssZ` (proleptic Gregorian calendar;
 /// days to date by Hinnant's `civil_from_days`).
 pub fn utc_rfc3339(secs: i64) -> String {
+    format!("{}Z", civil_seconds(secs))
+}
+
+/// Milliseconds since 1970-01-01T00:00:00Z as `YYYY-MM-DDThh:mm:ss.mmmZ`: the live loop's and
+/// the monitor's time stamps.
+///
+/// ```
+/// // 1 795 766 400 s is 2026-11-27T08:00:00Z (`date -u -d @1795766400`).
+/// let stamp = errmap_core::io::stamp::utc_rfc3339_ms(1_795_766_400_123);
+/// assert_eq!(stamp, "2026-11-27T08:00:00.123Z");
+/// assert_eq!(errmap_core::io::stamp::utc_rfc3339_ms(-1), "1969-12-31T23:59:59.999Z");
+/// ```
+pub fn utc_rfc3339_ms(ms: i64) -> String {
+    format!(
+        "{}.{:03}Z",
+        civil_seconds(ms.div_euclid(1000)),
+        ms.rem_euclid(1000)
+    )
+}
+
+/// `YYYY-MM-DDThh:mm:ss` of seconds since the epoch.
+fn civil_seconds(secs: i64) -> String {
     let days = secs.div_euclid(86_400);
     let rem = secs.rem_euclid(86_400);
     let z = days + 719_468;
@@ -33,7 +55,7 @@ pub fn utc_rfc3339(secs: i64) -> String {
     let month = if mp < 10 { mp + 3 } else { mp - 9 };
     let year = yoe + era * 400 + i64::from(month <= 2);
     format!(
-        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}",
         rem / 3600,
         rem % 3600 / 60,
         rem % 60
