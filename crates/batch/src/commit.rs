@@ -25,10 +25,24 @@ impl Staging {
         Staging::begin_owned(target)
     }
 
+    /// [`Staging::begin`] that keeps the staging folders of interrupted runs into `target`
+    /// (their finished parts may be resumed) and returns them; the caller removes them.
+    pub fn begin_keeping_stale(target: &Path) -> Result<(Staging, Vec<PathBuf>)> {
+        check_replaceable(target)?;
+        let stale = stale_stagings(target);
+        remove_temporaries_inside(target)?;
+        Ok((Staging::create(target)?, stale))
+    }
+
     /// [`Staging::begin`] for a folder errmap owns inside a run's folder (e.g. `family/`),
     /// which has no manifest of its own.
     pub fn begin_owned(target: &Path) -> Result<Staging> {
         remove_stale(target)?;
+        Staging::create(target)
+    }
+
+    /// A new staging folder beside `target`.
+    fn create(target: &Path) -> Result<Staging> {
         let parent = parent_of(target);
         std::fs::create_dir_all(&parent).map_err(|e| Error::io("create folder", &parent, e))?;
         let dir = tempfile::Builder::new()
@@ -120,16 +134,31 @@ fn is_temporary(name: &str) -> bool {
 /// Remove what an interrupted run into `target` left: its staging folders beside it and
 /// `.errmap-*.tmp` files anywhere inside it.
 pub fn remove_stale(target: &Path) -> Result<()> {
+    for dir in stale_stagings(target) {
+        remove_path(&dir)?;
+    }
+    remove_temporaries_inside(target)
+}
+
+/// The staging folders interrupted runs into `target` left beside it, by name.
+pub fn stale_stagings(target: &Path) -> Vec<PathBuf> {
     let parent = parent_of(target);
     let prefix = staging_prefix(target);
+    let mut found = Vec::new();
     if let Ok(entries) = std::fs::read_dir(&parent) {
         for entry in entries.flatten() {
             let name = entry.file_name().to_string_lossy().to_string();
             if name.starts_with(&prefix) && name.ends_with(".tmp") {
-                remove_path(&entry.path())?;
+                found.push(entry.path());
             }
         }
     }
+    found.sort();
+    found
+}
+
+/// Remove the `.errmap-*.tmp` files interrupted writes left anywhere inside `target`.
+fn remove_temporaries_inside(target: &Path) -> Result<()> {
     let mut stack = vec![target.to_path_buf()];
     while let Some(dir) = stack.pop() {
         let Ok(entries) = std::fs::read_dir(&dir) else {
@@ -149,7 +178,8 @@ pub fn remove_stale(target: &Path) -> Result<()> {
     Ok(())
 }
 
-fn remove_path(path: &Path) -> Result<()> {
+/// Remove a file or a folder tree; one already gone is fine.
+pub fn remove_path(path: &Path) -> Result<()> {
     let r = if path.is_dir() {
         std::fs::remove_dir_all(path)
     } else {

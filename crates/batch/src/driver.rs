@@ -1,9 +1,10 @@
 //! A job run from start to commit (`errmap batch`) and the reduce of a sharded job (`errmap merge`): staging, `--resume`, the manifest, the family rebuilt from the shards.
 
 use super::commit::{self, Staging};
-use super::manifest::{self, RunManifest, RUN_MANIFEST};
+use super::journal::{self, Finished, Journal};
+use super::manifest::{self, PartRecord, RunManifest, RUN_MANIFEST};
 use super::reduce::{self, PartReduce, REDUCE_FILE};
-use super::summary::{BatchSummary, PartSummary};
+use super::summary::{BatchSummary, PartSummary, ToolpathSummary};
 use super::{plan_job, BatchOptions, JobFile, Shard};
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::progress::Reporter;
@@ -55,7 +56,11 @@ fn job_inputs(file: &JobFile) -> Result<Vec<PathBuf>> {
 /// `p` with the prefix `from` replaced by `to`.
 fn relocate(p: &mut PathBuf, from: &Path, to: &Path) {
     if let Ok(rest) = p.strip_prefix(from) {
-        *p = to.join(rest);
+        *p = if rest.as_os_str().is_empty() {
+            to.to_path_buf()
+        } else {
+            to.join(rest)
+        };
     }
 }
 
@@ -98,29 +103,83 @@ pub fn run_job(
         None
     };
     let input_hashes = manifest::hash_inputs(&inputs)?;
-    let staging = Staging::begin(&target)?;
+    let (staging, stale) = if opts.resume {
+        Staging::begin_keeping_stale(&target)?
+    } else {
+        (Staging::begin(&target)?, Vec::new())
+    };
     let folders = RunFolders {
         staging: staging.path().to_path_buf(),
         target,
     };
-    let (plan, reused) = plan_resumed(&file, opts, &folders, previous.as_ref(), &input_hashes)?;
-    let mut summary = super::execute(&plan, trainer, reporter)?;
-    relocate_summary(&mut summary, &folders.staging, &folders.target);
-    for p in summary.parts.iter().filter(|p| p.ok) {
-        errmap_core::io::write_json(&folders.staging.join(&p.part).join("summary.json"), p)?;
+    // Finished parts to keep: the committed run's, then those the journals of interrupted runs
+    // into the same folder record.
+    let mut sources: Vec<Source> = Vec::new();
+    if let Some(m) = previous {
+        let toolpaths = BatchSummary::read(&folders.target.join("summary.json"))
+            .map(|s| toolpaths_by_part(s.toolpaths))
+            .unwrap_or_default();
+        sources.push(Source {
+            manifest: m,
+            folder: folders.target.clone(),
+            toolpaths,
+        });
     }
-    if !reused.is_empty() {
-        add_reused(
-            &mut summary,
-            &file,
-            &folders.target,
-            &folders.staging,
-            &reused,
-        )?;
+    for dir in &stale {
+        if let Some((m, toolpaths)) = journal::read(dir).filter(|(m, _)| m.job_hash == job_hash) {
+            sources.push(Source {
+                manifest: m,
+                folder: dir.clone(),
+                toolpaths,
+            });
+        }
+    }
+    let (plan, kept) = plan_resumed(&file, opts, &folders, &sources, &input_hashes)?;
+    for dir in &stale {
+        commit::remove_path(dir)?;
+    }
+    let journal = Journal::create(&folders.staging, &job_hash, &input_hashes)?;
+    for k in &kept {
+        journal.record(k)?;
+    }
+    let reused: Vec<String> = kept.iter().map(|k| k.part.part.clone()).collect();
+    // Each part, once written: its summary naming its final folder, then its journal line.
+    let on_part = |p: &PartSummary, toolpaths: &[ToolpathSummary]| -> Result<()> {
+        let mut p = p.clone();
+        if let Some(d) = &mut p.output_dir {
+            relocate(d, &folders.staging, &folders.target);
+        }
+        let mut toolpaths = toolpaths.to_vec();
+        for t in &mut toolpaths {
+            relocate(&mut t.output, &folders.staging, &folders.target);
+        }
+        let dir = folders.staging.join(&p.part);
+        errmap_core::io::write_json(&dir.join("summary.json"), &p)?;
+        let outputs = manifest::hash_tree(&dir)?
+            .into_iter()
+            .map(|(k, v)| (format!("{}/{k}", p.part), v))
+            .collect();
+        journal.record(&Finished {
+            part: PartRecord {
+                part: p.part.clone(),
+                probe_file: p.probe_file.clone(),
+                input_sha256: input_hashes.get(&p.probe_file).cloned().unwrap_or_default(),
+                ok: true,
+                reused: false,
+                outputs,
+            },
+            toolpaths,
+        })
+    };
+    let mut summary = super::execute_with(&plan, trainer, reporter, &on_part)?;
+    relocate_summary(&mut summary, &folders.staging, &folders.target);
+    if !kept.is_empty() {
+        add_reused(&mut summary, &file, &folders.staging, &kept)?;
         if opts.shard.is_none() {
             reduce_resumed_family(&mut summary, &file, opts, &folders, trainer)?;
         }
     }
+    journal.remove()?;
     let kind = if opts.shard.is_some() {
         "shard"
     } else {
@@ -164,16 +223,14 @@ fn plan_resumed(
     file: &JobFile,
     opts: &BatchOptions,
     folders: &RunFolders,
-    previous: Option<&RunManifest>,
+    sources: &[Source],
     input_hashes: &BTreeMap<PathBuf, String>,
-) -> Result<(super::Plan, Vec<String>)> {
+) -> Result<(super::Plan, Vec<Finished>)> {
     let mut plan = plan_job(file, opts, &folders.staging)?;
-    let reused = match previous {
-        Some(prev) => reuse_parts(prev, &folders.target, &folders.staging, &plan, input_hashes)?,
-        None => Vec::new(),
-    };
+    let reused = reuse_parts(sources, &folders.staging, &plan, input_hashes)?;
     let all_parts = plan.parts.clone();
-    plan.parts.retain(|p| !reused.contains(&p.name));
+    plan.parts
+        .retain(|p| !reused.iter().any(|r| r.part.part == p.name));
     if !reused.is_empty() {
         // The family needs every part: the reduce builds it after the run. Parts that start
         // from the family network get it rebuilt from every part, as the whole run builds it.
@@ -195,9 +252,9 @@ fn reduce_resumed_family(
 ) -> Result<()> {
     let dir = &folders.staging;
     let full = plan_job(file, opts, dir)?;
-    let parts = read_reduce_parts(summary, dir, None)?;
+    let paths = reduce_paths(summary, dir, None)?;
     let outcome = reduce::reduce_family(
-        &parts,
+        &part_source(&paths),
         &full.settings,
         &domain_of(file)?,
         &dir.join("family"),
@@ -263,58 +320,85 @@ fn domain_of(file: &JobFile) -> Result<errmap_core::geom::Domain> {
         .ok_or_else(|| Error::Internal("the job's domain was checked above".into()))
 }
 
-/// Parts of the previous run kept by `--resume` (hard-linked, or copied, into the staging
-/// folder): same probe file, same input hash, mapped, every output unchanged. Nothing is kept
-/// when a toolpath or the job file changed.
+/// Where `--resume` may find finished parts: a committed run (its manifest) or an interrupted
+/// one (its journal), its folder and its parts' toolpaths.
+struct Source {
+    manifest: RunManifest,
+    folder: PathBuf,
+    toolpaths: BTreeMap<String, Vec<ToolpathSummary>>,
+}
+
+/// A summary's toolpaths by the part whose map compensated them.
+fn toolpaths_by_part(toolpaths: Vec<ToolpathSummary>) -> BTreeMap<String, Vec<ToolpathSummary>> {
+    let mut by_part: BTreeMap<String, Vec<ToolpathSummary>> = BTreeMap::new();
+    for t in toolpaths {
+        by_part.entry(t.map.clone()).or_default().push(t);
+    }
+    by_part
+}
+
+/// Parts of earlier runs kept by `--resume` (hard-linked, or copied, into the staging folder):
+/// same probe file, same input hash, mapped, every output unchanged; the first source that has
+/// a part gives it. Nothing is kept from a source whose toolpaths or job file differ.
 fn reuse_parts(
-    prev: &RunManifest,
-    target: &Path,
+    sources: &[Source],
     staging: &Path,
     plan: &super::Plan,
     input_hashes: &BTreeMap<PathBuf, String>,
-) -> Result<Vec<String>> {
-    let others_same = input_hashes
-        .iter()
-        .filter(|(f, _)| !plan.parts.iter().any(|p| &p.probe_file == *f))
-        .all(|(f, h)| prev.inputs.get(f) == Some(h));
-    if !others_same {
-        return Ok(Vec::new());
-    }
-    let mut reused = Vec::new();
-    for part in &plan.parts {
-        let Some(rec) = prev.parts.iter().find(|r| r.part == part.name) else {
+) -> Result<Vec<Finished>> {
+    let mut reused: Vec<Finished> = Vec::new();
+    for src in sources {
+        let prev = &src.manifest;
+        let others_same = input_hashes
+            .iter()
+            .filter(|(f, _)| !plan.parts.iter().any(|p| &p.probe_file == *f))
+            .all(|(f, h)| prev.inputs.get(f) == Some(h));
+        if !others_same {
             continue;
-        };
-        let same_input = rec.probe_file == part.probe_file
-            && input_hashes.get(&part.probe_file) == Some(&rec.input_sha256);
-        if rec.ok && same_input && RunManifest::outputs_match(target, rec) {
-            for rel in rec.outputs.keys() {
-                let (from, to) = (target.join(rel), staging.join(rel));
-                if let Some(parent) = to.parent() {
-                    std::fs::create_dir_all(parent)
-                        .map_err(|e| Error::io("create folder", parent, e))?;
-                }
-                if std::fs::hard_link(&from, &to).is_err() {
-                    std::fs::copy(&from, &to)
-                        .map_err(|e| Error::io("copy the earlier output to", &to, e))?;
-                }
+        }
+        for part in &plan.parts {
+            if reused.iter().any(|r| r.part.part == part.name) {
+                continue;
             }
-            reused.push(part.name.clone());
+            let Some(rec) = prev.parts.iter().find(|r| r.part == part.name) else {
+                continue;
+            };
+            let same_input = rec.probe_file == part.probe_file
+                && input_hashes.get(&part.probe_file) == Some(&rec.input_sha256);
+            if rec.ok && same_input && RunManifest::outputs_match(&src.folder, rec) {
+                for rel in rec.outputs.keys() {
+                    let (from, to) = (src.folder.join(rel), staging.join(rel));
+                    if let Some(parent) = to.parent() {
+                        std::fs::create_dir_all(parent)
+                            .map_err(|e| Error::io("create folder", parent, e))?;
+                    }
+                    if std::fs::hard_link(&from, &to).is_err() {
+                        std::fs::copy(&from, &to)
+                            .map_err(|e| Error::io("copy the earlier output to", &to, e))?;
+                    }
+                }
+                reused.push(Finished {
+                    part: PartRecord {
+                        reused: true,
+                        ..rec.clone()
+                    },
+                    toolpaths: src.toolpaths.get(&part.name).cloned().unwrap_or_default(),
+                });
+            }
         }
     }
     Ok(reused)
 }
 
-/// The kept parts' lines (and per-part toolpaths) from the previous summary, in batch order.
+/// The kept parts' lines and per-part toolpaths, in batch order.
 fn add_reused(
     summary: &mut BatchSummary,
     file: &JobFile,
-    target: &Path,
     staging: &Path,
-    reused: &[String],
+    kept: &[Finished],
 ) -> Result<()> {
-    for name in reused {
-        let path = staging.join(name).join("summary.json");
+    for k in kept {
+        let path = staging.join(&k.part.part).join("summary.json");
         let text = errmap_core::io::read_text(&path)?;
         let p: PartSummary = serde_json::from_str(&text).map_err(|e| {
             Error::input(
@@ -324,13 +408,7 @@ fn add_reused(
             )
         })?;
         summary.parts.push(p);
-    }
-    if let Ok(prev) = BatchSummary::read(&target.join("summary.json")) {
-        let kept = prev
-            .toolpaths
-            .into_iter()
-            .filter(|t| reused.contains(&t.map));
-        summary.toolpaths.extend(kept);
+        summary.toolpaths.extend(k.toolpaths.iter().cloned());
     }
     let order = file.probe_files()?;
     summary.parts.sort_by_key(|p| {
@@ -343,13 +421,21 @@ fn add_reused(
     Ok(())
 }
 
-/// The reduce inputs of the mapped parts of `summary`, in its (batch) order, each read from
-/// `<folder>/<part>/reduce.json` and, when a manifest is given, checked against its hash.
-fn read_reduce_parts(
+/// The reduce records at `paths`, read one at a time.
+fn part_source(paths: &[PathBuf]) -> reduce::PartSource<'_> {
+    reduce::PartSource {
+        count: paths.len(),
+        load: Box::new(move |k| PartReduce::read(&paths[k])),
+    }
+}
+
+/// The reduce inputs of the mapped parts of `summary`, in its (batch) order:
+/// `<folder>/<part>/reduce.json`, each checked against its hash when a manifest is given.
+fn reduce_paths(
     summary: &BatchSummary,
     folder: &Path,
     manifest: Option<&RunManifest>,
-) -> Result<Vec<PartReduce>> {
+) -> Result<Vec<PathBuf>> {
     let mut parts = Vec::new();
     for p in summary.parts.iter().filter(|p| p.ok) {
         let rel = format!("{}/{REDUCE_FILE}", p.part);
@@ -368,7 +454,7 @@ fn read_reduce_parts(
                 ));
             }
         }
-        parts.push(PartReduce::read(&path)?);
+        parts.push(path);
     }
     Ok(parts)
 }
@@ -416,6 +502,19 @@ fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathB
                     found.push((s, entry.path()));
                 }
             }
+        }
+        let merged_already = RunManifest::read(&dir)
+            .ok()
+            .flatten()
+            .is_some_and(|m| m.kind == "reduce");
+        if !found.iter().any(|(_, p)| p.starts_with(&dir)) && merged_already {
+            return Err(Error::usage(
+                format!(
+                    "{} is a merged run already: its shards' parts are in it and their folders are gone",
+                    dir.display()
+                ),
+                "to merge anew, run the shards again (errmap batch JOB --shard I/N), then merge",
+            ));
         }
         if !found.iter().any(|(_, p)| p.starts_with(&dir)) && only_count.is_none() {
             return Err(Error::usage(
@@ -593,26 +692,36 @@ fn reduce_into(
 ) -> Result<JobRun> {
     let summaries = shard_summaries(folders, manifests)?;
     let mut merged = super::merge(&summaries)?;
-    let parts = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
+    let paths = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
     let trainer = trainer_for(file.job.model.backend)?;
     let opts = BatchOptions::default();
     let plan = plan_job(file, &opts, batch_dir)?;
     let family_dir = batch_dir.join("family");
-    // A stale run.json must not vouch for a family being replaced; the parts of an unsharded
-    // run that the folder held before are removed, so the folder holds one run only.
+    // A stale run.json must not vouch for a family being replaced; the parts of the run the
+    // folder held before are removed, so the folder holds one run only.
     let manifest_path = batch_dir.join(RUN_MANIFEST);
     if let Some(old) = RunManifest::read(batch_dir).ok().flatten() {
-        if old.kind == "batch" {
-            remove_part_outputs(batch_dir, &old)?;
-        }
+        remove_part_outputs(batch_dir, &old)?;
     }
     if manifest_path.exists() {
         std::fs::remove_file(&manifest_path)
             .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
     }
+    // Each shard's parts at `<part>/` in the batch folder, as one machine writes them: their
+    // files hard-linked out of the shard folders, which go once `run.json` is written.
+    link_parts_flat(batch_dir, folders, manifests)?;
+    for (_, dir) in folders.values() {
+        relocate_summary(&mut merged, dir, batch_dir);
+    }
+    // Each part's own summary names its new folder (a new file: the shard's stays as it was).
+    for p in merged.parts.iter().filter(|p| p.ok) {
+        let path = batch_dir.join(&p.part).join("summary.json");
+        std::fs::remove_file(&path).map_err(|e| Error::io("replace the part summary", &path, e))?;
+        errmap_core::io::write_json(&path, p)?;
+    }
     let staging = Staging::begin_owned(&family_dir)?;
     let outcome = reduce::reduce_family(
-        &parts,
+        &part_source(&paths),
         &plan.settings,
         &domain_of(file)?,
         staging.path(),
@@ -631,6 +740,10 @@ fn reduce_into(
     m.k_sigma = Some(file.job.clean.k_sigma);
     write_report(batch_dir, &mut m)?;
     m.write(batch_dir)?;
+    for (_, dir) in folders.values() {
+        std::fs::remove_dir_all(dir)
+            .map_err(|e| Error::io("remove the merged shard folder", dir, e))?;
+    }
     Ok(JobRun {
         summary: merged,
         folder: batch_dir.to_path_buf(),
@@ -665,7 +778,7 @@ fn shard_reduce_parts(
     summaries: &[(PathBuf, BatchSummary)],
     folders: &ShardFolders,
     manifests: &[RunManifest],
-) -> Result<Vec<PartReduce>> {
+) -> Result<Vec<PathBuf>> {
     let mut parts = Vec::new();
     for p in merged.parts.iter().filter(|p| p.ok) {
         let (k, _) = summaries
@@ -678,12 +791,43 @@ fn shard_reduce_parts(
             ..summaries[k].1.clone()
         };
         let dir = &folders.values().nth(k).expect("one folder per summary").1;
-        parts.extend(read_reduce_parts(&one, dir, Some(&manifests[k]))?);
+        parts.extend(reduce_paths(&one, dir, Some(&manifests[k]))?);
     }
     Ok(parts)
 }
 
-/// Remove the part files an earlier unsharded run listed (and the folders left empty).
+/// Hard-link (or copy) every shard's part files to the same path in the batch folder
+/// (`shard-I-of-N/<part>/map.csv` → `<part>/map.csv`), replacing what an interrupted merge left.
+fn link_parts_flat(
+    batch_dir: &Path,
+    folders: &ShardFolders,
+    manifests: &[RunManifest],
+) -> Result<()> {
+    for ((_, dir), m) in folders.values().zip(manifests) {
+        for rel in m.parts.iter().flat_map(|r| r.outputs.keys()) {
+            let (from, to) = (dir.join(rel), batch_dir.join(rel));
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent)
+                    .map_err(|e| Error::io("create folder", parent, e))?;
+            }
+            match std::fs::remove_file(&to) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::io("replace the earlier output", &to, e))
+                }
+                _ => {}
+            }
+            if std::fs::hard_link(&from, &to).is_err() {
+                errmap_core::io::write_atomic_bytes(
+                    &to,
+                    &std::fs::read(&from).map_err(|e| Error::read(&from, e))?,
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Remove the part files an earlier run of the folder listed (and the folders left empty).
 fn remove_part_outputs(batch_dir: &Path, old: &RunManifest) -> Result<()> {
     for rec in &old.parts {
         for rel in rec.outputs.keys() {
@@ -729,11 +873,12 @@ fn reduce_manifest(
         inputs.extend(m.inputs.clone());
         for rec in &m.parts {
             let mut rec = rec.clone();
-            rec.outputs = rec
-                .outputs
-                .into_iter()
-                .map(|(k, v)| (format!("{name}/{k}"), v))
-                .collect();
+            // The part summaries were rewritten with their new folder.
+            for (rel, hash) in rec.outputs.iter_mut() {
+                if rel.ends_with("/summary.json") {
+                    *hash = manifest::sha256_file(&batch_dir.join(rel.as_str()))?;
+                }
+            }
             parts.push(rec);
         }
     }

@@ -5,8 +5,10 @@
 
 pub(crate) mod commit;
 pub(crate) mod driver;
+pub(crate) mod family_sums;
 pub mod folder_report;
 pub(crate) mod job;
+pub mod journal;
 pub mod k8s;
 pub mod manifest;
 pub mod nested;
@@ -22,7 +24,10 @@ pub(crate) mod train_step;
 
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};
-pub use run::{execute, PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
+pub use run::{
+    execute, execute_with, PartDone, PartInput, Plan, Settings, ToolpathPlan, CHUNK_PARTS,
+    PART_OUTPUTS,
+};
 pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 

@@ -133,6 +133,7 @@ impl PartReduce {
             marks: Marks {
                 probes: points(&file.probes_mm_bits)?,
                 rejected: points(&file.rejected_mm_bits)?,
+                totals: None,
             },
         })
     }
@@ -143,4 +144,7 @@ impl PartReduce {
 pub(crate) struct Marks {
     pub probes: Vec<(f64, f64)>,
     pub rejected: Vec<(f64, f64)>,
+    /// The (kept, rejected) counts the legend gives when they differ from the marks drawn
+    /// (a family map draws each distinct position once); `None`: the marks' own counts.
+    pub totals: Option<(usize, usize)>,
 }

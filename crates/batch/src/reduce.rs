@@ -4,28 +4,19 @@
 //! batch order, and starts from the same initial weights as in the unsharded batch, so on the
 //! CPU trainer the reduce writes the same bytes.
 
+use super::family_sums::{FamilyMaps, FamilyNodes};
+#[cfg(test)]
 use super::part_record::Marks;
 pub use super::part_record::{PartReduce, REDUCE_FILE};
 use super::run::{compensate_one, training_set, write_family, Settings, ToolpathPlan};
 use super::summary::{FamilySummary, ToolpathSummary};
-use super::train_step::{initial_network, Role};
+use super::train_step::train_family;
 use errmap_core::error::{Error, Result};
 use errmap_core::geom::Domain;
 use errmap_maps::interp::Grid;
-use errmap_maps::map::{family_stats, ErrorMap, FittedModel};
+use errmap_maps::map::FittedModel;
 use errmap_maps::nn::Trainer;
 use std::path::Path;
-
-/// Node-wise mean of the parts' training sets (nodes where every part has a value), summed
-/// in the order given — the batch order of the unsharded run.
-pub fn family_mean_nodes(nodes: &[&[Option<f64>]], len: usize) -> Vec<Option<f64>> {
-    (0..len)
-        .map(|k| {
-            let vals: Option<Vec<f64>> = nodes.iter().map(|p| p[k]).collect();
-            vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
-        })
-        .collect()
-}
 
 /// What the reduce adds to a merged summary.
 #[derive(Debug, Default)]
@@ -34,10 +25,19 @@ pub struct FamilyOutcome {
     pub toolpaths: Vec<ToolpathSummary>,
 }
 
-/// Fit the family network to the mean of `parts` (batch order), write the family folder
-/// `dir` (mean, std, model) and compensate the family toolpaths.
+/// The parts' reduce records, one at a time: `load(k)` reads the `k`-th of `count` (batch
+/// order), so a family of any size needs memory for one record and the family's sums.
+pub struct PartSource<'a> {
+    /// How many parts were mapped.
+    pub count: usize,
+    /// Read the `k`-th part's record.
+    pub load: Box<dyn Fn(usize) -> Result<PartReduce> + 'a>,
+}
+
+/// Fit the family network to the mean of the parts' training sets (batch order), write the
+/// family folder `dir` (mean, std, model) and compensate the family toolpaths.
 pub fn reduce_family(
-    parts: &[PartReduce],
+    parts: &PartSource,
     s: &Settings,
     domain: &Domain,
     dir: &Path,
@@ -46,7 +46,13 @@ pub fn reduce_family(
 ) -> Result<FamilyOutcome> {
     let train_grid = Grid::covering(domain, s.spacing_mm)?;
     let grid = Grid::covering(domain, s.grid_step_mm)?;
-    for p in parts {
+    if parts.count == 0 {
+        return Ok(FamilyOutcome::default());
+    }
+    let mut nodes = FamilyNodes::new(train_grid.len());
+    let mut maps = FamilyMaps::new(grid, s.normal);
+    for k in 0..parts.count {
+        let p = (parts.load)(k)?;
         let u_len_ok = p.map_u_um.as_ref().is_none_or(|u| u.len() == grid.len());
         if p.train_nodes.len() != train_grid.len() || p.map_e_um.len() != grid.len() || !u_len_ok {
             return Err(Error::usage(
@@ -54,46 +60,27 @@ pub fn reduce_family(
                 "merge the shards of one job (same domain, spacing and grid step)",
             ));
         }
+        nodes.add(&p.train_nodes);
+        maps.add(
+            &p.map_e_um,
+            p.map_u_um.as_deref(),
+            (p.hull_mm.as_ref(), p.surface_mm),
+            &p.marks,
+        );
     }
-    if parts.is_empty() {
-        return Ok(FamilyOutcome::default());
-    }
-    let nodes: Vec<&[Option<f64>]> = parts.iter().map(|p| p.train_nodes.as_slice()).collect();
-    let mean_nodes = family_mean_nodes(&nodes, train_grid.len());
-    if mean_nodes.iter().flatten().count() < 3 {
-        return Ok(FamilyOutcome::default());
-    }
-    let (set, norm) = training_set(&train_grid, &mean_nodes, domain);
-    s.model.validate()?;
-    let initial = initial_network(&s.model, &Role::Family);
-    let net = trainer
-        .train_from(vec![initial], std::slice::from_ref(&set), &s.model)?
-        .pop()
-        .ok_or_else(|| Error::Internal("the trainer returned no family network".into()))?;
-    let domains: Vec<_> = parts
-        .iter()
-        .map(|p| (p.hull_mm.as_ref(), p.surface_mm))
-        .collect();
-    let model = FittedModel::new("family", s.normal, *domain, norm, net).with_domains(&domains);
-    let maps: Vec<ErrorMap> = parts
-        .iter()
-        .map(|p| ErrorMap {
-            grid,
-            normal: s.normal,
-            values: p.map_e_um.clone(),
-        })
-        .collect();
-    let refs: Vec<&ErrorMap> = maps.iter().collect();
-    let Some((mean, std)) = family_stats(&refs) else {
+    let Some(mean_nodes) = nodes.mean() else {
         return Ok(FamilyOutcome::default());
     };
-    let mut marks = Marks::default();
-    for p in parts {
-        marks.probes.extend_from_slice(&p.marks.probes);
-        marks.rejected.extend_from_slice(&p.marks.rejected);
-    }
-    let u_parts: Option<Vec<&[f64]>> = parts.iter().map(|p| p.map_u_um.as_deref()).collect();
-    let (family, model) = write_family(dir, &mean, &std, model, u_parts, maps.len(), &marks, s)?;
+    let (set, norm) = training_set(&train_grid, &mean_nodes, domain);
+    s.model.validate()?;
+    let net = train_family(trainer, &set, &s.model)?;
+    let model = FittedModel::new("family", s.normal, *domain, norm, net);
+    let Some(mean) = maps.mean() else {
+        return Ok(FamilyOutcome::default());
+    };
+    let again = (0..parts.count).map(|k| (parts.load)(k).map(|p| p.map_e_um));
+    let std = maps.std_map(&mean, again)?;
+    let (family, model) = write_family(dir, &mean, &std, model, &maps, s)?;
     let mut out = FamilyOutcome {
         family: Some(family),
         toolpaths: Vec::new(),
@@ -130,21 +117,12 @@ mod tests {
             marks: Marks {
                 probes: vec![(0.1, 1.0 / 3.0), (2.5, -7.25)],
                 rejected: vec![(600.0 / 7.0, 0.2)],
+                totals: None,
             },
         };
         p.write(dir.path()).unwrap();
         let back = PartReduce::read(&dir.path().join(REDUCE_FILE)).unwrap();
         assert_eq!(back, p);
         assert_eq!(back.map_e_um[1].to_bits(), (-0.0f64).to_bits());
-    }
-
-    #[test]
-    fn family_mean_needs_every_part() {
-        let a = [Some(1.0), None, Some(3.0)];
-        let b = [Some(2.0), Some(5.0), Some(4.0)];
-        assert_eq!(
-            family_mean_nodes(&[&a, &b], 3),
-            vec![Some(1.5), None, Some(3.5)]
-        );
     }
 }

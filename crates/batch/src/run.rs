@@ -5,16 +5,17 @@
 //! network is fitted to the node-wise mean of the parts' training sets. All of them go to the
 //! trainer in one call, so on a GPU a whole family trains in the same dispatches.
 
+use super::family_sums::{FamilyMaps, FamilyNodes};
 use super::part_record::Marks;
 use super::summary::{BatchSummary, FamilySummary, PartSummary, ToolpathSummary};
 use super::timing::{PartTiming, Stopping, Timing};
-use super::train_step::{train_all, Role};
+use super::train_step::{train_family, train_parts, Role};
 use errmap_core::error::{Error, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::progress::Reporter;
 use errmap_maps::interp::{self, Grid, Method, Surface};
 use errmap_maps::map::uncertainty::{self, Uncertainty};
-use errmap_maps::map::{family_stats, Benefit, ErrorMap, FittedModel};
+use errmap_maps::map::{Benefit, ErrorMap, FittedModel};
 use errmap_maps::nn::stop::Holdout;
 use errmap_maps::nn::{Mlp, ModelConfig, Normalisation, Trainer, TrainingSet};
 use errmap_maps::probe::{self, ProbePoint, ProbeSpec, Rejected};
@@ -315,39 +316,6 @@ fn kriging_holdout_misses(prep: &Prepared) -> Option<Vec<f64>> {
     )
 }
 
-/// The training-grid values of the parts the family network is fitted to, in batch order:
-/// this run's parts when it maps the whole family; every part of the family (those of other
-/// shards read and interpolated here, failures left out as the whole run leaves them out) when
-/// only some are mapped but they start from the family network; none otherwise.
-fn family_members(
-    plan: &Plan,
-    interpolated: &[Interpolated],
-    s: &Settings,
-    train_grid: &Grid,
-) -> Vec<Vec<Option<f64>>> {
-    if plan.family_dir.is_some() {
-        return interpolated.iter().map(|p| p.full_nodes.clone()).collect();
-    }
-    if plan.family_parts.is_empty() || s.model.warm_start != errmap_maps::nn::WarmStart::Family {
-        return Vec::new();
-    }
-    plan.family_parts
-        .par_iter()
-        .map(
-            |part| match interpolated.iter().find(|p| p.prep.input.name == part.name) {
-                Some(p) => Some(p.full_nodes.clone()),
-                // Only its training-grid values: no hold-out fits for a part mapped elsewhere.
-                None => prepare(part.clone(), s)
-                    .ok()
-                    .and_then(|prep| full_nodes(&prep, s, train_grid).ok()),
-            },
-        )
-        .collect::<Vec<_>>()
-        .into_iter()
-        .flatten()
-        .collect()
-}
-
 /// A training set from node values: the nodes that have a value.
 pub(crate) fn training_set(
     grid: &Grid,
@@ -391,65 +359,342 @@ fn union_box(parts: &[Prepared]) -> Option<Domain> {
     all
 }
 
+/// Parts mapped together: read, cleaned, trained in one trainer call, written, then dropped.
+/// A run holds one chunk at a time, so its memory does not grow with the family; 32 parts
+/// (64 networks) keep the CPU trainer's cores and a GPU's dispatches busy.
+pub const CHUNK_PARTS: usize = 32;
+
+/// A part read and cleaned, or why not.
+type Prep = std::result::Result<Prepared, Box<(PartInput, Error)>>;
+
+/// Read and clean the parts of one chunk (rayon).
+fn prepare_chunk(chunk: &[PartInput], s: &Settings) -> Vec<Prep> {
+    chunk.par_iter().map(|p| prepare(p.clone(), s)).collect()
+}
+
 /// Run the plan with `trainer`, telling `reporter` how it goes; every part's outcome (and its
-/// error) is in the summary. The steps: read → clean → grid → train → evaluate → write.
+/// error) is in the summary. The parts go through in chunks of [`CHUNK_PARTS`] (read → clean →
+/// grid → train → evaluate → write) and only their summaries and the family's running sums
+/// stay; the family (mean, spread, network, toolpaths) is written after the last chunk.
 pub fn execute(
     plan: &Plan,
     trainer: &dyn Trainer,
     reporter: &dyn Reporter,
 ) -> Result<BatchSummary> {
+    execute_with(plan, trainer, reporter, &|_, _| Ok(()))
+}
+
+/// Told of each part once all its files are written (its summary and its compensated
+/// toolpaths), in batch order within a chunk; an error stops the run.
+pub type PartDone<'a> = dyn Fn(&PartSummary, &[ToolpathSummary]) -> Result<()> + Sync + 'a;
+
+/// [`execute`], telling `on_part` of each part mapped as soon as its files are written (a
+/// batch records it for `--resume`).
+pub fn execute_with(
+    plan: &Plan,
+    trainer: &dyn Trainer,
+    reporter: &dyn Reporter,
+    on_part: &PartDone,
+) -> Result<BatchSummary> {
     let s = &plan.settings;
-    let Cleaned { parts, mut failed } = read_and_clean(plan, reporter);
-    let Some(domain) = map_domain(s, &parts)? else {
-        // Nothing could be fitted: every part failed before training.
-        return Ok(finish(plan, trainer, None, failed, None, Vec::new()));
+    let mut first: Option<Vec<Prep>> = None;
+    let domain = match s.domain {
+        Some(d) => Some(d),
+        None => {
+            let survey = survey_box(plan, reporter);
+            if survey.domain.is_none() {
+                // Nothing could be fitted: every part failed before training.
+                return Ok(finish(plan, trainer, None, survey.failed, None, Vec::new()));
+            }
+            first = Some(survey.first);
+            survey.domain
+        }
     };
+    let domain = checked_domain(domain)?;
     let grids = Grids::new(&domain, s)?;
-    let (interpolated, mut lost) = interpolate_all(parts, s, &grids.train, reporter);
-    failed.append(&mut lost);
-    let sets = training_sets(plan, &interpolated, &grids.train, &domain);
-    if sets.sets.is_empty() {
-        return Ok(finish(
-            plan,
-            trainer,
-            Some(domain),
-            failed,
-            None,
-            Vec::new(),
-        ));
+    let builds_family = plan.family_dir.is_some();
+    let warm = s.model.warm_start == errmap_maps::nn::WarmStart::Family;
+    let mut nodes = FamilyNodes::new(grids.train.len());
+    let mut family_net = None;
+    if warm {
+        let members = if builds_family {
+            &plan.parts
+        } else {
+            &plan.family_parts
+        };
+        let kept = family_prepass(
+            members,
+            builds_family,
+            &mut first,
+            &mut nodes,
+            &grids,
+            s,
+            reporter,
+        );
+        first = kept;
+        family_net = family_network(trainer, &nodes, &grids.train, &domain, s)?;
     }
-    let networks = train(trainer, &sets, &interpolated, s, reporter)?;
-    let fit = Fit {
-        settings: s,
-        domain,
-        grid: grids.map,
-        sets: &sets,
-        nets: &networks.nets,
+    let mut acc = Accumulated {
+        summaries: Vec::new(),
+        maps: FamilyMaps::new(grids.map, s.normal),
+        delivered: Vec::new(),
+        kept_maps: Vec::new(),
+        timings: Vec::new(),
+        toolpaths: Vec::new(),
     };
-    let outputs = evaluate(plan, trainer, &fit)?;
-    let mut delivered = write_parts(&fit, &interpolated, &outputs, &networks.timings, reporter);
-    delivered.summaries.append(&mut failed);
-    let (family_model, family_summary) = write_family_maps(plan, &fit, &delivered)?;
-    let toolpaths = compensate_toolpaths(plan, &delivered.maps, family_model.as_ref());
+    let inputs = grid_inputs(&domain, &grids.map);
+    let bar = reporter.progress(plan.parts.len() as u64, "map parts");
+    for (k, chunk) in plan.parts.chunks(CHUNK_PARTS).enumerate() {
+        let preps = match first.take().filter(|_| k == 0) {
+            Some(p) => p,
+            None => prepare_chunk(chunk, s),
+        };
+        let mut failed = Vec::new();
+        let mut parts = Vec::new();
+        for r in preps {
+            match r {
+                Ok(p) => parts.push(p),
+                Err(b) => failed.push(failed_part(&b.0, &b.1)),
+            }
+        }
+        bar.inc(failed.len() as u64);
+        let (interpolated, lost) = interpolate_all(parts, s, &grids.train);
+        bar.inc(lost.len() as u64);
+        failed.extend(lost);
+        acc.summaries.append(&mut failed);
+        if !warm && builds_family {
+            for p in &interpolated {
+                nodes.add(&p.full_nodes);
+            }
+        }
+        if interpolated.is_empty() {
+            continue;
+        }
+        let sets = training_sets(&interpolated, &grids.train, &domain);
+        let networks = train(
+            trainer,
+            &sets,
+            &interpolated,
+            s,
+            family_net.as_ref(),
+            reporter,
+        )?;
+        let fit = Fit {
+            settings: s,
+            domain,
+            grid: grids.map,
+            sets: &sets,
+            nets: &networks.nets,
+        };
+        let outputs = trainer.evaluate_batch(&fit.delivered_nets(), &inputs)?;
+        let delivered = write_parts(&fit, &interpolated, &outputs, &networks.timings, &*bar);
+        acc.add(delivered, plan, on_part)?;
+        acc.timings.extend(networks.timings.into_iter().flatten());
+    }
+    bar.finish();
+    if !warm && builds_family {
+        family_net = family_network(trainer, &nodes, &grids.train, &domain, s)?;
+    }
+    let (family_model, family_summary) = write_family_maps(plan, s, domain, family_net, &acc)?;
+    let mut toolpaths = std::mem::take(&mut acc.toolpaths);
+    if let (Some(tp), Some(model), Some(dir)) = (&plan.toolpaths, &family_model, &plan.family_dir) {
+        if !tp.per_part {
+            for f in &tp.files {
+                toolpaths.push(compensate_one(f, dir, "family", model, tp));
+            }
+        }
+    }
     let mut summary = finish(
         plan,
         trainer,
         Some(domain),
-        delivered.summaries,
+        acc.summaries,
         family_summary,
         toolpaths,
     );
-    let timings: Vec<PartTiming> = networks.timings.into_iter().flatten().collect();
-    if !timings.is_empty() {
-        summary.timing = Some(Timing::new(trainer.name(), timings));
+    if !acc.timings.is_empty() {
+        summary.timing = Some(Timing::new(trainer.name(), acc.timings));
     }
     Ok(summary)
 }
 
-/// Step 1's outcome: the parts read and cleaned, and the summaries of those that failed.
-struct Cleaned {
-    parts: Vec<Prepared>,
+/// What a run keeps of its parts once they are written: their summary rows, the family's
+/// running sums, the delivered parts' folders (to read their maps again for the spread), the
+/// stopping figures and the per-part toolpaths.
+struct Accumulated {
+    summaries: Vec<PartSummary>,
+    maps: FamilyMaps,
+    delivered: Vec<PathBuf>,
+    /// The delivered maps themselves, only when the parts write no `reduce.json` to read them
+    /// back from (a single part's run).
+    kept_maps: Vec<Vec<f64>>,
+    timings: Vec<PartTiming>,
+    toolpaths: Vec<ToolpathSummary>,
+}
+
+impl Accumulated {
+    /// Take in a chunk's delivered parts, in batch order, compensate their per-part toolpaths
+    /// and tell `on_part` of each.
+    fn add(&mut self, delivered: Delivered, plan: &Plan, on_part: &PartDone) -> Result<()> {
+        for m in &delivered.maps {
+            self.maps.add(
+                &m.map.values,
+                m.u_um(),
+                (m.model.hull_mm.as_ref(), m.model.surface_mm),
+                &m.marks,
+            );
+            if let Some(dir) = &m.dir {
+                self.delivered.push(dir.clone());
+            }
+            if !plan.settings.reduce_inputs {
+                self.kept_maps.push(m.map.values.clone());
+            }
+        }
+        for p in delivered.summaries.iter().filter(|p| p.ok) {
+            let mut own = Vec::new();
+            let tp = plan.toolpaths.as_ref().filter(|tp| tp.per_part);
+            let m = delivered.maps.iter().find(|m| m.name == p.part);
+            if let (Some(tp), Some(m)) = (tp, m) {
+                if let Some(dir) = &m.dir {
+                    for f in &tp.files {
+                        own.push(compensate_one(f, dir, &m.name, &m.model, tp));
+                    }
+                }
+            }
+            on_part(p, &own)?;
+            self.toolpaths.extend(own);
+        }
+        self.summaries.extend(delivered.summaries);
+        Ok(())
+    }
+
+    /// The delivered maps again, in the order they were added: from the parts' `reduce.json`
+    /// (bit-exact), or those kept.
+    fn maps_again(&self) -> Box<dyn Iterator<Item = Result<Vec<f64>>> + '_> {
+        if !self.kept_maps.is_empty() || self.delivered.is_empty() {
+            return Box::new(self.kept_maps.iter().map(|m| Ok(m.clone())));
+        }
+        Box::new(self.delivered.iter().map(|d| {
+            super::part_record::PartReduce::read(&d.join(super::part_record::REDUCE_FILE))
+                .map(|p| p.map_e_um)
+        }))
+    }
+}
+
+/// The survey of a run without a fixed domain: the clean points' box over every part, the
+/// first chunk's parts (kept for the run) and the summaries of the parts that failed.
+struct Survey {
+    domain: Option<Domain>,
+    first: Vec<Prep>,
     failed: Vec<PartSummary>,
+}
+
+/// Read and clean every part once, chunk by chunk, for the box of their clean points.
+fn survey_box(plan: &Plan, reporter: &dyn Reporter) -> Survey {
+    let bar = reporter.progress(plan.parts.len() as u64, "clean");
+    let mut survey = Survey {
+        domain: None,
+        first: Vec::new(),
+        failed: Vec::new(),
+    };
+    for (k, chunk) in plan.parts.chunks(CHUNK_PARTS).enumerate() {
+        let preps = prepare_chunk(chunk, &plan.settings);
+        for r in &preps {
+            match r {
+                Ok(p) => {
+                    let b = union_box(std::slice::from_ref(p));
+                    survey.domain = match (survey.domain, b) {
+                        (Some(a), Some(b)) => union_box_of(a, b),
+                        (a, b) => a.or(b),
+                    };
+                }
+                Err(b) => survey.failed.push(failed_part(&b.0, &b.1)),
+            }
+        }
+        bar.inc(chunk.len() as u64);
+        if k == 0 {
+            survey.first = preps;
+        }
+    }
+    bar.finish();
+    survey
+}
+
+fn union_box_of(a: Domain, b: Domain) -> Option<Domain> {
+    Some(Domain {
+        u_min_mm: a.u_min_mm.min(b.u_min_mm),
+        v_min_mm: a.v_min_mm.min(b.v_min_mm),
+        u_max_mm: a.u_max_mm.max(b.u_max_mm),
+        v_max_mm: a.v_max_mm.max(b.v_max_mm),
+    })
+}
+
+/// The family's training-grid sums before its parts train from its network (`warm_start =
+/// "family"`): every member read, cleaned and interpolated once, chunk by chunk, in batch order.
+/// Returns the first chunk of the run's own parts (`members` are they when `own`), kept.
+fn family_prepass(
+    members: &[PartInput],
+    own: bool,
+    first: &mut Option<Vec<Prep>>,
+    nodes: &mut FamilyNodes,
+    grids: &Grids,
+    s: &Settings,
+    reporter: &dyn Reporter,
+) -> Option<Vec<Prep>> {
+    let bar = reporter.progress(members.len() as u64, "family mean");
+    let mut kept = None;
+    for (k, chunk) in members.chunks(CHUNK_PARTS).enumerate() {
+        let preps = match first.take().filter(|_| k == 0 && own) {
+            Some(p) => p,
+            None => prepare_chunk(chunk, s),
+        };
+        let member_nodes: Vec<Option<Vec<Option<f64>>>> = preps
+            .par_iter()
+            .map(|r| {
+                r.as_ref()
+                    .ok()
+                    .and_then(|p| member_nodes(p, s, &grids.train))
+            })
+            .collect();
+        for n in member_nodes.iter().flatten() {
+            nodes.add(n);
+        }
+        bar.inc(chunk.len() as u64);
+        if k == 0 && own {
+            kept = Some(preps);
+        }
+    }
+    bar.finish();
+    kept
+}
+
+/// A family member's training-grid values: those of a part that interpolates (see
+/// [`interpolate`]), without its kriging baseline; `None` for a part that does not.
+fn member_nodes(prep: &Prepared, s: &Settings, train_grid: &Grid) -> Option<Vec<Option<f64>>> {
+    let full = full_nodes(prep, s, train_grid).ok()?;
+    if full.iter().flatten().count() < 3 {
+        return None;
+    }
+    if !prep.holdout.is_empty() && Surface::new(&probe::uve(&kept_points(prep))).is_err() {
+        return None;
+    }
+    Some(full)
+}
+
+/// The family network fitted to the members' node-wise mean, with its normalisation; `None`
+/// without members or with fewer than 3 nodes every member has.
+fn family_network(
+    trainer: &dyn Trainer,
+    nodes: &FamilyNodes,
+    train_grid: &Grid,
+    domain: &Domain,
+    s: &Settings,
+) -> Result<Option<(Mlp, Normalisation)>> {
+    let Some(mean) = nodes.mean() else {
+        return Ok(None);
+    };
+    let (set, norm) = training_set(train_grid, &mean, domain);
+    Ok(Some((train_family(trainer, &set, &s.model)?, norm)))
 }
 
 /// The summary of a part that failed.
@@ -457,42 +702,14 @@ fn failed_part(input: &PartInput, e: &Error) -> PartSummary {
     PartSummary::failed(&input.name, &input.probe_file, e)
 }
 
-/// Step 1: read and clean every part (rayon).
-fn read_and_clean(plan: &Plan, reporter: &dyn Reporter) -> Cleaned {
-    let bar = reporter.progress(plan.parts.len() as u64, "clean");
-    let prepared: Vec<_> = plan
-        .parts
-        .par_iter()
-        .map(|p| {
-            let r = prepare(p.clone(), &plan.settings);
-            bar.inc(1);
-            r
-        })
-        .collect();
-    bar.finish();
-    let mut cleaned = Cleaned {
-        parts: Vec::new(),
-        failed: Vec::new(),
-    };
-    for r in prepared {
-        match r {
-            Ok(p) => cleaned.parts.push(p),
-            Err(b) => cleaned.failed.push(failed_part(&b.0, &b.1)),
-        }
-    }
-    cleaned
-}
-
-/// The domain every network is scaled over: the settings' or the clean points' box; `None`
-/// when no part has a clean point.
-fn map_domain(s: &Settings, parts: &[Prepared]) -> Result<Option<Domain>> {
-    match s.domain.or_else(|| union_box(parts)) {
-        Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Ok(Some(d)),
-        Some(_) => Err(Error::usage(
+/// The map domain, checked to span an area.
+fn checked_domain(domain: Option<Domain>) -> Result<Domain> {
+    match domain {
+        Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Ok(d),
+        _ => Err(Error::usage(
             "the probe points span no area (zero width or height)",
             "give a map domain",
         )),
-        None => Ok(None),
     }
 }
 
@@ -511,23 +728,16 @@ impl Grids {
     }
 }
 
-/// Step 2: every part's training-grid values (rayon); the parts that fail are summarised.
+/// A chunk's training-grid values (rayon); the parts that fail are summarised.
 fn interpolate_all(
     parts: Vec<Prepared>,
     s: &Settings,
     train_grid: &Grid,
-    reporter: &dyn Reporter,
 ) -> (Vec<Interpolated>, Vec<PartSummary>) {
-    let bar = reporter.progress(parts.len() as u64, "interpolate");
     let results: Vec<_> = parts
         .into_par_iter()
-        .map(|p| {
-            let r = interpolate(p, s, train_grid);
-            bar.inc(1);
-            r
-        })
+        .map(|p| interpolate(p, s, train_grid))
         .collect();
-    bar.finish();
     let mut interpolated = Vec::new();
     let mut failed = Vec::new();
     for r in results {
@@ -539,17 +749,15 @@ fn interpolate_all(
     (interpolated, failed)
 }
 
-/// Step 3's outcome: every training set of the batch with its scaling and role: per part
-/// [hold-out fit], delivered fit; then the family.
+/// A chunk's training sets with their scaling and role: per part [hold-out fit], delivered fit.
 struct TrainingSets {
     sets: Vec<TrainingSet>,
     norms: Vec<Normalisation>,
     roles: Vec<Role>,
     /// Per part: (hold-out slot, delivered slot).
     slots: Vec<(Option<usize>, usize)>,
-    /// The held-out points of each part's slot (none for the family).
+    /// The held-out points of each slot (none for a delivered fit).
     holdouts: Vec<Option<Holdout>>,
-    family_slot: Option<usize>,
 }
 
 impl TrainingSets {
@@ -561,9 +769,8 @@ impl TrainingSets {
     }
 }
 
-/// Step 3: the training sets of every part and of the family.
+/// The training sets of a chunk's parts.
 fn training_sets(
-    plan: &Plan,
     interpolated: &[Interpolated],
     train_grid: &Grid,
     domain: &Domain,
@@ -574,7 +781,6 @@ fn training_sets(
         roles: Vec::new(),
         slots: Vec::new(),
         holdouts: Vec::new(),
-        family_slot: None,
     };
     for p in interpolated {
         let name = &p.prep.input.name;
@@ -588,34 +794,12 @@ fn training_sets(
         let d = t.push(delivered, Role::Delivered(name.clone()));
         t.slots.push((h, d));
     }
-    let members = family_members(plan, interpolated, &plan.settings, train_grid);
-    if let Some(mean) = family_mean(&members, train_grid) {
-        let set = training_set(train_grid, &mean, domain);
-        t.family_slot = Some(t.push(set, Role::Family));
-    }
     t
 }
 
-/// The node-wise mean of the family members' training-grid values (a node counts where every
-/// member has a value); `None` without members or with fewer than 3 such nodes.
-fn family_mean(members: &[Vec<Option<f64>>], train_grid: &Grid) -> Option<Vec<Option<f64>>> {
-    if members.is_empty() {
-        return None;
-    }
-    let mean: Vec<Option<f64>> = (0..train_grid.len())
-        .map(|k| {
-            let vals: Option<Vec<f64>> = members.iter().map(|p| p[k]).collect();
-            vals.map(|v| v.iter().sum::<f64>() / v.len() as f64)
-        })
-        .collect();
-    (mean.iter().flatten().count() >= 3).then_some(mean)
-}
-
-/// The `--verbose` line on the training work: how many networks, how many points, which
+/// The `--verbose` line on a chunk's training: how many networks, how many points, which
 /// schedule, on which trainer.
-fn describe_training(t: &TrainingSets, s: &Settings, trainer: &dyn Trainer) -> String {
-    let warm =
-        s.model.warm_start == errmap_maps::nn::WarmStart::Family && t.roles.contains(&Role::Family);
+fn describe_training(t: &TrainingSets, s: &Settings, warm: bool, trainer: &dyn Trainer) -> String {
     let epochs = if warm {
         format!(
             "the family network {} epochs, then the parts {} epochs from it",
@@ -640,25 +824,35 @@ fn describe_training(t: &TrainingSets, s: &Settings, trainer: &dyn Trainer) -> S
     )
 }
 
-/// Step 4's outcome: one network per training set, and per part its hold-out stopping.
+/// A chunk's networks, and per part its hold-out stopping.
 struct Networks {
     nets: Vec<Mlp>,
     timings: Vec<Option<PartTiming>>,
 }
 
-/// Step 4: train every network of the batch in one trainer call.
+/// Train a chunk's networks in one trainer call, from the family network when given.
 fn train(
     trainer: &dyn Trainer,
     t: &TrainingSets,
     interpolated: &[Interpolated],
     s: &Settings,
+    family: Option<&(Mlp, Normalisation)>,
     reporter: &dyn Reporter,
 ) -> Result<Networks> {
+    let warm = family.filter(|_| s.model.warm_start == errmap_maps::nn::WarmStart::Family);
     if reporter.shows_detail() {
-        reporter.detail(&describe_training(t, s, trainer));
+        reporter.detail(&describe_training(t, s, warm.is_some(), trainer));
     }
     let bar = reporter.activity("train");
-    let trained = train_all(trainer, &t.sets, &t.norms, &t.roles, &s.model, &t.holdouts);
+    let trained = train_parts(
+        trainer,
+        &t.sets,
+        &t.norms,
+        &t.roles,
+        &s.model,
+        &t.holdouts,
+        warm.map(|(n, m)| (n, m)),
+    );
     bar.finish();
     let trained = trained?;
     let timings = interpolated
@@ -703,13 +897,20 @@ impl Fit<'_> {
             self.nets[slot].clone(),
         )
     }
+
+    /// The delivered networks of the chunk's parts, in part order.
+    fn delivered_nets(&self) -> Vec<Mlp> {
+        self.sets
+            .slots
+            .iter()
+            .map(|&(_, d)| self.nets[d].clone())
+            .collect()
+    }
 }
 
-/// Step 5: the delivered networks of every part (and the family's, when this run writes the
-/// family) on the map grid, in network outputs.
-fn evaluate(plan: &Plan, trainer: &dyn Trainer, fit: &Fit) -> Result<Vec<Vec<f32>>> {
-    let scale = Normalisation::new(&fit.domain, &[]);
-    let grid = &fit.grid;
+/// The map grid's nodes in network inputs (the domain's scaling).
+fn grid_inputs(domain: &Domain, grid: &Grid) -> Vec<[f32; 2]> {
+    let scale = Normalisation::new(domain, &[]);
     let mut inputs = Vec::with_capacity(grid.len());
     for j in 0..grid.nv {
         for i in 0..grid.nu {
@@ -717,18 +918,16 @@ fn evaluate(plan: &Plan, trainer: &dyn Trainer, fit: &Fit) -> Result<Vec<Vec<f32
             inputs.push(scale.scale_input(u, v));
         }
     }
-    let mut eval_slots: Vec<usize> = fit.sets.slots.iter().map(|&(_, d)| d).collect();
-    eval_slots.extend(fit.sets.family_slot.filter(|_| plan.family_dir.is_some()));
-    let eval_nets: Vec<_> = eval_slots.iter().map(|&k| fit.nets[k].clone()).collect();
-    trainer.evaluate_batch(&eval_nets, &inputs)
+    inputs
 }
 
-/// A delivered part: its name, folder, map and model.
+/// A delivered part: its name, folder, map, model and marks.
 struct PartMap {
     name: String,
     dir: Option<PathBuf>,
     map: ErrorMap,
     model: FittedModel,
+    marks: Marks,
 }
 
 impl PartMap {
@@ -738,23 +937,20 @@ impl PartMap {
     }
 }
 
-/// Step 6's outcome: every part's summary, the delivered maps, and every part's probe and
-/// rejected points in batch order (for the family maps).
+/// A chunk's outcome: every part's summary and the delivered maps, in batch order.
 struct Delivered {
     summaries: Vec<PartSummary>,
     maps: Vec<PartMap>,
-    marks: Marks,
 }
 
-/// Step 6: every part's outputs (rayon).
+/// Every part's outputs of a chunk (rayon), each counted on `bar` as it is written.
 fn write_parts(
     fit: &Fit,
     interpolated: &[Interpolated],
     outputs: &[Vec<f32>],
     timings: &[Option<PartTiming>],
-    reporter: &dyn Reporter,
+    bar: &dyn errmap_core::progress::Progress,
 ) -> Delivered {
-    let bar = reporter.progress(interpolated.len() as u64, "write");
     let results: Vec<(PartSummary, Option<Fitted>)> = interpolated
         .par_iter()
         .zip(fit.sets.slots.par_iter())
@@ -766,22 +962,19 @@ fn write_parts(
             r
         })
         .collect();
-    bar.finish();
     let mut delivered = Delivered {
         summaries: Vec::new(),
         maps: Vec::new(),
-        marks: Marks::default(),
     };
     for (summary, fitted) in results {
-        if let Some((map, model, part)) = fitted {
+        if let Some((map, model, marks)) = fitted {
             delivered.maps.push(PartMap {
                 name: summary.part.clone(),
                 dir: summary.output_dir.clone(),
                 map,
                 model,
+                marks,
             });
-            delivered.marks.probes.extend(part.probes);
-            delivered.marks.rejected.extend(part.rejected);
         }
         delivered.summaries.push(summary);
     }
@@ -933,62 +1126,27 @@ fn kriging_map(k: &interp::kriging::Kriging, grid: Grid, normal: Axis) -> ErrorM
     }
 }
 
-/// Step 7: the family maps and network, when this run writes the family.
+/// The family maps and network, when this run writes the family: the mean from the running
+/// sums, the spread from the delivered maps taken again.
 fn write_family_maps(
     plan: &Plan,
-    fit: &Fit,
-    delivered: &Delivered,
+    s: &Settings,
+    domain: Domain,
+    family: Option<(Mlp, Normalisation)>,
+    acc: &Accumulated,
 ) -> Result<(Option<FittedModel>, Option<FamilySummary>)> {
-    let (Some(dir), Some(fslot)) = (&plan.family_dir, fit.sets.family_slot) else {
+    let (Some(dir), Some((net, norm))) = (&plan.family_dir, family) else {
         return Ok((None, None));
     };
-    let maps: Vec<&ErrorMap> = delivered.maps.iter().map(|m| &m.map).collect();
-    let Some((mean, std)) = family_stats(&maps) else {
+    let Some(mean) = acc.maps.mean() else {
         return Ok((None, None));
     };
-    let s = fit.settings;
+    let std = acc.maps.std_map(&mean, acc.maps_again())?;
     let family_file = plan.job.clone().unwrap_or_else(|| dir.clone());
     check_map_plausible(&mean, s.max_deviation_mm, &family_file)?;
-    let parts: Vec<&FittedModel> = delivered.maps.iter().map(|m| &m.model).collect();
-    let model = fit.model("family", fslot).with_parts(&parts);
-    let u_parts: Option<Vec<&[f64]>> = delivered.maps.iter().map(PartMap::u_um).collect();
-    let (summary, model) = write_family(
-        dir,
-        &mean,
-        &std,
-        model,
-        u_parts,
-        maps.len(),
-        &delivered.marks,
-        s,
-    )?;
+    let model = FittedModel::new("family", s.normal, domain, norm, net);
+    let (summary, model) = write_family(dir, &mean, &std, model, &acc.maps, s)?;
     Ok((Some(model), Some(summary)))
-}
-
-/// Step 8: the toolpaths compensated with each part's map or with the family map.
-fn compensate_toolpaths(
-    plan: &Plan,
-    maps: &[PartMap],
-    family_model: Option<&FittedModel>,
-) -> Vec<ToolpathSummary> {
-    let mut toolpaths = Vec::new();
-    let Some(tp) = &plan.toolpaths else {
-        return toolpaths;
-    };
-    if tp.per_part {
-        for m in maps {
-            if let Some(dir) = &m.dir {
-                for f in &tp.files {
-                    toolpaths.push(compensate_one(f, dir, &m.name, &m.model, tp));
-                }
-            }
-        }
-    } else if let (Some(model), Some(dir)) = (family_model, &plan.family_dir) {
-        for f in &tp.files {
-            toolpaths.push(compensate_one(f, dir, "family", model, tp));
-        }
-    }
-    toolpaths
 }
 
 fn finish(
@@ -1049,21 +1207,21 @@ fn part_marks(p: &Interpolated) -> Marks {
             .iter()
             .map(|r| (r.point.u_mm, r.point.v_mm))
             .collect(),
+        totals: None,
     }
 }
 
 /// The family map's u(E) per node: √(std² + Σ u_i² / N²) — how far the next part may stand
 /// from the family mean, and how well the parts' maps know their own parts.
-fn family_uncertainty(std: &ErrorMap, u_parts: &[&[f64]]) -> Option<Uncertainty> {
-    let n = u_parts.len();
-    if n == 0 || u_parts.iter().any(|u| u.len() != std.values.len()) {
+fn family_uncertainty(std: &ErrorMap, u_squared_sum: &[f64], n: usize) -> Option<Uncertainty> {
+    if n == 0 || u_squared_sum.len() != std.values.len() {
         return None;
     }
-    let u_um = (0..std.values.len())
-        .map(|k| {
-            let own: f64 = u_parts.iter().map(|u| u[k] * u[k]).sum::<f64>() / (n * n) as f64;
-            round4((std.values[k].powi(2) + own).sqrt())
-        })
+    let u_um = std
+        .values
+        .iter()
+        .zip(u_squared_sum)
+        .map(|(s, q)| round4((s.powi(2) + q / (n * n) as f64).sqrt()))
         .collect();
     Some(Uncertainty {
         method: "family".into(),
@@ -1075,21 +1233,27 @@ fn family_uncertainty(std: &ErrorMap, u_parts: &[&[f64]]) -> Option<Uncertainty>
 }
 
 /// The family folder: mean and std maps (CSV, heatmaps with every part's probe and rejected
-/// points and the family's measured hull), the family map's u(E) (`uncertainty.png`, from the
-/// parts' `u_parts` when every part has one) and the family network's `model.json`, which
-/// is returned with that u.
-#[allow(clippy::too_many_arguments)]
+/// points and the family's measured hull), the family map's u(E) (`uncertainty.png`, when
+/// every part has one) and the family network's `model.json`, which is returned with the
+/// parts' measured domain and that u.
 pub(crate) fn write_family(
     dir: &Path,
     mean: &ErrorMap,
     std: &ErrorMap,
-    model: FittedModel,
-    u_parts: Option<Vec<&[f64]>>,
-    parts: usize,
-    marks: &Marks,
+    mut model: FittedModel,
+    maps: &FamilyMaps,
     s: &Settings,
 ) -> Result<(FamilySummary, FittedModel)> {
-    let model = model.with_uncertainty(u_parts.and_then(|u| family_uncertainty(std, &u)));
+    if let Some((hull, surface)) = maps.domain() {
+        model.hull_mm = Some(hull);
+        model.surface_mm = Some(surface);
+    }
+    let parts = maps.count();
+    let marks = &maps.marks().to_marks();
+    let u = maps
+        .u_squared_sum()
+        .and_then(|q| family_uncertainty(std, q, parts));
+    let model = model.with_uncertainty(u);
     let axes = s.normal.plane_axes();
     mean.write_csv(&dir.join("mean.csv"), "e_um")?;
     std.write_csv(&dir.join("std.csv"), "std_um")?;
@@ -1222,7 +1386,10 @@ pub(crate) fn draw_shaded(
     extrapolated: &[bool],
 ) -> Result<()> {
     let values: Vec<Option<f64>> = map.values.iter().map(|&v| Some(v)).collect();
-    heatmap::save_heatmap(
+    let counts = marks
+        .totals
+        .unwrap_or((marks.probes.len(), marks.rejected.len()));
+    heatmap::save_heatmap_counted(
         path,
         &Heatmap {
             title: title.into(),
@@ -1241,6 +1408,7 @@ pub(crate) fn draw_shaded(
             scale,
             extrapolated,
         },
+        counts,
     )?;
     Ok(())
 }
@@ -1541,10 +1709,11 @@ mod tests {
         assert_eq!(
             stages,
             [
+                // No domain: the parts' box first; then one bar over the parts, the training
+                // of each chunk inside it.
                 &Event::Stage("clean".into(), 1),
-                &Event::Stage("interpolate".into(), 1),
+                &Event::Stage("map parts".into(), 1),
                 &Event::Stage("train".into(), 1),
-                &Event::Stage("write".into(), 1),
             ]
         );
         // 36 points: 4 held out (round(0.1 · 36)), so a hold-out and a delivered network.

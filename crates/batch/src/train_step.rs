@@ -63,6 +63,7 @@ pub struct Trained {
 /// `warm_epochs` steps. With `stop = "holdout"`, a part's hold-out network (`holdouts[k]`: its
 /// held-out points) and its delivered network stop together at the hold-out network's best
 /// check; the family network, which has no held-out points, trains its full steps.
+#[cfg(test)]
 pub fn train_all(
     trainer: &dyn Trainer,
     sets: &[TrainingSet],
@@ -71,38 +72,84 @@ pub fn train_all(
     config: &ModelConfig,
     holdouts: &[Option<Holdout>],
 ) -> Result<Trained> {
-    let initial: Vec<Mlp> = roles.iter().map(|r| initial_network(config, r)).collect();
     let family = roles.iter().position(|r| *r == Role::Family);
-    let all: Vec<usize> = (0..sets.len()).collect();
     let (WarmStart::Family, Some(f)) = (config.warm_start, family) else {
-        return fit(trainer, initial, sets, roles, config, holdouts, &all);
+        return train_parts(trainer, sets, norms, roles, config, holdouts, None);
     };
-    let family_net = trainer
-        .train_from(vec![initial[f].clone()], &sets[f..=f], config)?
-        .pop()
-        .ok_or_else(|| Error::Internal("trainer returned no family network".into()))?;
-    let warm = ModelConfig {
-        epochs: config.warm_epochs,
-        loss_every: config.loss_every.min(config.warm_epochs),
-        ..config.clone()
-    };
+    let family_net = train_family(trainer, &sets[f], config)?;
     let others: Vec<usize> = (0..sets.len()).filter(|&k| k != f).collect();
-    let starts: Vec<Mlp> = others
+    let pick = |k: &usize| (sets[*k].clone(), norms[*k].clone(), roles[*k].clone());
+    let (part_sets, part_norms, part_roles): (Vec<_>, Vec<_>, Vec<_>) = others
         .iter()
-        .map(|&k| rescaled(&family_net, &norms[f], &norms[k]))
+        .map(pick)
+        .fold(Default::default(), |mut acc, (s, n, r)| {
+            acc.0.push(s);
+            acc.1.push(n);
+            acc.2.push(r);
+            acc
+        });
+    let part_holdouts: Vec<Option<Holdout>> = others
+        .iter()
+        .map(|&k| holdouts.get(k).cloned().flatten())
         .collect();
-    let part_sets: Vec<TrainingSet> = others.iter().map(|&k| sets[k].clone()).collect();
-    let trained = fit(trainer, starts, &part_sets, roles, &warm, holdouts, &others)?;
+    let trained = train_parts(
+        trainer,
+        &part_sets,
+        &part_norms,
+        &part_roles,
+        config,
+        &part_holdouts,
+        Some((&family_net, &norms[f])),
+    )?;
     let mut out = Trained {
-        nets: initial,
+        nets: vec![family_net.clone(); sets.len()],
         stops: vec![None; sets.len()],
     };
-    out.nets[f] = family_net;
     for (i, k) in others.into_iter().enumerate() {
         out.nets[k] = trained.nets[i].clone();
         out.stops[k] = trained.stops[i].clone();
     }
     Ok(out)
+}
+
+/// The family network alone: `epochs` steps from its own initial weights (seeded by its name),
+/// so every run (whole, sharded, resumed, merged) fits the same network to the same mean.
+pub fn train_family(trainer: &dyn Trainer, set: &TrainingSet, config: &ModelConfig) -> Result<Mlp> {
+    let initial = initial_network(config, &Role::Family);
+    trainer
+        .train_from(vec![initial], std::slice::from_ref(set), config)?
+        .pop()
+        .ok_or_else(|| Error::Internal("trainer returned no family network".into()))
+}
+
+/// The networks of some parts (`sets`, `norms`, `roles`, `holdouts` one per network) in one
+/// trainer call: from their own initial weights, or with `warm` (the family network and its
+/// normalisation) from it, rescaled to each part's targets, for `warm_epochs` steps.
+pub fn train_parts(
+    trainer: &dyn Trainer,
+    sets: &[TrainingSet],
+    norms: &[Normalisation],
+    roles: &[Role],
+    config: &ModelConfig,
+    holdouts: &[Option<Holdout>],
+    warm: Option<(&Mlp, &Normalisation)>,
+) -> Result<Trained> {
+    let all: Vec<usize> = (0..sets.len()).collect();
+    let Some((family_net, family_norm)) = warm.filter(|_| config.warm_start == WarmStart::Family)
+    else {
+        let initial: Vec<Mlp> = roles.iter().map(|r| initial_network(config, r)).collect();
+        return fit(trainer, initial, sets, roles, config, holdouts, &all);
+    };
+    let warm_config = ModelConfig {
+        epochs: config.warm_epochs,
+        loss_every: config.loss_every.min(config.warm_epochs),
+        ..config.clone()
+    };
+    let starts: Vec<Mlp> = norms
+        .iter()
+        .map(|n| rescaled(family_net, family_norm, n))
+        .collect();
+    fit(trainer, starts, sets, roles, &warm_config, holdouts, &all)
 }
 
 /// The networks `batch` (indices into `roles` and `holdouts`) trained from `initial` on

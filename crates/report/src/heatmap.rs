@@ -151,6 +151,16 @@ pub fn frame(map: &Heatmap<'_>) -> Frame {
 
 /// Draw the heatmap and write it to `path` as PNG (atomically); returns where the plot lies.
 pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
+    save_heatmap_counted(path, map, (map.probes.len(), map.rejected.len()))
+}
+
+/// [`save_heatmap`] with the legend's counts of kept and rejected points given apart: a family
+/// map draws each distinct position once but counts every part's points.
+pub fn save_heatmap_counted(
+    path: &Path,
+    map: &Heatmap<'_>,
+    counts: (usize, usize),
+) -> Result<Frame> {
     let layout = Layout::of(map);
     let main_w = layout.plot_w + Y_LABELS + 2 * MARGIN;
     let width = main_w + BAR;
@@ -164,7 +174,7 @@ pub fn save_heatmap(path: &Path, map: &Heatmap<'_>) -> Result<Frame> {
             (MARGIN as i32, 6),
             (FONT, 22).into_font().color(&BLACK),
         ))?;
-        draw_legend(&header, map, lo, hi)?;
+        draw_legend(&header, map, counts, lo, hi)?;
 
         let (main, _bar) = body.split_horizontally(main_w);
         let mut chart = draw_axes(&main, map, &layout)?;
@@ -289,6 +299,7 @@ fn lighten(c: RGBColor) -> RGBColor {
 fn draw_legend<DB: DrawingBackend>(
     header: &DrawingArea<DB, plotters::coord::Shift>,
     map: &Heatmap<'_>,
+    (kept, rejected): (usize, usize),
     lo: f64,
     hi: f64,
 ) -> std::result::Result<(), Box<dyn std::error::Error + Send + Sync>>
@@ -301,13 +312,13 @@ where
     let mut x = x0;
     if !map.probes.is_empty() {
         draw_probe_mark(header, (x, y1))?;
-        let text = format!("probe point kept ({})", map.probes.len());
+        let text = format!("probe point kept ({kept})");
         header.draw(&Text::new(text.clone(), (x + 10, y1 - 9), small.clone()))?;
         x += 24 + 8 * text.chars().count() as i32;
     }
     if !map.rejected.is_empty() || !map.probes.is_empty() {
         draw_rejected_mark(header, (x, y1))?;
-        let text = format!("rejected gross error ({})", map.rejected.len());
+        let text = format!("rejected gross error ({rejected})");
         header.draw(&Text::new(text, (x + 16, y1 - 9), small.clone()))?;
     }
     let mut x = x0;
