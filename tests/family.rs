@@ -511,8 +511,36 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
         .collect();
     assert_eq!(names, ["p01", "p02", "p03"]);
     assert!(d.join("out/summary.json").is_file());
+    // The merged folder is laid out as one machine's: the parts at out/<part>, no shard folder.
+    let left: Vec<String> = common::listing(&d.join("out"))
+        .into_iter()
+        .filter(|f| !f.contains('/') || f.ends_with('/'))
+        .collect();
+    assert_eq!(
+        left,
+        [
+            "family/",
+            "p01/",
+            "p02/",
+            "p03/",
+            "report.html",
+            "run.json",
+            "summary.json"
+        ]
+    );
+    for p in ["p01", "p02", "p03"] {
+        let s: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(d.join("out").join(p).join("summary.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            s["output_dir"],
+            format!("out/{p}"),
+            "{p}'s summary names its folder"
+        );
+    }
     // The family maps are the node-wise mean and std of the three parts' maps.
-    let maps: Vec<Vec<Vec<f64>>> = ["shard-0-of-2/p01", "shard-1-of-2/p02", "shard-0-of-2/p03"]
+    let maps: Vec<Vec<Vec<f64>>> = ["p01", "p02", "p03"]
         .iter()
         .map(|p| read_csv(&d.join("out").join(p).join("map.csv")).1)
         .collect();
@@ -534,8 +562,15 @@ fn shards_map_their_parts_and_merge_joins_the_summaries() {
     assert!(d.join("out/family/model.json").is_file());
     assert!(d.join("out/family/finish-compensated.ngc").is_file());
     assert_eq!(merged["family_map"]["parts"], 3);
+    // Merged once, the shards are in the run: a second merge says so.
+    let out = run_expect(&["merge", "out", "--backend", "cpu"], d, 2);
+    assert!(
+        out.stderr.contains("is a merged run already"),
+        "{}",
+        out.report()
+    );
     // A missing shard is an error naming it.
-    std::fs::remove_dir_all(d.join("out/shard-0-of-2")).unwrap();
+    run_expect(&batch_args("cpu", "out", &["--shard", "1/2"]), d, 0);
     let out = run_expect(&["merge", "out", "--backend", "cpu"], d, 2);
     assert!(
         out.stderr

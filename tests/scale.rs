@@ -83,12 +83,26 @@ fn part_summary_without_folder(bytes: &[u8]) -> serde_json::Value {
     v
 }
 
-/// Compare the reduce of a sharded run in `sharded` (shard folders + family) with the
-/// unsharded run in `single`: the family folder always, the parts' files when `parts`.
+/// Compare the merge of a sharded run in `sharded` with the unsharded run in `single`, file by
+/// file at the same paths (a merged run's folder looks like one machine's: parts at `<part>/`,
+/// no shard folder): the family folder always; with `parts`, the same files and every part's
+/// files too.
 fn compare_runs(single: &Path, sharded: &Path, parts: bool) -> Vec<String> {
     let mut diffs = Vec::new();
     let one = snapshot(single);
     let many = snapshot(sharded);
+    let shard_files: Vec<&String> = many.keys().filter(|k| k.starts_with("shard-")).collect();
+    assert!(
+        shard_files.is_empty(),
+        "left after the merge: {shard_files:?}"
+    );
+    if parts {
+        assert_eq!(
+            one.keys().collect::<Vec<_>>(),
+            many.keys().collect::<Vec<_>>(),
+            "the merged folder holds other files than the unsharded run's"
+        );
+    }
     let mut family_files = 0;
     for (rel, bytes) in &one {
         if rel.starts_with("family/") {
@@ -101,18 +115,12 @@ fn compare_runs(single: &Path, sharded: &Path, parts: bool) -> Vec<String> {
         if !parts || !rel.contains('/') {
             continue;
         }
-        // p03/map.csv ↔ shard-I-of-N/p03/map.csv
-        let found: Vec<&Vec<u8>> = many
-            .iter()
-            .filter(|(k, _)| k.starts_with("shard-") && k.ends_with(&format!("/{rel}")))
-            .map(|(_, v)| v)
-            .collect();
-        let same = match found.as_slice() {
-            [b] if rel.ends_with("summary.json") => {
+        let same = match many.get(rel) {
+            Some(b) if rel.ends_with("summary.json") => {
                 part_summary_without_folder(b) == part_summary_without_folder(bytes)
             }
-            [b] => *b == bytes,
-            _ => false,
+            Some(b) => b == bytes,
+            None => false,
         };
         if !same {
             diffs.push(rel.clone());
@@ -124,6 +132,12 @@ fn compare_runs(single: &Path, sharded: &Path, parts: bool) -> Vec<String> {
         one = one.keys()
     );
     diffs
+}
+
+/// A run's `summary.json` with its output folder's name replaced by `single`.
+fn summary_in(dir: &Path, name: &str) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join(name).join("summary.json")).unwrap();
+    serde_json::from_str(&text.replace(&format!("\"{name}/"), "\"single/")).unwrap()
 }
 
 /// Run a job as `n` shards plus the merge into `out`.
@@ -180,6 +194,8 @@ fn every_file_of_2_3_7_shards_equals_the_unsharded_run() {
         sharded(d, &out, n);
         let diffs = compare_runs(&d.join("single"), &d.join(&out), true);
         assert!(diffs.is_empty(), "{n} shards: {diffs:?} differ");
+        // The merged summary is the unsharded run's, part folders included.
+        assert_eq!(summary_in(d, &out), summary_in(d, "single"), "{n} shards");
     }
 }
 
@@ -616,17 +632,169 @@ fn a_sharded_rerun_into_an_unsharded_runs_folder_leaves_no_part_of_the_old_run()
     batch(d, "out", &[]).expect_code(0);
     assert!(d.join("out/p01/map.csv").is_file());
     sharded(d, "out", 2);
-    let left: Vec<String> = common::listing(&d.join("out"))
-        .into_iter()
-        .filter(|f| !f.contains('/') || f.starts_with("p0"))
-        .collect();
+    // Every file is the merge's: listed in its run.json with its hash (no file of the old
+    // run, no shard folder).
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("out/run.json")).unwrap()).unwrap();
+    let mut listed: BTreeMap<String, String> = BTreeMap::new();
+    for p in m["parts"].as_array().unwrap() {
+        for (k, v) in p["outputs"].as_object().unwrap() {
+            listed.insert(k.clone(), v.as_str().unwrap().to_string());
+        }
+    }
+    for (k, v) in m["files"].as_object().unwrap() {
+        listed.insert(k.clone(), v.as_str().unwrap().to_string());
+    }
+    let mut present = common::listing(&d.join("out"));
+    present.retain(|f| f != "run.json" && !f.ends_with('/'));
     assert_eq!(
-        left,
-        ["report.html", "run.json", "summary.json"],
-        "{:?}",
-        common::listing(&d.join("out"))
+        present,
+        listed.keys().cloned().collect::<Vec<_>>(),
+        "files not of the merge"
     );
+    // Hashed by coreutils' sha256sum, not errmap's own code.
+    for (rel, hash) in &listed {
+        let out = Command::new("sha256sum")
+            .arg(d.join("out").join(rel))
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(text.split_whitespace().next(), Some(hash.as_str()), "{rel}");
+    }
     let m: serde_json::Value =
         serde_json::from_slice(&std::fs::read(d.join("out/run.json")).unwrap()).unwrap();
     assert_eq!(m["kind"], "reduce");
+}
+
+/// The journal of the run now writing into `dir/out` (in its staging folder beside it).
+fn journal_lines(dir: &Path) -> Vec<serde_json::Value> {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().to_string();
+        if name.starts_with(".errmap-out-") && name.ends_with(".tmp") {
+            let text =
+                std::fs::read_to_string(e.path().join(".errmap-journal.jsonl")).unwrap_or_default();
+            // Only whole lines: the last may be being written.
+            return text
+                .lines()
+                .skip(1)
+                .filter_map(|l| serde_json::from_str(l).ok())
+                .collect();
+        }
+    }
+    Vec::new()
+}
+
+#[test]
+fn a_run_killed_after_its_first_chunk_resumes_without_mapping_those_parts_again() {
+    // 36 parts: the first chunk of 32 is written and journaled, then SIGKILL while the rest
+    // runs; --resume keeps exactly the journaled parts (the same files, hard-linked) and the
+    // folder ends byte for byte as an uninterrupted run's.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    run_ok(
+        d,
+        &[
+            "synth",
+            "web-plate",
+            "--parts",
+            "36",
+            "--grid",
+            "9x7",
+            "--epochs",
+            "20",
+            "--out-dir",
+            "data",
+        ],
+    );
+    batch(d, "whole", &[]).expect_code(0);
+    let mut cmd = common::command();
+    scrub(&mut cmd);
+    let args = [
+        "batch",
+        "data/job.toml",
+        "--backend",
+        "cpu",
+        "--out-dir",
+        "out",
+        "--quiet",
+    ];
+    let mut child = cmd.args(args).current_dir(d).spawn().unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(600);
+    let journaled = loop {
+        let lines = journal_lines(d);
+        if lines.len() >= errmap::batch::CHUNK_PARTS {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            break journal_lines(d);
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before its first chunk was journaled"
+        );
+        assert!(std::time::Instant::now() < deadline, "no chunk journaled");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    };
+    assert!(
+        !d.join("out/run.json").exists(),
+        "killed before it committed"
+    );
+    let staging = std::fs::read_dir(d)
+        .unwrap()
+        .flatten()
+        .find(|e| e.file_name().to_string_lossy().starts_with(".errmap-out-"))
+        .unwrap()
+        .path();
+    use std::os::unix::fs::MetadataExt;
+    let done: BTreeMap<String, u64> = journaled
+        .iter()
+        .map(|l| {
+            let part = l["part"]["part"].as_str().unwrap().to_string();
+            let ino = std::fs::metadata(staging.join(&part).join("map.csv"))
+                .unwrap()
+                .ino();
+            (part, ino)
+        })
+        .collect();
+    assert!(done.len() >= 32 && done.len() < 36, "{done:?}");
+
+    batch(d, "out", &["--resume"]).expect_code(0);
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("out/run.json")).unwrap()).unwrap();
+    let reused: Vec<String> = m["parts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["reused"] == true)
+        .map(|p| p["part"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(reused, done.keys().cloned().collect::<Vec<_>>());
+    // Not mapped again: the very files the killed run wrote.
+    for (part, ino) in &done {
+        let now = std::fs::metadata(d.join("out").join(part).join("map.csv"))
+            .unwrap()
+            .ino();
+        assert_eq!(now, *ino, "{part} was written again");
+    }
+    // Nothing of the killed run is left beside or inside the folder.
+    assert!(temporaries(d).is_empty(), "{:?}", temporaries(d));
+    // The same bytes as the uninterrupted run (run.json apart: it says what was reused).
+    let whole = snapshot(&d.join("whole"));
+    let out = snapshot(&d.join("out"));
+    assert_eq!(
+        whole.keys().collect::<Vec<_>>(),
+        out.keys().collect::<Vec<_>>()
+    );
+    for (rel, bytes) in &whole {
+        if rel == "run.json" {
+            continue;
+        }
+        let theirs = &out[rel];
+        let same = if rel.ends_with("summary.json") {
+            let norm = |b: &[u8]| String::from_utf8_lossy(b).replace("\"whole/", "\"out/");
+            norm(bytes) == norm(theirs)
+        } else {
+            bytes == theirs
+        };
+        assert!(same, "{rel} differs from the uninterrupted run");
+    }
 }
