@@ -311,6 +311,36 @@ fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
     errmap_core::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
     m.files
         .insert(name.to_string(), manifest::sha256_bytes(html.as_bytes()));
+    if !super::run_page::has_part_pages(summary.parts.len()) {
+        return Ok(());
+    }
+    // A large family: each part's page in its folder, listed with the part's files.
+    let mut pages = Vec::new();
+    for p in &summary.parts {
+        let input = super::run_page::RunInput {
+            dir,
+            manifest: m,
+            summary: &summary,
+        };
+        let html = super::run_page::render_part(&input, p)?;
+        let rel = format!("{}/{name}", p.part);
+        let path = dir.join(&rel);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io("create folder", parent, e))?;
+        }
+        errmap_core::io::write_atomic_bytes(&path, html.as_bytes())?;
+        pages.push((p.part.clone(), rel, manifest::sha256_bytes(html.as_bytes())));
+    }
+    for (part, rel, hash) in pages {
+        match m.parts.iter_mut().find(|r| r.part == part) {
+            Some(r) => {
+                r.outputs.insert(rel, hash);
+            }
+            None => {
+                m.files.insert(rel, hash);
+            }
+        }
+    }
     Ok(())
 }
 

@@ -9,8 +9,14 @@ use errmap_core::error::{Error, Location, Result};
 use errmap_report::html::{self, figure_cell, json_text, num, para, png_figure, table, Cell, Page};
 use std::path::Path;
 
-/// File name of the report in a run's folder.
+/// File name of the report in a run's folder, and of each part's page in its folder when the
+/// family has more than [`INLINE_PARTS`] parts.
 pub const REPORT_FILE: &str = "report.html";
+
+/// Up to this many parts, each part's figures and pictures are sections of `report.html`;
+/// beyond, each part has its own page (`<part>/report.html`) linked from the table of parts,
+/// so the report of a large family stays one overview of a few MB, not a thousand pictures.
+pub const INLINE_PARTS: usize = 50;
 
 /// What a run report is built from.
 pub struct RunInput<'a> {
@@ -42,14 +48,155 @@ pub fn render_run(input: &RunInput) -> Result<String> {
     if !s.toolpaths.is_empty() {
         page.section("toolpaths", "Compensated toolpaths", toolpath_section(s));
     }
-    for p in &s.parts {
-        page.section(
-            &format!("part-{}", p.part),
-            &format!("Part {}", p.part),
-            part_section(input, p)?,
-        );
+    let inline = s.parts.len() <= INLINE_PARTS;
+    page.section("parts", "Parts", parts_table(input, inline));
+    if inline {
+        for p in &s.parts {
+            page.section(
+                &format!("part-{}", p.part),
+                &format!("Part {}", p.part),
+                part_section(input, p)?,
+            );
+        }
     }
     Ok(page.render())
+}
+
+/// Whether a run of `parts` parts has a page per part (`<part>/report.html`).
+pub fn has_part_pages(parts: usize) -> bool {
+    parts > INLINE_PARTS
+}
+
+/// The page of one part (`<part>/report.html` of a large family): its figures, pictures and
+/// rejected points, and the way back to the family's report.
+pub fn render_part(input: &RunInput, p: &PartSummary) -> Result<String> {
+    let back = format!(
+        "<p><a href=\"../{REPORT_FILE}#parts\">← all parts of {}</a></p>\n",
+        html::escape(&input.summary.family)
+    );
+    let mut page = Page {
+        title: format!("errmap report — {} part {}", input.summary.family, p.part),
+        lead: format!(
+            "Part {} of family {}. Lengths in mm, errors in µm.",
+            p.part, input.summary.family
+        ),
+        sections: Vec::new(),
+    };
+    page.section(
+        &format!("part-{}", p.part),
+        &format!("Part {}", p.part),
+        back + &part_section(input, p)?,
+    );
+    Ok(page.render())
+}
+
+/// The columns of the table of parts: heading, anchor of the variant sorted by it, and the
+/// figure (`None` sorts last).
+type Column = (&'static str, &'static str, fn(&PartSummary) -> Option<f64>);
+
+const SORT_COLUMNS: [Column; 7] = [
+    ("points", "points", |p| Some(p.points as f64)),
+    ("rejected", "rejected", |p| Some(p.rejected as f64)),
+    ("hold-out RMSE (delivered), µm", "holdout", |p| {
+        p.delivered_holdout_rmse_um
+    }),
+    ("benefit share", "benefit", |p| p.benefit_share),
+    ("map RMS, µm", "rms", |p| p.rms_um),
+    ("map PV, µm", "pv", |p| p.pv_um),
+    ("u(E) max, µm", "umax", |p| p.u_max_um),
+];
+
+/// Where a part's details are: its section of this page, or its own page.
+fn part_href(part: &str, inline: bool) -> String {
+    if inline {
+        format!("#{}", html::anchor(&format!("part-{part}")))
+    } else {
+        // Part names are safe folder names; a few characters still mean something in a URL.
+        let path: String = part
+            .chars()
+            .map(|c| match c {
+                '%' => "%25".to_string(),
+                ' ' => "%20".to_string(),
+                '#' => "%23".to_string(),
+                '?' => "%3F".to_string(),
+                c => c.to_string(),
+            })
+            .collect();
+        format!("{path}/{REPORT_FILE}")
+    }
+}
+
+/// One table of every part in `order`, its headings linking to the variants sorted by them.
+fn parts_variant(s: &BatchSummary, order: &[usize], inline: bool) -> String {
+    let mut t =
+        String::from("<table class=\"parts\">\n<thead><tr><th><a href=\"#parts\">part</a></th>");
+    for (title, id, _) in SORT_COLUMNS {
+        t.push_str(&format!(
+            "<th><a href=\"#parts-by-{id}\">{}</a></th>",
+            html::escape(title)
+        ));
+    }
+    t.push_str("<th>status</th></tr></thead>\n<tbody>\n");
+    for &k in order {
+        let p = &s.parts[k];
+        t.push_str(&format!(
+            "<tr><td><a href=\"{}\">{}</a></td>",
+            html::escape(&part_href(&p.part, inline)),
+            html::escape(&p.part)
+        ));
+        for (i, (_, _, value)) in SORT_COLUMNS.iter().enumerate() {
+            let digits = if i < 2 { 0 } else { 3 };
+            let v = if p.ok { value(p) } else { None };
+            t.push_str(&format!("<td class=\"num\">{}</td>", num(v, digits)));
+        }
+        let status = if p.ok { "mapped" } else { "FAILED" };
+        t.push_str(&format!("<td>{status}</td></tr>\n"));
+    }
+    t.push_str("</tbody></table>\n");
+    t
+}
+
+/// The table of parts, sortable without a script (the report's policy allows none): one
+/// variant per column, pre-sorted (largest first, failed parts last), shown when its heading's
+/// link makes it the page's target; by name otherwise.
+fn parts_table(input: &RunInput, inline: bool) -> String {
+    let s = input.summary;
+    let mut body = String::from(
+        "<style>.parts-sorted{display:none}.parts-sorted:target{display:block}\
+.parts-sorted:target~.parts-default{display:none}table.parts td a{text-decoration:none}</style>\n",
+    );
+    body.push_str(&para(
+        "note",
+        &format!(
+            "{} part(s), {} failed. Click a column's heading to sort by it (largest first), \
+the part heading for the order of the probe files; a part's name opens its {}.",
+            s.parts.len(),
+            s.failed_parts,
+            if inline { "section below" } else { "own page" }
+        ),
+    ));
+    for (title, id, value) in SORT_COLUMNS {
+        let mut order: Vec<usize> = (0..s.parts.len()).collect();
+        let key = |k: &usize| s.parts[*k].ok.then(|| value(&s.parts[*k])).flatten();
+        // Largest first, unknown last, ties in batch order (a stable sort).
+        order.sort_by(|a, b| match (key(a), key(b)) {
+            (Some(x), Some(y)) => y.total_cmp(&x),
+            (Some(_), None) => std::cmp::Ordering::Less,
+            (None, Some(_)) => std::cmp::Ordering::Greater,
+            (None, None) => std::cmp::Ordering::Equal,
+        });
+        body.push_str(&format!(
+            "<div id=\"parts-by-{id}\" class=\"parts-sorted\">\n<p class=\"note\">sorted by {}</p>\n",
+            html::escape(title)
+        ));
+        body.push_str(&parts_variant(s, &order, inline));
+        body.push_str("</div>\n");
+    }
+    let order: Vec<usize> = (0..s.parts.len()).collect();
+    body.push_str("<div class=\"parts-default\">\n");
+    body.push_str(&parts_variant(s, &order, inline));
+    body.push_str("</div>\n");
+    body
 }
 
 fn kv(key: &str, value: impl Into<String>) -> Vec<Cell> {
@@ -517,5 +664,78 @@ mod tests {
         // No network: nothing but data: URIs and in-page anchors.
         assert!(!html.contains("http://") || html.matches("http://").count() == 1);
         assert!(!html.contains("https://") && !html.contains("<script"));
+    }
+
+    #[test]
+    fn a_family_of_1000_parts_gets_an_overview_and_a_page_per_part() {
+        // 1000 synthetic summary rows: part k has map RMS k/10 µm, every 100th failed.
+        let tmp = tempfile::tempdir().unwrap();
+        let (manifest, mut summary) = fake_run(tmp.path());
+        let template = summary.parts[0].clone();
+        let failed = summary.parts[1].clone();
+        summary.parts = (0..1000)
+            .map(|k| {
+                let mut p = if k % 100 == 99 {
+                    failed.clone()
+                } else {
+                    template.clone()
+                };
+                p.part = format!("p{k:04}");
+                if p.ok {
+                    p.rms_um = Some(k as f64 / 10.0);
+                }
+                p
+            })
+            .collect();
+        summary.failed_parts = 10;
+        let input = RunInput {
+            dir: tmp.path(),
+            manifest: &manifest,
+            summary: &summary,
+        };
+        let html = render_run(&input).unwrap();
+        // No part's pictures or sections on the overview: the family's two pictures only.
+        assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+        assert!(!html.contains("<section id=\"part-"));
+        assert!(html.len() < 4_000_000, "{} bytes", html.len());
+        // Eight tables of every part (seven sorted, one by name), each row a link to its page.
+        assert_eq!(html.matches("<table class=\"parts\">").count(), 8);
+        assert_eq!(html.matches("<tr><td><a href=\"p").count(), 8000);
+        assert_eq!(html.matches("href=\"p0042/report.html\"").count(), 8);
+        // Sorted by RMS: largest first (p0998, as p0999 failed), failed parts last.
+        let by_rms = &html[html.find("id=\"parts-by-rms\"").unwrap()..];
+        let by_rms = &by_rms[..by_rms.find("</div>").unwrap()];
+        let rows: Vec<&str> = by_rms
+            .split("<tr><td><a href=\"")
+            .skip(1)
+            .map(|r| &r[..5])
+            .collect();
+        assert_eq!(rows[..3], ["p0998", "p0997", "p0996"]);
+        assert_eq!(rows[989], "p0000");
+        assert_eq!(
+            rows[990..],
+            [
+                "p0099", "p0199", "p0299", "p0399", "p0499", "p0599", "p0699", "p0799", "p0899",
+                "p0999"
+            ]
+        );
+        // The default (by name) variant comes last, so a sorted one hides it when targeted.
+        let default_at = html.find("class=\"parts-default\"").unwrap();
+        assert!(html.rfind("class=\"parts-sorted\"").unwrap() < default_at);
+        // A part's own page: its figures and the way back.
+        let page = render_part(&input, &summary.parts[42]).unwrap();
+        assert!(page.contains("href=\"../report.html#parts\""));
+        assert!(page.contains("data-figure=\"p0042.rms_um\" data-value=\"4.2\""));
+        assert!(!page.contains("<script"));
+        // Up to INLINE_PARTS parts the sections stay on the one page, linked by anchor.
+        summary.parts.truncate(INLINE_PARTS);
+        let input = RunInput {
+            dir: tmp.path(),
+            manifest: &manifest,
+            summary: &summary,
+        };
+        let html = render_run(&input).unwrap();
+        assert_eq!(html.matches("<section id=\"part-").count(), INLINE_PARTS);
+        assert!(html.contains("href=\"#part-p0042\""));
     }
 }
