@@ -49,6 +49,10 @@ pub fn warn(line: &str) {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Terminal;
 
+/// The bar's line: what, how far (steps done of all), time so far and the time left, which
+/// indicatif estimates from the recent rate (a family's parts: parts done, time to the last).
+const BAR_TEMPLATE: &str = "{msg:>12} [{bar:30}] {pos}/{len} {elapsed_precise}, {eta} left";
+
 /// A progress bar of `len` steps with a message, drawn on stderr only when it is a terminal and the run is not quiet.
 fn bar(len: u64, message: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
@@ -56,7 +60,7 @@ fn bar(len: u64, message: &str) -> ProgressBar {
         bar.set_draw_target(ProgressDrawTarget::hidden());
     }
     bar.set_style(
-        ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} {elapsed_precise}")
+        ProgressStyle::with_template(BAR_TEMPLATE)
             .expect("progress template is valid")
             .progress_chars("=> "),
     );
