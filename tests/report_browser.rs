@@ -251,6 +251,30 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
         json!({"expression": PROBE, "returnByValue": true}),
     );
     let page: Value = serde_json::from_str(probe["result"]["value"].as_str().unwrap()).unwrap();
+    // The table of parts sorts without a script: following a column heading's link shows the
+    // variant sorted by that column, largest first; the part heading's shows the file order.
+    let shown = |dt: &mut DevTools, hash: &str| -> Vec<String> {
+        let expr = format!(
+            "location.hash = '{hash}'; JSON.stringify(Array.from(document.querySelectorAll('table.parts'))\
+             .filter(t => t.offsetParent !== null)\
+             .map(t => Array.from(t.tBodies[0].rows).map(r => r.cells[0].innerText)))"
+        );
+        let r = dt.call(
+            s,
+            "Runtime.evaluate",
+            json!({"expression": expr, "returnByValue": true}),
+        );
+        let tables: Vec<Vec<String>> =
+            serde_json::from_str(r["result"]["value"].as_str().unwrap()).unwrap();
+        assert_eq!(
+            tables.len(),
+            1,
+            "one table of parts visible at {hash}: {tables:?}"
+        );
+        tables.into_iter().next().unwrap()
+    };
+    let by_rms = shown(&mut dt, "#parts-by-rms");
+    let by_name = shown(&mut dt, "#parts");
     let pdf = dt.call(s, "Page.printToPDF", json!({"printBackground": true}));
     dt.drain(Duration::from_millis(500));
 
@@ -275,7 +299,12 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
         .iter()
         .map(|s| s["id"].as_str().unwrap())
         .collect();
-    let mut want = vec!["job".to_string(), "family".into(), "toolpaths".into()];
+    let mut want = vec![
+        "job".to_string(),
+        "family".into(),
+        "toolpaths".into(),
+        "parts".into(),
+    ];
     want.extend(
         parts
             .iter()
@@ -285,6 +314,20 @@ fn the_sample_report_opens_in_chromium_complete_and_equal_to_the_summary() {
     for sec in page["sections"].as_array().unwrap() {
         assert!(sec["text"].as_u64().unwrap() > 100, "empty section {sec}");
     }
+    // The sorted orders, checked against summary.json's figures.
+    let names: Vec<String> = parts
+        .iter()
+        .map(|p| p["part"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(by_name, names);
+    let mut want_rms = names.clone();
+    let rms = |n: &String| {
+        parts.iter().find(|p| p["part"] == n.as_str()).unwrap()["rms_um"]
+            .as_f64()
+            .unwrap()
+    };
+    want_rms.sort_by(|a, b| rms(b).partial_cmp(&rms(a)).unwrap());
+    assert_eq!(by_rms, want_rms);
     // No console error, no exception, no failed or blocked load.
     for e in &dt.events {
         let m = e["method"].as_str().unwrap_or("");
