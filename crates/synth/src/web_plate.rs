@@ -52,7 +52,7 @@ pub enum Layout {
 pub struct WebPlateSpec {
     /// Family name: the job's `family` and the title line of the instrument files.
     pub family: String,
-    /// Number of parts (1 to 999), named `p01`, `p02`, ….
+    /// Number of parts (1 to 9999), named `p01`, `p02`, … (`p100`, `p1000` past 99 and 999).
     pub parts: usize,
     /// Seed of the family: each part's truth, outliers, repeats and noise, and an irregular
     /// layout, follow from it.
@@ -278,8 +278,8 @@ fn validate(spec: &WebPlateSpec) -> Result<()> {
             format!("give --size of at least {min}x{min} mm"),
         ));
     }
-    if spec.parts == 0 || spec.parts > 999 {
-        return Err(Error::usage("--parts must be 1…999", "e.g. --parts 8"));
+    if spec.parts == 0 || spec.parts > 9999 {
+        return Err(Error::usage("--parts must be 1…9999", "e.g. --parts 8"));
     }
     match spec.layout {
         Layout::Grid { nx, ny } if nx < 3 || ny < 3 || nx * ny > 100_000 => Err(Error::usage(
