@@ -213,7 +213,7 @@ impl FamilyMaps {
     }
 
     /// The spread about `mean` of the maps, given again in the same order: √(Σ (e − μ)² / N).
-    pub fn std_map<'a>(
+    pub fn std_map(
         &self,
         mean: &ErrorMap,
         maps: impl Iterator<Item = errmap_core::Result<Vec<f64>>>,
