@@ -1730,6 +1730,47 @@ mod tests {
         let again = execute(&plan, &trainer, &errmap_core::progress::Silent).unwrap();
         assert_eq!(again.parts[0].rms_um, summary.parts[0].rms_um);
         assert!(out_dir.join("summary.json").is_file());
+        // The parts bar reaches the number of parts: each part counted once, as it is written.
+        let counted = Counting::default();
+        execute(&plan, &trainer, &counted).unwrap();
+        assert_eq!(counted.done("map parts"), Some((1, 1)));
+    }
+
+    /// A reporter that counts each bar's steps: (steps done, length) by message.
+    #[derive(Default)]
+    struct Counting {
+        bars: std::sync::Mutex<Vec<(String, u64, std::sync::Arc<std::sync::atomic::AtomicU64>)>>,
+    }
+
+    struct Count(std::sync::Arc<std::sync::atomic::AtomicU64>);
+
+    impl errmap_core::progress::Progress for Count {
+        fn inc(&self, n: u64) {
+            self.0.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        }
+        fn finish(&self) {}
+    }
+
+    impl Counting {
+        fn done(&self, message: &str) -> Option<(u64, u64)> {
+            let bars = self.bars.lock().unwrap();
+            let (_, len, n) = bars.iter().find(|b| b.0 == message)?;
+            Some((n.load(std::sync::atomic::Ordering::Relaxed), *len))
+        }
+    }
+
+    impl Reporter for Counting {
+        fn info(&self, _: &str) {}
+        fn detail(&self, _: &str) {}
+        fn warn(&self, _: &str) {}
+        fn progress(&self, len: u64, message: &str) -> Box<dyn errmap_core::progress::Progress> {
+            let n = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+            self.bars
+                .lock()
+                .unwrap()
+                .push((message.to_string(), len, n.clone()));
+            Box::new(Count(n))
+        }
     }
 
     #[test]
