@@ -136,6 +136,8 @@ struct AxisSlot {
     model: AxisModel,
     position: Option<(usize, String)>,
     direction: Option<(usize, String)>,
+    /// A number on the direction channel within ±this is standstill.
+    direction_deadband: f64,
     /// Indices into the sensor slots of the model's gain sensors (model order) and ambient.
     gain_sensors: Vec<usize>,
     ambient: Option<usize>,
@@ -426,6 +428,7 @@ impl Live {
                 ),
                 position,
                 direction,
+                direction_deadband: a.direction_deadband,
                 gain_sensors,
                 ambient,
                 target,
@@ -548,40 +551,79 @@ impl Live {
             }
         }
         // The start ramps from what the controller holds now (a dry run starts from zero).
-        for a in &mut self.axes {
-            let Some(t) = a.target else { continue };
+        for a in 0..self.axes.len() {
+            let Some(t) = self.axes[a].target else {
+                continue;
+            };
             if self.once {
                 continue;
             }
-            let present = self.targets[t].present(&a.model.name)?;
-            a.written = match present {
-                Present::Line(l) => l,
-                Present::K3 {
-                    abs_mm,
-                    slope,
-                    reference_mm,
-                } => super::target::opcua::line_of_k3(abs_mm, slope, reference_mm, a.model.px_mm()),
-                Present::Value(v) => {
-                    // A point target: its value as an offset of the thermal line (the geometric
-                    // part, when carried, is not ramped).
-                    let geometric = a
-                        .position
-                        .as_ref()
-                        .and_then(|(s, c)| self.sources[*s].source.snapshot().channels.get(c))
-                        .and_then(|r| r.value.as_number())
-                        .filter(|_| a.model.include_geometric)
-                        .map_or(0.0, |x| {
-                            -0.5 * (a.model.model.geometric_um(Direction::Forward, x)
-                                + a.model.model.geometric_um(Direction::Reverse, x))
-                        });
-                    Line {
-                        offset_um: v - geometric,
-                        slope_um_per_m: 0.0,
-                    }
-                }
-            };
+            let present = self.targets[t].present(&self.axes[a].model.name)?;
+            self.axes[a].written = self.line_of_present(&self.axes[a], present);
         }
         Ok(())
+    }
+
+    /// The thermal line a controller's present compensation stands for, which the loop ramps
+    /// from.
+    fn line_of_present(&self, a: &AxisSlot, present: Present) -> Line {
+        match present {
+            Present::Line(l) => l,
+            Present::K3 {
+                abs_mm,
+                slope,
+                reference_mm,
+            } => super::target::opcua::line_of_k3(abs_mm, slope, reference_mm, a.model.px_mm()),
+            Present::Value(v) => {
+                // A point target: its value as an offset of the thermal line (the geometric
+                // part, when carried, is not ramped).
+                let geometric = a
+                    .position
+                    .as_ref()
+                    .and_then(|(s, c)| self.sources[*s].source.snapshot().channels.get(c))
+                    .and_then(|r| r.value.as_number())
+                    .filter(|_| a.model.include_geometric)
+                    .map_or(0.0, |x| {
+                        -0.5 * (a.model.model.geometric_um(Direction::Forward, x)
+                            + a.model.model.geometric_um(Direction::Reverse, x))
+                    });
+                Line {
+                    offset_um: v - geometric,
+                    slope_um_per_m: 0.0,
+                }
+            }
+        }
+    }
+
+    /// A target whose value changed under errmap (a LinuxCNC machine-off/on zeroes its external
+    /// offsets): the axis ramps from the controller's present value as at a start, and an alarm
+    /// says so until the controller takes errmap's values again. A failed read is left to the
+    /// write that follows, which reports it.
+    fn resync_axis(&mut self, a: usize, utc: &str, notes: &mut Vec<String>) {
+        let Some(t) = self.axes[a].target else { return };
+        let name = self.axes[a].model.name.clone();
+        let key = format!("moved:{name}");
+        let Ok(Some(present)) = self.targets[t].moved(&name) else {
+            self.alarms.clear(&key);
+            return;
+        };
+        let line = self.line_of_present(&self.axes[a], present);
+        let axis = &mut self.axes[a];
+        let message = format!(
+            "{name}: {} holds {:.4} µm at Px, not the {:.4} µm errmap wrote (machine off/on, offsets cleared or not taken): ramping from its value",
+            self.targets[t].name(),
+            line.offset_um,
+            axis.written.offset_um,
+        );
+        axis.written = line;
+        axis.last_output = None;
+        self.starting = true;
+        if let Some(id) = self
+            .alarms
+            .raise(&key, self.targets[t].name(), message.clone(), utc)
+        {
+            notes.push(format!("alarm {id} raised: {message}"));
+        }
     }
 
     /// Run until stopped (or one cycle with `once`).
@@ -859,6 +901,7 @@ impl Live {
         let mut axis_holds = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
             self.direction_of(a);
+            self.resync_axis(a, &utc, notes);
             let (goal, held, problem) = self.goal_of(a, hold || hold_stop, ramp_stop);
             if let Some((key, message)) = problem {
                 if let Some(id) = self.alarms.raise(
@@ -948,8 +991,8 @@ impl Live {
                 "-" => Some(Direction::Reverse),
                 other => Direction::parse(other),
             },
-            Some(Value::Number(v)) if *v > 0.0 => Some(Direction::Forward),
-            Some(Value::Number(v)) if *v < 0.0 => Some(Direction::Reverse),
+            Some(Value::Number(v)) if *v > axis.direction_deadband => Some(Direction::Forward),
+            Some(Value::Number(v)) if *v < -axis.direction_deadband => Some(Direction::Reverse),
             Some(Value::Flag(b)) => Some(if *b {
                 Direction::Forward
             } else {
