@@ -603,9 +603,10 @@ impl Live {
         let Some(t) = self.axes[a].target else { return };
         let name = self.axes[a].model.name.clone();
         let key = format!("moved:{name}");
-        let Ok(Some(present)) = self.targets[t].moved(&name) else {
-            self.alarms.clear(&key);
-            return;
+        let present = match self.targets[t].moved(&name) {
+            Ok(Some(present)) => present,
+            Ok(None) => return self.alarms.clear(&key),
+            Err(_) => return,
         };
         let line = self.line_of_present(&self.axes[a], present);
         let axis = &mut self.axes[a];
