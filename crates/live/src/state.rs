@@ -1,6 +1,7 @@
 //! The state file for the monitor (`errmap live --state PATH`, schema `errmap-live-state/1`):
-//! values, limits, alarms and source health, rewritten atomically every cycle, at most every 50 ms (a temporary file
-//! in the same folder, then a rename, so a reader never sees half a file).
+//! values, limits, alarms and source health, rewritten atomically every cycle, at most every
+//! 50 ms (a temporary file in the same folder, then a rename, so a reader never sees half a
+//! file).
 //!
 //! The file is not synced to disk each cycle: it is rewritten many times a second and only
 //! describes the present; the store holds the record. A thread of its own writes it, so the
