@@ -121,7 +121,7 @@ pub fn refined_parameters(points_uve: &[[f64; 3]], start: Parameters) -> Paramet
         }
     }
     let diag = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
-    if !(diag > 0.0) {
+    if diag.is_nan() || diag <= 0.0 {
         return start;
     }
     let eval = |l: f64, g: f64| profile(&distances, &e, l, g).map(|(nll, _, var, _)| (nll, var));
