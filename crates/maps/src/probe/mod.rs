@@ -12,6 +12,8 @@ mod clean;
 mod cloud;
 mod columns;
 mod dmis;
+mod loo;
+mod order_stat;
 mod point;
 mod read;
 
