@@ -4,9 +4,9 @@
 //! `cargo bench --bench scale_bench -- --sizes 1000,10000 --epochs 400 --out-dir DIR`.
 //! `cargo bench --bench scale_bench -- --compare-kriging` instead compares the exact kriging
 //! with the local one on the sizes where both run (hold-out RMS and time).
-//! Peak RSS is GNU time's maximum resident set size of the errmap process (`/usr/bin/time -f
-//! '%e %M'`); without /usr/bin/time the bench says so and stops. The map of every size is
-//! also judged against the scan's known truth (RMS of map − truth over the map grid inside
+//! Wall and CPU (user + system) seconds and peak RSS come from GNU time (`/usr/bin/time -f
+//! '%e %U %S %M'`: RSS is the errmap process's maximum resident set size); without
+//! /usr/bin/time the bench says so and stops. The map of every size is also judged against the scan's known truth (RMS of map − truth over the map grid inside
 //! the floor), so a faster but worse map shows here.
 
 use errmap::synth::scan::{truth_um, write_scan, ScanSpec};
@@ -120,8 +120,8 @@ fn main() {
     let root = keep.unwrap_or_else(|| temp.path().to_path_buf());
     let exe = env!("CARGO_BIN_EXE_errmap");
     println!(
-        "{:>9} {:>9} {:>11} {:>12} {:>9} {:>9} {:>10} {:>10} {:>8}",
-        "points", "wall_s", "us_per_pt", "peak_rss_mb", "rejected", "chips", "holdout_um", "kriging_um", "truth_um"
+        "{:>9} {:>9} {:>9} {:>11} {:>12} {:>9} {:>9} {:>10} {:>10} {:>8}",
+        "points", "wall_s", "cpu_s", "us_per_pt", "peak_rss_mb", "rejected", "chips", "holdout_um", "kriging_um", "truth_um"
     );
     let mut per_point = Vec::new();
     for &n in &sizes {
@@ -137,7 +137,7 @@ fn main() {
         .expect("write the scan");
         let out = dir.join("out");
         let run = Command::new("/usr/bin/time")
-            .args(["-f", "%e %M", exe, "batch"])
+            .args(["-f", "%e %U %S %M", exe, "batch"])
             .arg(&files.job)
             .arg("--out-dir")
             .arg(&out)
@@ -147,8 +147,10 @@ fn main() {
         let stderr = String::from_utf8_lossy(&run.stderr);
         let last = stderr.lines().last().unwrap_or("");
         let mut fields = last.split_whitespace();
-        let wall_s: f64 = fields.next().and_then(|x| x.parse().ok()).unwrap_or(f64::NAN);
-        let rss_kb: f64 = fields.next().and_then(|x| x.parse().ok()).unwrap_or(f64::NAN);
+        let mut number = || -> f64 { fields.next().and_then(|x| x.parse().ok()).unwrap_or(f64::NAN) };
+        let wall_s = number();
+        let cpu_s = number() + number();
+        let rss_kb = number();
         if !run.status.success() {
             eprintln!("errmap failed on {n} points: {stderr}");
         }
@@ -163,7 +165,7 @@ fn main() {
         let us = wall_s * 1e6 / n as f64;
         per_point.push(us);
         println!(
-            "{n:>9} {wall_s:>9.2} {us:>11.1} {:>12.0} {:>9} {:>9} {:>10} {:>10} {:>8}",
+            "{n:>9} {wall_s:>9.2} {cpu_s:>9.2} {us:>11.1} {:>12.0} {:>9} {:>9} {:>10} {:>10} {:>8}",
             rss_kb / 1024.0,
             part["rejected"].as_u64().unwrap_or(0),
             files.chips.len(),
