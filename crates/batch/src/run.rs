@@ -1579,7 +1579,6 @@ mod tests {
             seed: Some(1),
             backend: errmap_maps::nn::Backend::CpuReference,
             max_deviation_mm: 1.0,
-            max_memory_mb: None,
             columns: None,
             header_line: None,
         }
