@@ -41,23 +41,42 @@ fn compare_kriging(sizes: &[usize]) {
     use errmap::interp::local::LocalKriging;
     println!(
         "{:>7} {:>14} {:>14} {:>14} {:>14} {:>9} {:>9}",
-        "points", "exact_miss_um", "local_miss_um", "exact_truth_um", "local_truth_um", "exact_s", "local_s"
+        "points",
+        "exact_miss_um",
+        "local_miss_um",
+        "exact_truth_um",
+        "local_truth_um",
+        "exact_s",
+        "local_s"
     );
     for &n in sizes {
         let dir = tempfile::tempdir().expect("a temporary folder");
-        let files = write_scan(&ScanSpec { points: n, chips_per_million: 0, ..ScanSpec::default() }, dir.path())
-            .expect("write the scan");
+        let files = write_scan(
+            &ScanSpec {
+                points: n,
+                chips_per_million: 0,
+                ..ScanSpec::default()
+            },
+            dir.path(),
+        )
+        .expect("write the scan");
         let text = std::fs::read_to_string(&files.probes).expect("read the scan");
         let pts: Vec<[f64; 3]> = text
             .lines()
             .skip(1)
             .map(|l| {
-                let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect();
+                let v: Vec<f64> = l
+                    .split(',')
+                    .map(|x| x.parse().unwrap_or(f64::NAN))
+                    .collect();
                 [v[0], v[1], (v[2] - 5.0) * 1000.0]
             })
             .collect();
-        let (held, kept): (Vec<(usize, [f64; 3])>, Vec<(usize, [f64; 3])>) =
-            pts.iter().copied().enumerate().partition(|(k, _)| k % 10 == 5);
+        let (held, kept): (Vec<(usize, [f64; 3])>, Vec<(usize, [f64; 3])>) = pts
+            .iter()
+            .copied()
+            .enumerate()
+            .partition(|(k, _)| k % 10 == 5);
         let kept: Vec<[f64; 3]> = kept.into_iter().map(|(_, p)| p).collect();
         let rms = |f: &dyn Fn(f64, f64) -> f64, truth: bool| {
             let s: f64 = held
@@ -75,7 +94,11 @@ fn compare_kriging(sizes: &[usize]) {
         let t = std::time::Instant::now();
         let local = LocalKriging::fit(&kept).expect("local kriging");
         let at: Vec<[f64; 2]> = held.iter().map(|(_, p)| [p[0], p[1]]).collect();
-        let local_e: Vec<f64> = local.predict_many(&at).into_iter().map(|q| q.map_or(f64::NAN, |q| q.e_um)).collect();
+        let local_e: Vec<f64> = local
+            .predict_many(&at)
+            .into_iter()
+            .map(|q| q.map_or(f64::NAN, |q| q.e_um))
+            .collect();
         let local_s = t.elapsed().as_secs_f64();
         let local_at = |u: f64, v: f64| {
             let k = at.iter().position(|a| a[0] == u && a[1] == v).unwrap_or(0);
@@ -121,7 +144,16 @@ fn main() {
     let exe = env!("CARGO_BIN_EXE_errmap");
     println!(
         "{:>9} {:>9} {:>9} {:>11} {:>12} {:>9} {:>9} {:>10} {:>10} {:>8}",
-        "points", "wall_s", "cpu_s", "us_per_pt", "peak_rss_mb", "rejected", "chips", "holdout_um", "kriging_um", "truth_um"
+        "points",
+        "wall_s",
+        "cpu_s",
+        "us_per_pt",
+        "peak_rss_mb",
+        "rejected",
+        "chips",
+        "holdout_um",
+        "kriging_um",
+        "truth_um"
     );
     let mut per_point = Vec::new();
     for &n in &sizes {
@@ -147,7 +179,12 @@ fn main() {
         let stderr = String::from_utf8_lossy(&run.stderr);
         let last = stderr.lines().last().unwrap_or("");
         let mut fields = last.split_whitespace();
-        let mut number = || -> f64 { fields.next().and_then(|x| x.parse().ok()).unwrap_or(f64::NAN) };
+        let mut number = || -> f64 {
+            fields
+                .next()
+                .and_then(|x| x.parse().ok())
+                .unwrap_or(f64::NAN)
+        };
         let wall_s = number();
         let cpu_s = number() + number();
         let rss_kb = number();
@@ -178,6 +215,9 @@ fn main() {
         per_point.iter().copied().reduce(f64::min),
         per_point.iter().copied().reduce(f64::max),
     ) {
-        println!("time per point: {lo:.1} to {hi:.1} µs (largest / smallest {:.2})", hi / lo);
+        println!(
+            "time per point: {lo:.1} to {hi:.1} µs (largest / smallest {:.2})",
+            hi / lo
+        );
     }
 }

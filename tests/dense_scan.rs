@@ -44,8 +44,9 @@ fn a_dense_scan_is_binned_cleaned_and_mapped_close_to_its_truth() {
     let rejected = coords(&std::fs::read_to_string(part.join("rejected.csv")).unwrap());
     for &k in &files.chips {
         assert!(
-            rejected.iter().any(|r| (r[0] - probes[k][0]).abs() < 1e-9
-                && (r[1] - probes[k][1]).abs() < 1e-9),
+            rejected
+                .iter()
+                .any(|r| (r[0] - probes[k][0]).abs() < 1e-9 && (r[1] - probes[k][1]).abs() < 1e-9),
             "chip {k} at {:?} kept",
             probes[k]
         );
@@ -66,7 +67,10 @@ fn a_dense_scan_is_binned_cleaned_and_mapped_close_to_its_truth() {
         }
     }
     let rms = (sum / n as f64).sqrt();
-    assert!(n > 6000 && rms < 0.8, "map − truth RMS {rms} µm over {n} nodes");
+    assert!(
+        n > 6000 && rms < 0.8,
+        "map − truth RMS {rms} µm over {n} nodes"
+    );
 
     // The hold-out, the kriging baseline (local at this size), the benefit and u(E) exist.
     for key in [
@@ -104,19 +108,37 @@ fn a_scan_beyond_the_memory_bound_is_refused_naming_the_bound() {
     let summary = read_json(&dir.path().join("out/summary.json"));
     let error = summary["parts"][0]["error"].to_string();
     assert!(
-        error.contains("120 MB") && error.contains("--max-memory-mb") && error.contains("max_memory_mb"),
+        error.contains("120 MB")
+            && error.contains("--max-memory-mb")
+            && error.contains("max_memory_mb"),
         "{error}"
     );
     // `errmap map` of the one scan: exit 2 with the same words; the job key works too.
     let probes = files.probes.to_string_lossy().to_string();
     let run = errmap(
         dir.path(),
-        &["map", &probes, "--out-dir", "one", "--nominal-plane", "5", "--max-memory-mb", "120"],
+        &[
+            "map",
+            &probes,
+            "--out-dir",
+            "one",
+            "--nominal-plane",
+            "5",
+            "--max-memory-mb",
+            "120",
+        ],
     );
     run.expect_code(2);
     assert!(run.stderr.contains("--max-memory-mb"), "{}", run.stderr);
     let text = std::fs::read_to_string(&files.job).unwrap();
-    std::fs::write(&files.job, text.replace("family = \"scan\"", "family = \"scan\"\nmax_memory_mb = 120")).unwrap();
+    std::fs::write(
+        &files.job,
+        text.replace(
+            "family = \"scan\"",
+            "family = \"scan\"\nmax_memory_mb = 120",
+        ),
+    )
+    .unwrap();
     errmap(dir.path(), &["batch", &job, "--out-dir", "out2"]).expect_code(1);
     let error = read_json(&dir.path().join("out2/summary.json"))["parts"][0]["error"].to_string();
     assert!(error.contains("120 MB"), "{error}");
