@@ -112,7 +112,7 @@ impl Sums {
         let sve = self.ve - self.n * mv * mean;
         let det = suu * svv - suv * suv;
         // A layout close to a line (relative to the spread of the points) keeps the mean.
-        if !(det > 1e-6 * (suu + svv).powi(2)) {
+        if det.is_nan() || det <= 1e-6 * (suu + svv).powi(2) {
             return Some(mean);
         }
         let b = (sue * svv - sve * suv) / det;

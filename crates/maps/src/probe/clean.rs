@@ -677,12 +677,12 @@ mod tests {
             if touches_border {
                 continue; // a cell reaching far out near the hull: the raster would cut it
             }
-            for k in 0..points.len() {
+            for (k, &count) in stolen.iter().enumerate() {
                 let w = weights
                     .iter()
                     .find(|(h, _)| local.vertex(*h).data().index == k)
                     .map_or(0.0, |&(_, w)| w);
-                let brute = stolen[k] as f64 / cell as f64;
+                let brute = count as f64 / cell as f64;
                 assert!(
                     (w - brute).abs() < 0.02,
                     "point {i}, neighbour {k}: Sibson {w}, raster {brute}"
