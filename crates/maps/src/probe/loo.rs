@@ -17,7 +17,7 @@
 //! points within three rings of it before the removal see another neighbourhood: those are
 //! the ones predicted again.
 
-use super::clean::{predict_outside, predict_sibson_c1, site, Prediction};
+use super::predict::{predict_outside, predict_sibson_c1, site, Prediction};
 use super::ProbePoint;
 use crate::interp::{Site, Tri};
 use spade::handles::FixedVertexHandle;

@@ -16,6 +16,7 @@ mod dmis;
 mod loo;
 mod order_stat;
 mod point;
+mod predict;
 mod read;
 
 pub use clean::{

@@ -9,6 +9,9 @@
 /// Target block length.
 const BLOCK: usize = 1024;
 
+/// 1.4826 · MAD is a consistent estimator of σ for normally distributed values.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
 /// The multiset (values compared by `f64::total_cmp`).
 #[derive(Debug, Clone, Default)]
 pub(super) struct SortedValues {
@@ -119,7 +122,7 @@ impl SortedValues {
         let up = |t: usize| get(a + t) - m;
         let down = |t: usize| m - get(a - 1 - t);
         let kth = |k: usize| kth_of_two(&up, n - a, &down, a, k);
-        super::clean::MAD_TO_SIGMA * middle(&kth)
+        MAD_TO_SIGMA * middle(&kth)
     }
 }
 
