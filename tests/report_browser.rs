@@ -1,53 +1,17 @@
 //! report.html in a real browser: the sample job's report opened by headless Chromium over the DevTools protocol (every image decoded, no console error, no request outside the file, the figures equal summary.json, printed to PDF), and `errmap report`'s refusals.
 //!
-//! Chromium is driven through `--remote-debugging-pipe`: it reads DevTools commands on file
-//! descriptor 3 and writes replies and events on 4, each a JSON message ended by a NUL byte.
-//! `sh` maps the test's pipes onto those descriptors, so no WebSocket client and no unsafe
-//! code are needed. Without a browser the browser test is skipped (and says so), unless
-//! `ERRMAP_REQUIRE_BROWSER=1`, as in CI, which makes it fail.
+//! The browser is driven as tests/devtools says; without one the browser tests are skipped
+//! (and say so), unless `ERRMAP_REQUIRE_BROWSER=1`, as in CI, which makes them fail.
 
 mod common;
+mod devtools;
 
 use base64::Engine as _;
+use devtools::{browser_or_skip, DevTools};
 use serde_json::{json, Value};
-use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::OnceLock;
-use std::time::{Duration, Instant};
-
-const BROWSER_NAMES: [&str; 4] = [
-    "chromium",
-    "chromium-browser",
-    "google-chrome",
-    "google-chrome-stable",
-];
-
-/// The browser errmap would use: `$ERRMAP_CHROMIUM`, else the first name on the PATH.
-fn browser() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("ERRMAP_CHROMIUM").filter(|p| !p.is_empty()) {
-        return Some(PathBuf::from(p)).filter(|p| p.is_file());
-    }
-    let path = std::env::var_os("PATH")?;
-    BROWSER_NAMES.iter().find_map(|name| {
-        std::env::split_paths(&path)
-            .map(|d| d.join(name))
-            .find(|c| c.is_file())
-    })
-}
-
-/// The browser, or `None` after a visible skip note; a panic under ERRMAP_REQUIRE_BROWSER=1.
-fn browser_or_skip(test: &str) -> Option<PathBuf> {
-    let found = browser();
-    if found.is_none() {
-        if std::env::var("ERRMAP_REQUIRE_BROWSER").as_deref() == Ok("1") {
-            panic!("ERRMAP_REQUIRE_BROWSER=1 but no Chromium was found (install the Debian package `chromium` or set ERRMAP_CHROMIUM)");
-        }
-        eprintln!("SKIPPED {test}: no Chromium (install `chromium` or set ERRMAP_CHROMIUM)");
-    }
-    found
-}
+use std::time::Duration;
 
 /// The sample job run once for the whole file: (its folder, the repository root).
 fn sample_run() -> &'static Path {
@@ -68,132 +32,6 @@ fn sample_run() -> &'static Path {
         );
         out
     })
-}
-
-/// A DevTools session over Chromium's pipe.
-struct DevTools {
-    child: Child,
-    to_browser: ChildStdin,
-    from_browser: Receiver<Value>,
-    next_id: u64,
-    /// Every event received so far, in order.
-    events: Vec<Value>,
-    _profile: tempfile::TempDir,
-}
-
-const TIMEOUT: Duration = Duration::from_secs(90);
-
-impl DevTools {
-    fn start(browser: &Path) -> DevTools {
-        let profile = tempfile::tempdir().unwrap();
-        let mut child = Command::new("sh")
-            .arg("-c")
-            .arg(r#"exec "$0" "$@" 3<&0 4>&1 0</dev/null 1>/dev/null"#)
-            .arg(browser)
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--no-first-run",
-                "--remote-debugging-pipe",
-            ])
-            .arg(format!("--user-data-dir={}", profile.path().display()))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("start the browser");
-        let to_browser = child.stdin.take().unwrap();
-        let mut out = child.stdout.take().unwrap();
-        let (tx, rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let mut buf = Vec::new();
-            let mut chunk = [0u8; 1 << 16];
-            while let Ok(n) = out.read(&mut chunk) {
-                if n == 0 {
-                    break;
-                }
-                buf.extend_from_slice(&chunk[..n]);
-                while let Some(end) = buf.iter().position(|&b| b == 0) {
-                    let msg: Vec<u8> = buf.drain(..=end).collect();
-                    if let Ok(v) = serde_json::from_slice(&msg[..end]) {
-                        if tx.send(v).is_err() {
-                            return;
-                        }
-                    }
-                }
-            }
-        });
-        DevTools {
-            child,
-            to_browser,
-            from_browser: rx,
-            next_id: 1,
-            events: Vec::new(),
-            _profile: profile,
-        }
-    }
-
-    fn recv(&mut self, deadline: Instant) -> Value {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match self.from_browser.recv_timeout(left) {
-            Ok(v) => v,
-            Err(RecvTimeoutError::Timeout) => panic!("the browser did not answer in time"),
-            Err(RecvTimeoutError::Disconnected) => panic!("the browser closed its pipe"),
-        }
-    }
-
-    /// Send a command (to a page session when given) and wait for its result.
-    fn call(&mut self, session: Option<&str>, method: &str, params: Value) -> Value {
-        let id = self.next_id;
-        self.next_id += 1;
-        let mut msg = json!({"id": id, "method": method, "params": params});
-        if let Some(s) = session {
-            msg["sessionId"] = json!(s);
-        }
-        let mut bytes = serde_json::to_vec(&msg).unwrap();
-        bytes.push(0);
-        self.to_browser.write_all(&bytes).unwrap();
-        self.to_browser.flush().unwrap();
-        let deadline = Instant::now() + TIMEOUT;
-        loop {
-            let v = self.recv(deadline);
-            if v.get("id").and_then(Value::as_u64) == Some(id) {
-                if let Some(e) = v.get("error") {
-                    panic!("{method} failed: {e}");
-                }
-                return v["result"].clone();
-            }
-            self.events.push(v);
-        }
-    }
-
-    /// Wait until an event `method` has arrived.
-    fn wait_for(&mut self, method: &str) {
-        let deadline = Instant::now() + TIMEOUT;
-        while !self.events.iter().any(|e| e["method"] == method) {
-            let v = self.recv(deadline);
-            self.events.push(v);
-        }
-    }
-
-    /// Collect what arrives for a short while (late console messages, requests).
-    fn drain(&mut self, wait: Duration) {
-        let deadline = Instant::now() + wait;
-        while let Ok(v) = self
-            .from_browser
-            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-        {
-            self.events.push(v);
-        }
-    }
-}
-
-impl Drop for DevTools {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 fn file_url(path: &Path) -> String {

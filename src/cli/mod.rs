@@ -61,6 +61,10 @@ pub struct Cli {
     /// numbers (grid steps, segment lengths, spacings) stop with exit 2 beyond it.
     #[arg(long, global = true, value_name = "MB", default_value_t = errmap::io::safety::DEFAULT_MAX_OUTPUT_MB)]
     pub max_output_mb: u64,
+    /// Memory one part may need, MB: a probe file or scan of more points stops with exit 2
+    /// before it is read (job key `max_memory_mb`; default 8192).
+    #[arg(long, global = true, value_name = "MB")]
+    pub max_memory_mb: Option<u64>,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -168,6 +172,13 @@ pub fn run(cli: Cli) -> Result<i32> {
         ));
     }
     errmap::io::safety::set_max_output_mb(cli.max_output_mb);
+    if cli.max_memory_mb == Some(0) {
+        return Err(errmap::Error::usage(
+            "--max-memory-mb 0 leaves no memory for any part",
+            "give a size in MB, e.g. --max-memory-mb 4096",
+        ));
+    }
+    errmap::probe::budget::set_max_memory_mb(cli.max_memory_mb.unwrap_or(0));
     let globals = Globals { quiet: cli.quiet };
     use errmap::progress::Verbosity;
     terminal::set_verbosity(match (cli.quiet, cli.verbose) {

@@ -2,8 +2,6 @@
 // Each test binary uses only part of it.
 #![allow(dead_code)]
 
-pub mod devtools;
-
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

@@ -44,6 +44,10 @@ pub struct Job {
     /// outside the domain (`--max-uncertainty-um`); none: no bound.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_uncertainty_um: Option<f64>,
+    /// Memory one part may need, MB (`--max-memory-mb` wins): a scan of more points is
+    /// refused before it is read; none: [`errmap_maps::probe::budget::DEFAULT_MAX_MEMORY_MB`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_memory_mb: Option<u64>,
     /// `[clean]`: gross-error rejection of probe points.
     pub clean: CleanConfig,
     /// `[interp]`: how the probes are interpolated into the network's training set.
@@ -72,6 +76,7 @@ impl Default for Job {
             columns: None,
             header_line: None,
             max_uncertainty_um: None,
+            max_memory_mb: None,
             clean: CleanConfig::default(),
             interp: InterpConfig::default(),
             model: ModelConfig::default(),
@@ -408,6 +413,13 @@ impl Job {
                     "give the largest u(E) in µm at which a toolpath point is still compensated, e.g. 2.5",
                 ));
             }
+        }
+        if self.max_memory_mb == Some(0) {
+            return Err(bad(
+                "max_memory_mb",
+                "0 MB leaves no memory for any part".into(),
+                "give the memory one part may use in MB, e.g. 4096, or leave the key out",
+            ));
         }
         if let Some([lo, hi]) = self.toolpaths.zone {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {

@@ -273,6 +273,7 @@ pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan>
             columns: job.columns.clone(),
             header_line: job.header_line,
             reduce_inputs: true,
+            max_memory_mb: job.max_memory_mb,
         },
         parts,
         family_parts,

@@ -57,6 +57,9 @@ pub struct Settings {
     pub header_line: Option<u64>,
     /// Write each part's `reduce.json` (batch runs: the shards' input to the reduce).
     pub reduce_inputs: bool,
+    /// The job's `max_memory_mb`: a part whose points need more memory is refused before it
+    /// is read (`--max-memory-mb` wins; see [`errmap_maps::probe::budget`]).
+    pub max_memory_mb: Option<u64>,
 }
 
 /// One part to map and where its files go.
@@ -179,15 +182,20 @@ fn hull_boundary(points: &[ProbePoint]) -> Vec<bool> {
         .collect()
 }
 
+/// Most held-out points of a part: 10,000 misses give its hold-out RMS to better than 1 %, and
+/// more would only slow the hold-out checks of a dense scan's training.
+pub const MAX_HOLDOUT_POINTS: usize = 10_000;
+
 /// Seeded choice of the held-out points: interior points only (the hull stays the same, so the
-/// hold-out fit is judged where it interpolates), `round(fraction · n)` of them, at least one.
+/// hold-out fit is judged where it interpolates), `round(fraction · n)` of them, at least one
+/// and at most [`MAX_HOLDOUT_POINTS`].
 fn choose_holdout(clean: &[ProbePoint], fraction: f64, seed: u64, name: &str) -> Vec<usize> {
     if fraction <= 0.0 || clean.len() < 8 {
         return Vec::new();
     }
     let boundary = hull_boundary(clean);
     let mut candidates: Vec<usize> = (0..clean.len()).filter(|&i| !boundary[i]).collect();
-    let want = ((fraction * clean.len() as f64).round() as usize).max(1);
+    let want = ((fraction * clean.len() as f64).round() as usize).clamp(1, MAX_HOLDOUT_POINTS);
     let want = want
         .min(candidates.len())
         .min(clean.len().saturating_sub(5));
@@ -210,6 +218,10 @@ fn prepare(
         columns: s.columns.clone(),
         header_line: s.header_line,
     };
+    let bound_mb = probe::budget::max_memory_mb(s.max_memory_mb);
+    if let Err(e) = probe::budget::check(&input.probe_file, bound_mb) {
+        return Err(Box::new((input, e)));
+    }
     let (set, preamble_lines, skipped_features) =
         match probe::read_probe_file(&input.probe_file, &spec) {
             Ok(read) => (read.set, read.preamble_lines, read.skipped_features),
@@ -241,7 +253,16 @@ fn prepare(
 
 /// The part's training-grid values from all its clean points (`None` outside their hull).
 fn full_nodes(prep: &Prepared, s: &Settings, train_grid: &Grid) -> Result<Vec<Option<f64>>> {
-    let surface = Surface::new(&probe::uve(&prep.clean))?;
+    training_nodes(&probe::uve(&prep.clean), s, train_grid)
+}
+
+/// Training-grid values from points: binned where they are dense, interpolated with the
+/// job's method otherwise ([`interp::bin`]).
+fn training_nodes(uve: &[[f64; 3]], s: &Settings, train_grid: &Grid) -> Result<Vec<Option<f64>>> {
+    if interp::bin::choose(uve, train_grid) == interp::bin::TrainingSource::Binned {
+        return Ok(interp::bin::binned_nodes(uve, train_grid));
+    }
+    let surface = Surface::new(uve)?;
     if s.method == Method::Kriging {
         surface.kriging()?;
     }
@@ -262,8 +283,8 @@ fn interpolate(
     let holdout_nodes = if prep.holdout.is_empty() {
         None
     } else {
-        match Surface::new(&probe::uve(&kept_points(&prep))) {
-            Ok(surface) => Some(interp::resample(&surface, s.method, train_grid)),
+        match training_nodes(&probe::uve(&kept_points(&prep)), s, train_grid) {
+            Ok(nodes) => Some(nodes),
             Err(e) => return Err(Box::new((prep.input, e))),
         }
     };
@@ -297,23 +318,25 @@ fn kept_points(prep: &Prepared) -> Vec<ProbePoint> {
         .collect()
 }
 
-/// The kriging baseline a metrologist would compare the map with: fitted on the points the
+/// The kriging baseline a metrologist would compare the map with (exact up to
+/// [`interp::baseline::EXACT_MAX_SITES`] points, local above): fitted on the points the
 /// hold-out network saw, its misses at the held-out points (µm); `None` without a hold-out or
 /// when the points cannot be kriged.
 fn kriging_holdout_misses(prep: &Prepared) -> Option<Vec<f64>> {
     if prep.holdout.is_empty() {
         return None;
     }
-    let k = interp::kriging::Kriging::fit(&probe::uve(&kept_points(prep))).ok()?;
-    Some(
-        prep.holdout
-            .iter()
-            .map(|&i| {
-                let q = &prep.clean[i];
-                q.e_um - k.predict(q.u_mm, q.v_mm)
-            })
-            .collect(),
-    )
+    let k = interp::baseline::Baseline::fit(&probe::uve(&kept_points(prep))).ok()?;
+    let at: Vec<[f64; 2]> = prep
+        .holdout
+        .iter()
+        .map(|&i| [prep.clean[i].u_mm, prep.clean[i].v_mm])
+        .collect();
+    prep.holdout
+        .iter()
+        .zip(k.predict_many(&at))
+        .map(|(&i, e)| Some(prep.clean[i].e_um - e?))
+        .collect()
 }
 
 /// A training set from node values: the nodes that have a value.
@@ -1005,7 +1028,15 @@ fn deliver_part(
         .as_deref()
         .and_then(errmap_maps::map::rms_um);
     let (map, model) = match kriging_if_better(p, holdout_rmse_um) {
-        Some(k) => (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k)),
+        Some(interp::baseline::Baseline::Exact(k)) => {
+            (kriging_map(&k, fit.grid, s.normal), model.with_kriging(k))
+        }
+        Some(interp::baseline::Baseline::Local(k)) => {
+            match local_kriging_map(&k, fit.grid, s.normal) {
+                Some(m) => (m, model.with_local_kriging(&k)),
+                None => (map, model),
+            }
+        }
         None => (map, model),
     };
     // The delivered map's hold-out figure, nested: each held-out point is predicted by the kind
@@ -1103,11 +1134,36 @@ fn round4(x: f64) -> f64 {
 fn kriging_if_better(
     p: &Interpolated,
     network_holdout_rmse_um: Option<f64>,
-) -> Option<interp::kriging::Kriging> {
+) -> Option<interp::baseline::Baseline> {
     if better_fit(p, network_holdout_rmse_um) != Some("kriging") {
         return None;
     }
-    interp::kriging::Kriging::fit(&probe::uve(&p.prep.clean)).ok()
+    interp::baseline::Baseline::fit(&probe::uve(&p.prep.clean)).ok()
+}
+
+/// A local kriging's values on the map grid; `None` if a node cannot be predicted.
+fn local_kriging_map(
+    k: &interp::local::LocalKriging,
+    grid: Grid,
+    normal: Axis,
+) -> Option<ErrorMap> {
+    let nodes: Vec<[f64; 2]> = (0..grid.nv)
+        .flat_map(|j| (0..grid.nu).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let (u, v) = grid.node(i, j);
+            [u, v]
+        })
+        .collect();
+    let values: Option<Vec<f64>> = k
+        .predict_many(&nodes)
+        .into_iter()
+        .map(|q| q.map(|q| q.e_um))
+        .collect();
+    Some(ErrorMap {
+        grid,
+        normal,
+        values: values?,
+    })
 }
 
 /// A kriging's values on the map grid.

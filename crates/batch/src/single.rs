@@ -88,6 +88,9 @@ impl MapRequest {
             ));
         }
         errmap_maps::probe::validate_max_deviation(self.max_deviation_mm, "--max-deviation-mm")?;
+        // One scan: too large for the memory bound is a refusal (exit 2) before it is read.
+        let bound_mb = errmap_maps::probe::budget::max_memory_mb(None);
+        errmap_maps::probe::budget::check(&self.probes, bound_mb)?;
         for (flag, v) in [
             ("--grid-step", self.grid_step_mm),
             ("--spacing", self.spacing_mm),
@@ -119,6 +122,7 @@ impl MapRequest {
                 columns: self.columns.clone(),
                 header_line: self.header_line,
                 reduce_inputs: false,
+                max_memory_mb: None,
             },
             parts: vec![PartInput {
                 name,

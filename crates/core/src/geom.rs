@@ -139,6 +139,12 @@ pub trait ErrorField: Sync {
     fn measured(&self, _u_mm: f64, _v_mm: f64, _margin_mm: f64) -> Option<bool> {
         Some(true)
     }
+    /// Whether E at (u, v) is withheld (`error_mm` gives `None`) because the map's standard
+    /// uncertainty there exceeds the user's bound (`--max-uncertainty-um`), so that a
+    /// compensation can say why the point stayed nominal.
+    fn withheld(&self, _u_mm: f64, _v_mm: f64) -> bool {
+        false
+    }
     /// The probed surface's nominal extent along the normal, mm, when the map records it.
     fn surface_mm(&self) -> Option<(f64, f64)> {
         None

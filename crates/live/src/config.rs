@@ -112,6 +112,8 @@ pub enum SourceKind {
     Modbus,
     /// OPC UA nodes.
     Opcua,
+    /// LinuxCNC HAL pins, read through errmap's HAL component.
+    Linuxcnc,
 }
 
 impl SourceKind {
@@ -121,6 +123,7 @@ impl SourceKind {
             SourceKind::Csv => "csv",
             SourceKind::Modbus => "modbus",
             SourceKind::Opcua => "opcua",
+            SourceKind::Linuxcnc => "linuxcnc",
         }
     }
 }
@@ -161,6 +164,11 @@ pub struct SourceConfig {
     pub user: Option<String>,
     /// OPC UA: the password of `user`.
     pub password: Option<String>,
+    // linuxcnc
+    /// LinuxCNC: the Python 3 that has LinuxCNC's `hal` module (default `/usr/bin/python3`).
+    pub python: Option<String>,
+    /// LinuxCNC: the name of errmap's HAL component (default `errmap-<name>`).
+    pub component: Option<String>,
 }
 
 /// One channel of a Modbus or OPC UA source.
@@ -184,6 +192,8 @@ pub struct ChannelConfig {
     pub offset: Option<f64>,
     /// OPC UA: the node id, e.g. `ns=2;s=Temperatures.T1`.
     pub node: Option<String>,
+    /// LinuxCNC: the HAL pin, signal or parameter read, e.g. `axis.z.pos-cmd`.
+    pub pin: Option<String>,
 }
 
 /// Denoising of a live sensor.
@@ -281,6 +291,10 @@ pub struct AxisConfig {
     /// `source.channel` of the travel direction (`+`/`-`, or a number's sign); without it
     /// the mean of the forward and reverse models is used.
     pub direction: Option<String>,
+    /// A number on the direction channel within ±this is standstill, which keeps the last
+    /// direction (a velocity's noise at rest; default 0, in the channel's unit).
+    #[serde(default)]
+    pub direction_deadband: f64,
     /// Largest |compensation| (µm) anywhere on the fitted travel.
     pub limit_um: f64,
     /// Largest |tanβ| (µm/m).
@@ -327,7 +341,7 @@ impl TargetKind {
 pub struct TargetConfig {
     /// The target's name, as an axis's `target` names it.
     pub name: String,
-    /// Which kind of target (only `modbus-registers` is built).
+    /// Which kind of target.
     pub kind: TargetKind,
     /// OPC UA targets: the server's endpoint URL.
     pub endpoint: Option<String>,
@@ -341,6 +355,10 @@ pub struct TargetConfig {
     pub user: Option<String>,
     /// OPC UA targets: the password of `user`.
     pub password: Option<String>,
+    /// LinuxCNC: the Python 3 that has LinuxCNC's `hal` module (default `/usr/bin/python3`).
+    pub python: Option<String>,
+    /// LinuxCNC: the name of errmap's HAL component (default `errmap-<name>`).
+    pub component: Option<String>,
     /// Axis name → where this target writes that axis.
     #[serde(default)]
     pub axes: BTreeMap<String, TargetAxisConfig>,
@@ -367,8 +385,13 @@ pub struct TargetAxisConfig {
     pub word_order: Option<String>,
     /// Modbus: µm per count (the register holds value/scale, rounded).
     pub scale: Option<f64>,
-    /// Units of the written value: `um` or `mm`.
+    /// Units of the written value: `um` or `mm` (OPC UA nodes); the machine's linear units,
+    /// `mm` or `inch` (LinuxCNC).
     pub unit: Option<String>,
+    /// LinuxCNC: µm per count of `axis.L.eoffset-counts` (default 0.1).
+    pub resolution_um: Option<f64>,
+    /// LinuxCNC: the axis letter of the `axis.L.*` pins (default: the axis's name in lower case).
+    pub letter: Option<String>,
 }
 
 /// A `source.channel` reference.
@@ -545,6 +568,13 @@ impl LiveConfig {
                     "give every axis its own name",
                 ));
             }
+            if !(a.direction_deadband.is_finite() && a.direction_deadband >= 0.0) {
+                return Err(self.key_error(
+                    &key("direction_deadband"),
+                    format!("{} is not a deadband", a.direction_deadband),
+                    "give a finite number ≥ 0 in the direction channel's unit",
+                ));
+            }
             for (k, v) in [
                 ("limit_um", a.limit_um),
                 ("slope_limit_um_per_m", a.slope_limit_um_per_m),
@@ -607,8 +637,9 @@ impl LiveConfig {
                 "channels",
                 "period_ms",
             ],
+            SourceKind::Linuxcnc => &["python", "component", "channels", "period_ms"],
         };
-        let given: [(&str, bool); 9] = [
+        let given: [(&str, bool); 11] = [
             ("path", s.path.is_some()),
             ("follow", s.follow.is_some()),
             ("address", s.address.is_some()),
@@ -618,6 +649,8 @@ impl LiveConfig {
             ("security_policy", s.security_policy.is_some()),
             ("user", s.user.is_some()),
             ("password", s.password.is_some()),
+            ("python", s.python.is_some()),
+            ("component", s.component.is_some()),
         ];
         for (k, present) in given {
             if present && !allowed.contains(&k) {
@@ -652,6 +685,7 @@ impl LiveConfig {
                 need("endpoint", s.endpoint.is_some())?;
                 need("channels", !s.channels.is_empty())?;
             }
+            SourceKind::Linuxcnc => need("channels", !s.channels.is_empty())?,
         }
         if self.cycle.replay_speed.is_some() && s.kind != SourceKind::Csv {
             return Err(self.key_error(

@@ -136,6 +136,8 @@ struct AxisSlot {
     model: AxisModel,
     position: Option<(usize, String)>,
     direction: Option<(usize, String)>,
+    /// A number on the direction channel within ±this is standstill.
+    direction_deadband: f64,
     /// Indices into the sensor slots of the model's gain sensors (model order) and ambient.
     gain_sensors: Vec<usize>,
     ambient: Option<usize>,
@@ -426,6 +428,7 @@ impl Live {
                 ),
                 position,
                 direction,
+                direction_deadband: a.direction_deadband,
                 gain_sensors,
                 ambient,
                 target,
@@ -548,40 +551,80 @@ impl Live {
             }
         }
         // The start ramps from what the controller holds now (a dry run starts from zero).
-        for a in &mut self.axes {
-            let Some(t) = a.target else { continue };
+        for a in 0..self.axes.len() {
+            let Some(t) = self.axes[a].target else {
+                continue;
+            };
             if self.once {
                 continue;
             }
-            let present = self.targets[t].present(&a.model.name)?;
-            a.written = match present {
-                Present::Line(l) => l,
-                Present::K3 {
-                    abs_mm,
-                    slope,
-                    reference_mm,
-                } => super::target::opcua::line_of_k3(abs_mm, slope, reference_mm, a.model.px_mm()),
-                Present::Value(v) => {
-                    // A point target: its value as an offset of the thermal line (the geometric
-                    // part, when carried, is not ramped).
-                    let geometric = a
-                        .position
-                        .as_ref()
-                        .and_then(|(s, c)| self.sources[*s].source.snapshot().channels.get(c))
-                        .and_then(|r| r.value.as_number())
-                        .filter(|_| a.model.include_geometric)
-                        .map_or(0.0, |x| {
-                            -0.5 * (a.model.model.geometric_um(Direction::Forward, x)
-                                + a.model.model.geometric_um(Direction::Reverse, x))
-                        });
-                    Line {
-                        offset_um: v - geometric,
-                        slope_um_per_m: 0.0,
-                    }
-                }
-            };
+            let present = self.targets[t].present(&self.axes[a].model.name)?;
+            self.axes[a].written = self.line_of_present(&self.axes[a], present);
         }
         Ok(())
+    }
+
+    /// The thermal line a controller's present compensation stands for, which the loop ramps
+    /// from.
+    fn line_of_present(&self, a: &AxisSlot, present: Present) -> Line {
+        match present {
+            Present::Line(l) => l,
+            Present::K3 {
+                abs_mm,
+                slope,
+                reference_mm,
+            } => super::target::opcua::line_of_k3(abs_mm, slope, reference_mm, a.model.px_mm()),
+            Present::Value(v) => {
+                // A point target: its value as an offset of the thermal line (the geometric
+                // part, when carried, is not ramped).
+                let geometric = a
+                    .position
+                    .as_ref()
+                    .and_then(|(s, c)| self.sources[*s].source.snapshot().channels.get(c))
+                    .and_then(|r| r.value.as_number())
+                    .filter(|_| a.model.include_geometric)
+                    .map_or(0.0, |x| {
+                        -0.5 * (a.model.model.geometric_um(Direction::Forward, x)
+                            + a.model.model.geometric_um(Direction::Reverse, x))
+                    });
+                Line {
+                    offset_um: v - geometric,
+                    slope_um_per_m: 0.0,
+                }
+            }
+        }
+    }
+
+    /// A target whose value changed under errmap (a LinuxCNC machine-off/on zeroes its external
+    /// offsets): the axis ramps from the controller's present value as at a start, and an alarm
+    /// says so until the controller takes errmap's values again. A failed read is left to the
+    /// write that follows, which reports it.
+    fn resync_axis(&mut self, a: usize, utc: &str, notes: &mut Vec<String>) {
+        let Some(t) = self.axes[a].target else { return };
+        let name = self.axes[a].model.name.clone();
+        let key = format!("moved:{name}");
+        let present = match self.targets[t].moved(&name) {
+            Ok(Some(present)) => present,
+            Ok(None) => return self.alarms.clear(&key),
+            Err(_) => return,
+        };
+        let line = self.line_of_present(&self.axes[a], present);
+        let axis = &mut self.axes[a];
+        let message = format!(
+            "{name}: {} holds {:.4} µm at Px, not the {:.4} µm errmap wrote (machine off/on, offsets cleared or not taken): ramping from its value",
+            self.targets[t].name(),
+            line.offset_um,
+            axis.written.offset_um,
+        );
+        axis.written = line;
+        axis.last_output = None;
+        self.starting = true;
+        if let Some(id) = self
+            .alarms
+            .raise(&key, self.targets[t].name(), message.clone(), utc)
+        {
+            notes.push(format!("alarm {id} raised: {message}"));
+        }
     }
 
     /// Run until stopped (or one cycle with `once`).
@@ -673,6 +716,7 @@ impl Live {
                 mode,
                 notes_of_cycle,
                 stopping.as_ref().filter(|_| done).map(|s| s.0.clone()),
+                done,
             )?;
             let took_us = began.elapsed().as_secs_f64() * 1e6;
             timed.0 += took_us;
@@ -699,14 +743,41 @@ impl Live {
         })
     }
 
-    /// One cycle's decisions and writes; returns the mode.
+    /// One cycle's decisions and writes; returns the mode. The stages: operators' commands,
+    /// the sources' watchdog, the sensors' readings, the coolant state, the ramp-to-zero latch,
+    /// then each axis's line moved toward its goal and written.
     fn step(&mut self, t: f64, stop_goal: Option<OnStop>, notes: &mut Vec<String>) -> Result<Mode> {
         let ramp_stop = stop_goal == Some(OnStop::RampToZero);
         let hold_stop = stop_goal == Some(OnStop::Hold);
         let utc = self.utc_at(t);
         self.apply_commands(&utc, notes);
+        let (sources_hold, sources_ramp) = self.watch_sources(t, &utc, notes);
+        let (sensors_hold, sensors_ramp) = self.take_readings(t, &utc, notes);
+        let coolant_missing = !self.read_coolant();
+        let hold = sources_hold || sensors_hold || coolant_missing;
+        self.latch_ramp(sources_ramp || sensors_ramp, hold, notes);
+        let (all_reached, any_held) = self.step_axes(hold || hold_stop, ramp_stop, &utc, notes);
 
-        // Sources: the watchdog.
+        let ramping = ramp_stop || self.ramp_latched;
+        if self.starting && all_reached && !hold && !ramping {
+            self.starting = false;
+        }
+        Ok(if ramping {
+            Mode::RampingToZero
+        } else if self.paused {
+            Mode::Paused
+        } else if hold || any_held {
+            Mode::Holding
+        } else if self.starting {
+            Mode::Starting
+        } else {
+            Mode::Running
+        })
+    }
+
+    /// The watchdog: a source silent past its timeout holds, past its ramp timeout it raises
+    /// an alarm and asks for the ramp to zero. Returns (hold, ramp cause).
+    fn watch_sources(&mut self, t: f64, utc: &str, notes: &mut Vec<String>) -> (bool, bool) {
         let mut hold = false;
         let mut ramp_cause = false;
         for s in &mut self.sources {
@@ -726,7 +797,7 @@ impl Live {
                             "{name} silent for {:.1} s (ramp timeout {:.1} s): ramping to zero",
                             age, s.ramp_timeout_s
                         ),
-                        &utc,
+                        utc,
                     ) {
                         notes.push(format!(
                             "alarm {id} raised: {name} silent past its ramp timeout"
@@ -738,9 +809,14 @@ impl Live {
                 self.alarms.clear(&key);
             }
         }
+        (hold, ramp_cause)
+    }
 
-        // Sensors: new readings checked, calibrated and filtered.
-        for (k, s) in self.sensors.iter_mut().enumerate() {
+    /// Every sensor's new reading checked, calibrated and filtered; an implausible one raises
+    /// an alarm. Returns (hold: a sensor without a good value, ramp cause: one implausible past
+    /// its source's ramp timeout).
+    fn take_readings(&mut self, t: f64, utc: &str, notes: &mut Vec<String>) -> (bool, bool) {
+        for s in self.sensors.iter_mut() {
             let src = &self.sources[s.source];
             let Some(r) = src.source.snapshot().channels.get(&s.channel) else {
                 s.problem = Some(format!("{} has no reading", s.def.name));
@@ -780,13 +856,14 @@ impl Live {
                     s.problem = Some(bad.message.clone());
                     s.problem_since_s.get_or_insert(t);
                     let source = src.source.name().to_string();
-                    if let Some(id) = self.alarms.raise(&key, &source, bad.message.clone(), &utc) {
+                    if let Some(id) = self.alarms.raise(&key, &source, bad.message.clone(), utc) {
                         notes.push(format!("alarm {id} raised: {}", bad.message));
                     }
-                    let _ = k;
                 }
             }
         }
+        let mut hold = false;
+        let mut ramp_cause = false;
         for s in &self.sensors {
             if s.problem.is_some() || s.value_c.is_none() {
                 hold = true;
@@ -797,44 +874,38 @@ impl Live {
                 }
             }
         }
+        (hold, ramp_cause)
+    }
 
-        // Coolant.
+    /// The coolant state's label this cycle (a bit, a number ≠ 0 or the label itself); false
+    /// when a coolant channel is configured and has no reading (the values are held).
+    fn read_coolant(&mut self) -> bool {
         self.coolant_label = None;
-        let mut coolant_on = None;
-        if let Some(c) = &self.coolant {
-            match self.sources[c.source]
-                .source
-                .snapshot()
-                .channels
-                .get(&c.channel)
-                .map(|r| &r.value)
-            {
-                Some(Value::Flag(b)) => {
-                    coolant_on = Some(*b);
-                    self.coolant_label = Some(if *b { c.on.clone() } else { c.off.clone() });
-                }
-                Some(Value::Number(v)) => {
-                    coolant_on = Some(*v != 0.0);
-                    self.coolant_label = Some(if *v != 0.0 {
-                        c.on.clone()
-                    } else {
-                        c.off.clone()
-                    });
-                }
-                Some(Value::Text(label)) => {
-                    coolant_on = if *label == c.on {
-                        Some(true)
-                    } else if *label == c.off {
-                        Some(false)
-                    } else {
-                        None
-                    };
-                    self.coolant_label = Some(label.clone());
-                }
-                None => hold = true,
-            }
-        }
+        let Some(c) = &self.coolant else {
+            return true;
+        };
+        self.coolant_label = match self.sources[c.source]
+            .source
+            .snapshot()
+            .channels
+            .get(&c.channel)
+            .map(|r| &r.value)
+        {
+            Some(Value::Flag(b)) => Some(if *b { c.on.clone() } else { c.off.clone() }),
+            Some(Value::Number(v)) => Some(if *v != 0.0 {
+                c.on.clone()
+            } else {
+                c.off.clone()
+            }),
+            Some(Value::Text(label)) => Some(label.clone()),
+            None => return false,
+        };
+        true
+    }
 
+    /// Latch the ramp to zero on a cause; release it once the causes are gone and every alarm
+    /// is acknowledged (the way back up is a start: at the rate limit, mode `starting`).
+    fn latch_ramp(&mut self, ramp_cause: bool, hold: bool, notes: &mut Vec<String>) {
         if ramp_cause && !self.ramp_latched {
             self.ramp_latched = true;
             notes.push(
@@ -843,12 +914,21 @@ impl Live {
         }
         if self.ramp_latched && !ramp_cause && !hold && self.alarms.all_acknowledged() {
             self.ramp_latched = false;
-            // The way back up is a start: at the rate limit, mode `starting` until reached.
             self.starting = true;
             notes.push("ramp to zero released: causes gone, alarms acknowledged".into());
         }
+    }
 
-        // Axes.
+    /// Each axis: a target's value changed under errmap taken in, the goal (held, zero or the
+    /// model's line within its bounds), one rate-limited step toward it, written. Returns
+    /// (every axis reached its goal, any axis held).
+    fn step_axes(
+        &mut self,
+        hold: bool,
+        ramp_stop: bool,
+        utc: &str,
+        notes: &mut Vec<String>,
+    ) -> (bool, bool) {
         let dt = if self.once {
             f64::INFINITY
         } else {
@@ -856,17 +936,15 @@ impl Live {
         };
         let mut all_reached = true;
         let mut any_held = false;
-        let mut axis_holds = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
             self.direction_of(a);
-            let (goal, held, problem) = self.goal_of(a, hold || hold_stop, ramp_stop);
+            self.resync_axis(a, utc, notes);
+            let (goal, held, problem) = self.goal_of(a, hold, ramp_stop);
             if let Some((key, message)) = problem {
-                if let Some(id) = self.alarms.raise(
-                    &key,
-                    &self.axes[a].model.name.clone(),
-                    message.clone(),
-                    &utc,
-                ) {
+                if let Some(id) =
+                    self.alarms
+                        .raise(&key, &self.axes[a].model.name.clone(), message.clone(), utc)
+                {
                     notes.push(format!("alarm {id} raised: {message}"));
                 }
             } else {
@@ -879,28 +957,10 @@ impl Live {
                 all_reached = false;
             }
             any_held |= held;
-            axis_holds.push(held);
             axis.written = next;
-            self.write_axis(a, &utc, notes);
+            self.write_axis(a, utc, notes);
         }
-        let _ = axis_holds;
-
-        let ramping = ramp_stop || self.ramp_latched;
-        if self.starting && all_reached && !hold && !ramping {
-            self.starting = false;
-        }
-        let _ = coolant_on;
-        Ok(if ramping {
-            Mode::RampingToZero
-        } else if self.paused {
-            Mode::Paused
-        } else if hold || any_held {
-            Mode::Holding
-        } else if self.starting {
-            Mode::Starting
-        } else {
-            Mode::Running
-        })
+        (all_reached, any_held)
     }
 
     /// The line an axis moves toward this cycle, whether it is held, and a bounds problem
@@ -948,8 +1008,8 @@ impl Live {
                 "-" => Some(Direction::Reverse),
                 other => Direction::parse(other),
             },
-            Some(Value::Number(v)) if *v > 0.0 => Some(Direction::Forward),
-            Some(Value::Number(v)) if *v < 0.0 => Some(Direction::Reverse),
+            Some(Value::Number(v)) if *v > axis.direction_deadband => Some(Direction::Forward),
+            Some(Value::Number(v)) if *v < -axis.direction_deadband => Some(Direction::Reverse),
             Some(Value::Flag(b)) => Some(if *b {
                 Direction::Forward
             } else {
@@ -1115,13 +1175,14 @@ impl Live {
         }
     }
 
-    /// Log the cycle and rewrite the state file.
+    /// Log the cycle and rewrite the state file (when due, and always for the `last` cycle).
     fn record(
         &mut self,
         t: f64,
         mode: Mode,
         notes: Vec<String>,
         stop_reason: Option<String>,
+        last: bool,
     ) -> Result<()> {
         let utc = self.utc_at(t);
         let mut inputs = Map::new();
@@ -1237,7 +1298,7 @@ impl Live {
                 self.link.retain(self.utc_at(cutoff_t), cutoff_t);
             }
         }
-        if self.state_writer.is_some() {
+        if self.state_writer.as_ref().is_some_and(|w| last || w.due()) {
             let sensors = self
                 .sensors
                 .iter()

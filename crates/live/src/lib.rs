@@ -1,6 +1,7 @@
 //! `errmap live`: the composite thermal model applied while the machine works. Temperatures,
-//! coolant state and axis positions come in from sources (a CSV stream, Modbus TCP, OPC UA),
-//! each cycle computes every axis's compensation from its fitted model, the safety rules bound
+//! coolant state and axis positions come in from sources (a CSV stream, Modbus TCP, OPC UA,
+//! LinuxCNC HAL pins), each cycle computes every axis's compensation from its fitted model, the
+//! safety rules bound
 //! and rate-limit it, targets write it into the controller, and every cycle is logged into the
 //! temperature history store, with a state file for the monitor (`errmap serve`).
 #![forbid(unsafe_code)]
@@ -13,6 +14,7 @@ pub mod bench;
 pub mod config;
 pub mod cycle;
 pub mod filter;
+pub mod hal;
 pub mod log;
 pub mod modbus;
 pub mod opcua;
@@ -44,6 +46,9 @@ fn connect_source(
         SourceKind::Opcua => Ok(Box::new(source::opcua::OpcUaSource::connect(
             config, index, s,
         )?)),
+        SourceKind::Linuxcnc => Ok(Box::new(source::linuxcnc::LinuxCncSource::connect(
+            config, index, s,
+        )?)),
         SourceKind::Csv => Err(Error::Internal("a csv source is opened by the loop".into())),
     }
 }
@@ -63,16 +68,12 @@ fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
             config::TargetKind::ModbusRegisters => targets.push(Box::new(
                 target::modbus::ModbusTarget::connect(config, i, t)?,
             )),
-            config::TargetKind::SinumerikOpcua | config::TargetKind::OpcuaNodes => targets.push(
-                Box::new(target::opcua::OpcUaTarget::connect(config, i, t)?),
-            ),
-            other => {
-                return Err(config.key_error(
-                    &format!("targets.{i}.kind"),
-                    format!("{} targets are not built into this errmap", other.name()),
-                    "use a modbus-registers, sinumerik-opcua or opcua-nodes target, or run with --dry-run",
-                ))
+            config::TargetKind::SinumerikOpcua | config::TargetKind::OpcuaNodes => {
+                targets.push(Box::new(target::opcua::OpcUaTarget::connect(config, i, t)?))
             }
+            config::TargetKind::Linuxcnc => targets.push(Box::new(
+                target::linuxcnc::LinuxCncTarget::connect(config, i, t)?,
+            )),
         }
     }
     Ok(targets)

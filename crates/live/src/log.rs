@@ -39,6 +39,11 @@ pub const LIVE_CYCLES_DDL: &str = "CREATE TABLE IF NOT EXISTS live_cycles (
 /// The `source` of a live campaign in the `campaigns` table.
 pub const LIVE_SOURCE: &str = "errmap live";
 
+/// The writer commits at most this often: the cycles that arrive in between go into one
+/// transaction (at 100 Hz five cycles a commit instead of one), and the operators' commands
+/// are read once per commit.
+const COMMIT_EVERY: std::time::Duration = std::time::Duration::from_millis(50);
+
 /// One cycle's record.
 #[derive(Debug, Clone)]
 pub struct CycleRecord {
@@ -345,11 +350,17 @@ struct Writer {
 impl Writer {
     fn run(mut self, rx: mpsc::Receiver<ToWriter>, commands: mpsc::Sender<Command>) {
         let mut batch: Vec<ToWriter> = Vec::new();
+        let mut last_commit = std::time::Instant::now();
         loop {
-            let open = match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            let open = match rx.recv_timeout(COMMIT_EVERY) {
                 Ok(m) => {
                     batch.push(m);
-                    batch.extend(rx.try_iter().take(2000));
+                    // Group commit: gather what arrives until COMMIT_EVERY has passed.
+                    let wait = COMMIT_EVERY.saturating_sub(last_commit.elapsed());
+                    if !wait.is_zero() {
+                        std::thread::sleep(wait);
+                    }
+                    batch.extend(rx.try_iter().take(4096));
                     true
                 }
                 Err(mpsc::RecvTimeoutError::Timeout) => true,
@@ -357,6 +368,7 @@ impl Writer {
             };
             // A failed batch is kept and tried again (the store may be busy for a while).
             if !batch.is_empty() {
+                last_commit = std::time::Instant::now();
                 match self.write(&batch) {
                     Ok(()) => {
                         batch.clear();

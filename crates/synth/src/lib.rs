@@ -6,6 +6,7 @@
 pub mod circular;
 pub mod linear;
 pub mod rotary;
+pub mod scan;
 /// The training workload of throughput measurements (kept under this name for callers).
 pub use errmap_maps::nn::workload as training;
 /// Thermal campaigns with known truth (generated beside the analysis that reads them).

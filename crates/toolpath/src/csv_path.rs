@@ -84,14 +84,15 @@ pub fn compensate(
 }
 
 /// E at a path point: inside the zone and the measured domain (or anywhere the map reaches,
-/// with `--extrapolate`), and whether a point was left out for being outside the domain.
+/// with `--extrapolate`), and whether a point was left nominal outside the domain or for its
+/// uncertainty.
 struct ErrorLookup<'f> {
     field: &'f dyn ErrorField,
     settings: &'f CompensationSettings,
     zone: Option<(f64, f64)>,
     normal: usize,
     plane: (usize, usize),
-    extrapolated: std::cell::Cell<bool>,
+    kept_nominal: super::reach::KeptNominal,
 }
 
 impl<'f> ErrorLookup<'f> {
@@ -107,7 +108,7 @@ impl<'f> ErrorLookup<'f> {
             zone,
             normal: field.normal().index(),
             plane: (u.index(), v.index()),
-            extrapolated: std::cell::Cell::new(false),
+            kept_nominal: super::reach::KeptNominal::default(),
         }
     }
 
@@ -118,7 +119,7 @@ impl<'f> ErrorLookup<'f> {
             }
         }
         let (u, v) = (p[self.plane.0], p[self.plane.1]);
-        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
+        super::reach::domain_error_mm(self.field, self.settings, u, v, &self.kept_nominal)
     }
 }
 
@@ -156,9 +157,7 @@ impl Rows<'_> {
                 self.normal,
                 &error_at,
             );
-            if lookup.extrapolated.replace(false) {
-                self.report.moves_outside_domain += 1;
-            }
+            lookup.kept_nominal.count(&mut self.report);
             if self.prev.is_some() {
                 emitted.remove(0); // the previous row, already written
             }

@@ -233,6 +233,10 @@ pub struct CompensationReport {
     /// Cutting moves in the zone that reach outside the measured domain (the probes' hull),
     /// where they keep their nominal coordinates (unless `--extrapolate`).
     pub moves_outside_domain: u64,
+    /// Cutting moves in the zone that reach, inside the measured domain, where the map's u(E)
+    /// exceeds `--max-uncertainty-um`, where they keep their nominal coordinates (whatever
+    /// `--extrapolate` says). A move can count here and in `moves_outside_domain`.
+    pub moves_uncertain: u64,
     /// The dialect the program was read in.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dialect: Option<Dialect>,
@@ -261,12 +265,13 @@ impl CompensationReport {
     /// The one-line summary the CLI prints.
     pub fn summary_line(&self) -> String {
         format!(
-            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} moves kept nominal outside the measured domain, {} lines in, {} out)",
+            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} moves kept nominal outside the measured domain, {} where u(E) > --max-uncertainty-um, {} lines in, {} out)",
             self.moves_changed,
             self.moves_split,
             self.max_abs_error_mm,
             self.points_compensated,
             self.moves_outside_domain,
+            self.moves_uncertain,
             self.lines_in,
             self.lines_out
         )

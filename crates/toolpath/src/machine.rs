@@ -9,7 +9,6 @@ use super::arc::Arc;
 use super::reach::{self, MaybePoint};
 use super::CompensationSettings;
 use errmap_core::geom::ErrorField;
-use std::cell::Cell;
 
 /// Millimetres per inch.
 const MM_PER_INCH: f64 = 25.4;
@@ -46,8 +45,9 @@ pub(crate) struct Machine<'a> {
     pub offset: f64,
     /// Line where the position became unknown, for messages.
     pub unknown_since: Option<u64>,
-    /// Set by [`Self::error_at`] when a point in the zone lies outside the measured domain.
-    pub extrapolated: Cell<bool>,
+    /// Set by [`Self::error_at`] when a point in the zone lies outside the measured domain or
+    /// where u(E) exceeds the bound; counted per move into the report.
+    pub kept_nominal: reach::KeptNominal,
     /// `--zone` in the program's first units, until those are known ([`Self::fix_zone`]).
     zone_first_units: Option<(f64, f64)>,
     /// The zone along the normal in mm (work coordinates), once fixed.
@@ -76,7 +76,7 @@ impl<'a> Machine<'a> {
             shift: [0.0; 3],
             offset: 0.0,
             unknown_since: None,
-            extrapolated: Cell::new(false),
+            kept_nominal: reach::KeptNominal::default(),
             zone_first_units: settings.zone,
             zone_mm: default_zone_mm,
         }
@@ -131,7 +131,7 @@ impl<'a> Machine<'a> {
         let s = self.scale_mm();
         let (iu, iv) = self.plane_uv;
         let (u, v) = ((p[iu] + self.shift[iu]) * s, (p[iv] + self.shift[iv]) * s);
-        reach::domain_error_mm(self.field, self.settings, u, v, &self.extrapolated)
+        reach::domain_error_mm(self.field, self.settings, u, v, &self.kept_nominal)
             .map(|e_mm| e_mm / s)
     }
 

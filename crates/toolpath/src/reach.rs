@@ -1,7 +1,7 @@
 //! Where the map may be applied, for every toolpath reader: E inside the measured domain (or anywhere the map reaches, with `--extrapolate`), and whether a path through partly known points can reach the zone and that domain.
 
 use super::point::{dist, lerp};
-use super::CompensationSettings;
+use super::{CompensationReport, CompensationSettings};
 use errmap_core::geom::ErrorField;
 use std::cell::Cell;
 
@@ -18,20 +18,52 @@ pub(crate) fn compensable_mm(
             || field.measured(u_mm, v_mm, settings.domain_margin_mm) == Some(true))
 }
 
+/// Which points a move met that stay nominal, and why: set while the move's points are looked
+/// up, then [`KeptNominal::count`]ed into the report once per move.
+#[derive(Debug, Default)]
+pub(crate) struct KeptNominal {
+    /// A point in the zone outside the measured domain (the probes' hull and margin).
+    outside: Cell<bool>,
+    /// A point in the domain where u(E) exceeds `--max-uncertainty-um`.
+    uncertain: Cell<bool>,
+}
+
+impl KeptNominal {
+    /// Count the move just looked up into `report` (`moves_outside_domain`, `moves_uncertain`)
+    /// and clear the marks for the next move.
+    pub(crate) fn count(&self, report: &mut CompensationReport) {
+        report.moves_outside_domain += u64::from(self.outside.replace(false));
+        report.moves_uncertain += u64::from(self.uncertain.replace(false));
+    }
+}
+
 /// E (mm) at plane point (u, v) where the map may be applied, as [`compensable_mm`]; a point the
-/// map reaches only by extrapolating gives `None` and sets `extrapolated`, so the report can
-/// count the moves left nominal there.
+/// map reaches only by extrapolating gives `None` and marks `kept` outside, and a point in the
+/// domain whose E is withheld for its uncertainty ([`ErrorField::withheld`]) gives `None` and
+/// marks `kept` uncertain, so the report can count the moves left nominal for each reason.
+/// Outside the domain the domain is the reason, whatever u(E) is.
 pub(crate) fn domain_error_mm(
     field: &dyn ErrorField,
     settings: &CompensationSettings,
     u_mm: f64,
     v_mm: f64,
-    extrapolated: &Cell<bool>,
+    kept: &KeptNominal,
 ) -> Option<f64> {
-    let e_mm = field.error_mm(u_mm, v_mm)?;
-    if !settings.extrapolate && field.measured(u_mm, v_mm, settings.domain_margin_mm) != Some(true)
-    {
-        extrapolated.set(true);
+    let outside = || {
+        !settings.extrapolate && field.measured(u_mm, v_mm, settings.domain_margin_mm) != Some(true)
+    };
+    let Some(e_mm) = field.error_mm(u_mm, v_mm) else {
+        if field.withheld(u_mm, v_mm) {
+            if outside() {
+                kept.outside.set(true);
+            } else {
+                kept.uncertain.set(true);
+            }
+        }
+        return None;
+    };
+    if outside() {
+        kept.outside.set(true);
         return None;
     }
     e_mm.is_finite().then_some(e_mm)

@@ -3,6 +3,7 @@
 //! watchdog) from those times.
 
 pub mod csv;
+pub mod linuxcnc;
 pub mod modbus;
 pub mod opcua;
 
@@ -81,7 +82,7 @@ impl Snapshot {
 pub trait Source: Send {
     /// The source's name in the config.
     fn name(&self) -> &str;
-    /// `csv`, `modbus`, `opcua`.
+    /// `csv`, `modbus`, `opcua`, `linuxcnc`.
     fn kind(&self) -> &'static str;
     /// The channels it can deliver (checked against the config at start).
     fn channel_names(&self) -> Vec<String>;

@@ -2,6 +2,7 @@
 //! (offset, slope, reference position); a point target (LinuxCNC external offsets, a generic
 //! node or register) takes the value at the axis's present position.
 
+pub mod linuxcnc;
 pub mod modbus;
 pub mod opcua;
 
@@ -52,4 +53,12 @@ pub trait Target: Send {
     fn present(&mut self, axis: &str) -> Result<Present>;
     /// Write an axis's compensation.
     fn write(&mut self, axis: &str, output: &Output) -> Result<()>;
+    /// The controller's present compensation of an axis when it is no longer what errmap last
+    /// wrote (LinuxCNC zeroes its external offsets at machine-on and drops changes while the
+    /// machine is off); the loop then ramps from it as at a start. Asked before each cycle's
+    /// write; None when the controller holds what errmap wrote (and for targets that cannot
+    /// change on their own).
+    fn moved(&mut self, _axis: &str) -> Result<Option<Present>> {
+        Ok(None)
+    }
 }

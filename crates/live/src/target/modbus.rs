@@ -43,6 +43,7 @@ impl ModbusTarget {
                 scale: a.scale,
                 offset: None,
                 node: None,
+                pin: None,
             };
             axes.insert(
                 axis.clone(),

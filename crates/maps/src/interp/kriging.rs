@@ -42,7 +42,7 @@ pub(crate) fn matern52(r: f64, l: f64) -> f64 {
 pub const MAX_SITES: usize = 4000;
 
 /// The profiled fit of one (ℓ, g): (−log-likelihood without constants, μ̂, σ̂², weights).
-fn profile(
+pub(crate) fn profile(
     distances: &DMatrix<f64>,
     e: &[f64],
     l: f64,

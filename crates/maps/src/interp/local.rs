@@ -268,6 +268,15 @@ impl LocalKriging {
         })
     }
 
+    /// The sites `(u_mm, v_mm, e_um)` it predicts from.
+    pub fn sites_uve(&self) -> Vec<[f64; 3]> {
+        self.sites
+            .iter()
+            .zip(&self.values)
+            .map(|(s, &e)| [s[0], s[1], e])
+            .collect()
+    }
+
     /// Predictions at many points (rayon); `None` where a system is singular.
     pub fn predict_many(&self, points_uv: &[[f64; 2]]) -> Vec<Option<Prediction>> {
         use rayon::prelude::*;
@@ -312,6 +321,37 @@ mod tests {
     }
 
     #[test]
+    fn a_stored_local_kriging_predicts_as_the_fitted_one() {
+        // 300 sites of a smooth field: the model written to JSON and read back (cells rebuilt)
+        // predicts bit for bit what the fitted kriging predicts, and a damaged one is refused.
+        let pts: Vec<[f64; 3]> = (0..300)
+            .map(|k| {
+                let (u, v) = (
+                    (k % 20) as f64 * 7.0 + (k / 20) as f64 * 0.3,
+                    (k / 20) as f64 * 9.0,
+                );
+                [u, v, (u / 30.0).sin() * 5.0 + v * 0.02]
+            })
+            .collect();
+        let fitted = LocalKriging::fit(&pts).unwrap();
+        let json = serde_json::to_string(&LocalKrigingModel::of(&fitted)).unwrap();
+        let back: LocalKrigingModel = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, LocalKrigingModel::of(&fitted));
+        back.validate().unwrap();
+        for p in [[10.0, 10.0], [70.5, 33.3], [131.0, 120.0]] {
+            let want = fitted.predict(p[0], p[1]).unwrap().e_um;
+            assert_eq!(
+                back.predict(p[0], p[1]).to_bits(),
+                want.to_bits(),
+                "at {p:?}"
+            );
+        }
+        let mut bad = back.clone();
+        bad.length_mm = 0.0;
+        assert!(bad.validate().is_err());
+    }
+
+    #[test]
     fn one_site_system_has_the_closed_form() {
         // Three sites at one spot, p far (≫ ℓ) away: r = 0 and R = J + g·I (J all ones), so
         // R⁻¹1 = 1/(3 + g), λ = −1/(1ᵀR⁻¹1) = −(3 + g)/3, w = 1/3 each and
@@ -338,5 +378,79 @@ mod tests {
         .unwrap();
         let at = exact.predict(10.0, 0.0).unwrap();
         assert!((at.e_um - 2.0).abs() < 1e-9 && at.sd_um < 1e-6, "{at:?}");
+    }
+}
+
+/// A local kriging as `model.json` stores it when it is the delivered map: its sites and
+/// parameters (the nearest-site cells are rebuilt on first use).
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalKrigingModel {
+    /// The sites `(u_mm, v_mm, e_um)`.
+    pub sites_uve: Vec<[f64; 3]>,
+    /// Correlation length ℓ, mm.
+    pub length_mm: f64,
+    /// Nugget g as a share of the process variance.
+    pub nugget_ratio: f64,
+    /// Process variance σ², µm².
+    pub variance_um2: f64,
+    #[serde(skip)]
+    fitted: std::sync::OnceLock<Option<LocalKriging>>,
+}
+
+impl PartialEq for LocalKrigingModel {
+    fn eq(&self, other: &Self) -> bool {
+        self.sites_uve == other.sites_uve
+            && self.length_mm == other.length_mm
+            && self.nugget_ratio == other.nugget_ratio
+            && self.variance_um2 == other.variance_um2
+    }
+}
+
+impl LocalKrigingModel {
+    /// The model of a fitted local kriging.
+    pub fn of(k: &LocalKriging) -> LocalKrigingModel {
+        LocalKrigingModel {
+            sites_uve: k.sites_uve(),
+            length_mm: k.parameters.length_mm,
+            nugget_ratio: k.parameters.nugget_ratio,
+            variance_um2: k.parameters.variance_um2,
+            fitted: std::sync::OnceLock::from(Some(k.clone())),
+        }
+    }
+
+    /// The local kriging, built on first use; `None` when the stored sites cannot be kriged.
+    pub fn kriging(&self) -> Option<&LocalKriging> {
+        self.fitted
+            .get_or_init(|| {
+                let parameters = Parameters {
+                    length_mm: self.length_mm,
+                    nugget_ratio: self.nugget_ratio,
+                    variance_um2: self.variance_um2,
+                };
+                LocalKriging::with_parameters(&self.sites_uve, parameters).ok()
+            })
+            .as_ref()
+    }
+
+    /// E at (u, v), µm; NaN where it cannot be predicted.
+    pub fn predict(&self, u_mm: f64, v_mm: f64) -> f64 {
+        self.kriging()
+            .and_then(|k| k.predict(u_mm, v_mm))
+            .map_or(f64::NAN, |q| q.e_um)
+    }
+
+    /// Consistency of a model read from a file (the message says what is wrong).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let finite = self.sites_uve.iter().flatten().all(|v| v.is_finite())
+            && [self.length_mm, self.nugget_ratio, self.variance_um2]
+                .iter()
+                .all(|v| v.is_finite());
+        if self.sites_uve.len() < 3 || !finite || self.length_mm <= 0.0 || self.nugget_ratio < 0.0 {
+            return Err(
+                "local kriging needs at least 3 finite sites, a length > 0 and a nugget ≥ 0".into(),
+            );
+        }
+        Ok(())
     }
 }

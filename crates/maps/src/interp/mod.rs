@@ -19,6 +19,8 @@
 
 mod gradient;
 
+pub mod baseline;
+pub mod bin;
 pub mod kriging;
 pub mod local;
 mod sweep;

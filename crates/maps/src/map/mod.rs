@@ -43,6 +43,11 @@ pub struct FittedModel {
     /// held-out points better than the network), and [`FittedModel::e_um`] evaluates it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kriging: Option<crate::interp::kriging::Kriging>,
+    /// When present, the delivered map is this local kriging of the probe points (a part of
+    /// more points than the exact kriging takes, where it fitted the held-out points better
+    /// than the network), and [`FittedModel::e_um`] evaluates it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub local_kriging: Option<crate::interp::local::LocalKrigingModel>,
     /// The measured domain: convex hull of the probed points (plane axes, mm), counter-clockwise.
     /// Absent in maps written by older versions (toolpath compensation then needs `--extrapolate`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -124,6 +129,7 @@ impl FittedModel {
             normalisation,
             network,
             kriging: None,
+            local_kriging: None,
             hull_mm: None,
             surface_mm: None,
             benefit: None,
@@ -202,6 +208,12 @@ impl FittedModel {
         self
     }
 
+    /// The same model delivering the local kriging `kriging` instead of the network.
+    pub fn with_local_kriging(mut self, kriging: &crate::interp::local::LocalKriging) -> Self {
+        self.local_kriging = Some(crate::interp::local::LocalKrigingModel::of(kriging));
+        self
+    }
+
     /// Record the measured domain and surface of the probed points the map was fitted to.
     pub fn with_probes(mut self, points: &[crate::probe::ProbePoint]) -> Self {
         let n = self.normal.index();
@@ -244,6 +256,9 @@ impl FittedModel {
     /// the kriging returns towards its mean).
     pub fn e_um(&self, u_mm: f64, v_mm: f64) -> f64 {
         if let Some(k) = &self.kriging {
+            return k.predict(u_mm, v_mm);
+        }
+        if let Some(k) = &self.local_kriging {
             return k.predict(u_mm, v_mm);
         }
         let x = self.normalisation.scale_input(u_mm, v_mm);
@@ -324,6 +339,13 @@ impl FittedModel {
             ));
         }
         if let Some(Err(m)) = model.uncertainty.as_ref().map(|u| u.validate()) {
+            return Err(Error::input(
+                Location::file(path),
+                m,
+                "the file is damaged: refit the map",
+            ));
+        }
+        if let Some(Err(m)) = model.local_kriging.as_ref().map(|k| k.validate()) {
             return Err(Error::input(
                 Location::file(path),
                 m,

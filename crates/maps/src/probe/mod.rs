@@ -8,15 +8,20 @@
 //! vector where the file gives one, in µm; the map coordinates `(u, v)` are the nominal
 //! coordinates along the two plane axes ([`Axis::plane_axes`]). See `docs/probe-files.md`.
 
+pub mod budget;
 mod clean;
 mod cloud;
 mod columns;
 mod dmis;
+mod loo;
+mod order_stat;
 mod point;
+mod predict;
 mod read;
 
 pub use clean::{
-    reject_gross_errors, Cleaned, Rejected, DEFAULT_K_SIGMA, MIN_POINTS_TO_JUDGE, SIGMA_FLOOR_UM,
+    reject_gross_errors, Cleaned, Rejected, DEFAULT_K_SIGMA, FROM_SCRATCH_MAX_POINTS,
+    MIN_POINTS_TO_JUDGE, SIGMA_FLOOR_UM,
 };
 pub use columns::ProbeColumns;
 pub use read::{

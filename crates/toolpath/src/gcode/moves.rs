@@ -696,9 +696,7 @@ impl<'a> Rewriter<'a> {
                 return Err(self.output_limit_error(line));
             }
         }
-        if self.m.extrapolated.replace(false) {
-            self.report.moves_outside_domain += 1;
-        }
+        self.m.kept_nominal.count(&mut self.report);
         let result = if emitted.iter().any(|(_, e)| e.is_some()) {
             match mode {
                 CompMode::Off => self.rewrite(line, words, &emitted, arc.as_ref(), mv.motion),

@@ -145,9 +145,7 @@ impl Kt<'_> {
         p[v] = y;
         p[k] = bottom;
         let e = self.m.error_at(&p);
-        if self.m.extrapolated.replace(false) {
-            self.report.moves_outside_domain += 1;
-        }
+        self.m.kept_nominal.count(&mut self.report);
         // The hole passes from the start down to the bottom: one that passes through the zone
         // with its bottom outside it is not compensated and refused (its walls would be).
         let (lo, hi) = (start.min(bottom), start.max(bottom));
@@ -311,9 +309,7 @@ impl Kt<'_> {
         p[v] = y;
         p[self.m.normal] = bottom;
         let e = self.m.error_at(&p);
-        if self.m.extrapolated.replace(false) {
-            self.report.moves_outside_domain += 1;
-        }
+        self.m.kept_nominal.count(&mut self.report);
         let Some(e) = e else {
             // Outside the zone or the measured domain: the original definition drills it.
             if self.hole_surface_out.is_some() {

@@ -109,9 +109,7 @@ impl Kt<'_> {
                 ));
             }
         }
-        if self.m.extrapolated.replace(false) {
-            self.report.moves_outside_domain += 1;
-        }
+        self.m.kept_nominal.count(&mut self.report);
         if !emitted.iter().any(|(_, e)| e.is_some()) {
             let absolute = b.head == "L" && b.word(AXES[self.m.normal]).is_some();
             return self.unchanged(n, content, term, b, absolute);

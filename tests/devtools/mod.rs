@@ -1,4 +1,11 @@
-//! Headless Chromium driven over `--remote-debugging-pipe` (DevTools messages ended by NUL on file descriptors 3 and 4, mapped by `sh`), as tests/report_browser.rs drives it; here with calls that may fail (a page navigating away) and a polled wait for a page condition.
+//! Headless Chromium for the browser tests (report_browser, serve_browser), driven over `--remote-debugging-pipe`: calls that may fail (a page navigating away), a wait for an event, and a polled wait for a page condition.
+//!
+//! Chromium reads DevTools commands on file descriptor 3 and writes replies and events on 4,
+//! each a JSON message ended by a NUL byte. `sh` maps the test's pipes onto those descriptors,
+//! so no WebSocket client and no unsafe code are needed. Without a browser a test is skipped
+//! (and says so), unless `ERRMAP_REQUIRE_BROWSER=1`, as in CI, which makes it fail.
+// Each test binary uses only part of it.
+#![allow(dead_code)]
 
 use serde_json::{json, Value};
 use std::io::{Read, Write};
@@ -39,6 +46,7 @@ pub fn browser_or_skip(test: &str) -> Option<PathBuf> {
     found
 }
 
+/// A DevTools session over Chromium's pipe; the browser is killed when dropped.
 pub struct DevTools {
     child: Child,
     to_browser: ChildStdin,
@@ -136,9 +144,23 @@ impl DevTools {
         }
     }
 
+    /// Send a command and wait for its result; a panic naming the method when it fails.
     pub fn call(&mut self, session: Option<&str>, method: &str, params: Value) -> Value {
         self.try_call(session, method, params)
             .unwrap_or_else(|e| panic!("{method} failed: {e}"))
+    }
+
+    /// Wait until an event `method` has arrived (it stays in [`DevTools::events`]).
+    pub fn wait_for(&mut self, method: &str) {
+        let deadline = Instant::now() + TIMEOUT;
+        while !self.events.iter().any(|e| e["method"] == method) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let v = self
+                .from_browser
+                .recv_timeout(left)
+                .unwrap_or_else(|_| panic!("the browser sent no {method} in time"));
+            self.events.push(v);
+        }
     }
 
     /// A new page: its session id, with the Page, Runtime, Log and Network events on.
