@@ -17,7 +17,7 @@ useful work when cores are contended.
 
 Usage: python3 benches/peers/training_ratio.py --errmap target/release/errmap \
            [--parts 1,8,32] [--epochs 200] [--rounds 3] [--backends cpu,gpu] [--json FILE]
-           [--torch-threads N]
+           [--torch-threads N] [--no-loop]
 """
 import argparse
 import json
@@ -62,6 +62,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--backends", default="cpu,gpu")
     ap.add_argument("--json", help="also write every round's figures to this file")
+    ap.add_argument("--no-loop", action="store_true",
+                    help="skip PyTorch's per-part loop (slow; the ratios are against batched)")
     ap.add_argument("--torch-threads", type=int,
                     help="PyTorch's intra-op threads (default: its own choice, the cores); 1 "
                          "avoids OpenMP's waits on a machine whose cores are contended")
@@ -79,14 +81,17 @@ def main():
     results = []
     for parts in [int(p) for p in args.parts.split(",")]:
         sets = peers.family(parts)
-        sides = ["torch batched", "torch loop"] + [f"errmap {b}" for b in backends]
+        torch_sides = [("torch batched", peers.torch_batched)]
+        if not args.no_loop:
+            torch_sides.append(("torch loop", peers.torch_loop))
+        sides = [name for name, _ in torch_sides] + [f"errmap {b}" for b in backends]
         rates = {k: [] for k in sides}
         per_cpu = {k: [] for k in sides}
         loads = []
         devices = {}
         for _ in range(args.rounds):
             loads.append(load())
-            for side, fn in (("torch batched", peers.torch_batched), ("torch loop", peers.torch_loop)):
+            for side, fn in torch_sides:
                 wall, cpu = torch_rate(torch, fn, sets, args.epochs)
                 rates[side].append(wall)
                 per_cpu[side].append(cpu)
@@ -108,8 +113,8 @@ def main():
             e = f"errmap {b}"
             print(f"  {e} ({devices[b]}): {med[e] / med['torch batched']:.2f}x torch batched "
                   f"(best {best[e] / best['torch batched']:.2f}x, per CPU s "
-                  f"{med_cpu[e] / med_cpu['torch batched']:.2f}x), "
-                  f"{med[e] / med['torch loop']:.2f}x torch loop")
+                  f"{med_cpu[e] / med_cpu['torch batched']:.2f}x)"
+                  + ("" if args.no_loop else f", {med[e] / med['torch loop']:.2f}x torch loop"))
         results.append({"parts": parts, "epochs": args.epochs, "load_average": loads,
                         "sample_epochs_per_s": rates, "sample_epochs_per_cpu_s": per_cpu,
                         "devices": devices})
