@@ -1,4 +1,4 @@
-//! Training and map-evaluation throughput: CPU reference vs wgpu (lavapipe or a hardware GPU), families of 1, 8 and 32 parts.
+//! Training and map-evaluation throughput: the CPU reference, the fast CPU trainer and wgpu (lavapipe or a hardware GPU), families of 1, 8 and 32 parts.
 //!
 //! Workload (mirrored by benches/peers/peers.py): each part is a 48 × 32 grid (1536 samples)
 //! of a ±40 µm web-plate deflection field over 600 × 300 mm, standardised; MLP 2-32-32-1 tanh,
@@ -8,7 +8,7 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput};
 use errmap::gpu::GpuTrainer;
-use errmap::nn::{CpuTrainer, ModelConfig, Normalisation, Trainer, TrainingSet};
+use errmap::nn::{CpuTrainer, FastCpuTrainer, ModelConfig, Normalisation, Trainer, TrainingSet};
 
 #[path = "../tests/common/plate_sets.rs"]
 mod plate_sets;
@@ -55,6 +55,9 @@ pub fn training(c: &mut Criterion) {
         group.throughput(Throughput::Elements(samples as u64 * EPOCHS as u64));
         group.bench_with_input(BenchmarkId::new("cpu", parts), &sets, |b, sets| {
             b.iter(|| black_box(CpuTrainer::reference().train_batch(sets, &config).unwrap()))
+        });
+        group.bench_with_input(BenchmarkId::new("cpu-fast", parts), &sets, |b, sets| {
+            b.iter(|| black_box(FastCpuTrainer.train_batch(sets, &config).unwrap()))
         });
         if let Some(gpu) = &gpu {
             group.bench_with_input(BenchmarkId::new("gpu", parts), &sets, |b, sets| {

@@ -59,8 +59,12 @@ pub fn run(cmd: BenchCommand, _globals: Globals) -> Result<i32> {
                     .map_err(|e| errmap::Error::Internal(format!("bench JSON: {e}")))?;
                 outln!("{text}");
             } else {
+                let per_cpu = report
+                    .sample_epochs_per_cpu_s
+                    .map(|r| format!(", {r:.3e} per CPU second"))
+                    .unwrap_or_default();
                 outln!(
-                    "{} on {}: {:.3e} sample·epochs/s ({} × {} samples × {} epochs in {:.3} s; pipeline build {:.3} s)\n{}",
+                    "{} on {}: {:.3e} sample·epochs/s{per_cpu} ({} × {} samples × {} epochs in {:.3} s; pipeline build {:.3} s)\n{}",
                     report.backend,
                     report.device,
                     report.sample_epochs_per_s,

@@ -47,6 +47,12 @@ pub struct TrainingBenchReport {
     /// Opening the device, building the pipelines and the warm-up epoch (0 for the CPU
     /// trainers apart from their warm-up).
     pub pipeline_build_s: f64,
+    /// CPU seconds of the whole process (all threads) in the timed epochs; `null` where the
+    /// platform cannot tell.
+    pub train_cpu_s: Option<f64>,
+    /// parts × samples × epochs / [`TrainingBenchReport::train_cpu_s`]: work per CPU second,
+    /// which other processes on the machine change much less than the wall-clock rate.
+    pub sample_epochs_per_cpu_s: Option<f64>,
 }
 
 /// Most samples a bench trains per network, and most networks (a typo guard).
@@ -77,7 +83,7 @@ pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
     let selection = select_trainer(bench.backend, &config, silent())?;
     let open_s = open.elapsed().as_secs_f64();
     let sets = crate::nn::workload::plate_family(bench.parts, bench.samples);
-    let measure = probe::measure(
+    let (measure, train_cpu_s) = probe::measure_with_cpu(
         selection.trainer.as_ref(),
         selection.backend.name(),
         open_s,
@@ -97,5 +103,7 @@ pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
         sample_epochs_per_s: measure.sample_epochs_per_s,
         train_s: work / measure.sample_epochs_per_s,
         pipeline_build_s: measure.pipeline_build_s,
+        train_cpu_s,
+        sample_epochs_per_cpu_s: train_cpu_s.filter(|s| *s > 0.0).map(|s| work / s),
     })
 }

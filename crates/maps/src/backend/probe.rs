@@ -164,6 +164,19 @@ pub fn measure(
     config: &ModelConfig,
     epochs: u32,
 ) -> Result<Measure> {
+    measure_with_cpu(trainer, backend, open_s, sets, config, epochs).map(|(m, _)| m)
+}
+
+/// [`measure`], and the CPU seconds the whole process (every thread: rayon's, a software
+/// adapter's workers) spent in the timed epochs; `None` where the platform cannot tell.
+pub fn measure_with_cpu(
+    trainer: &dyn Trainer,
+    backend: &str,
+    open_s: f64,
+    sets: &[TrainingSet],
+    config: &ModelConfig,
+    epochs: u32,
+) -> Result<(Measure, Option<f64>)> {
     let warm = ModelConfig {
         epochs: 1,
         loss_every: 1,
@@ -177,16 +190,21 @@ pub fn measure(
         loss_every: epochs,
         ..config.clone()
     };
+    let cpu = cpu_time::ProcessTime::try_now().ok();
     let start = Instant::now();
     trainer.train_batch(sets, &timed)?;
     let train_s = start.elapsed().as_secs_f64().max(1e-9);
+    let cpu_s = cpu
+        .and_then(|c| c.try_elapsed().ok())
+        .map(|d| d.as_secs_f64());
     let samples: usize = sets.iter().map(|s| s.len()).sum();
-    Ok(Measure {
+    let measure = Measure {
         backend: backend.to_string(),
         device: device_name(trainer),
         sample_epochs_per_s: samples as f64 * epochs as f64 / train_s,
         pipeline_build_s,
-    })
+    };
+    Ok((measure, cpu_s))
 }
 
 /// The adapter or SIMD path in a trainer's name: "gpu: llvmpipe (…) (Vulkan, software)" →

@@ -44,6 +44,10 @@ const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
 /// Invocations per workgroup = gradient lanes = llvmpipe's SIMD width on AVX2.
 pub const LANES: usize = 8;
 
+/// Samples of a lane that go forward and backward before their gradient terms are added
+/// together (measured on lavapipe: docs/gpu.md, Kernels).
+pub const SAMPLES_PER_PASS: usize = 4;
+
 /// Largest parameter count the generated kernel takes: its size (and llvmpipe's compile
 /// time) grows with the parameters; larger networks use the hardware kernels.
 pub const MAX_CPU_PARAMS: usize = 4096;
@@ -113,17 +117,38 @@ pub fn epoch_source(
     for c in 0..params {
         line(&format!("    let {} = {};", param(c), uniform_param(c)));
     }
-    // Two samples of this lane per iteration (s0, then s0 + 8 if there is one): the weights
-    // loaded once serve both, and llvmpipe's masked loop bookkeeping is paid half as often.
-    line("    for (var s0 = t; s0 < n; s0 += 16u) {");
-    line("        {");
-    line("            let s = s0;");
-    sample_pass(&mut line, &spans, activation, params);
-    line("        }");
-    line("        if s0 + 8u < n {");
-    line("            let s = s0 + 8u;");
-    sample_pass(&mut line, &spans, activation, params);
-    line("        }");
+    // SAMPLES_PER_PASS samples of this lane per iteration, s0, s0 + 8, …: all go forward and
+    // backward, then their gradient terms are added in one pass,
+    // g = ((g + term(s0)) + term(s0 + 8)) + …, so each accumulator (they live on the stack)
+    // is read and written once per SAMPLES_PER_PASS samples. A sample past the set is
+    // replaced by sample s0 with a zero error: its terms are ±0, and g + ±0 = g because g, a
+    // sum that starts at +0, is never −0. The order is the reference's, and so are the bits.
+    line(&format!(
+        "    for (var s0 = t; s0 < n; s0 += {}u) {{",
+        LANES * SAMPLES_PER_PASS
+    ));
+    let suffixes: Vec<String> = (0..SAMPLES_PER_PASS)
+        .map(|k| ((b'a' + k as u8) as char).to_string())
+        .collect();
+    for (k, suffix) in suffixes.iter().enumerate() {
+        if k == 0 {
+            sample_pass(&mut line, &spans, activation, params, suffix, "s0", None);
+            continue;
+        }
+        let offset = k * LANES;
+        line(&format!("        let has_{suffix} = s0 + {offset}u < n;"));
+        sample_pass(
+            &mut line,
+            &spans,
+            activation,
+            params,
+            suffix,
+            &format!("select(s0, s0 + {offset}u, has_{suffix})"),
+            Some(&format!("has_{suffix}")),
+        );
+    }
+    let names: Vec<&str> = suffixes.iter().map(|s| s.as_str()).collect();
+    gradient_terms(&mut line, &spans, params, &names);
     line("    }");
     if subgroups {
         subgroup_reduce_and_adam(&mut line, params, stride_floats);
@@ -134,25 +159,38 @@ pub fn epoch_source(
     Some(w)
 }
 
-/// Forward and backward pass of sample `s`, adding its terms to this lane's sums.
+/// Forward and backward pass of the sample at index `index`, its values named with
+/// `suffix`; with `present`, the error is zero where that condition is false. Adds its squared
+/// error to this lane's sum; the gradient terms are added by [`gradient_terms`].
 fn sample_pass(
     line: &mut dyn FnMut(&str),
     spans: &[LayerSpan],
     activation: Activation,
     params: usize,
+    suffix: &str,
+    index: &str,
+    present: Option<&str>,
 ) {
-    line("        let sample = samples[net.sample_offset + s];");
-    line("        let a0_0 = sample.x;");
-    line("        let a0_1 = sample.y;");
-    forward(line, spans, activation);
-    line("        let err = y - sample.target_value;");
-    let sq = acc(params);
-    line(&format!("        {sq} = {sq} + err * err;"));
     line(&format!(
-        "        let d{}_0 = err * net.grad_scale;",
+        "        let sample{suffix} = samples[net.sample_offset + {index}];"
+    ));
+    line(&format!("        let a0_0{suffix} = sample{suffix}.x;"));
+    line(&format!("        let a0_1{suffix} = sample{suffix}.y;"));
+    forward(line, spans, activation, suffix);
+    let err = format!("y{suffix} - sample{suffix}.target_value");
+    match present {
+        None => line(&format!("        let err{suffix} = {err};")),
+        Some(cond) => line(&format!(
+            "        let err{suffix} = select(0.0, {err}, {cond});"
+        )),
+    }
+    let sq = acc(params);
+    line(&format!("        {sq} = {sq} + err{suffix} * err{suffix};"));
+    line(&format!(
+        "        let d{}_0{suffix} = err{suffix} * net.grad_scale;",
         spans.len() - 1
     ));
-    backward(line, spans, activation);
+    backward(line, spans, activation, suffix);
 }
 
 /// Structs and bindings. Host mirrors: `NetInfo`, `Sample`, `Step` in `super::layout`,
@@ -218,8 +256,9 @@ fn derivative(activation: Activation, a: &str) -> String {
     }
 }
 
-/// a{l+1}_i = f(b[i] + Σ_j W[i][j]·a{l}_j), j ascending; the output layer is linear (`y`).
-fn forward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activation) {
+/// a{l+1}_i = f(b[i] + Σ_j W[i][j]·a{l}_j), j ascending; the output layer is linear (`y`);
+/// every name ends with `suffix`.
+fn forward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activation, suffix: &str) {
     let last = spans.len() - 1;
     for (l, span) in spans.iter().enumerate() {
         for i in 0..span.outputs {
@@ -227,15 +266,15 @@ fn forward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activati
             for j in 0..span.inputs {
                 let _ = write!(
                     z,
-                    " + {} * a{l}_{j}",
+                    " + {} * a{l}_{j}{suffix}",
                     param(span.weight_offset + i * span.inputs + j)
                 );
             }
             if l == last {
-                line(&format!("        let y = {z};"));
+                line(&format!("        let y{suffix} = {z};"));
             } else {
                 line(&format!(
-                    "        let a{}_{i} = {};",
+                    "        let a{}_{i}{suffix} = {};",
                     l + 1,
                     apply(activation, &z)
                 ));
@@ -244,22 +283,10 @@ fn forward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activati
     }
 }
 
-/// Gradient terms of each layer (bias += δ_i, W[i][j] += δ_i·a_j) and
-/// δ_prev[j] = (0 + Σ_i W[i][j]·δ_i, i ascending)·f'(a_j).
-fn backward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activation) {
+/// δ_prev[j] = (0 + Σ_i W[i][j]·δ_i, i ascending)·f'(a_j) of every layer below the output,
+/// names ending with `suffix`.
+fn backward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activation, suffix: &str) {
     for (l, span) in spans.iter().enumerate().rev() {
-        for i in 0..span.outputs {
-            let b = span.bias_offset + i;
-            line(&format!("        {} = {} + d{l}_{i};", acc(b), acc(b)));
-            for j in 0..span.inputs {
-                let c = span.weight_offset + i * span.inputs + j;
-                line(&format!(
-                    "        {} = {} + d{l}_{i} * a{l}_{j};",
-                    acc(c),
-                    acc(c)
-                ));
-            }
-        }
         if l == 0 {
             continue;
         }
@@ -268,16 +295,45 @@ fn backward(line: &mut dyn FnMut(&str), spans: &[LayerSpan], activation: Activat
             for i in 0..span.outputs {
                 let _ = write!(
                     b,
-                    " + {} * d{l}_{i}",
+                    " + {} * d{l}_{i}{suffix}",
                     param(span.weight_offset + i * span.inputs + j)
                 );
             }
-            let a = format!("a{l}_{j}");
+            let a = format!("a{l}_{j}{suffix}");
             line(&format!(
-                "        let d{}_{j} = ({b}) * {};",
+                "        let d{}_{j}{suffix} = ({b}) * {};",
                 l - 1,
                 derivative(activation, &a)
             ));
+        }
+    }
+}
+
+/// The gradient terms of the samples named by `suffixes`, in that order, added to this
+/// lane's sums: bias += δ_i, W[i][j] += δ_i·a_j.
+fn gradient_terms(
+    line: &mut dyn FnMut(&str),
+    spans: &[LayerSpan],
+    params: usize,
+    suffixes: &[&str],
+) {
+    debug_assert!(params >= spans.last().map_or(0, |s| s.bias_offset + s.outputs));
+    for (l, span) in spans.iter().enumerate().rev() {
+        for i in 0..span.outputs {
+            let b = acc(span.bias_offset + i);
+            let mut sum = b.clone();
+            for x in suffixes {
+                let _ = write!(sum, " + d{l}_{i}{x}");
+            }
+            line(&format!("        {b} = {sum};"));
+            for j in 0..span.inputs {
+                let c = acc(span.weight_offset + i * span.inputs + j);
+                let mut sum = c.clone();
+                for x in suffixes {
+                    let _ = write!(sum, " + d{l}_{i}{x} * a{l}_{j}{x}");
+                }
+                line(&format!("        {c} = {sum};"));
+            }
         }
     }
 }

@@ -1,11 +1,24 @@
-//! The fast CPU trainer: the reference's arithmetic blocked 8 samples wide with fused multiply-adds (AVX2 + FMA where the processor has them), networks and sample chunks spread over all cores.
+//! The fast CPU trainer: the reference's arithmetic blocked 8 samples wide with fused multiply-adds (AVX2 + FMA where the processor has them) in register-blocked tiles, networks and sample chunks spread over all cores.
 //!
 //! Same model, loss and Adam step as [`super::CpuTrainer`], and the same gradient lanes
 //! (sample s to lane s mod 8, lanes summed in ascending sample order, then the tree
 //! +4, +2, +1), but every multiply-add is fused, so results differ from the reference in the
-//! last bits; `crates/maps/tests/nn.rs` bounds the difference. The order of every sum depends only on the
-//! training set's size (chunks of [`CHUNK_BLOCKS`] blocks, added in chunk order), never on
-//! the number of cores, so a run gives the same bytes on any machine with the same SIMD path.
+//! last bits; `crates/maps/tests/nn.rs` bounds the difference. The order of every sum depends
+//! only on the training set's size, never on the number of cores or on the tiling below, so
+//! a run gives the same bytes on any machine with the same SIMD path:
+//! - a layer output z_i = b_i + Σ_j W[i][j]·a_j, j ascending (one fused chain per sample);
+//! - a delta δ_prev[j] = (0 + Σ_i W[i][j]·δ_i, i ascending)·(1 − a_j²) for tanh;
+//! - a gradient: the set is cut into chunks of [`CHUNK_BLOCKS`] blocks of 8 samples; within
+//!   a chunk lane b of each parameter starts at 0 and adds the terms of samples
+//!   8·block + b, blocks ascending; the chunks' lanes are added in chunk order, then the
+//!   8 lanes in the tree.
+//!
+//! How the work is laid out does not enter those orders. Blocks go through the network
+//! [`TILE`] at a time: a layer's outputs are computed for a few units × the tile's blocks in
+//! registers, each weight loaded once for them all; the deltas likewise; and the gradient
+//! lanes of a few rows × columns of a weight matrix stay in registers while the tile's blocks
+//! are added to them in ascending order, so a lane accumulator is loaded and stored once per
+//! tile instead of once per block.
 
 use rayon::prelude::*;
 
@@ -19,11 +32,20 @@ use errmap_core::Result;
 const W: usize = REFERENCE_LANES;
 type V = [f32; W];
 /// Blocks of 8 samples per chunk: a chunk is the unit of parallel work within a network
-/// (512 samples; a 1536-sample set makes 3 chunks).
+/// (512 samples; a 1536-sample set makes 3 chunks), and of the gradient's first sum.
 pub const CHUNK_BLOCKS: usize = 64;
-/// Blocks whose gradients are accumulated together (one load and store of a lane
-/// accumulator per 2 fused multiply-adds), in ascending sample order per lane.
-const PAIR: usize = 2;
+/// Blocks that go through the network together (a divisor of [`CHUNK_BLOCKS`]).
+pub const TILE: usize = 4;
+/// One unit's values over the blocks of a tile.
+type T = [V; TILE];
+
+/// Output units computed together in the forward pass (each with the tile's blocks).
+const FWD_ROWS: usize = 2;
+/// Input units whose deltas are computed together in the backward pass.
+const BWD_COLS: usize = 2;
+/// Rows × columns of a weight matrix whose gradient lanes stay in registers over a tile.
+const GRAD_ROWS: usize = 2;
+const GRAD_COLS: usize = 4;
 
 /// Trains on the CPU as fast as this processor allows; see the module documentation.
 #[derive(Debug, Clone, Copy, Default)]
@@ -55,8 +77,10 @@ impl Trainer for FastCpuTrainer {
         sets: &[TrainingSet],
         config: &ModelConfig,
     ) -> Result<Vec<Mlp>> {
+        let split = split_chunks(sets.len());
         train_each(initial, sets, config, |net, set, k| {
             let mut fast = FastGradient::new(net, set);
+            fast.parallel_chunks = split;
             fit_one(net, config, k, |params, grad| {
                 fast.loss_and_gradient(params, set, grad)
             })
@@ -70,8 +94,10 @@ impl Trainer for FastCpuTrainer {
         config: &ModelConfig,
         to_epoch: u32,
     ) -> Result<()> {
+        let split = split_chunks(sets.len());
         continue_each(runs, sets, config, to_epoch, |run, set, k| {
             let mut fast = FastGradient::new(&run.net, set);
+            fast.parallel_chunks = split;
             adam_steps(run, config, to_epoch, k, |params, grad| {
                 fast.loss_and_gradient(params, set, grad)
             })
@@ -84,6 +110,14 @@ impl Trainer for FastCpuTrainer {
     }
 }
 
+/// Whether a batch of `networks` should also spread each network's chunks over the cores:
+/// only when there are fewer networks than threads (otherwise the networks keep every core
+/// busy, and splitting an epoch into tasks only adds their cost). Either way the sums are the
+/// same.
+fn split_chunks(networks: usize) -> bool {
+    networks < rayon::current_num_threads()
+}
+
 /// The network's shape as the blocked pass needs it.
 struct Shape {
     spans: Vec<LayerSpan>,
@@ -92,13 +126,13 @@ struct Shape {
     activation: Activation,
 }
 
-/// One chunk's scratch: activations and deltas of [`PAIR`] blocks, 8 lane accumulators
-/// per parameter, and the chunk's squared error.
+/// One chunk's scratch: activations and deltas of one tile, 8 lane accumulators per
+/// parameter, and the chunk's squared error.
 struct Chunk {
     first_block: usize,
     blocks: usize,
-    acts: Vec<Vec<V>>,
-    deltas: Vec<Vec<V>>,
+    acts: Vec<T>,
+    deltas: Vec<T>,
     lanes: Vec<V>,
     sq_err: f64,
 }
@@ -111,6 +145,9 @@ pub struct FastGradient {
     total: Vec<V>,
     /// The gradient after [`FastGradient::compute`].
     pub sum: Vec<f32>,
+    /// Whether [`FastGradient::compute`] runs the chunks as parallel tasks (default) or one
+    /// after the other on the calling thread; the result is the same bits.
+    pub parallel_chunks: bool,
 }
 
 impl FastGradient {
@@ -127,8 +164,8 @@ impl FastGradient {
             .map(|c| Chunk {
                 first_block: c * CHUNK_BLOCKS,
                 blocks: CHUNK_BLOCKS.min(blocks - c * CHUNK_BLOCKS),
-                acts: vec![vec![[0.0; W]; units]; PAIR],
-                deltas: vec![vec![[0.0; W]; units]; PAIR],
+                acts: vec![[[0.0; W]; TILE]; units],
+                deltas: vec![[[0.0; W]; TILE]; units],
                 lanes: vec![[0.0; W]; params],
                 sq_err: 0.0,
             })
@@ -142,6 +179,7 @@ impl FastGradient {
             chunks,
             total: vec![[0.0; W]; params],
             sum: vec![0.0; params],
+            parallel_chunks: true,
         }
     }
 
@@ -162,7 +200,7 @@ impl FastGradient {
     pub fn compute(&mut self, params: &[f32], set: &TrainingSet) -> f64 {
         let shape = &self.shape;
         let grad_scale = 2.0f32 / set.len() as f32;
-        self.chunks.par_iter_mut().for_each(|chunk| {
+        let run = |chunk: &mut Chunk| {
             let pass = ChunkPass {
                 shape,
                 params,
@@ -175,7 +213,12 @@ impl FastGradient {
                 return simd.vectorize(pass);
             }
             pass.run();
-        });
+        };
+        if self.parallel_chunks && self.chunks.len() > 1 {
+            self.chunks.par_iter_mut().for_each(run);
+        } else {
+            self.chunks.iter_mut().for_each(run);
+        }
         // Chunks in order, then the 8-lane tree: the order depends on the set's size only.
         let mut sq_err = 0.0;
         let total = &mut self.total;
@@ -217,44 +260,60 @@ impl pulp::NullaryFnOnce for ChunkPass<'_> {
 }
 
 impl ChunkPass<'_> {
+    /// Every tile of the chunk: forward, output deltas, backward, then the tile's gradient
+    /// terms into the lanes. The stages are `#[inline(always)]`: this is the hot loop, one
+    /// function once compiled.
     #[inline(always)]
     fn run(self) {
-        let chunk = self.chunk;
+        let Self {
+            shape,
+            params,
+            set,
+            grad_scale,
+            chunk,
+        } = self;
         chunk.lanes.iter_mut().for_each(|l| *l = [0.0; W]);
         let mut sq_err = 0.0f64;
-        let n = self.set.len();
+        let n = set.len();
+        let last = shape.spans.len() - 1;
+        let out_unit = shape.unit_offset[last];
         let mut block = 0;
         while block < chunk.blocks {
-            // A pair past the chunk's end is padded with an empty block (zero deltas).
-            for q in 0..PAIR {
-                let s0 = (chunk.first_block + block + q) * W;
-                let count = if block + q < chunk.blocks {
-                    W.min(n - s0)
-                } else {
-                    0
-                };
-                sq_err += forward_backward(
-                    self.shape,
-                    self.params,
-                    self.set,
-                    s0,
+            // Blocks of the tile past the chunk's end run with no samples (zero inputs and
+            // deltas) and add nothing to the lanes.
+            let real = TILE.min(chunk.blocks - block);
+            let first_sample = (chunk.first_block + block) * W;
+            let mut counts = [0usize; TILE];
+            for (q, count) in counts.iter_mut().enumerate().take(real) {
+                *count = W.min(n - (first_sample + q * W));
+            }
+            let input = tile_inputs(set, first_sample, &counts);
+            forward(shape, params, &input, &mut chunk.acts);
+            for (q, &count) in counts.iter().enumerate().take(real) {
+                sq_err += output_deltas(
+                    &chunk.acts[out_unit][q],
+                    set,
+                    first_sample + q * W,
                     count,
-                    self.grad_scale,
-                    &mut chunk.acts[q],
-                    &mut chunk.deltas[q],
+                    grad_scale,
+                    &mut chunk.deltas[out_unit][q],
                 );
             }
-            let (a0, a1) = chunk.acts.split_at(1);
-            let (d0, d1) = chunk.deltas.split_at(1);
+            for q in real..TILE {
+                chunk.deltas[out_unit][q] = [0.0; W];
+            }
+            for l in (1..shape.spans.len()).rev() {
+                backward_layer(shape, params, l, &chunk.acts, &mut chunk.deltas);
+            }
             accumulate(
-                self.shape,
-                self.set,
-                (chunk.first_block + block) * W,
-                [&a0[0], &a1[0]],
-                [&d0[0], &d1[0]],
+                shape,
+                &input,
+                &chunk.acts,
+                &chunk.deltas,
+                real,
                 &mut chunk.lanes,
             );
-            block += PAIR;
+            block += TILE;
         }
         chunk.sq_err = sq_err;
     }
@@ -305,7 +364,10 @@ fn tanh_v(x: V) -> V {
     ];
     const CLAMP: f32 = f32::from_bits(0x40fc_f84f);
     const TINY: f32 = f32::from_bits(0x39d1_b717);
-    let x = x.map(|v| v.clamp(-CLAMP, CLAMP));
+    let mut x = x;
+    for v in &mut x {
+        *v = v.clamp(-CLAMP, CLAMP);
+    }
     let x2 = mul(x, x);
     let mut p = fma(x2, splat(A[6]), splat(A[5]));
     for a in A[..5].iter().rev() {
@@ -327,93 +389,99 @@ fn tanh_v(x: V) -> V {
     ratio
 }
 
-/// Rows of a layer computed together, so that their sums are independent chains of
-/// fused multiply-adds (each row's own order is unchanged).
-const ROWS: usize = 4;
-
-/// z_i = b_i + Σ_j W[i][j]·a_j for the `ROWS` rows from `i0` (rows past `outputs` unused).
 #[inline(always)]
-fn layer_rows(params: &[f32], span: &LayerSpan, i0: usize, prev: &[V]) -> [V; ROWS] {
-    let mut z = [[0.0f32; W]; ROWS];
-    let rows = ROWS.min(span.outputs - i0);
-    let mut weights = [&params[0..0]; ROWS];
-    for r in 0..rows {
-        z[r] = splat(params[span.bias_offset + i0 + r]);
-        weights[r] = &params[span.weight_offset + (i0 + r) * span.inputs..][..span.inputs];
-    }
-    if rows == ROWS {
-        for (j, a) in prev.iter().enumerate() {
-            for r in 0..ROWS {
-                z[r] = fma(splat(weights[r][j]), *a, z[r]);
+fn activate(activation: Activation, z: V) -> V {
+    match activation {
+        Activation::Tanh => tanh_v(z),
+        Activation::Relu => {
+            let mut out = z;
+            for v in &mut out {
+                *v = v.max(0.0);
             }
-        }
-    } else {
-        for r in 0..rows {
-            for (w, a) in weights[r].iter().zip(prev) {
-                z[r] = fma(splat(*w), *a, z[r]);
-            }
+            out
         }
     }
-    z
 }
 
-/// Forward and backward pass of the block of samples s0 … s0 + count − 1 (count ≤ 8; the
-/// other lanes carry zero deltas). Leaves each layer's outputs in `acts` and deltas in
-/// `deltas`; returns the block's squared error. The stages are `#[inline(always)]`: this is
-/// the hot loop, one function once compiled.
-#[allow(clippy::too_many_arguments)]
+/// The inputs of the tile's blocks from sample `s0` (`counts[q]` samples in block q), zero in
+/// the lanes past them.
 #[inline(always)]
-fn forward_backward(
-    shape: &Shape,
-    params: &[f32],
-    set: &TrainingSet,
-    s0: usize,
-    count: usize,
-    grad_scale: f32,
-    acts: &mut [V],
-    deltas: &mut [V],
-) -> f64 {
-    let input = block_inputs(set, s0, count);
-    forward(shape, params, &input, acts);
-    let out_unit = shape.unit_offset[shape.spans.len() - 1];
-    let sq_err = output_deltas(
-        &acts[out_unit],
-        set,
-        s0,
-        count,
-        grad_scale,
-        &mut deltas[out_unit],
-    );
-    for l in (1..shape.spans.len()).rev() {
-        backward_layer(shape, params, l, acts, deltas);
+fn tile_inputs(set: &TrainingSet, s0: usize, counts: &[usize; TILE]) -> [T; 2] {
+    let mut input = [[[0.0f32; W]; TILE]; 2];
+    for (q, &count) in counts.iter().enumerate() {
+        let from = s0 + q * W;
+        if count == 0 {
+            continue;
+        }
+        for (b, x) in set.inputs[from..from + count].iter().enumerate() {
+            input[0][q][b] = x[0];
+            input[1][q][b] = x[1];
+        }
     }
-    sq_err
+    input
 }
 
-/// Forward pass of the block: each layer's outputs (activated except the last) into `acts`.
+/// Forward pass of the tile: each layer's outputs (activated except the last) into `acts`.
 #[inline(always)]
-fn forward(shape: &Shape, params: &[f32], input: &[V; 2], acts: &mut [V]) {
+fn forward(shape: &Shape, params: &[f32], input: &[T; 2], acts: &mut [T]) {
     let last = shape.spans.len() - 1;
     for (l, span) in shape.spans.iter().enumerate() {
         let (done, rest) = acts.split_at_mut(shape.unit_offset[l]);
-        let prev: &[V] = if l == 0 {
+        let prev: &[T] = if l == 0 {
             input
         } else {
             &done[shape.unit_offset[l - 1]..][..span.inputs]
         };
         let out = &mut rest[..span.outputs];
-        for i0 in (0..span.outputs).step_by(ROWS) {
-            let z = layer_rows(params, span, i0, prev);
-            for (r, o) in out[i0..].iter_mut().take(ROWS).enumerate() {
-                *o = if l == last {
-                    z[r]
-                } else {
-                    match shape.activation {
-                        Activation::Tanh => tanh_v(z[r]),
-                        Activation::Relu => z[r].map(|v| v.max(0.0)),
-                    }
-                };
+        let act = (l != last).then_some(shape.activation);
+        let mut i0 = 0;
+        while i0 + FWD_ROWS <= span.outputs {
+            forward_rows::<FWD_ROWS>(params, span, i0, prev, act, out);
+            i0 += FWD_ROWS;
+        }
+        while i0 < span.outputs {
+            forward_rows::<1>(params, span, i0, prev, act, out);
+            i0 += 1;
+        }
+    }
+}
+
+/// Outputs i0 … i0 + R − 1 of a layer for every block of the tile:
+/// z_i = b_i + Σ_j W[i][j]·a_j (j ascending), activated with `act` if given.
+#[inline(always)]
+fn forward_rows<const R: usize>(
+    params: &[f32],
+    span: &LayerSpan,
+    i0: usize,
+    prev: &[T],
+    act: Option<Activation>,
+    out: &mut [T],
+) {
+    let inputs = span.inputs;
+    let prev = &prev[..inputs];
+    // Plain loops, not `array::from_fn` or `map` closures: a closure is compiled apart from
+    // the SIMD dispatch, without its vector features (and `mul_add` there is a libm call).
+    let mut weights = [&params[..0]; R];
+    let mut z = [[[0.0f32; W]; TILE]; R];
+    for r in 0..R {
+        weights[r] = &params[span.weight_offset + (i0 + r) * inputs..][..inputs];
+        z[r] = [splat(params[span.bias_offset + i0 + r]); TILE];
+    }
+    for j in 0..inputs {
+        let a = &prev[j];
+        for r in 0..R {
+            let w = splat(weights[r][j]);
+            for q in 0..TILE {
+                z[r][q] = fma(w, a[q], z[r][q]);
             }
+        }
+    }
+    for r in 0..R {
+        for q in 0..TILE {
+            out[i0 + r][q] = match act {
+                Some(activation) => activate(activation, z[r][q]),
+                None => z[r][q],
+            };
         }
     }
 }
@@ -445,92 +513,171 @@ fn output_deltas(
 /// The deltas of layer `l`'s inputs from its output deltas:
 /// δ_prev[j] = (Σ_i W[i][j]·δ_i, i ascending)·f'(a_prev[j]).
 #[inline(always)]
-fn backward_layer(shape: &Shape, params: &[f32], l: usize, acts: &[V], deltas: &mut [V]) {
+fn backward_layer(shape: &Shape, params: &[f32], l: usize, acts: &[T], deltas: &mut [T]) {
     let span = shape.spans[l];
     let (before, current) = deltas.split_at_mut(shape.unit_offset[l]);
     let delta = &current[..span.outputs];
     let prev_acts = &acts[shape.unit_offset[l - 1]..][..span.inputs];
     let prev_delta = &mut before[shape.unit_offset[l - 1]..][..span.inputs];
-    // back_j = Σ_i W[i][j]·δ_i, i ascending: rows of W two at a time, every column j an
-    // independent sum.
-    let back = &mut prev_delta[..];
-    back.iter_mut().for_each(|b| *b = [0.0; W]);
-    let mut i = 0;
-    while i + 1 < span.outputs {
-        let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-        let w1 = &params[span.weight_offset + (i + 1) * span.inputs..][..span.inputs];
-        let (d0, d1) = (delta[i], delta[i + 1]);
-        for ((b, x0), x1) in back.iter_mut().zip(w0).zip(w1) {
-            *b = fma(splat(*x1), d1, fma(splat(*x0), d0, *b));
-        }
-        i += 2;
+    let mut j0 = 0;
+    while j0 + BWD_COLS <= span.inputs {
+        backward_cols::<BWD_COLS>(
+            params,
+            &span,
+            j0,
+            delta,
+            prev_acts,
+            shape.activation,
+            prev_delta,
+        );
+        j0 += BWD_COLS;
     }
-    if i < span.outputs {
-        let w0 = &params[span.weight_offset + i * span.inputs..][..span.inputs];
-        for (b, x0) in back.iter_mut().zip(w0) {
-            *b = fma(splat(*x0), delta[i], *b);
-        }
-    }
-    for (b, a) in back.iter_mut().zip(prev_acts) {
-        let slope = match shape.activation {
-            Activation::Tanh => fma(*a, a.map(|v| -v), splat(1.0)),
-            Activation::Relu => a.map(|v| if v > 0.0 { 1.0 } else { 0.0 }),
-        };
-        *b = mul(*b, slope);
+    while j0 < span.inputs {
+        backward_cols::<1>(
+            params,
+            &span,
+            j0,
+            delta,
+            prev_acts,
+            shape.activation,
+            prev_delta,
+        );
+        j0 += 1;
     }
 }
 
-/// The two inputs of samples s0 … s0 + count − 1, zero in the lanes past them.
+/// Input deltas j0 … j0 + C − 1 of a layer for every block of the tile.
 #[inline(always)]
-fn block_inputs(set: &TrainingSet, s0: usize, count: usize) -> [V; 2] {
-    let mut input = [[0.0f32; W]; 2];
-    let s0 = s0.min(set.len());
-    for (b, x) in set.inputs[s0..(s0 + count).min(set.len())]
-        .iter()
-        .enumerate()
-    {
-        input[0][b] = x[0];
-        input[1][b] = x[1];
+fn backward_cols<const C: usize>(
+    params: &[f32],
+    span: &LayerSpan,
+    j0: usize,
+    delta: &[T],
+    prev_acts: &[T],
+    activation: Activation,
+    prev_delta: &mut [T],
+) {
+    let inputs = span.inputs;
+    let delta = &delta[..span.outputs];
+    let weights = &params[span.weight_offset..][..span.outputs * inputs];
+    let mut back = [[[0.0f32; W]; TILE]; C];
+    for (i, d) in delta.iter().enumerate() {
+        let row = &weights[i * inputs + j0..][..C];
+        for c in 0..C {
+            let w = splat(row[c]);
+            for q in 0..TILE {
+                back[c][q] = fma(w, d[q], back[c][q]);
+            }
+        }
     }
-    input
+    for c in 0..C {
+        let a = &prev_acts[j0 + c];
+        for q in 0..TILE {
+            let mut slope = [0.0f32; W];
+            for b in 0..W {
+                slope[b] = match activation {
+                    Activation::Tanh => a[q][b].mul_add(-a[q][b], 1.0),
+                    Activation::Relu => {
+                        if a[q][b] > 0.0 {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    }
+                };
+            }
+            prev_delta[j0 + c][q] = mul(back[c][q], slope);
+        }
+    }
 }
 
-/// Adds δ_i·a_j (and δ_i for the biases) of the [`PAIR`] blocks starting at sample `s0` to
-/// the 8 lane accumulators, block after block, so each lane keeps ascending sample order.
+/// Adds δ_i·a_j (and δ_i for the biases) of the first `real` blocks of the tile to the 8
+/// lane accumulators, block after block, so each lane keeps ascending sample order.
 #[inline(always)]
 fn accumulate(
     shape: &Shape,
-    set: &TrainingSet,
-    s0: usize,
-    acts: [&[V]; PAIR],
-    deltas: [&[V]; PAIR],
+    input: &[T; 2],
+    acts: &[T],
+    deltas: &[T],
+    real: usize,
     lanes: &mut [V],
 ) {
-    let mut inputs = [[[0.0f32; W]; 2]; PAIR];
-    for (q, input) in inputs.iter_mut().enumerate() {
-        *input = block_inputs(set, s0 + q * W, W);
-    }
     for (l, span) in shape.spans.iter().enumerate() {
-        let prev: [&[V]; PAIR] = if l == 0 {
-            [&inputs[0], &inputs[1]]
+        let prev: &[T] = if l == 0 {
+            input
         } else {
-            let from = shape.unit_offset[l - 1];
-            [
-                &acts[0][from..][..span.inputs],
-                &acts[1][from..][..span.inputs],
-            ]
+            &acts[shape.unit_offset[l - 1]..][..span.inputs]
         };
-        for i in 0..span.outputs {
-            let unit = shape.unit_offset[l] + i;
-            let d = [deltas[0][unit], deltas[1][unit]];
-            let row = &mut lanes[span.weight_offset + i * span.inputs..][..span.inputs];
-            for ((g, a0), a1) in row.iter_mut().zip(prev[0]).zip(prev[1]) {
-                *g = fma(d[1], *a1, fma(d[0], *a0, *g));
-            }
-            let bias = &mut lanes[span.bias_offset + i];
-            for b in 0..W {
-                bias[b] = bias[b] + d[0][b] + d[1][b];
+        let delta = &deltas[shape.unit_offset[l]..][..span.outputs];
+        let (weights, rest) = lanes[span.weight_offset..].split_at_mut(span.outputs * span.inputs);
+        for (bias, d) in rest[..span.outputs].iter_mut().zip(delta) {
+            for dq in &d[..real] {
+                for b in 0..W {
+                    bias[b] += dq[b];
+                }
             }
         }
+        let mut i0 = 0;
+        while i0 + GRAD_ROWS <= span.outputs {
+            gradient_rows::<GRAD_ROWS>(span, i0, delta, prev, real, weights);
+            i0 += GRAD_ROWS;
+        }
+        while i0 < span.outputs {
+            gradient_rows::<1>(span, i0, delta, prev, real, weights);
+            i0 += 1;
+        }
+    }
+}
+
+/// The lanes of weight rows i0 … i0 + R − 1 of a layer, [`GRAD_COLS`] columns at a time.
+#[inline(always)]
+fn gradient_rows<const R: usize>(
+    span: &LayerSpan,
+    i0: usize,
+    delta: &[T],
+    prev: &[T],
+    real: usize,
+    weights: &mut [V],
+) {
+    let inputs = span.inputs;
+    let mut j0 = 0;
+    while j0 + GRAD_COLS <= inputs {
+        gradient_tile::<R, GRAD_COLS>(inputs, i0, j0, delta, prev, real, weights);
+        j0 += GRAD_COLS;
+    }
+    while j0 < inputs {
+        gradient_tile::<R, 1>(inputs, i0, j0, delta, prev, real, weights);
+        j0 += 1;
+    }
+}
+
+/// The lanes of W[i0 … i0 + R − 1][j0 … j0 + C − 1] held in registers while the first
+/// `real` blocks of the tile add δ_i·a_j to them, blocks ascending.
+#[inline(always)]
+fn gradient_tile<const R: usize, const C: usize>(
+    inputs: usize,
+    i0: usize,
+    j0: usize,
+    delta: &[T],
+    prev: &[T],
+    real: usize,
+    weights: &mut [V],
+) {
+    let d = &delta[i0..][..R];
+    let a = &prev[j0..][..C];
+    let mut g = [[[0.0f32; W]; C]; R];
+    for r in 0..R {
+        g[r].copy_from_slice(&weights[(i0 + r) * inputs + j0..][..C]);
+    }
+    for q in 0..real.min(TILE) {
+        for r in 0..R {
+            let dq = d[r][q];
+            for c in 0..C {
+                g[r][c] = fma(dq, a[c][q], g[r][c]);
+            }
+        }
+    }
+    for r in 0..R {
+        weights[(i0 + r) * inputs + j0..][..C].copy_from_slice(&g[r]);
     }
 }
