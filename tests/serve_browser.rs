@@ -35,6 +35,64 @@ fn make_run(runs: &std::path::Path) {
     assert!(dir.join("report.html").is_file());
 }
 
+/// Log in through the form as the operator `op` from a fresh page; ends on the live page.
+fn log_in_as_operator(dt: &mut DevTools, s: &str, url: &str) {
+    dt.call(
+        Some(s),
+        "Page.navigate",
+        serde_json::json!({"url": format!("{url}/live")}),
+    );
+    // Without a session: the login form.
+    dt.wait_until(
+        s,
+        "location.pathname === '/login' && document.readyState === 'complete'",
+        Duration::from_secs(30),
+        "the login page",
+    );
+    dt.eval(
+        s,
+        &format!(
+            "document.querySelector('input[name=user]').value = 'op';
+             document.querySelector('input[name=password]').value = '{PASSWORD}';
+             document.querySelector('form.login').submit(); true"
+        ),
+    );
+    dt.wait_until(
+        s,
+        "location.pathname === '/live'",
+        Duration::from_secs(30),
+        "the live page after login",
+    );
+}
+
+/// No console error, exception, CSP violation or failed load (a live stream cancelled by
+/// leaving its page is not a failure), and no request outside the server.
+fn assert_browser_clean(dt: &DevTools, url: &str) {
+    for e in &dt.events {
+        let m = e["method"].as_str().unwrap_or("");
+        let p = &e["params"];
+        let bad = match m {
+            "Runtime.consoleAPICalled" => matches!(p["type"].as_str(), Some("error" | "assert")),
+            "Runtime.exceptionThrown" => true,
+            "Log.entryAdded" => p["entry"]["level"] == "error",
+            "Network.loadingFailed" => p["canceled"] != true,
+            _ => false,
+        };
+        assert!(!bad, "browser reported: {e}");
+    }
+    for e in dt
+        .events
+        .iter()
+        .filter(|e| e["method"] == "Network.requestWillBeSent")
+    {
+        let r = e["params"]["request"]["url"].as_str().unwrap_or("");
+        assert!(
+            r.starts_with(&format!("{url}/")) || r.starts_with("data:") || r == "about:blank",
+            "request outside the server: {r}"
+        );
+    }
+}
+
 #[test]
 fn log_in_watch_the_live_page_follow_the_state_file_and_open_a_report() {
     let Some(chrome) = browser_or_skip("serve_browser") else {
@@ -57,32 +115,7 @@ fn log_in_watch_the_live_page_follow_the_state_file_and_open_a_report() {
     let url = server.url.clone();
     let mut dt = DevTools::start(&chrome);
     let s = dt.page();
-    dt.call(
-        Some(&s),
-        "Page.navigate",
-        serde_json::json!({"url": format!("{url}/live")}),
-    );
-    // Without a session: the login form.
-    dt.wait_until(
-        &s,
-        "location.pathname === '/login' && document.readyState === 'complete'",
-        Duration::from_secs(30),
-        "the login page",
-    );
-    dt.eval(
-        &s,
-        &format!(
-            "document.querySelector('input[name=user]').value = 'op';
-             document.querySelector('input[name=password]').value = '{PASSWORD}';
-             document.querySelector('form.login').submit(); true"
-        ),
-    );
-    dt.wait_until(
-        &s,
-        "location.pathname === '/live'",
-        Duration::from_secs(30),
-        "the live page after login",
-    );
+    log_in_as_operator(&mut dt, &s, &url);
     // The script fills the page from the stream.
     dt.wait_until(
         &s,
@@ -161,20 +194,6 @@ fn log_in_watch_the_live_page_follow_the_state_file_and_open_a_report() {
         .unwrap();
     assert!(sections.as_u64().unwrap() >= 1);
     dt.drain(Duration::from_millis(500));
-    // No console error, exception, CSP violation or failed load (the live stream cancelled by
-    // leaving its page is not a failure).
-    for e in &dt.events {
-        let m = e["method"].as_str().unwrap_or("");
-        let p = &e["params"];
-        let bad = match m {
-            "Runtime.consoleAPICalled" => matches!(p["type"].as_str(), Some("error" | "assert")),
-            "Runtime.exceptionThrown" => true,
-            "Log.entryAdded" => p["entry"]["level"] == "error",
-            "Network.loadingFailed" => p["canceled"] != true,
-            _ => false,
-        };
-        assert!(!bad, "browser reported: {e}");
-    }
     let requests: Vec<&str> = dt
         .events
         .iter()
@@ -186,12 +205,7 @@ fn log_in_watch_the_live_page_follow_the_state_file_and_open_a_report() {
         "{requests:?}"
     );
     assert!(requests.contains(&report.as_str()), "{requests:?}");
-    for r in &requests {
-        assert!(
-            r.starts_with(&format!("{url}/")) || r.starts_with("data:") || *r == "about:blank",
-            "request outside the server: {r}"
-        );
-    }
+    assert_browser_clean(&dt, &url);
 }
 
 /// Rows of the sample replay the live test keeps (the first 15 minutes of data time).
@@ -282,28 +296,10 @@ fn the_live_page_follows_errmap_live_replaying_the_sample_and_an_operator_pauses
     let url = server.url.clone();
     let mut dt = DevTools::start(&chrome);
     let s = dt.page();
-    dt.call(
-        Some(&s),
-        "Page.navigate",
-        serde_json::json!({"url": format!("{url}/login")}),
-    );
+    log_in_as_operator(&mut dt, &s, &url);
     dt.wait_until(
         &s,
-        "document.readyState === 'complete' && !!document.querySelector('form.login')",
-        Duration::from_secs(30),
-        "the login page",
-    );
-    dt.eval(
-        &s,
-        &format!(
-            "document.querySelector('input[name=user]').value = 'op';
-             document.querySelector('input[name=password]').value = '{PASSWORD}';
-             document.querySelector('form.login').submit(); true"
-        ),
-    );
-    dt.wait_until(
-        &s,
-        "location.pathname === '/live' && document.getElementById('mode').textContent === 'no state'",
+        "document.getElementById('mode').textContent === 'no state'",
         Duration::from_secs(30),
         "the live page before the loop runs",
     );
@@ -454,27 +450,5 @@ fn the_live_page_follows_errmap_live_replaying_the_sample_and_an_operator_pauses
         ]
     );
     dt.drain(Duration::from_millis(500));
-    for e in &dt.events {
-        let m = e["method"].as_str().unwrap_or("");
-        let p = &e["params"];
-        let bad = match m {
-            "Runtime.consoleAPICalled" => matches!(p["type"].as_str(), Some("error" | "assert")),
-            "Runtime.exceptionThrown" => true,
-            "Log.entryAdded" => p["entry"]["level"] == "error",
-            "Network.loadingFailed" => p["canceled"] != true,
-            _ => false,
-        };
-        assert!(!bad, "browser reported: {e}");
-    }
-    for e in dt
-        .events
-        .iter()
-        .filter(|e| e["method"] == "Network.requestWillBeSent")
-    {
-        let r = e["params"]["request"]["url"].as_str().unwrap_or("");
-        assert!(
-            r.starts_with(&format!("{url}/")) || r.starts_with("data:") || r == "about:blank",
-            "request outside the server: {r}"
-        );
-    }
+    assert_browser_clean(&dt, &url);
 }
