@@ -122,7 +122,7 @@ impl Sums {
     }
 }
 
-/// Each node's value from the points of its cell ([`Sums::value`]); `None` for an empty cell.
+/// Each node's value from the points of its cell (`Sums::value`); `None` for an empty cell.
 /// Coordinates are taken relative to the node in units of the spacing, so the sums stay well
 /// scaled.
 pub fn binned_nodes(points_uve: &[[f64; 3]], grid: &Grid) -> Vec<Option<f64>> {

@@ -107,7 +107,7 @@ pub fn likelihood_factor(misses_um: &[f64], sd_um: &[f64], noise_um: f64) -> Opt
 
 /// The parameters of largest profiled likelihood near `start` (the kriging's grid search), on
 /// the same subsample as [`Parameters::fit`]: a pattern search over ln ℓ and ln g (the best of
-/// the 8 neighbours at factors [`REFINE_STEPS`], up to [`REFINE_MOVES`] moves per step),
+/// the 8 neighbours at factors `REFINE_STEPS`, up to `REFINE_MOVES` moves per step),
 /// within the grid's own range (ℓ from 1 % to 200 % of the sites' diagonal, g from 1e-6 to
 /// 1). `start` is kept when no neighbour improves it.
 pub fn refined_parameters(points_uve: &[[f64; 3]], start: Parameters) -> Parameters {
@@ -228,7 +228,7 @@ pub struct Uncertainty {
     pub method: String,
     /// The grid of `u_um` (node (i, j) at (u0 + i·step, v0 + j·step), u fastest).
     pub grid: Grid,
-    /// u(E) per node, µm. Written as one line of JSON ([`one_line`]); read as any JSON list,
+    /// u(E) per node, µm. Written as one line of JSON (`one_line`); read as any JSON list,
     /// so files written one number per line (errmap before this form) read as before.
     #[serde(serialize_with = "one_line")]
     pub u_um: Vec<f64>,

@@ -74,9 +74,9 @@ pub struct Cleaned {
 ///
 /// Up to [`FROM_SCRATCH_MAX_POINTS`] points each residual comes from a fresh triangulation of
 /// the others; above, from the point's neighbourhood in one triangulation of the active points
-/// ([`super::loo`]): a rejection removes the point from it and predicts again only the points
+/// (`probe::loo`): a rejection removes the point from it and predicts again only the points
 /// within three rings of it, and σ comes from a sorted multiset updated with them
-/// ([`super::order_stat`]). Both give the same residuals wherever the Delaunay triangulation is
+/// (`probe::order_stat`). Both give the same residuals wherever the Delaunay triangulation is
 /// unique, at O(n log n) for the second.
 pub fn reject_gross_errors(set: &ProbeSet, k_sigma: f64) -> Result<Cleaned> {
     if !(k_sigma.is_finite() && k_sigma > 0.0) {
@@ -100,7 +100,7 @@ pub fn reject_gross_errors(set: &ProbeSet, k_sigma: f64) -> Result<Cleaned> {
 /// all the points, so a local triangulation can pick other diagonals and move a borderline
 /// point's residual across k·σ. Keeping the definition here keeps the decisions (and the
 /// hold-out split that follows from them) of every part of this size; it costs O(n² log n) per
-/// rejection, about a second at this size. Above it the local path ([`reject_local`]) runs.
+/// rejection, about a second at this size. Above it the local path (`reject_local`) runs.
 pub const FROM_SCRATCH_MAX_POINTS: usize = 1000;
 
 /// The k·σ loop on residuals from a fresh triangulation of the others (the definition).
