@@ -5,6 +5,7 @@
 
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::{Axis, Domain};
+use errmap_core::io::line_col;
 use errmap_maps::interp::Method;
 use errmap_maps::nn::ModelConfig;
 use serde::{Deserialize, Serialize};
@@ -204,19 +205,6 @@ pub struct JobFile {
     pub path: PathBuf,
     /// The job it holds, validated.
     pub job: Job,
-}
-
-/// 1-based (line, column) of a byte offset.
-fn line_col(text: &str, byte: usize) -> (u64, u64) {
-    let end = byte.min(text.len());
-    let before = &text.as_bytes()[..end];
-    let line = 1 + before.iter().filter(|&&b| b == b'\n').count() as u64;
-    let line_start = before
-        .iter()
-        .rposition(|&b| b == b'\n')
-        .map_or(0, |p| p + 1);
-    let col = 1 + text.get(line_start..end).map_or(0, |s| s.chars().count()) as u64;
-    (line, col)
 }
 
 /// 1-based (line, column) of the value of a dotted key (`clean.k_sigma`) in job TOML, from the

@@ -10,6 +10,20 @@ use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// 1-based (line, column) of a byte offset in a text, the column in characters, as an editor
+/// shows them (the TOML files' error locations: job files and live configs).
+pub fn line_col(text: &str, byte: usize) -> (u64, u64) {
+    let end = byte.min(text.len());
+    let before = &text.as_bytes()[..end];
+    let line = 1 + before.iter().filter(|&&b| b == b'\n').count() as u64;
+    let line_start = before
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |p| p + 1);
+    let col = 1 + text.get(line_start..end).map_or(0, |s| s.chars().count()) as u64;
+    (line, col)
+}
+
 /// Write a file atomically: the content goes to a temporary file beside `path`, which is
 /// flushed and then renamed over the target, so an interrupted run never leaves a
 /// half-written file that looks complete. The file is created with mode 0666 less the umask,
@@ -475,6 +489,17 @@ pub fn cache_dir() -> Option<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn line_col_counts_lines_and_characters_from_one() {
+        // "ab\n" is bytes 0–2, "cdé\n" 3–7 (é is two bytes), "f" is byte 8.
+        let text = "ab\ncdé\nf";
+        assert_eq!(line_col(text, 0), (1, 1));
+        assert_eq!(line_col(text, 2), (1, 3));
+        assert_eq!(line_col(text, 7), (2, 4));
+        assert_eq!(line_col(text, 8), (3, 1));
+        assert_eq!(line_col(text, 99), (3, 2), "past the end: the end");
+    }
 
     #[test]
     fn numbers_and_errors_name_line_and_column() {

@@ -3,6 +3,7 @@
 //! Every error names the file, the key and the line of the offending value.
 
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::io::line_col;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -716,19 +717,6 @@ fn display_key(key: &str) -> String {
         }
     }
     out
-}
-
-/// 1-based (line, column) of a byte offset.
-pub(crate) fn line_col(text: &str, byte: usize) -> (u64, u64) {
-    let end = byte.min(text.len());
-    let before = &text.as_bytes()[..end];
-    let line = 1 + before.iter().filter(|&&b| b == b'\n').count() as u64;
-    let line_start = before
-        .iter()
-        .rposition(|&b| b == b'\n')
-        .map_or(0, |p| p + 1);
-    let col = 1 + text.get(line_start..end).map_or(0, |s| s.chars().count()) as u64;
-    (line, col)
 }
 
 /// (line, column) of the deepest part of a dotted key present in the text (array elements by

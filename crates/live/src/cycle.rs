@@ -1269,14 +1269,13 @@ impl Live {
             Some(notes.join("; "))
         };
         if let Some(f) = self.link.failure() {
-            if let Some(id) = self.alarms.raise(
+            // Raised once while the failure lasts (raise ignores an active key).
+            self.alarms.raise(
                 "store",
                 "store",
                 format!("the store cannot be written: {f}"),
                 &utc,
-            ) {
-                let _ = id;
-            }
+            );
         } else {
             self.alarms.clear("store");
         }
