@@ -2,11 +2,11 @@
 //! runtime, with blocking reads and writes of node values bounded by a timeout. Security
 //! policy `None` (message security mode None), anonymous or user name and password.
 
-use errmap_core::error::{Error, Result};
+use errmap_core::error::Error;
 use opcua::client::{ClientBuilder, IdentityToken, Password, Session};
 use opcua::types::{
     AttributeId, DataValue, EndpointDescription, MessageSecurityMode, NodeId, NumericRange,
-    ReadValueId, TimestampsToReturn, UserTokenPolicy, Variant, WriteValue,
+    ReadValueId, StatusCode, TimestampsToReturn, UserTokenPolicy, Variant, WriteValue,
 };
 use std::str::FromStr;
 use std::sync::Arc;
@@ -35,21 +35,92 @@ pub fn node_id(text: &str) -> std::result::Result<NodeId, String> {
     NodeId::from_str(text).map_err(|_| format!("'{text}' is not a node id"))
 }
 
+/// Why a connection failed.
+#[derive(Debug)]
+pub enum ConnectError {
+    /// The server refused the session's user identity (`BadUserAccessDenied`,
+    /// `BadIdentityTokenRejected`, `BadIdentityTokenInvalid`): a wrong user name or password,
+    /// or a login the server does not take. The status code's name.
+    Denied(String),
+    /// The server could not be reached or the session failed otherwise (exit 3).
+    Failed(Error),
+}
+
+impl From<ConnectError> for Error {
+    fn from(e: ConnectError) -> Error {
+        match e {
+            ConnectError::Failed(e) => e,
+            ConnectError::Denied(code) => Error::io(
+                "log in to",
+                "the OPC UA server",
+                std::io::Error::other(code),
+            ),
+        }
+    }
+}
+
+impl std::fmt::Display for ConnectError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ConnectError::Denied(code) => write!(f, "the server refused the login ({code})"),
+            ConnectError::Failed(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+/// The error of a login the server refused, for a source or target at `key` of `config`
+/// (`what` names it): the `user` key (or the source or target itself when it logs in
+/// anonymously), exit 2 with what to check.
+pub fn denied_error(
+    config: &crate::config::LiveConfig,
+    key: &str,
+    what: &str,
+    endpoint: &str,
+    user: Option<&str>,
+    code: &str,
+) -> Error {
+    let (at, how) = match user {
+        Some(u) => (
+            format!("{key}.user"),
+            format!("user '{u}' with the configured password"),
+        ),
+        None => (key.to_string(), "an anonymous session".to_string()),
+    };
+    config.key_error(
+        &at,
+        format!("{what} at {endpoint} refused {how} ({code})"),
+        "check the `user` and `password` keys against the server's user accounts (a user allowed \
+         to read and write these nodes); without `user` errmap logs in anonymously",
+    )
+}
+
+/// The status codes with which a server refuses a session's user identity.
+fn is_denial(code: StatusCode) -> bool {
+    matches!(
+        code,
+        StatusCode::BadUserAccessDenied
+            | StatusCode::BadIdentityTokenRejected
+            | StatusCode::BadIdentityTokenInvalid
+    )
+}
+
 impl OpcUa {
-    /// Connect (exit 3 when the server cannot be reached or refuses the session).
+    /// Connect: [`ConnectError::Denied`] when the server refuses the user identity (the caller
+    /// names the `user` and `password` keys, exit 2), [`ConnectError::Failed`] when it cannot
+    /// be reached or the session fails otherwise (exit 3).
     pub fn connect(
         what: &str,
         endpoint: &str,
         user: Option<&str>,
         password: Option<&str>,
         timeout: Duration,
-    ) -> Result<OpcUa> {
+    ) -> std::result::Result<OpcUa, ConnectError> {
         let unreachable = |e: String| {
-            Error::io(
+            ConnectError::Failed(Error::io(
                 "connect to",
                 format!("{what} at {endpoint}"),
                 std::io::Error::other(e),
-            )
+            ))
         };
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
@@ -86,22 +157,39 @@ impl OpcUa {
                 client.connect_to_matching_endpoint(description, identity),
             )
             .await
-            .map_err(|_| format!("no answer within {} ms", timeout.as_millis()))?
-            .map_err(|e| e.to_string())?;
-            event_loop.spawn();
-            let connected = tokio::time::timeout(timeout, session.wait_for_connection())
-                .await
-                .unwrap_or(false);
-            if connected {
-                Ok(session)
-            } else {
-                Err(
+            .map_err(|_| unreachable(format!("no answer within {} ms", timeout.as_millis())))?
+            .map_err(|e| {
+                if is_denial(e.status()) {
+                    ConnectError::Denied(format!("{}", e.status()))
+                } else {
+                    unreachable(e.to_string())
+                }
+            })?;
+            let mut ended = event_loop.spawn();
+            // The event loop ends with the status of a session it could not establish (a
+            // refused login among them); the session never reports a connection then.
+            let outcome = tokio::time::timeout(timeout, async {
+                tokio::select! {
+                    connected = session.wait_for_connection() => Ok(connected),
+                    code = &mut ended => Err(code),
+                }
+            })
+            .await;
+            match outcome {
+                Ok(Ok(true)) => Ok(session),
+                Ok(Err(Ok(code))) if is_denial(code) => {
+                    Err(ConnectError::Denied(format!("{code}")))
+                }
+                Ok(Err(Ok(code))) => Err(unreachable(format!(
+                    "the session was not established ({code})"
+                ))),
+                _ => Err(unreachable(
                     "the session was not established (user, password, security policy?)"
                         .to_string(),
-                )
+                )),
             }
         });
-        let session = session.map_err(unreachable)?;
+        let session = session?;
         Ok(OpcUa {
             rt,
             session,

@@ -4,7 +4,7 @@
 
 use super::{Snapshot, Source, Value};
 use crate::config::{LiveConfig, SourceConfig};
-use crate::opcua::{node_id, NodeValue, OpcUa};
+use crate::opcua::{denied_error, node_id, ConnectError, NodeValue, OpcUa};
 use errmap_core::error::{Error, Result};
 use opcua::types::NodeId;
 use std::sync::{Arc, Mutex};
@@ -38,7 +38,7 @@ struct Login {
 }
 
 impl Login {
-    fn connect(&self) -> Result<OpcUa> {
+    fn connect(&self) -> std::result::Result<OpcUa, ConnectError> {
         OpcUa::connect(
             &self.what,
             &self.endpoint,
@@ -76,7 +76,17 @@ impl OpcUaSource {
             password: s.password.clone(),
             timeout: Duration::from_millis(s.timeout_ms),
         };
-        let client = login.connect()?;
+        let client = login.connect().map_err(|e| match e {
+            ConnectError::Denied(code) => denied_error(
+                config,
+                &key,
+                &login.what,
+                &login.endpoint,
+                login.user.as_deref(),
+                &code,
+            ),
+            ConnectError::Failed(e) => e,
+        })?;
         let first = client.read(&nodes).map_err(|e| {
             Error::io(
                 "read from",

@@ -14,7 +14,7 @@
 use super::{Output, Present, Target};
 use crate::axis::Line;
 use crate::config::{LiveConfig, TargetConfig, TargetKind};
-use crate::opcua::{node_id, OpcUa};
+use crate::opcua::{denied_error, node_id, ConnectError, OpcUa};
 use errmap_core::error::{Error, Result};
 use opcua::types::NodeId;
 use std::collections::BTreeMap;
@@ -104,13 +104,20 @@ impl OpcUaTarget {
             };
             axes.insert(axis.clone(), nodes);
         }
+        let what = format!("OPC UA target '{}'", t.name);
         let client = OpcUa::connect(
-            &format!("OPC UA target '{}'", t.name),
+            &what,
             &endpoint,
             t.user.as_deref(),
             t.password.as_deref(),
             Duration::from_millis(2000),
-        )?;
+        )
+        .map_err(|e| match e {
+            ConnectError::Denied(code) => {
+                denied_error(config, &key, &what, &endpoint, t.user.as_deref(), &code)
+            }
+            ConnectError::Failed(e) => e,
+        })?;
         Ok(OpcUaTarget {
             name: t.name.clone(),
             kind: t.kind,
