@@ -10,17 +10,6 @@ mod live_support;
 use live_support::*;
 use serde_json::json;
 
-fn set(s: &mut PyServer, node: &str, value: serde_json::Value) {
-    assert_eq!(
-        s.ask(&json!({"op": "set", "node": node, "value": value})),
-        "ok"
-    );
-}
-
-fn get(s: &mut PyServer, node: &str) -> f64 {
-    serde_json::from_str::<f64>(&s.ask(&json!({"op": "get", "node": node}))).unwrap()
-}
-
 #[test]
 fn sinumerik_k3_setting_data_over_opcua() {
     let Some(python) = venv_python("asyncua", "OPCUA") else {
@@ -29,23 +18,16 @@ fn sinumerik_k3_setting_data_over_opcua() {
     let dir = scratch();
     let d = dir.path();
     let model = Model::read(&d.join("model.json"));
-    let rows = synth_replay(d, &["--hours", "4", "--period-s", "1", "--campaign", "1"]);
-    let f: Vec<f64> = rows[7201]
-        .split(',')
-        .take(6)
-        .skip(3)
-        .map(|v| v.parse().unwrap())
-        .collect();
-    let (nut_ohm, bearing_c, room_c) = (f[0], f[1], f[2]);
+    let (nut_ohm, bearing_c, room_c) = warm_readings(d);
     let mut ua = PyServer::start(&python, "opcua_server.py", &[]);
-    set(&mut ua, "T.nut", json!(nut_ohm));
-    set(&mut ua, "T.bearing", json!(bearing_c));
-    set(&mut ua, "T.room", json!(room_c));
-    set(&mut ua, "Coolant", json!(true));
-    set(&mut ua, "X.position", json!(250.0));
-    set(&mut ua, "X.direction", json!(1));
+    ua_set(&mut ua, "T.nut", json!(nut_ohm));
+    ua_set(&mut ua, "T.bearing", json!(bearing_c));
+    ua_set(&mut ua, "T.room", json!(room_c));
+    ua_set(&mut ua, "Coolant", json!(true));
+    ua_set(&mut ua, "X.position", json!(250.0));
+    ua_set(&mut ua, "X.direction", json!(1));
     // The control holds an error line of 2 µm at P0 = 0 (SD43900 = 0.002 mm).
-    set(&mut ua, "SD43900[X]", json!(0.002));
+    ua_set(&mut ua, "SD43900[X]", json!(0.002));
     let text = format!(
         r#"[loop]
 period_ms = 100
@@ -54,36 +36,7 @@ on_stop = "hold"
 [store]
 path = "live.sqlite"
 
-[[sources]]
-name = "nc"
-kind = "opcua"
-endpoint = "opc.tcp://127.0.0.1:{p}/"
-security_policy = "None"
-period_ms = 100
-timeout_ms = 1000
-ramp_timeout_ms = 2500
-channels = [
-  {{ name = "nut", node = "ns=2;s=T.nut" }},
-  {{ name = "bearing", node = "ns=2;s=T.bearing" }},
-  {{ name = "room", node = "ns=2;s=T.room" }},
-  {{ name = "coolant", node = "ns=2;s=Coolant" }},
-  {{ name = "x", node = "ns=2;s=X.position" }},
-  {{ name = "dir", node = "ns=2;s=X.direction" }},
-]
-
-[sensors.nut]
-channel = "nc.nut"
-filter = "none"
-[sensors.bearing]
-channel = "nc.bearing"
-filter = "none"
-[sensors.room]
-channel = "nc.room"
-filter = "none"
-
-[coolant]
-channel = "nc.coolant"
-
+{tables}
 [[axes]]
 name = "X"
 model = "model.json"
@@ -104,7 +57,8 @@ sd43900 = "ns=2;s=SD43900[X]"
 sd43910 = "ns=2;s=SD43910[X]"
 sd43920 = "ns=2;s=SD43920[X]"
 "#,
-        p = ua.port
+        p = ua.port,
+        tables = ua_source_tables(ua.port, "", 1000, 2500),
     );
     std::fs::write(d.join("live.toml"), text).unwrap();
     let mut live = std::process::Command::new(ERRMAP)
@@ -145,9 +99,9 @@ sd43920 = "ns=2;s=SD43920[X]"
     let want = tan_beta("on", nut_ohm);
     assert!(want > 10.0, "a warm axis: {want} µm/m");
     let (sd0, sd1, sd2) = (
-        get(&mut ua, "SD43900[X]"),
-        get(&mut ua, "SD43910[X]"),
-        get(&mut ua, "SD43920[X]"),
+        ua_get(&mut ua, "SD43900[X]"),
+        ua_get(&mut ua, "SD43910[X]"),
+        ua_get(&mut ua, "SD43920[X]"),
     );
     assert!(sd0.abs() <= 1e-5, "SD43900 {sd0} mm (0.01 µm = 1e-5 mm)");
     assert!(
@@ -159,10 +113,10 @@ sd43920 = "ns=2;s=SD43920[X]"
 
     // Coolant off: the other gains, reached through the rate limit (many cycles).
     let switched_at = newest(d).unwrap().cycle;
-    set(&mut ua, "Coolant", json!(false));
+    ua_set(&mut ua, "Coolant", json!(false));
     let want_off = tan_beta("off", nut_ohm);
     wait_for("the coolant-off line", || {
-        ((get(&mut ua, "SD43910[X]") - want_off * 1e-6).abs() <= 1e-9).then_some(())
+        ((ua_get(&mut ua, "SD43910[X]") - want_off * 1e-6).abs() <= 1e-9).then_some(())
     });
     let all = cycles(&d.join("live.sqlite"));
     let ramp: Vec<&Cycle> = all
@@ -187,12 +141,12 @@ sd43920 = "ns=2;s=SD43920[X]"
     }
 
     // An open RTD (1000 Ω): held, alarmed, SD43910 unchanged.
-    let before = get(&mut ua, "SD43910[X]");
-    set(&mut ua, "T.nut", json!(1000.0));
+    let before = ua_get(&mut ua, "SD43910[X]");
+    ua_set(&mut ua, "T.nut", json!(1000.0));
     wait_for("holding", || newest(d).filter(|c| c.mode == "holding"));
     assert!(noted(d, "nut open RTD"));
-    assert_eq!(get(&mut ua, "SD43910[X]"), before);
-    set(&mut ua, "T.nut", json!(nut_ohm));
+    assert_eq!(ua_get(&mut ua, "SD43910[X]"), before);
+    ua_set(&mut ua, "T.nut", json!(nut_ohm));
     wait_for("running again", || {
         newest(d).filter(|c| c.mode == "running")
     });
@@ -205,7 +159,7 @@ sd43920 = "ns=2;s=SD43920[X]"
     });
     assert!(noted(d, "nc silent past its ramp timeout"));
     wait_for("zero setting data", || {
-        (get(&mut ua, "SD43910[X]") == 0.0 && get(&mut ua, "SD43900[X]") == 0.0).then_some(())
+        (ua_get(&mut ua, "SD43910[X]") == 0.0 && ua_get(&mut ua, "SD43900[X]") == 0.0).then_some(())
     });
 
     std::process::Command::new("kill")

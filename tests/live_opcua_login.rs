@@ -14,17 +14,6 @@ use serde_json::json;
 const USER: &str = "errmap";
 const PASSWORD: &str = "s3cret-K3";
 
-fn set(s: &mut PyServer, node: &str, value: serde_json::Value) {
-    assert_eq!(
-        s.ask(&json!({"op": "set", "node": node, "value": value})),
-        "ok"
-    );
-}
-
-fn get(s: &mut PyServer, node: &str) -> f64 {
-    serde_json::from_str::<f64>(&s.ask(&json!({"op": "get", "node": node}))).unwrap()
-}
-
 fn logins(s: &mut PyServer) -> (u64, u64) {
     let v: serde_json::Value = serde_json::from_str(&s.ask(&json!({"op": "logins"}))).unwrap();
     (
@@ -44,38 +33,7 @@ on_stop = "hold"
 [store]
 path = "live.sqlite"
 
-[[sources]]
-name = "nc"
-kind = "opcua"
-endpoint = "opc.tcp://127.0.0.1:{port}/"
-security_policy = "None"
-user = "{USER}"
-password = "{source_pw}"
-period_ms = 100
-timeout_ms = 2000
-ramp_timeout_ms = 5000
-channels = [
-  {{ name = "nut", node = "ns=2;s=T.nut" }},
-  {{ name = "bearing", node = "ns=2;s=T.bearing" }},
-  {{ name = "room", node = "ns=2;s=T.room" }},
-  {{ name = "coolant", node = "ns=2;s=Coolant" }},
-  {{ name = "x", node = "ns=2;s=X.position" }},
-  {{ name = "dir", node = "ns=2;s=X.direction" }},
-]
-
-[sensors.nut]
-channel = "nc.nut"
-filter = "none"
-[sensors.bearing]
-channel = "nc.bearing"
-filter = "none"
-[sensors.room]
-channel = "nc.room"
-filter = "none"
-
-[coolant]
-channel = "nc.coolant"
-
+{tables}
 [[axes]]
 name = "X"
 model = "model.json"
@@ -97,28 +55,28 @@ password = "{target_pw}"
 [targets.axes.X]
 node = "ns=2;s=Comp[X]"
 unit = "um"
-"#
+"#,
+        tables = ua_source_tables(
+            port,
+            &format!("user = \"{USER}\"\npassword = \"{source_pw}\""),
+            2000,
+            5000
+        ),
     )
 }
 
 /// The server with the one login, serving row 7201 of a synthetic campaign (warm, coolant on)
 /// with X at 250 mm going forward; returns it and the served (nut Ω, bearing °C, room °C).
 fn serve(python: &std::path::Path, d: &std::path::Path) -> (PyServer, (f64, f64, f64)) {
-    let rows = synth_replay(d, &["--hours", "4", "--period-s", "1", "--campaign", "1"]);
-    let f: Vec<f64> = rows[7201]
-        .split(',')
-        .take(6)
-        .skip(3)
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let (nut, bearing, room) = warm_readings(d);
     let mut ua = PyServer::start(python, "opcua_server.py", &[USER, PASSWORD]);
-    set(&mut ua, "T.nut", json!(f[0]));
-    set(&mut ua, "T.bearing", json!(f[1]));
-    set(&mut ua, "T.room", json!(f[2]));
-    set(&mut ua, "Coolant", json!(true));
-    set(&mut ua, "X.position", json!(250.0));
-    set(&mut ua, "X.direction", json!(1));
-    (ua, (f[0], f[1], f[2]))
+    ua_set(&mut ua, "T.nut", json!(nut));
+    ua_set(&mut ua, "T.bearing", json!(bearing));
+    ua_set(&mut ua, "T.room", json!(room));
+    ua_set(&mut ua, "Coolant", json!(true));
+    ua_set(&mut ua, "X.position", json!(250.0));
+    ua_set(&mut ua, "X.direction", json!(1));
+    (ua, (nut, bearing, room))
 }
 
 #[test]
@@ -153,30 +111,30 @@ fn login_and_generic_node_writes() {
     let forward = want(0, 250.0);
     assert!(forward.abs() > 1.0, "a warm axis: {forward} µm");
     wait_for("the forward value at 250 mm", || {
-        ((get(&mut ua, "Comp[X]") - forward).abs() <= 0.01).then_some(())
+        ((ua_get(&mut ua, "Comp[X]") - forward).abs() <= 0.01).then_some(())
     });
     wait_for("running", || newest(d).filter(|c| c.mode == "running"));
-    let v = get(&mut ua, "Comp[X]");
+    let v = ua_get(&mut ua, "Comp[X]");
     assert!(
         (v - forward).abs() <= 0.01,
         "Comp[X] {v} µm, model {forward} µm"
     );
 
     // Reversing at 400 mm: the reverse model's value there.
-    set(&mut ua, "X.position", json!(400.0));
-    set(&mut ua, "X.direction", json!(-1));
+    ua_set(&mut ua, "X.position", json!(400.0));
+    ua_set(&mut ua, "X.direction", json!(-1));
     let reverse = want(1, 400.0);
     assert!(
         (reverse - want(0, 400.0)).abs() > 0.05,
         "the directions differ"
     );
     wait_for("the reverse value at 400 mm", || {
-        ((get(&mut ua, "Comp[X]") - reverse).abs() <= 0.01).then_some(())
+        ((ua_get(&mut ua, "Comp[X]") - reverse).abs() <= 0.01).then_some(())
     });
     wait_for("running", || {
         newest(d).filter(|c| c.mode == "running" && c.inputs["X.position_mm"] == 400.0)
     });
-    let v = get(&mut ua, "Comp[X]");
+    let v = ua_get(&mut ua, "Comp[X]");
     assert!(
         (v - reverse).abs() <= 0.01,
         "Comp[X] {v} µm, model {reverse} µm"
@@ -202,7 +160,7 @@ fn wrong_password_is_refused_before_anything_is_written() {
     let d = dir.path();
     let (mut ua, _) = serve(&python, d);
     // What the controller holds now; errmap must not touch it.
-    set(&mut ua, "Comp[X]", json!(7.5));
+    ua_set(&mut ua, "Comp[X]", json!(7.5));
 
     // The target's password is wrong.
     std::fs::write(
@@ -223,7 +181,7 @@ fn wrong_password_is_refused_before_anything_is_written() {
         assert!(err.contains(needle), "'{needle}' not in: {err}");
     }
     assert!(err.contains("live.toml:"), "the config's line: {err}");
-    assert_eq!(get(&mut ua, "Comp[X]"), 7.5, "nothing written");
+    assert_eq!(ua_get(&mut ua, "Comp[X]"), 7.5, "nothing written");
     assert!(
         !d.join("live.sqlite").exists() || cycles(&d.join("live.sqlite")).is_empty(),
         "no cycle ran"
@@ -247,5 +205,5 @@ fn wrong_password_is_refused_before_anything_is_written() {
         !d.join("live.sqlite").exists() || cycles(&d.join("live.sqlite")).is_empty(),
         "no cycle ran"
     );
-    assert_eq!(get(&mut ua, "Comp[X]"), 7.5, "nothing written");
+    assert_eq!(ua_get(&mut ua, "Comp[X]"), 7.5, "nothing written");
 }

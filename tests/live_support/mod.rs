@@ -470,3 +470,67 @@ pub fn noted(dir: &Path, needle: &str) -> bool {
     .unwrap()
         > 0
 }
+
+/// Readings of a warm machine: row 7201 (2 h in) of synthetic campaign 1, a row a second, as
+/// (nut Ω, bearing °C, room °C).
+pub fn warm_readings(dir: &Path) -> (f64, f64, f64) {
+    let rows = synth_replay(dir, &["--hours", "4", "--period-s", "1", "--campaign", "1"]);
+    let f: Vec<f64> = rows[7201]
+        .split(',')
+        .take(6)
+        .skip(3)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    (f[0], f[1], f[2])
+}
+
+/// The OPC UA test server (tests/live_support/opcua_server.py): set a node's value.
+pub fn ua_set(s: &mut PyServer, node: &str, value: Value) {
+    assert_eq!(
+        s.ask(&serde_json::json!({"op": "set", "node": node, "value": value})),
+        "ok"
+    );
+}
+
+/// The OPC UA test server: a node's value as the server holds it.
+pub fn ua_get(s: &mut PyServer, node: &str) -> f64 {
+    serde_json::from_str::<f64>(&s.ask(&serde_json::json!({"op": "get", "node": node}))).unwrap()
+}
+
+/// The config tables reading the OPC UA test server on `port` as source `nc` (its `login`
+/// lines, e.g. `user = …`, and its timeouts) with the three sensors unfiltered and the coolant.
+pub fn ua_source_tables(port: u16, login: &str, timeout_ms: u64, ramp_timeout_ms: u64) -> String {
+    format!(
+        r#"[[sources]]
+name = "nc"
+kind = "opcua"
+endpoint = "opc.tcp://127.0.0.1:{port}/"
+security_policy = "None"
+{login}
+period_ms = 100
+timeout_ms = {timeout_ms}
+ramp_timeout_ms = {ramp_timeout_ms}
+channels = [
+  {{ name = "nut", node = "ns=2;s=T.nut" }},
+  {{ name = "bearing", node = "ns=2;s=T.bearing" }},
+  {{ name = "room", node = "ns=2;s=T.room" }},
+  {{ name = "coolant", node = "ns=2;s=Coolant" }},
+  {{ name = "x", node = "ns=2;s=X.position" }},
+  {{ name = "dir", node = "ns=2;s=X.direction" }},
+]
+
+[sensors.nut]
+channel = "nc.nut"
+filter = "none"
+[sensors.bearing]
+channel = "nc.bearing"
+filter = "none"
+[sensors.room]
+channel = "nc.room"
+filter = "none"
+
+[coolant]
+channel = "nc.coolant"
+"#
+    )
+}
