@@ -716,7 +716,6 @@ impl Live {
                 mode,
                 notes_of_cycle,
                 stopping.as_ref().filter(|_| done).map(|s| s.0.clone()),
-                done,
             )?;
             let took_us = began.elapsed().as_secs_f64() * 1e6;
             timed.0 += took_us;
@@ -1175,14 +1174,13 @@ impl Live {
         }
     }
 
-    /// Log the cycle and rewrite the state file (when due, and always for the `last` cycle).
+    /// Log the cycle and rewrite the state file.
     fn record(
         &mut self,
         t: f64,
         mode: Mode,
         notes: Vec<String>,
         stop_reason: Option<String>,
-        last: bool,
     ) -> Result<()> {
         let utc = self.utc_at(t);
         let mut inputs = Map::new();
@@ -1297,7 +1295,7 @@ impl Live {
                 self.link.retain(self.utc_at(cutoff_t), cutoff_t);
             }
         }
-        if self.state_writer.as_ref().is_some_and(|w| last || w.due()) {
+        if self.state_writer.is_some() {
             let sensors = self
                 .sensors
                 .iter()
