@@ -487,6 +487,14 @@ impl LiveConfig {
     }
 
     fn validate(&self) -> Result<()> {
+        self.check_loop_and_store()?;
+        self.check_sources()?;
+        self.check_sensors()?;
+        self.check_axes()
+    }
+
+    /// `[loop]` and `[store]`.
+    fn check_loop_and_store(&self) -> Result<()> {
         let c = &self.cycle;
         if c.period_ms == 0 || c.period_ms > 60_000 {
             return Err(self.key_error(
@@ -518,6 +526,11 @@ impl LiveConfig {
                 "e.g. 30",
             ));
         }
+        Ok(())
+    }
+
+    /// At least one source, each valid and named once.
+    fn check_sources(&self) -> Result<()> {
         if self.sources.is_empty() {
             return Err(self.key_error("sources", "no source", "add a [[sources]] table"));
         }
@@ -532,6 +545,11 @@ impl LiveConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Each sensor's channel reference and plausibility limits, and the coolant channel's.
+    fn check_sensors(&self) -> Result<()> {
         for (name, s) in &self.sensors {
             let key = format!("sensors.{name}");
             self.channel_ref(&format!("{key}.channel"), &s.channel)?;
@@ -556,53 +574,64 @@ impl LiveConfig {
         if let Some(cool) = &self.coolant {
             self.channel_ref("coolant.channel", &cool.channel)?;
         }
+        Ok(())
+    }
+
+    /// At least one axis, each named once and valid.
+    fn check_axes(&self) -> Result<()> {
         if self.axes.is_empty() {
             return Err(self.key_error("axes", "no axis", "add an [[axes]] table"));
         }
         let mut axis_names = std::collections::BTreeSet::new();
         for (i, a) in self.axes.iter().enumerate() {
-            let key = |k: &str| format!("axes.{i}.{k}");
             if !axis_names.insert(a.name.as_str()) {
                 return Err(self.key_error(
-                    &key("name"),
+                    &format!("axes.{i}.name"),
                     format!("a second axis named '{}'", a.name),
                     "give every axis its own name",
                 ));
             }
-            if !(a.direction_deadband.is_finite() && a.direction_deadband >= 0.0) {
+            self.check_axis(i, a)?;
+        }
+        Ok(())
+    }
+
+    /// An axis's deadband, limits, channel references and target.
+    fn check_axis(&self, i: usize, a: &AxisConfig) -> Result<()> {
+        let key = |k: &str| format!("axes.{i}.{k}");
+        if !(a.direction_deadband.is_finite() && a.direction_deadband >= 0.0) {
+            return Err(self.key_error(
+                &key("direction_deadband"),
+                format!("{} is not a deadband", a.direction_deadband),
+                "give a finite number ≥ 0 in the direction channel's unit",
+            ));
+        }
+        for (k, v) in [
+            ("limit_um", a.limit_um),
+            ("slope_limit_um_per_m", a.slope_limit_um_per_m),
+            ("rate_limit_um_s", a.rate_limit_um_s),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
                 return Err(self.key_error(
-                    &key("direction_deadband"),
-                    format!("{} is not a deadband", a.direction_deadband),
-                    "give a finite number ≥ 0 in the direction channel's unit",
+                    &key(k),
+                    format!("{v} is not a positive limit"),
+                    "give a positive finite number",
                 ));
             }
-            for (k, v) in [
-                ("limit_um", a.limit_um),
-                ("slope_limit_um_per_m", a.slope_limit_um_per_m),
-                ("rate_limit_um_s", a.rate_limit_um_s),
-            ] {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(self.key_error(
-                        &key(k),
-                        format!("{v} is not a positive limit"),
-                        "give a positive finite number",
-                    ));
-                }
-            }
-            if let Some(p) = &a.position {
-                self.channel_ref(&key("position"), p)?;
-            }
-            if let Some(d) = &a.direction {
-                self.channel_ref(&key("direction"), d)?;
-            }
-            if let Some(t) = &a.target {
-                if !self.targets.iter().any(|x| &x.name == t) {
-                    return Err(self.key_error(
-                        &key("target"),
-                        format!("no target named '{t}'"),
-                        "name a [[targets]] entry",
-                    ));
-                }
+        }
+        if let Some(p) = &a.position {
+            self.channel_ref(&key("position"), p)?;
+        }
+        if let Some(d) = &a.direction {
+            self.channel_ref(&key("direction"), d)?;
+        }
+        if let Some(t) = &a.target {
+            if !self.targets.iter().any(|x| &x.name == t) {
+                return Err(self.key_error(
+                    &key("target"),
+                    format!("no target named '{t}'"),
+                    "name a [[targets]] entry",
+                ));
             }
         }
         Ok(())

@@ -194,6 +194,323 @@ fn sensor_filter(def: &Sensor, cfg: &SensorConfig) -> Result<CausalFilter> {
     })
 }
 
+/// Each axis's model file, checked to be of that axis.
+fn read_models(config: &LiveConfig) -> Result<Vec<ThermalModel>> {
+    let mut models = Vec::new();
+    for (i, a) in config.axes.iter().enumerate() {
+        let model = ThermalModel::read(&config.resolve(&a.model))?;
+        if model.axis != a.name {
+            return Err(config.key_error(
+                &format!("axes.{i}.model"),
+                format!("the model is of axis '{}', not '{}'", model.axis, a.name),
+                "give the model `errmap thermal fit` wrote for this axis",
+            ));
+        }
+        models.push(model);
+    }
+    Ok(models)
+}
+
+/// The sensors the models need (gain sensors and ambient, each once, in model order), checked
+/// against the config's `[sensors.*]` both ways and across the models.
+fn model_sensors(config: &LiveConfig, models: &[ThermalModel]) -> Result<Vec<Sensor>> {
+    let mut defs: Vec<Sensor> = Vec::new();
+    for (i, m) in models.iter().enumerate() {
+        for name in m.gain_sensors.iter().chain(m.ambient_sensor.iter()) {
+            let def = m
+                .sensors
+                .iter()
+                .find(|s| &s.name == name)
+                .cloned()
+                .ok_or_else(|| Error::Internal(format!("model lacks sensor '{name}'")))?;
+            match defs.iter().find(|d| d.name == def.name) {
+                Some(d) if d.unit != def.unit || d.calibration != def.calibration => {
+                    return Err(config.key_error(
+                        &format!("axes.{i}.model"),
+                        format!("sensor '{name}' has another unit or calibration than in an earlier axis's model"),
+                        "fit the axes' models with the same sensor table",
+                    ))
+                }
+                Some(_) => {}
+                None => {
+                    if !config.sensors.contains_key(name) {
+                        return Err(config.key_error(
+                            "sensors",
+                            format!("the model of axis {} needs sensor '{name}'", config.axes[i].name),
+                            format!("add [sensors.{name}] with its channel = \"source.channel\""),
+                        ));
+                    }
+                    defs.push(def);
+                }
+            }
+        }
+    }
+    for name in config.sensors.keys() {
+        if !defs.iter().any(|d| &d.name == name) {
+            return Err(config.key_error(
+                &format!("sensors.{name}"),
+                format!("no axis's model has a sensor '{name}'"),
+                format!(
+                    "the models' sensors: {}",
+                    defs.iter()
+                        .map(|d| d.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+    }
+    Ok(defs)
+}
+
+/// A `[coolant]` channel is needed when a model has gains for more than one coolant state;
+/// `--once` takes live readings, which a replay does not have.
+fn check_coolant_and_once(
+    config: &LiveConfig,
+    options: &RunOptions,
+    models: &[ThermalModel],
+) -> Result<()> {
+    if config.coolant.is_none() {
+        if let Some((i, m)) = models
+            .iter()
+            .enumerate()
+            .find(|(_, m)| m.coolant_states.len() > 1)
+        {
+            return Err(config.key_error(
+                "coolant",
+                format!(
+                    "the model of axis {} has gains for coolant {}; the loop needs the coolant state",
+                    config.axes[i].name,
+                    m.coolant_states.join(", ")
+                ),
+                "add [coolant] with channel = \"source.channel\"",
+            ));
+        }
+    }
+    if options.once && config.cycle.replay_speed.is_some() {
+        return Err(Error::usage(
+            "--once takes one cycle of live readings; a replay has no present value",
+            "remove loop.replay_speed, or run the replay without --once",
+        ));
+    }
+    Ok(())
+}
+
+/// Open every source (one that cannot be reached is exit 3).
+fn open_sources(config: &LiveConfig) -> Result<Vec<SourceSlot>> {
+    let replay = config.cycle.replay_speed.is_some();
+    let mut sources = Vec::new();
+    for (index, s) in config.sources.iter().enumerate() {
+        let source: Box<dyn Source> = match s.kind {
+            SourceKind::Csv => {
+                let path = config.resolve(s.path.as_deref().unwrap_or(std::path::Path::new("-")));
+                Box::new(CsvSource::open(
+                    &s.name,
+                    &path,
+                    s.follow.unwrap_or(false),
+                    replay,
+                    s.timeout_ms,
+                )?)
+            }
+            other => super::connect_source(config, index, s, other)?,
+        };
+        sources.push(SourceSlot {
+            source,
+            timeout_s: s.timeout_ms as f64 / 1000.0,
+            ramp_timeout_s: s.ramp_timeout_ms as f64 / 1000.0,
+            silent_since_s: None,
+        });
+    }
+    Ok(sources)
+}
+
+/// The (source index, channel) a `source.channel` reference held by `key` names, checked
+/// against the channels the opened source delivers.
+fn find_channel(
+    config: &LiveConfig,
+    sources: &[SourceSlot],
+    key: &str,
+    text: &str,
+) -> Result<(usize, String)> {
+    let r: ChannelRef = config.channel_ref(key, text)?;
+    let i = config
+        .sources
+        .iter()
+        .position(|s| s.name == r.source)
+        .ok_or_else(|| Error::Internal(format!("source {} vanished", r.source)))?;
+    let names = sources[i].source.channel_names();
+    if !names.iter().any(|n| n == &r.channel) {
+        return Err(config.key_error(
+            key,
+            format!("source '{}' has no channel '{}'", r.source, r.channel),
+            format!("its channels: {}", names.join(", ")),
+        ));
+    }
+    Ok((i, r.channel))
+}
+
+/// A slot per model sensor, on its configured channel.
+fn sensor_slots(
+    config: &LiveConfig,
+    defs: Vec<Sensor>,
+    sources: &[SourceSlot],
+) -> Result<Vec<SensorSlot>> {
+    let mut sensors = Vec::new();
+    for def in defs {
+        let cfg = config.sensors[&def.name].clone();
+        let key = format!("sensors.{}.channel", def.name);
+        let (source, channel) = find_channel(config, sources, &key, &cfg.channel)?;
+        sensors.push(SensorSlot {
+            filter: sensor_filter(&def, &cfg)?,
+            def,
+            cfg,
+            source,
+            channel,
+            last_seq: 0,
+            last_accepted: None,
+            value_c: None,
+            raw: None,
+            age_s: None,
+            problem: None,
+            problem_since_s: None,
+        });
+    }
+    Ok(sensors)
+}
+
+/// The coolant channel, when configured.
+fn coolant_slot(config: &LiveConfig, sources: &[SourceSlot]) -> Result<Option<CoolantSlot>> {
+    let Some(c) = &config.coolant else {
+        return Ok(None);
+    };
+    let (source, channel) = find_channel(config, sources, "coolant.channel", &c.channel)?;
+    Ok(Some(CoolantSlot {
+        source,
+        channel,
+        on: c.on.clone(),
+        off: c.off.clone(),
+    }))
+}
+
+/// The connected target axis `i` writes to (None in a dry run); a point target needs the
+/// axis's position.
+fn axis_target(
+    config: &LiveConfig,
+    options: &RunOptions,
+    i: usize,
+    has_position: bool,
+    targets: &[Box<dyn Target>],
+) -> Result<Option<usize>> {
+    if options.dry_run {
+        return Ok(None);
+    }
+    let a = &config.axes[i];
+    let name = a.target.as_deref().ok_or_else(|| {
+        config.key_error(
+            &format!("axes.{i}"),
+            format!("axis {} has no target", a.name),
+            "name a [[targets]] entry with target = \"…\", or run with --dry-run",
+        )
+    })?;
+    let t = targets
+        .iter()
+        .position(|t| t.name() == name)
+        .ok_or_else(|| Error::Internal(format!("target {name} was not connected")))?;
+    if targets[t].is_point() && !has_position {
+        return Err(config.key_error(
+            &format!("axes.{i}.target"),
+            format!("target '{name}' writes the value at the axis's position, but axis {} has no position channel", a.name),
+            "add position = \"source.channel\" to the axis",
+        ));
+    }
+    Ok(Some(t))
+}
+
+/// A slot per axis: its model with the configured limits, channels, sensors and target.
+fn axis_slots(
+    config: &LiveConfig,
+    options: &RunOptions,
+    models: Vec<ThermalModel>,
+    sensors: &[SensorSlot],
+    sources: &[SourceSlot],
+    targets: &[Box<dyn Target>],
+) -> Result<Vec<AxisSlot>> {
+    let mut axes = Vec::new();
+    for (i, (a, model)) in config.axes.iter().zip(models).enumerate() {
+        let channel = |k: &str, text: &Option<String>| -> Result<Option<(usize, String)>> {
+            text.as_deref()
+                .map(|t| find_channel(config, sources, &format!("axes.{i}.{k}"), t))
+                .transpose()
+        };
+        let position = channel("position", &a.position)?;
+        let direction = channel("direction", &a.direction)?;
+        let index = |name: &str| sensors.iter().position(|s| s.def.name == name);
+        let gain_sensors = model
+            .gain_sensors
+            .iter()
+            .map(|n| index(n).ok_or_else(|| Error::Internal(format!("sensor {n} missing"))))
+            .collect::<Result<Vec<_>>>()?;
+        let ambient = model.ambient_sensor.as_deref().and_then(index);
+        let target = axis_target(config, options, i, position.is_some(), targets)?;
+        let target_name = match (options.dry_run, &a.target) {
+            (true, _) => "dry-run".to_string(),
+            (false, Some(t)) => t.clone(),
+            (false, None) => String::new(),
+        };
+        axes.push(AxisSlot {
+            model: AxisModel::new(
+                a.name.clone(),
+                model,
+                Limits {
+                    limit_um: a.limit_um,
+                    slope_limit_um_per_m: a.slope_limit_um_per_m,
+                    rate_limit_um_s: a.rate_limit_um_s,
+                },
+                a.include_geometric,
+            ),
+            position,
+            direction,
+            direction_deadband: a.direction_deadband,
+            gain_sensors,
+            ambient,
+            target,
+            target_name,
+            written: Line::default(),
+            last_direction: None,
+            last_output: None,
+        });
+    }
+    Ok(axes)
+}
+
+/// The run's record: the store (its campaign named by the start time) and the state file.
+fn open_record(
+    config: &LiveConfig,
+    options: &RunOptions,
+    sensors: &[SensorSlot],
+    axes: &[AxisSlot],
+    start_wall: SystemTime,
+) -> Result<(StoreLink, Option<StateWriter>)> {
+    let start_utc = state::utc_ms(start_wall);
+    let logged: Vec<Sensor> = sensors.iter().map(|s| s.def.clone()).collect();
+    let link = StoreLink::open(LinkSettings {
+        path: &config.resolve(&config.store.path),
+        campaign: format!("live-{start_utc}"),
+        axis: &axes[0].model.name,
+        px_mm: axes[0].model.px_mm(),
+        sensors: &logged,
+        start_utc: &start_utc,
+        now_unix: start_wall
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs() as i64),
+    })?;
+    let state_writer = match &options.state {
+        Some(p) => Some(StateWriter::new(p)?),
+        None => None,
+    };
+    Ok((link, state_writer))
+}
+
 impl Live {
     /// Check the config against the models and sources, open the sources, the targets and the
     /// store. Nothing is written to a target here.
@@ -202,261 +519,15 @@ impl Live {
         options: &RunOptions,
         targets: Vec<Box<dyn Target>>,
     ) -> Result<Live> {
-        // Models, and the sensors they need.
-        let mut models = Vec::new();
-        for (i, a) in config.axes.iter().enumerate() {
-            let model = ThermalModel::read(&config.resolve(&a.model))?;
-            if model.axis != a.name {
-                return Err(config.key_error(
-                    &format!("axes.{i}.model"),
-                    format!("the model is of axis '{}', not '{}'", model.axis, a.name),
-                    "give the model `errmap thermal fit` wrote for this axis",
-                ));
-            }
-            models.push(model);
-        }
-        let mut defs: Vec<Sensor> = Vec::new();
-        for (i, m) in models.iter().enumerate() {
-            for name in m.gain_sensors.iter().chain(m.ambient_sensor.iter()) {
-                let def = m
-                    .sensors
-                    .iter()
-                    .find(|s| &s.name == name)
-                    .cloned()
-                    .ok_or_else(|| Error::Internal(format!("model lacks sensor '{name}'")))?;
-                match defs.iter().find(|d| d.name == def.name) {
-                    Some(d) if d.unit != def.unit || d.calibration != def.calibration => {
-                        return Err(config.key_error(
-                            &format!("axes.{i}.model"),
-                            format!("sensor '{name}' has another unit or calibration than in an earlier axis's model"),
-                            "fit the axes' models with the same sensor table",
-                        ))
-                    }
-                    Some(_) => {}
-                    None => {
-                        if !config.sensors.contains_key(name) {
-                            return Err(config.key_error(
-                                "sensors",
-                                format!("the model of axis {} needs sensor '{name}'", config.axes[i].name),
-                                format!("add [sensors.{name}] with its channel = \"source.channel\""),
-                            ));
-                        }
-                        defs.push(def);
-                    }
-                }
-            }
-        }
-        for name in config.sensors.keys() {
-            if !defs.iter().any(|d| &d.name == name) {
-                return Err(config.key_error(
-                    &format!("sensors.{name}"),
-                    format!("no axis's model has a sensor '{name}'"),
-                    format!(
-                        "the models' sensors: {}",
-                        defs.iter()
-                            .map(|d| d.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                ));
-            }
-        }
-        if config.coolant.is_none() {
-            if let Some((i, m)) = models
-                .iter()
-                .enumerate()
-                .find(|(_, m)| m.coolant_states.len() > 1)
-            {
-                return Err(config.key_error(
-                    "coolant",
-                    format!(
-                        "the model of axis {} has gains for coolant {}; the loop needs the coolant state",
-                        config.axes[i].name,
-                        m.coolant_states.join(", ")
-                    ),
-                    "add [coolant] with channel = \"source.channel\"",
-                ));
-            }
-        }
-        let replay = config.cycle.replay_speed.is_some();
-        if options.once && replay {
-            return Err(Error::usage(
-                "--once takes one cycle of live readings; a replay has no present value",
-                "remove loop.replay_speed, or run the replay without --once",
-            ));
-        }
-
-        // Sources: a source that cannot be reached is exit 3.
-        let mut sources = Vec::new();
-        for (index, s) in config.sources.iter().enumerate() {
-            let source: Box<dyn Source> = match s.kind {
-                SourceKind::Csv => {
-                    let path =
-                        config.resolve(s.path.as_deref().unwrap_or(std::path::Path::new("-")));
-                    Box::new(CsvSource::open(
-                        &s.name,
-                        &path,
-                        s.follow.unwrap_or(false),
-                        replay,
-                        s.timeout_ms,
-                    )?)
-                }
-                other => super::connect_source(config, index, s, other)?,
-            };
-            sources.push(SourceSlot {
-                source,
-                timeout_s: s.timeout_ms as f64 / 1000.0,
-                ramp_timeout_s: s.ramp_timeout_ms as f64 / 1000.0,
-                silent_since_s: None,
-            });
-        }
-        let find = |key: &str, r: &ChannelRef| -> Result<(usize, String)> {
-            let i = config
-                .sources
-                .iter()
-                .position(|s| s.name == r.source)
-                .ok_or_else(|| Error::Internal(format!("source {} vanished", r.source)))?;
-            let names = sources[i].source.channel_names();
-            if !names.iter().any(|n| n == &r.channel) {
-                return Err(config.key_error(
-                    key,
-                    format!("source '{}' has no channel '{}'", r.source, r.channel),
-                    format!("its channels: {}", names.join(", ")),
-                ));
-            }
-            Ok((i, r.channel.clone()))
-        };
-
-        let mut sensors = Vec::new();
-        for def in defs {
-            let cfg = config.sensors[&def.name].clone();
-            let key = format!("sensors.{}.channel", def.name);
-            let (source, channel) = find(&key, &config.channel_ref(&key, &cfg.channel)?)?;
-            sensors.push(SensorSlot {
-                filter: sensor_filter(&def, &cfg)?,
-                def,
-                cfg,
-                source,
-                channel,
-                last_seq: 0,
-                last_accepted: None,
-                value_c: None,
-                raw: None,
-                age_s: None,
-                problem: None,
-                problem_since_s: None,
-            });
-        }
-        let coolant = match &config.coolant {
-            Some(c) => {
-                let (source, channel) = find(
-                    "coolant.channel",
-                    &config.channel_ref("coolant.channel", &c.channel)?,
-                )?;
-                Some(CoolantSlot {
-                    source,
-                    channel,
-                    on: c.on.clone(),
-                    off: c.off.clone(),
-                })
-            }
-            None => None,
-        };
-
-        let mut axes = Vec::new();
-        for (i, (a, model)) in config.axes.iter().zip(models).enumerate() {
-            let key = |k: &str| format!("axes.{i}.{k}");
-            let position = match &a.position {
-                Some(p) => Some(find(
-                    &key("position"),
-                    &config.channel_ref(&key("position"), p)?,
-                )?),
-                None => None,
-            };
-            let direction = match &a.direction {
-                Some(d) => Some(find(
-                    &key("direction"),
-                    &config.channel_ref(&key("direction"), d)?,
-                )?),
-                None => None,
-            };
-            let index = |name: &str| sensors.iter().position(|s| s.def.name == name);
-            let gain_sensors = model
-                .gain_sensors
-                .iter()
-                .map(|n| index(n).ok_or_else(|| Error::Internal(format!("sensor {n} missing"))))
-                .collect::<Result<Vec<_>>>()?;
-            let ambient = model.ambient_sensor.as_deref().and_then(index);
-            let target = if options.dry_run {
-                None
-            } else {
-                let name = a.target.as_deref().ok_or_else(|| {
-                    config.key_error(
-                        &format!("axes.{i}"),
-                        format!("axis {} has no target", a.name),
-                        "name a [[targets]] entry with target = \"…\", or run with --dry-run",
-                    )
-                })?;
-                let t = targets
-                    .iter()
-                    .position(|t| t.name() == name)
-                    .ok_or_else(|| Error::Internal(format!("target {name} was not connected")))?;
-                if targets[t].is_point() && position.is_none() {
-                    return Err(config.key_error(
-                        &key("target"),
-                        format!("target '{name}' writes the value at the axis's position, but axis {} has no position channel", a.name),
-                        "add position = \"source.channel\" to the axis",
-                    ));
-                }
-                Some(t)
-            };
-            let target_name = match (options.dry_run, &a.target) {
-                (true, _) => "dry-run".to_string(),
-                (false, Some(t)) => t.clone(),
-                (false, None) => String::new(),
-            };
-            axes.push(AxisSlot {
-                model: AxisModel::new(
-                    a.name.clone(),
-                    model,
-                    Limits {
-                        limit_um: a.limit_um,
-                        slope_limit_um_per_m: a.slope_limit_um_per_m,
-                        rate_limit_um_s: a.rate_limit_um_s,
-                    },
-                    a.include_geometric,
-                ),
-                position,
-                direction,
-                direction_deadband: a.direction_deadband,
-                gain_sensors,
-                ambient,
-                target,
-                target_name,
-                written: Line::default(),
-                last_direction: None,
-                last_output: None,
-            });
-        }
-
+        let models = read_models(config)?;
+        let defs = model_sensors(config, &models)?;
+        check_coolant_and_once(config, options, &models)?;
+        let sources = open_sources(config)?;
+        let sensors = sensor_slots(config, defs, &sources)?;
+        let coolant = coolant_slot(config, &sources)?;
+        let axes = axis_slots(config, options, models, &sensors, &sources, &targets)?;
         let start_wall = SystemTime::now();
-        let start_utc = state::utc_ms(start_wall);
-        let logged: Vec<Sensor> = sensors.iter().map(|s| s.def.clone()).collect();
-        let link = StoreLink::open(LinkSettings {
-            path: &config.resolve(&config.store.path),
-            campaign: format!("live-{start_utc}"),
-            axis: &axes[0].model.name,
-            px_mm: axes[0].model.px_mm(),
-            sensors: &logged,
-            start_utc: &start_utc,
-            now_unix: start_wall
-                .duration_since(SystemTime::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs() as i64),
-        })?;
-        let state_writer = match &options.state {
-            Some(p) => Some(StateWriter::new(p)?),
-            None => None,
-        };
+        let (link, state_writer) = open_record(config, options, &sensors, &axes, start_wall)?;
         Ok(Live {
             period_s: config.cycle.period_ms as f64 / 1000.0,
             period_ms: config.cycle.period_ms,
@@ -1183,6 +1254,40 @@ impl Live {
         stop_reason: Option<String>,
     ) -> Result<()> {
         let utc = self.utc_at(t);
+        let (mut inputs, samples) = self.sensor_inputs(t);
+        let coolant_on = self.coolant_on();
+        inputs.insert("coolant_on".into(), json!(coolant_on));
+        inputs.insert("coolant".into(), json!(self.coolant_label));
+        let (outputs, axis_states) = self.axis_outputs(mode, &mut inputs);
+        let note = if notes.is_empty() {
+            None
+        } else {
+            Some(notes.join("; "))
+        };
+        self.watch_store(&utc);
+        self.link.log(CycleRecord {
+            cycle: self.cycle,
+            at_utc: utc,
+            mode: mode.name(),
+            inputs_json: Json::Object(inputs).to_string(),
+            outputs_json: Json::Object(outputs).to_string(),
+            note,
+            time_s: t,
+            samples,
+        });
+        self.retain(t);
+        if self.state_writer.is_some() {
+            let state = self.state(t, mode, coolant_on, axis_states, stop_reason);
+            if let Some(w) = self.state_writer.as_mut() {
+                w.write(&state)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The cycle's inputs so far (`time_s`, each sensor's °C as the model used it, `raw`
+    /// readings) and the temperature samples to log (the sensors with a value and no problem).
+    fn sensor_inputs(&self, t: f64) -> (Map<String, Json>, Vec<(usize, f64)>) {
         let mut inputs = Map::new();
         inputs.insert("time_s".into(), json!(t));
         let mut raw = Map::new();
@@ -1195,16 +1300,27 @@ impl Live {
             }
         }
         inputs.insert("raw".into(), Json::Object(raw));
-        let coolant_on = self
-            .coolant
+        (inputs, samples)
+    }
+
+    /// Whether the coolant is on (None without a coolant channel or with an unknown label).
+    fn coolant_on(&self) -> Option<bool> {
+        self.coolant
             .as_ref()
             .and_then(|c| match &self.coolant_label {
                 Some(l) if *l == c.on => Some(true),
                 Some(l) if *l == c.off => Some(false),
                 _ => None,
-            });
-        inputs.insert("coolant_on".into(), json!(coolant_on));
-        inputs.insert("coolant".into(), json!(self.coolant_label));
+            })
+    }
+
+    /// Each axis's outputs for the store and its state for the state file; its position and
+    /// direction go into `inputs`.
+    fn axis_outputs(
+        &mut self,
+        mode: Mode,
+        inputs: &mut Map<String, Json>,
+    ) -> (Map<String, Json>, Vec<AxisState>) {
         let mut outputs = Map::new();
         let mut axis_states = Vec::with_capacity(self.axes.len());
         for a in 0..self.axes.len() {
@@ -1261,33 +1377,26 @@ impl Live {
                 written_slope_um_per_m: axis.written.slope_um_per_m,
             });
         }
-        let note = if notes.is_empty() {
-            None
-        } else {
-            Some(notes.join("; "))
-        };
+        (outputs, axis_states)
+    }
+
+    /// An alarm while the store cannot be written (raised once while the failure lasts).
+    fn watch_store(&mut self, utc: &str) {
         if let Some(f) = self.link.failure() {
             // Raised once while the failure lasts (raise ignores an active key).
             self.alarms.raise(
                 "store",
                 "store",
                 format!("the store cannot be written: {f}"),
-                &utc,
+                utc,
             );
         } else {
             self.alarms.clear("store");
         }
-        self.link.log(CycleRecord {
-            cycle: self.cycle,
-            at_utc: utc.clone(),
-            mode: mode.name(),
-            inputs_json: Json::Object(inputs).to_string(),
-            outputs_json: Json::Object(outputs).to_string(),
-            note,
-            time_s: t,
-            samples,
-        });
-        // Retention: about once an hour of loop time.
+    }
+
+    /// Retention: about once an hour of loop time, delete what is older than `retention_days`.
+    fn retain(&mut self, t: f64) {
         let every = (3600.0 / self.period_s).max(1.0) as u64;
         if self.cycle % every == every - 1 {
             let cutoff_t = t - self.retention_s;
@@ -1295,56 +1404,61 @@ impl Live {
                 self.link.retain(self.utc_at(cutoff_t), cutoff_t);
             }
         }
-        if self.state_writer.is_some() {
-            let sensors = self
-                .sensors
-                .iter()
-                .map(|s| SensorState {
-                    name: s.def.name.clone(),
-                    value_c: s.value_c,
-                    ok: s.problem.is_none() && s.value_c.is_some(),
-                    source: self.sources[s.source].source.name().to_string(),
-                    age_ms: s.age_s.map(|a| (a.max(0.0) * 1000.0).round() as u64),
-                    problem: s.problem.clone(),
-                })
-                .collect();
-            let sources = self
-                .sources
-                .iter()
-                .map(|s| {
-                    let snap = s.source.snapshot();
-                    let age = snap.last_ok_s.map_or(f64::INFINITY, |at| t - at);
-                    SourceState {
-                        name: s.source.name().to_string(),
-                        kind: s.source.kind(),
-                        healthy: age <= s.timeout_s && snap.problem.is_none(),
-                        last_ok_utc: snap.last_ok_s.map(|at| self.utc_at(at)),
-                        problem: snap.problem.clone().or_else(|| {
-                            (age > s.timeout_s).then(|| format!("silent for {:.1} s", age))
-                        }),
-                    }
-                })
-                .collect();
-            let state = State {
-                schema: state::SCHEMA,
-                written_utc: state::utc_ms(SystemTime::now()),
-                cycle: self.cycle,
-                period_ms: self.period_ms,
-                mode,
-                dry_run: self.dry_run,
-                coolant_on,
-                sensors,
-                axes: axis_states,
-                sources,
-                alarms: self.alarms.states(),
-                missed_cycles: self.missed,
-                stop_reason,
-            };
-            if let Some(w) = self.state_writer.as_mut() {
-                w.write(&state)?;
-            }
+    }
+
+    /// The state file's content for this cycle.
+    fn state(
+        &self,
+        t: f64,
+        mode: Mode,
+        coolant_on: Option<bool>,
+        axes: Vec<AxisState>,
+        stop_reason: Option<String>,
+    ) -> State {
+        let sensors = self
+            .sensors
+            .iter()
+            .map(|s| SensorState {
+                name: s.def.name.clone(),
+                value_c: s.value_c,
+                ok: s.problem.is_none() && s.value_c.is_some(),
+                source: self.sources[s.source].source.name().to_string(),
+                age_ms: s.age_s.map(|a| (a.max(0.0) * 1000.0).round() as u64),
+                problem: s.problem.clone(),
+            })
+            .collect();
+        let sources = self
+            .sources
+            .iter()
+            .map(|s| {
+                let snap = s.source.snapshot();
+                let age = snap.last_ok_s.map_or(f64::INFINITY, |at| t - at);
+                SourceState {
+                    name: s.source.name().to_string(),
+                    kind: s.source.kind(),
+                    healthy: age <= s.timeout_s && snap.problem.is_none(),
+                    last_ok_utc: snap.last_ok_s.map(|at| self.utc_at(at)),
+                    problem: snap.problem.clone().or_else(|| {
+                        (age > s.timeout_s).then(|| format!("silent for {:.1} s", age))
+                    }),
+                }
+            })
+            .collect();
+        State {
+            schema: state::SCHEMA,
+            written_utc: state::utc_ms(SystemTime::now()),
+            cycle: self.cycle,
+            period_ms: self.period_ms,
+            mode,
+            dry_run: self.dry_run,
+            coolant_on,
+            sensors,
+            axes,
+            sources,
+            alarms: self.alarms.states(),
+            missed_cycles: self.missed,
+            stop_reason,
         }
-        Ok(())
     }
 }
 

@@ -40,15 +40,9 @@ fn connect_source(
     kind: SourceKind,
 ) -> Result<Box<dyn Source>> {
     match kind {
-        SourceKind::Modbus => Ok(Box::new(source::modbus::ModbusSource::connect(
-            config, index, s,
-        )?)),
-        SourceKind::Opcua => Ok(Box::new(source::opcua::OpcUaSource::connect(
-            config, index, s,
-        )?)),
-        SourceKind::Linuxcnc => Ok(Box::new(source::linuxcnc::LinuxCncSource::connect(
-            config, index, s,
-        )?)),
+        SourceKind::Modbus => Ok(Box::new(source::modbus::connect(config, index, s)?)),
+        SourceKind::Opcua => Ok(Box::new(source::opcua::connect(config, index, s)?)),
+        SourceKind::Linuxcnc => Ok(Box::new(source::linuxcnc::connect(config, index, s)?)),
         SourceKind::Csv => Err(Error::Internal("a csv source is opened by the loop".into())),
     }
 }

@@ -6,6 +6,7 @@ pub mod csv;
 pub mod linuxcnc;
 pub mod modbus;
 pub mod opcua;
+pub mod poll;
 
 use std::collections::HashMap;
 

@@ -12,7 +12,7 @@
 //! change dropped) is reported by [`Target::moved`], and the loop ramps from it as at a start.
 
 use super::{Output, Present, Target};
-use crate::config::{LiveConfig, TargetConfig};
+use crate::config::{LiveConfig, TargetAxisConfig, TargetConfig};
 use crate::hal::{HalLink, HalValue, PinSpec};
 use crate::source::linuxcnc::DEFAULT_PYTHON;
 use errmap_core::error::{Error, Result};
@@ -63,31 +63,7 @@ impl LinuxCncTarget {
     /// exit 3 when LinuxCNC or its `hal` module cannot be reached or a pin is driven already).
     pub fn connect(config: &LiveConfig, index: usize, t: &TargetConfig) -> Result<LinuxCncTarget> {
         let key = format!("targets.{index}");
-        if config.cycle.period_ms < MIN_PERIOD_MS {
-            return Err(config.key_error(
-                "loop.period_ms",
-                format!(
-                    "a linuxcnc target needs a loop period of at least {MIN_PERIOD_MS} ms, so that motion has taken a write before the next cycle reads it back"
-                ),
-                format!("period_ms = {MIN_PERIOD_MS} or more"),
-            ));
-        }
-        for (k, present) in [
-            ("endpoint", t.endpoint.is_some()),
-            ("address", t.address.is_some()),
-            ("unit_id", t.unit_id.is_some()),
-            ("security_policy", t.security_policy.is_some()),
-            ("user", t.user.is_some()),
-            ("password", t.password.is_some()),
-        ] {
-            if present {
-                return Err(config.key_error(
-                    &format!("{key}.{k}"),
-                    format!("a linuxcnc target has no key '{k}'"),
-                    "its keys: name, kind, python, component, axes",
-                ));
-            }
-        }
+        check_target(config, &key, t)?;
         let component = t
             .component
             .clone()
@@ -95,76 +71,10 @@ impl LinuxCncTarget {
         let mut pins = Vec::new();
         let mut axes = BTreeMap::new();
         for (axis, a) in &t.axes {
-            let k = format!("{key}.axes.{axis}");
-            for (field, present) in [
-                ("sd43900", a.sd43900.is_some()),
-                ("sd43910", a.sd43910.is_some()),
-                ("sd43920", a.sd43920.is_some()),
-                ("node", a.node.is_some()),
-                ("register", a.register.is_some()),
-                ("type", a.data_type.is_some()),
-                ("word_order", a.word_order.is_some()),
-                ("scale", a.scale.is_some()),
-            ] {
-                if present {
-                    return Err(config.key_error(
-                        &format!("{k}.{field}"),
-                        format!("a linuxcnc axis has no key '{field}'"),
-                        "its keys: letter, resolution_um, unit",
-                    ));
-                }
-            }
-            let letter = a.letter.clone().unwrap_or_else(|| axis.to_lowercase());
-            if !(letter.len() == 1 && "xyzabcuvw".contains(letter.as_str())) {
-                return Err(config.key_error(
-                    &format!("{k}.letter"),
-                    format!("'{letter}' is not a LinuxCNC axis letter"),
-                    "one of x y z a b c u v w (letter = \"z\")",
-                ));
-            }
-            let resolution_um = a.resolution_um.unwrap_or(0.1);
-            if !(resolution_um.is_finite() && resolution_um > 0.0 && resolution_um <= 1000.0) {
-                return Err(config.key_error(
-                    &format!("{k}.resolution_um"),
-                    format!("{resolution_um} is not a resolution"),
-                    "µm per count, e.g. 0.1",
-                ));
-            }
-            let mm_per_unit = match a.unit.as_deref() {
-                None | Some("mm") => 1.0,
-                Some("inch") => 25.4,
-                Some(other) => {
-                    return Err(config.key_error(
-                        &format!("{k}.unit"),
-                        format!("'{other}' is not a LinuxCNC linear unit"),
-                        "mm or inch, as [TRAJ] LINEAR_UNITS",
-                    ))
-                }
-            };
-            for (pin, hal_type, motion) in [
-                ("counts", "s32", "eoffset-counts"),
-                ("scale", "float", "eoffset-scale"),
-                ("enable", "bit", "eoffset-enable"),
-            ] {
-                pins.push(PinSpec {
-                    name: format!("{letter}.{pin}"),
-                    hal_type,
-                    net: Some(format!("axis.{letter}.{motion}")),
-                    signal: format!("{component}-{letter}-{pin}"),
-                });
-            }
-            axes.insert(
-                axis.clone(),
-                AxisPins {
-                    request_pin: format!("axis.{letter}.eoffset-request"),
-                    counts_pin: format!("{letter}.counts"),
-                    scale: resolution_um / 1000.0 / mm_per_unit,
-                    mm_per_unit,
-                    counts: 0,
-                    expected: None,
-                    request_now: None,
-                },
-            );
+            let (axis_pins, specs) =
+                axis_pins(config, &format!("{key}.axes.{axis}"), axis, a, &component)?;
+            pins.extend(specs);
+            axes.insert(axis.clone(), axis_pins);
         }
         let what = format!("LinuxCNC target '{}'", t.name);
         let mut link = HalLink::start(
@@ -174,21 +84,7 @@ impl LinuxCncTarget {
             &pins,
             Duration::from_millis(1000),
         )?;
-        let reach = |e: String| Error::io("reach", &what, std::io::Error::other(e));
-        // errmap's counts pins took the value motion reads when they were linked; the offsets
-        // move only by changes from there. The scale is set before any change, then enabled.
-        for a in axes.values_mut() {
-            let full = format!("{component}.{}", a.counts_pin);
-            a.counts = match link.get(&[full]).map_err(reach)?[..] {
-                [HalValue::Integer(c)] => c as i32,
-                _ => return Err(reach(format!("{} is not an s32", a.counts_pin))),
-            };
-            let letter = &a.counts_pin[..1];
-            link.set(&[(format!("{letter}.scale"), format!("{:e}", a.scale))])
-                .map_err(reach)?;
-            link.set(&[(format!("{letter}.enable"), "1".into())])
-                .map_err(reach)?;
-        }
+        take_over(&mut link, &what, &component, &mut axes)?;
         Ok(LinuxCncTarget {
             name: t.name.clone(),
             link,
@@ -219,6 +115,140 @@ impl LinuxCncTarget {
             .map_err(|e| self.failed("read from", e))?;
         Ok(v[0].as_f64())
     }
+}
+
+/// The loop period a linuxcnc target needs, and no key of another target kind.
+fn check_target(config: &LiveConfig, key: &str, t: &TargetConfig) -> Result<()> {
+    if config.cycle.period_ms < MIN_PERIOD_MS {
+        return Err(config.key_error(
+                "loop.period_ms",
+                format!(
+                    "a linuxcnc target needs a loop period of at least {MIN_PERIOD_MS} ms, so that motion has taken a write before the next cycle reads it back"
+                ),
+                format!("period_ms = {MIN_PERIOD_MS} or more"),
+            ));
+    }
+    for (k, present) in [
+        ("endpoint", t.endpoint.is_some()),
+        ("address", t.address.is_some()),
+        ("unit_id", t.unit_id.is_some()),
+        ("security_policy", t.security_policy.is_some()),
+        ("user", t.user.is_some()),
+        ("password", t.password.is_some()),
+    ] {
+        if present {
+            return Err(config.key_error(
+                &format!("{key}.{k}"),
+                format!("a linuxcnc target has no key '{k}'"),
+                "its keys: name, kind, python, component, axes",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An axis's pins (`L.counts`, `L.scale`, `L.enable`, linked to `axis.L.eoffset-*`) from its
+/// `[targets.axes.*]` table at `key`: letter, resolution and unit checked.
+fn axis_pins(
+    config: &LiveConfig,
+    key: &str,
+    axis: &str,
+    a: &TargetAxisConfig,
+    component: &str,
+) -> Result<(AxisPins, [PinSpec; 3])> {
+    for (field, present) in [
+        ("sd43900", a.sd43900.is_some()),
+        ("sd43910", a.sd43910.is_some()),
+        ("sd43920", a.sd43920.is_some()),
+        ("node", a.node.is_some()),
+        ("register", a.register.is_some()),
+        ("type", a.data_type.is_some()),
+        ("word_order", a.word_order.is_some()),
+        ("scale", a.scale.is_some()),
+    ] {
+        if present {
+            return Err(config.key_error(
+                &format!("{key}.{field}"),
+                format!("a linuxcnc axis has no key '{field}'"),
+                "its keys: letter, resolution_um, unit",
+            ));
+        }
+    }
+    let letter = a.letter.clone().unwrap_or_else(|| axis.to_lowercase());
+    if !(letter.len() == 1 && "xyzabcuvw".contains(letter.as_str())) {
+        return Err(config.key_error(
+            &format!("{key}.letter"),
+            format!("'{letter}' is not a LinuxCNC axis letter"),
+            "one of x y z a b c u v w (letter = \"z\")",
+        ));
+    }
+    let resolution_um = a.resolution_um.unwrap_or(0.1);
+    if !(resolution_um.is_finite() && resolution_um > 0.0 && resolution_um <= 1000.0) {
+        return Err(config.key_error(
+            &format!("{key}.resolution_um"),
+            format!("{resolution_um} is not a resolution"),
+            "µm per count, e.g. 0.1",
+        ));
+    }
+    let mm_per_unit = match a.unit.as_deref() {
+        None | Some("mm") => 1.0,
+        Some("inch") => 25.4,
+        Some(other) => {
+            return Err(config.key_error(
+                &format!("{key}.unit"),
+                format!("'{other}' is not a LinuxCNC linear unit"),
+                "mm or inch, as [TRAJ] LINEAR_UNITS",
+            ))
+        }
+    };
+    let specs = [
+        ("counts", "s32", "eoffset-counts"),
+        ("scale", "float", "eoffset-scale"),
+        ("enable", "bit", "eoffset-enable"),
+    ]
+    .map(|(pin, hal_type, motion)| PinSpec {
+        name: format!("{letter}.{pin}"),
+        hal_type,
+        net: Some(format!("axis.{letter}.{motion}")),
+        signal: format!("{component}-{letter}-{pin}"),
+    });
+    Ok((
+        AxisPins {
+            request_pin: format!("axis.{letter}.eoffset-request"),
+            counts_pin: format!("{letter}.counts"),
+            scale: resolution_um / 1000.0 / mm_per_unit,
+            mm_per_unit,
+            counts: 0,
+            expected: None,
+            request_now: None,
+        },
+        specs,
+    ))
+}
+
+/// Take over each axis's offset where LinuxCNC has it: errmap's counts pins took the value
+/// motion reads when they were linked, and the offsets move only by changes from there. The
+/// scale is set before any change, then the offsets are enabled.
+fn take_over(
+    link: &mut HalLink,
+    what: &str,
+    component: &str,
+    axes: &mut BTreeMap<String, AxisPins>,
+) -> Result<()> {
+    let reach = |e: String| Error::io("reach", what, std::io::Error::other(e));
+    for a in axes.values_mut() {
+        let full = format!("{component}.{}", a.counts_pin);
+        a.counts = match link.get(&[full]).map_err(reach)?[..] {
+            [HalValue::Integer(c)] => c as i32,
+            _ => return Err(reach(format!("{} is not an s32", a.counts_pin))),
+        };
+        let letter = &a.counts_pin[..1];
+        link.set(&[(format!("{letter}.scale"), format!("{:e}", a.scale))])
+            .map_err(reach)?;
+        link.set(&[(format!("{letter}.enable"), "1".into())])
+            .map_err(reach)?;
+    }
+    Ok(())
 }
 
 impl Target for LinuxCncTarget {
