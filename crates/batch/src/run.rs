@@ -1403,10 +1403,12 @@ pub(crate) fn compensate_one(
             &model_file,
         )
         .and_then(|_| match tp.max_uncertainty_um {
-            None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings),
+            None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings)
+                .map_err(Into::into),
             Some(max_um) => {
                 let bounded = model.bounded_by_uncertainty(max_um, &model_file)?;
                 errmap_toolpath::compensate_file(input, &output, &bounded, &tp.settings)
+                    .map_err(Into::into)
             }
         });
     match checked {

@@ -95,7 +95,7 @@ mod tests {
         assert_eq!(layout(None, None), Layout::Grid { nx: 12, ny: 12 });
         assert!(check_noise_um(0.0).is_ok());
         let err = check_noise_um(-1.0).unwrap_err();
-        assert_eq!(err.exit_code(), 2);
+        assert_eq!(err.kind(), "input");
         assert!(err.to_string().contains("--noise-um must be ≥ 0"), "{err}");
         assert!(check_noise_um(f64::NAN).is_err());
     }

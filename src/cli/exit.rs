@@ -1,0 +1,86 @@
+//! Exit codes, in one place: each library operation's typed error (and the located diagnostic
+//! of the crates that still return one) mapped to the code a script acts on.
+//!
+//! 0 done; 1 a batch finished but some parts failed (decided by the batch's summary);
+//! 2 fix the input: bad file content, options or settings, data a method cannot use, a file
+//! that cannot be read; 3 the machine or errmap: an output that cannot be written, the GPU,
+//! an internal error.
+
+use errmap::error::{Diagnose, Diagnostic};
+use errmap::toolpath::{CompensateError, DialectError, SettingsError};
+
+/// Bad input: the user fixes a file, an option or a setting.
+const INPUT: i32 = 2;
+/// The machine (an output, the GPU) or errmap itself.
+const SYSTEM: i32 = 3;
+
+/// Why a command failed: the typed error of the library operation it called, or a located
+/// diagnostic (the CLI's own checks, and the crates that still return one).
+#[derive(Debug)]
+pub enum Failure {
+    /// A located diagnostic (batch, live, serve, the CLI's own checks).
+    Diagnostic(Diagnostic),
+    /// Compensation settings in words (`errmap compensate`'s flags).
+    Settings(SettingsError),
+    /// Toolpath compensation.
+    Compensate(CompensateError),
+}
+errmap_core::typed_error!(Failure {
+    Diagnostic,
+    Settings,
+    Compensate
+});
+
+/// A command's result: its exit code, or why it failed.
+pub type Result<T, E = Failure> = std::result::Result<T, E>;
+
+macro_rules! failure_from {
+    ($($variant:ident($ty:ty)),+ $(,)?) => {
+        $(impl From<$ty> for Failure {
+            fn from(e: $ty) -> Self {
+                Failure::$variant(e)
+            }
+        })+
+    };
+}
+failure_from!(
+    Diagnostic(Diagnostic),
+    Settings(SettingsError),
+    Compensate(CompensateError),
+);
+
+/// The exit code of a failed command.
+pub fn code(failure: &Failure) -> i32 {
+    let code = match failure {
+        Failure::Diagnostic(d) => diagnostic(d),
+        Failure::Settings(_) => INPUT,
+        Failure::Compensate(e) => compensate(e),
+    };
+    // Every typed variant keeps the code its diagnostic's kind had before the types existed.
+    debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
+    code
+}
+
+/// A diagnostic by its kind: bad input, usage, a numeric failure or an unreadable file are the
+/// input's; any other I/O failure, the device and internal errors are the machine's or errmap's.
+fn diagnostic(d: &Diagnostic) -> i32 {
+    match d {
+        Diagnostic::Input { .. } | Diagnostic::Usage { .. } | Diagnostic::Numeric { .. } => INPUT,
+        Diagnostic::Io { .. } if d.is_read() => INPUT,
+        Diagnostic::Io { .. } | Diagnostic::Device { .. } | Diagnostic::Internal(_) => SYSTEM,
+    }
+}
+
+fn compensate(e: &CompensateError) -> i32 {
+    use CompensateError as E;
+    match e {
+        E::Settings(_)
+        | E::Dialect(DialectError::Uncertain(_))
+        | E::Program(_)
+        | E::Uncovered(_)
+        | E::Overwrite(_)
+        | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
