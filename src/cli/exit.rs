@@ -7,6 +7,9 @@
 //! an internal error.
 
 use errmap::error::{Diagnose, Diagnostic};
+use errmap::map::grid_file::GridError;
+use errmap::map::MapError;
+use errmap::probe::ProbeError;
 use errmap::toolpath::{CompensateError, DialectError, SettingsError};
 
 /// Bad input: the user fixes a file, an option or a setting.
@@ -24,11 +27,20 @@ pub enum Failure {
     Settings(SettingsError),
     /// Toolpath compensation.
     Compensate(CompensateError),
+    /// Reading a probe file.
+    Probe(ProbeError),
+    /// Reading or using a fitted map.
+    Map(MapError),
+    /// Probe points onto a grid (`errmap grid`).
+    Grid(GridError),
 }
 errmap_core::typed_error!(Failure {
     Diagnostic,
     Settings,
-    Compensate
+    Compensate,
+    Probe,
+    Map,
+    Grid,
 });
 
 /// A command's result: its exit code, or why it failed.
@@ -47,6 +59,9 @@ failure_from!(
     Diagnostic(Diagnostic),
     Settings(SettingsError),
     Compensate(CompensateError),
+    Probe(ProbeError),
+    Map(MapError),
+    Grid(GridError),
 );
 
 /// The exit code of a failed command.
@@ -55,6 +70,9 @@ pub fn code(failure: &Failure) -> i32 {
         Failure::Diagnostic(d) => diagnostic(d),
         Failure::Settings(_) => INPUT,
         Failure::Compensate(e) => compensate(e),
+        Failure::Probe(e) => probe(e),
+        Failure::Map(e) => map(e),
+        Failure::Grid(e) => grid(e),
     };
     // Every typed variant keeps the code its diagnostic's kind had before the types existed.
     debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
@@ -80,6 +98,36 @@ fn compensate(e: &CompensateError) -> i32 {
         | E::Uncovered(_)
         | E::Overwrite(_)
         | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn probe(e: &ProbeError) -> i32 {
+    use ProbeError as E;
+    match e {
+        E::Options(_) | E::Line(_) | E::File(_) | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn map(e: &MapError) -> i32 {
+    use MapError as E;
+    match e {
+        E::Options(_) | E::Line(_) | E::File(_) | E::Implausible(_) | E::Weak(_) | E::Read(_) => {
+            INPUT
+        }
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn grid(e: &GridError) -> i32 {
+    use GridError as E;
+    match e {
+        E::Probes(p) => probe(p),
+        E::Options(_) => INPUT,
         E::Write(_) | E::Internal(_) => SYSTEM,
         _ => diagnostic(e.diagnostic()),
     }

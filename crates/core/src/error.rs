@@ -288,6 +288,12 @@ impl Diagnostic {
         matches!(self, Diagnostic::Io { action, .. } if *action == "read")
     }
 
+    /// Whether the diagnostic names a line of its file (a bad value, point or block there),
+    /// as opposed to the file as a whole or no file at all.
+    pub fn at_line(&self) -> bool {
+        matches!(self, Diagnostic::Input { location, .. } if location.line.is_some())
+    }
+
     /// The error as data: kind, message, location and hint (what `summary.json` records for a
     /// failed part).
     pub fn report(&self) -> ErrorReport {
