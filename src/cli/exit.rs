@@ -6,10 +6,15 @@
 //! that cannot be read; 3 the machine or errmap: an output that cannot be written, the GPU,
 //! an internal error.
 
+use errmap::circular::CircularError;
+use errmap::controller::TableError;
 use errmap::error::{Diagnose, Diagnostic};
+use errmap::linear::LinearError;
 use errmap::map::grid_file::GridError;
 use errmap::map::MapError;
 use errmap::probe::ProbeError;
+use errmap::rotary::RotaryError;
+use errmap::thermal::ThermalError;
 use errmap::toolpath::{CompensateError, DialectError, SettingsError};
 
 /// Bad input: the user fixes a file, an option or a setting.
@@ -33,6 +38,16 @@ pub enum Failure {
     Map(MapError),
     /// Probe points onto a grid (`errmap grid`).
     Grid(GridError),
+    /// A linear-axis analysis.
+    Linear(LinearError),
+    /// A thermal command.
+    Thermal(ThermalError),
+    /// A rotary-axis analysis or table.
+    Rotary(RotaryError),
+    /// A circular test.
+    Circular(CircularError),
+    /// A controller compensation table.
+    Table(TableError),
 }
 errmap_core::typed_error!(Failure {
     Diagnostic,
@@ -41,6 +56,11 @@ errmap_core::typed_error!(Failure {
     Probe,
     Map,
     Grid,
+    Linear,
+    Thermal,
+    Rotary,
+    Circular,
+    Table,
 });
 
 /// A command's result: its exit code, or why it failed.
@@ -62,7 +82,25 @@ failure_from!(
     Probe(ProbeError),
     Map(MapError),
     Grid(GridError),
+    Linear(LinearError),
+    Thermal(ThermalError),
+    Rotary(RotaryError),
+    Circular(CircularError),
+    Table(TableError),
 );
+
+/// An analysis' error (they share their variants): bad options, a bad line or file, a fit
+/// not possible or an unreadable input are the input's; an output, a bug the machine's or
+/// errmap's.
+macro_rules! analysis {
+    ($ty:ident, $e:expr) => {
+        match $e {
+            $ty::Options(_) | $ty::Line(_) | $ty::File(_) | $ty::Fit(_) | $ty::Read(_) => INPUT,
+            $ty::Write(_) | $ty::Internal(_) => SYSTEM,
+            other => diagnostic(other.diagnostic()),
+        }
+    };
+}
 
 /// The exit code of a failed command.
 pub fn code(failure: &Failure) -> i32 {
@@ -73,6 +111,11 @@ pub fn code(failure: &Failure) -> i32 {
         Failure::Probe(e) => probe(e),
         Failure::Map(e) => map(e),
         Failure::Grid(e) => grid(e),
+        Failure::Linear(e) => analysis!(LinearError, e),
+        Failure::Thermal(e) => analysis!(ThermalError, e),
+        Failure::Rotary(e) => analysis!(RotaryError, e),
+        Failure::Circular(e) => analysis!(CircularError, e),
+        Failure::Table(e) => analysis!(TableError, e),
     };
     // Every typed variant keeps the code its diagnostic's kind had before the types existed.
     debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
