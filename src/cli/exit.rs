@@ -13,7 +13,9 @@ use errmap::linear::LinearError;
 use errmap::map::grid_file::GridError;
 use errmap::map::MapError;
 use errmap::probe::ProbeError;
+use errmap::report::ReportError;
 use errmap::rotary::RotaryError;
+use errmap::synth::SynthError;
 use errmap::thermal::ThermalError;
 use errmap::toolpath::{CompensateError, DialectError, SettingsError};
 
@@ -48,6 +50,10 @@ pub enum Failure {
     Circular(CircularError),
     /// A controller compensation table.
     Table(TableError),
+    /// A report: results read back, the PDF.
+    Report(ReportError),
+    /// Sample data (`errmap synth …`).
+    Synth(SynthError),
 }
 errmap_core::typed_error!(Failure {
     Diagnostic,
@@ -61,6 +67,8 @@ errmap_core::typed_error!(Failure {
     Rotary,
     Circular,
     Table,
+    Report,
+    Synth,
 });
 
 /// A command's result: its exit code, or why it failed.
@@ -87,6 +95,8 @@ failure_from!(
     Rotary(RotaryError),
     Circular(CircularError),
     Table(TableError),
+    Report(ReportError),
+    Synth(SynthError),
 );
 
 /// An analysis' error (they share their variants): bad options, a bad line or file, a fit
@@ -116,6 +126,8 @@ pub fn code(failure: &Failure) -> i32 {
         Failure::Rotary(e) => analysis!(RotaryError, e),
         Failure::Circular(e) => analysis!(CircularError, e),
         Failure::Table(e) => analysis!(TableError, e),
+        Failure::Report(e) => report(e),
+        Failure::Synth(e) => synth(e),
     };
     // Every typed variant keeps the code its diagnostic's kind had before the types existed.
     debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
@@ -171,6 +183,24 @@ fn grid(e: &GridError) -> i32 {
     match e {
         E::Probes(p) => probe(p),
         E::Options(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn report(e: &ReportError) -> i32 {
+    use ReportError as E;
+    match e {
+        E::NoBrowser(_) | E::Output(_) | E::Result(_) | E::Read(_) => INPUT,
+        E::Print(_) | E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn synth(e: &SynthError) -> i32 {
+    use SynthError as E;
+    match e {
+        E::Options(_) | E::Input(_) | E::Read(_) => INPUT,
         E::Write(_) | E::Internal(_) => SYSTEM,
         _ => diagnostic(e.diagnostic()),
     }
