@@ -1,5 +1,5 @@
 //! The located diagnostic every errmap error carries (kind, file, line, column, message, hint)
-//! and the glue of the typed errors each operation returns ([`Diagnose`], [`typed_error!`]).
+//! and the glue of the typed errors each operation returns ([`Diagnose`], [`typed_error!`](crate::typed_error)).
 //!
 //! A library operation returns its own error enum (as `errmap_toolpath::CompensateError`), whose
 //! variants say what a caller can act on; each variant carries a [`Diagnostic`], which words
