@@ -205,3 +205,68 @@ fn synth(e: &SynthError) -> i32 {
         _ => diagnostic(e.diagnostic()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use errmap::error::Location;
+    use std::io;
+
+    fn input() -> Diagnostic {
+        Diagnostic::input(Location::line("p.csv", 3), "bad", "fix it")
+    }
+    fn read() -> Diagnostic {
+        Diagnostic::read("p.csv", io::Error::from(io::ErrorKind::NotFound))
+    }
+    fn write() -> Diagnostic {
+        Diagnostic::write("out.csv", io::Error::from(io::ErrorKind::PermissionDenied))
+    }
+
+    /// The codes of the documented table (the module page): 2 for the input's faults, 3 for
+    /// the machine's or errmap's, whatever operation reported them.
+    #[test]
+    fn each_operation_keeps_the_documented_codes() {
+        let cases: Vec<(Failure, i32)> = vec![
+            (Failure::from(input()), 2),
+            (Failure::from(read()), 2),
+            (Failure::from(write()), 3),
+            (Failure::from(Diagnostic::Internal("x".into())), 3),
+            (Failure::from(Diagnostic::device("lost", "")), 3),
+            (CompensateError::from(input()).into(), 2),
+            (CompensateError::from(read()).into(), 2),
+            (CompensateError::from(write()).into(), 3),
+            (CompensateError::Overwrite(input()).into(), 2),
+            (ProbeError::from(read()).into(), 2),
+            (ProbeError::from(write()).into(), 3),
+            (MapError::Weak(input()).into(), 2),
+            (GridError::from(ProbeError::from(read())).into(), 2),
+            (
+                LinearError::from(Diagnostic::numeric("singular", "")).into(),
+                2,
+            ),
+            (ThermalError::from(write()).into(), 3),
+            (TableError::from(input()).into(), 2),
+            (
+                ReportError::from(Diagnostic::device("no PDF", "")).into(),
+                3,
+            ),
+            (ReportError::from(read()).into(), 2),
+            (SynthError::from(write()).into(), 3),
+            (SynthError::from(Diagnostic::usage("bad", "")).into(), 2),
+        ];
+        for (failure, expected) in cases {
+            assert_eq!(code(&failure), expected, "{failure:?}");
+        }
+    }
+
+    /// A typed error prints exactly its diagnostic, causes included.
+    #[test]
+    fn a_typed_error_prints_its_diagnostic_word_for_word() {
+        let typed = Failure::from(CompensateError::from(read()));
+        let plain = read();
+        assert_eq!(typed.to_string(), "cannot read p.csv: entity not found");
+        assert_eq!(typed.to_string(), plain.to_string());
+        let cause = std::error::Error::source(&typed).map(|c| c.to_string());
+        assert_eq!(cause.as_deref(), Some("entity not found"));
+    }
+}

@@ -137,3 +137,21 @@ impl From<Diagnostic> for GridError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use errmap_core::error::Location;
+
+    #[test]
+    fn a_diagnostic_is_filed_by_its_kind_and_whether_it_names_a_line() {
+        let at_line = Diagnostic::input(Location::cell("p.csv", 4, "x_mm"), "not a number", "");
+        let whole = Diagnostic::input(Location::file("p.csv"), "too few points", "");
+        let bound = Diagnostic::usage("--max-deviation-mm -1 is not positive", "");
+        let unreadable = Diagnostic::read("p.csv", std::io::ErrorKind::NotFound.into());
+        assert!(matches!(ProbeError::from(at_line), ProbeError::Line(_)));
+        assert!(matches!(ProbeError::from(whole), ProbeError::File(_)));
+        assert!(matches!(ProbeError::from(bound), ProbeError::Options(_)));
+        assert!(matches!(ProbeError::from(unreadable), ProbeError::Read(_)));
+    }
+}
