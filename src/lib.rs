@@ -25,4 +25,4 @@ pub use errmap_serve as serve;
 pub use errmap_synth as synth;
 pub use errmap_toolpath as toolpath;
 
-pub use error::{Error, Location, Result};
+pub use error::{Diagnose, Diagnostic, Error, Location, Result};

@@ -3,6 +3,7 @@
 mod cli;
 
 use clap::Parser;
+use errmap::error::{Diagnose, Diagnostic};
 
 fn main() {
     errmap::gpu::quiet_headless_vulkan();
@@ -11,7 +12,7 @@ fn main() {
         Ok(code) => code,
         Err(err) => {
             // A closed pipe (`errmap … | head`) is not an error worth reporting.
-            if let errmap::Error::Io { source, .. } = &err {
+            if let Diagnostic::Io { source, .. } = err.diagnostic() {
                 if source.kind() == std::io::ErrorKind::BrokenPipe {
                     std::process::exit(0);
                 }
@@ -22,7 +23,7 @@ fn main() {
                 eprintln!("  caused by: {c}");
                 cause = c.source();
             }
-            err.exit_code()
+            cli::exit::code(&err)
         }
     };
     std::process::exit(code);

@@ -2,6 +2,7 @@
 
 mod common;
 
+use errmap::error::Diagnose;
 use errmap::geom::{Axis, ErrorField};
 use errmap::toolpath::{
     compensate_gcode, trace_gcode, CompensationReport, CompensationSettings, Dialect, Units,
@@ -60,7 +61,7 @@ fn refuse(text: &str) -> String {
 fn refuse_with(text: &str, s: &CompensationSettings) -> String {
     match compensate_gcode(text, Path::new("k.h"), &F1, s) {
         Ok((out, _)) => panic!("expected a refusal, got:\n{out}"),
-        Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
+        Err(e) => format!("{e} {}", e.diagnostic().report().hint.unwrap_or_default()),
     }
 }
 
@@ -879,7 +880,7 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
     let s = settings();
     let msg = match compensate_gcode(HOLES, Path::new("k.h"), &F35, &s) {
         Ok((out, _)) => panic!("expected a refusal:\n{out}"),
-        Err(e) => format!("{e} {}", e.report().hint.unwrap_or_default()),
+        Err(e) => format!("{e} {}", e.diagnostic().report().hint.unwrap_or_default()),
     };
     assert_msg(
         &msg,

@@ -1,9 +1,9 @@
 //! CLI of `errmap bench`: measure this machine (training throughput of a backend).
 
+use super::exit::Result;
 use super::Globals;
 use errmap::backend::bench::{self, TrainingBench};
 use errmap::nn::Backend;
-use errmap::Result;
 
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCommand {

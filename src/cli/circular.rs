@@ -1,9 +1,10 @@
 //! CLI of `errmap circular` and `errmap synth circular`: read a circular-test run, print the ISO 230-4 figures and the diagnosis, draw the polar chart; write synthetic runs.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::circular::{human_report, parse_centre_mm, run_test, Form, Plane, TestRequest};
 use errmap::synth::circular::{write_set, CircularSynthConfig};
-use errmap::{Error, Result};
+use errmap::Error;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]

@@ -1,9 +1,9 @@
 //! CLI of `errmap compensate`: rewrite a G-code or CSV toolpath with P' = P − E.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::toolpath::compensate_file;
 use errmap::toolpath::zone_spec::SettingsText;
-use errmap::Result;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]

@@ -76,7 +76,7 @@ mod tests {
     fn an_old_output_folder_that_looks_like_a_file_is_refused() {
         let err = old_output_folder(None, Some("diff.csv".into()), "--out-dir", "three files")
             .unwrap_err();
-        assert_eq!(err.exit_code(), 2);
+        assert_eq!(err.kind(), "input");
         let dir = old_output_folder(None, Some("out/difference".into()), "--out-dir", "x").unwrap();
         assert_eq!(dir, Some(PathBuf::from("out/difference")));
     }

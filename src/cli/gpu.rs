@@ -1,8 +1,8 @@
 //! CLI of `errmap gpu-info`: adapters, the one chosen and its limits.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::backend::info::GpuInfo;
-use errmap::Result;
 
 /// List GPU adapters, the one `--backend auto|gpu` would use, and its limits.
 #[derive(Debug, clap::Args)]

@@ -1,11 +1,11 @@
 //! CLI of `errmap grid`: interpolate probe points onto a grid without a network.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::geom::Axis;
 use errmap::interp::Method;
 use errmap::map::grid_file::{grid_probes, GridRequest};
 use errmap::probe::parse_domain;
-use errmap::Result;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]

@@ -1,5 +1,6 @@
 //! CLI of `errmap linear …` and `errmap synth linear`: analyse laser runs, air index, error budget, compensation tables, sample data.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::controller::{FanucSeries, SINUMERIK_DEFAULT_MAX_POINTS};
 use errmap::linear::{
@@ -7,7 +8,7 @@ use errmap::linear::{
     AirIndexJson, AnalyzeRequest, Corrections, Evaluation, RunSource, Standard, TableFormat,
     TableOptions, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,
 };
-use errmap::{Error, Result};
+use errmap::Error;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Subcommand)]

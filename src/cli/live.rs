@@ -1,7 +1,7 @@
 //! CLI of `errmap live` (the loop) and `errmap synth live-replay` (a machine log to replay).
 
+use super::exit::Result;
 use super::Globals;
-use errmap::error::Result;
 use errmap::live::replay::{write_replay, ReplayOptions};
 use errmap::live::{LiveConfig, RunOptions, StopFlags};
 use std::path::PathBuf;

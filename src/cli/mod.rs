@@ -31,6 +31,7 @@ mod choices;
 mod circular;
 mod compensate;
 mod deprecated;
+pub mod exit;
 mod gpu;
 mod grid;
 mod linear;
@@ -161,7 +162,7 @@ pub fn ignore_closed_pipe(result: Result<()>) -> Result<()> {
 }
 
 /// Run a parsed command line; the result is the process exit code.
-pub fn run(cli: Cli) -> Result<i32> {
+pub fn run(cli: Cli) -> exit::Result<i32> {
     // Every output of this process obeys the safety rules: never over an input, never
     // outside the folder a command writes into.
     errmap::io::safety::activate();
@@ -169,14 +170,16 @@ pub fn run(cli: Cli) -> Result<i32> {
         return Err(errmap::Error::usage(
             "--max-output-mb 0 allows no output at all",
             "give a size in MB, e.g. --max-output-mb 2000",
-        ));
+        )
+        .into());
     }
     errmap::io::safety::set_max_output_mb(cli.max_output_mb);
     if cli.max_memory_mb == Some(0) {
         return Err(errmap::Error::usage(
             "--max-memory-mb 0 leaves no memory for any part",
             "give a size in MB, e.g. --max-memory-mb 4096",
-        ));
+        )
+        .into());
     }
     errmap::probe::budget::set_max_memory_mb(cli.max_memory_mb.unwrap_or(0));
     let globals = Globals { quiet: cli.quiet };

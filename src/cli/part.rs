@@ -1,12 +1,13 @@
 //! CLI of part-family mapping: `batch`, `map` and `merge`.
 
+use super::exit::Result;
 use super::terminal::Terminal;
 use super::Globals;
 use errmap::batch::{self, BatchOptions, BatchSummary, Job, MapRequest, MergeRequest, Shard};
 use errmap::geom::{Axis, Domain};
 use errmap::interp::Method;
 use errmap::nn::{Backend, ModelConfig};
-use errmap::{Error, Result};
+use errmap::Error;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -127,7 +128,12 @@ pub struct MergeArgs {
     pub json: bool,
 }
 
-fn report(summary: &BatchSummary, path: &std::path::Path, json: bool, quiet: bool) -> Result<()> {
+fn report(
+    summary: &BatchSummary,
+    path: &std::path::Path,
+    json: bool,
+    quiet: bool,
+) -> errmap::Result<()> {
     if json {
         let text =
             serde_json::to_string_pretty(summary).map_err(|e| Error::Internal(e.to_string()))?;
@@ -146,7 +152,7 @@ fn select(
     backend: Backend,
     model: &ModelConfig,
     globals: Globals,
-) -> Result<Box<dyn errmap::nn::Trainer>> {
+) -> errmap::Result<Box<dyn errmap::nn::Trainer>> {
     let selection = errmap::backend::select_trainer(backend, model, super::notes(globals))?;
     super::terminal::detail(&format!("trainer: {}", selection.reason));
     Ok(selection.trainer)

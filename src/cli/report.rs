@@ -1,10 +1,11 @@
 //! CLI of `errmap report`: the self-contained `report.html` of a batch run or of an analysis's outputs, and its PDF.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::batch::manifest::{sha256_bytes, RunManifest};
 use errmap::batch::{folder_report::render_path, run_page::REPORT_FILE};
 use errmap::report::pdf::print_pdf;
-use errmap::{Error, Result};
+use errmap::Error;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
@@ -41,7 +42,7 @@ pub fn run(args: ReportArgs, _globals: Globals) -> Result<i32> {
 
 /// A run's `report.html` is listed in its `run.json`: replacing it with other bytes would leave
 /// the manifest vouching for a file that is gone, so that needs `-o`.
-fn check_listed_report(dir: &Path, html: &str) -> Result<()> {
+fn check_listed_report(dir: &Path, html: &str) -> errmap::Result<()> {
     let Some(m) = RunManifest::read(dir)? else {
         return Ok(());
     };

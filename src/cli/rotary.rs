@@ -1,11 +1,11 @@
 //! CLI of `errmap rotary …` and `errmap synth rotary`: arguments, printing, exit codes.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::error::Error;
 use errmap::rotary::commands::{analyze_command, table_command, AnalyzeRequest, TableRequest};
 use errmap::rotary::{AnalyzeOptions, RotaryAxis, Sign, TableFormat, TableOptions};
 use errmap::synth::rotary::{write_set, RotarySynthConfig};
-use errmap::Result;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Subcommand)]
@@ -173,7 +173,7 @@ pub fn run(cmd: RotaryCommand, _globals: Globals) -> Result<i32> {
 }
 
 /// Write to stdout; a closed pipe (`| head`) is not an error.
-fn print_stdout(text: &str) -> Result<()> {
+fn print_stdout(text: &str) -> errmap::Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {

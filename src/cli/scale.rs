@@ -1,11 +1,12 @@
 //! CLI of scale-out: `slurm` (array job + merge job, written or submitted) and `k8s` (Indexed Job + merge Job manifests).
 
+use super::exit::Result;
 use super::Globals;
 use errmap::batch::k8s::{self, K8sPlan};
 use errmap::batch::slurm::{self, SlurmPlan};
 use errmap::batch::{self, Job};
 use errmap::nn::Backend;
-use errmap::{Error, Result};
+use errmap::Error;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
@@ -107,7 +108,7 @@ fn backend_name(b: Option<Backend>) -> Option<String> {
     b.map(|b| b.name().to_string())
 }
 
-fn absolute(p: &Path) -> Result<PathBuf> {
+fn absolute(p: &Path) -> errmap::Result<PathBuf> {
     std::path::absolute(p).map_err(|e| Error::io("resolve", p, e))
 }
 

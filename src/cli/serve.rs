@@ -1,9 +1,10 @@
 //! CLI of `errmap serve`: the monitor web server, and `errmap serve user add|remove|list` for its users file.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::serve::users::{Role, Users};
 use errmap::serve::{self, Config};
-use errmap::{Error, Result};
+use errmap::Error;
 use std::io::Read;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
@@ -163,7 +164,8 @@ fn run_server(a: ServerArgs) -> Result<i32> {
         return Err(Error::usage(
             "--idle-timeout and --session-lifetime must be at least 1 s",
             "e.g. --idle-timeout 1800 --session-lifetime 28800",
-        ));
+        )
+        .into());
     }
     let users = a.users.unwrap_or_else(|| serve::default_users_path(&db));
     let cfg = Config {

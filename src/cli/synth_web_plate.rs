@@ -1,9 +1,9 @@
 //! CLI of `errmap synth web-plate`: write a sample web-plate family with its ground truth.
 
+use super::exit::Result;
 use super::Globals;
 use errmap::synth::web_plate::{self, WebPlateSpec};
 use errmap::synth::web_plate_args;
-use errmap::Result;
 
 #[derive(Debug, clap::Args)]
 pub struct SynthWebPlateArgs {

@@ -1,7 +1,8 @@
 //! CLI of `errmap thermal …` and `errmap synth thermal`.
 
+use super::exit::Result;
 use super::Globals;
-use errmap::error::{Error, Result};
+use errmap::error::Error;
 use errmap::linear::Standard;
 use errmap::synth::thermal::{write_campaigns, SynthThermalOptions};
 use errmap::thermal::campaign::Campaign;
@@ -285,7 +286,7 @@ fn run_difference(a: DifferenceArgs, _g: Globals) -> Result<i32> {
 
 fn run_ingest(a: IngestArgs, _g: Globals) -> Result<i32> {
     let db = commands::ingest_store(a.db.clone(), &a.campaigns);
-    let mut each = |s: &IngestSummary| -> Result<()> {
+    let mut each = |s: &IngestSummary| -> errmap::Result<()> {
         if !a.json {
             out!("{}", text::ingest_line(s));
         }
@@ -304,7 +305,7 @@ fn run_ingest(a: IngestArgs, _g: Globals) -> Result<i32> {
 /// One campaign into the open store. Debug builds (the tests) honour two fault injections
 /// inside the transaction: ERRMAP_TEST_FAIL_AFTER_SAMPLES=N fails after N temperature samples,
 /// ERRMAP_TEST_PAUSE_AFTER_SAMPLES=N says so on stderr and waits for a line on stdin there.
-fn ingest_one(replace: bool) -> impl FnMut(&mut Store, &Campaign) -> Result<IngestSummary> {
+fn ingest_one(replace: bool) -> impl FnMut(&mut Store, &Campaign) -> errmap::Result<IngestSummary> {
     move |store: &mut Store, campaign: &Campaign| {
         #[cfg(debug_assertions)]
         {

@@ -12,7 +12,7 @@ use std::path::Path;
 pub fn render_path(source: &Path) -> Result<String> {
     if source.is_file() {
         return match read_result(source)? {
-            Some(r) => render_results(&[(source.to_path_buf(), r)]),
+            Some(r) => render_results(&[(source.to_path_buf(), r)]).map_err(Into::into),
             None => Err(not_a_source(source)),
         };
     }
@@ -38,7 +38,7 @@ pub fn render_path(source: &Path) -> Result<String> {
     if results.is_empty() {
         return Err(not_a_source(source));
     }
-    render_results(&results)
+    render_results(&results).map_err(Into::into)
 }
 
 fn not_a_source(source: &Path) -> Error {

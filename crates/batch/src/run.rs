@@ -225,11 +225,11 @@ fn prepare(
     let (set, preamble_lines, skipped_features) =
         match probe::read_probe_file(&input.probe_file, &spec) {
             Ok(read) => (read.set, read.preamble_lines, read.skipped_features),
-            Err(e) => return Err(Box::new((input, e))),
+            Err(e) => return Err(Box::new((input, e.into()))),
         };
     let cleaned = match probe::reject_gross_errors(&set, s.k_sigma) {
         Ok(c) => c,
-        Err(e) => return Err(Box::new((input, e))),
+        Err(e) => return Err(Box::new((input, e.into()))),
     };
     let rows: u32 = set.points.iter().map(|p| p.repeats).sum();
     let holdout = choose_holdout(
@@ -1402,11 +1402,14 @@ pub(crate) fn compensate_one(
             "set [toolpaths] allow_weak_map = true in the job",
             &model_file,
         )
+        .map_err(Error::from)
         .and_then(|_| match tp.max_uncertainty_um {
-            None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings),
+            None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings)
+                .map_err(Into::into),
             Some(max_um) => {
                 let bounded = model.bounded_by_uncertainty(max_um, &model_file)?;
                 errmap_toolpath::compensate_file(input, &output, &bounded, &tp.settings)
+                    .map_err(Into::into)
             }
         });
     match checked {

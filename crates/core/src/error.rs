@@ -1,4 +1,9 @@
-//! The one error type of errmap: every input error names its file, line and column and says what would fix it.
+//! The located diagnostic every errmap error carries (kind, file, line, column, message, hint)
+//! and the glue of the typed errors each operation returns ([`Diagnose`], [`typed_error!`](crate::typed_error)).
+//!
+//! A library operation returns its own error enum (as `errmap_toolpath::CompensateError`), whose
+//! variants say what a caller can act on; each variant carries a [`Diagnostic`], which words
+//! the message exactly as errmap prints it. Exit codes are the binary's (`src/cli/exit.rs`).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -55,10 +60,10 @@ impl fmt::Display for Location {
     }
 }
 
-/// An [`Error`] as a record for files and scripts (`summary.json`).
+/// A [`Diagnostic`] as a record for files and scripts (`summary.json`).
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorReport {
-    /// `input`, `io`, `device` or `internal` (see [`Error::kind`]).
+    /// `input`, `io`, `device` or `internal` (see [`Diagnostic::kind`]).
     pub kind: String,
     /// What went wrong, without the location or hint.
     pub message: String,
@@ -91,12 +96,12 @@ impl fmt::Display for ErrorReport {
 }
 
 impl ErrorReport {
-    /// The error again, for a command that reports one part's failure as its own: the kind
-    /// (and so the exit code), place, message and hint are kept.
-    pub fn into_error(self) -> Error {
+    /// The diagnostic again, for a command that reports one part's failure as its own: the
+    /// kind (and so the exit code), place, message and hint are kept.
+    pub fn into_error(self) -> Diagnostic {
         let hint = self.hint.unwrap_or_default();
         match (self.kind.as_str(), self.file) {
-            ("input", Some(file)) => Error::Input {
+            ("input", Some(file)) => Diagnostic::Input {
                 location: Location {
                     file,
                     line: self.line,
@@ -105,11 +110,11 @@ impl ErrorReport {
                 message: self.message,
                 hint,
             },
-            ("input", None) => Error::Usage {
+            ("input", None) => Diagnostic::Usage {
                 message: self.message,
                 hint,
             },
-            ("io", file) => Error::Io {
+            ("io", file) => Diagnostic::Io {
                 action: if self.message.starts_with("cannot read") {
                     "read"
                 } else {
@@ -122,19 +127,20 @@ impl ErrorReport {
                         .map_or(self.message.clone(), |(_, cause)| cause.to_string()),
                 ),
             },
-            ("device", _) => Error::Device {
+            ("device", _) => Diagnostic::Device {
                 message: self.message,
                 hint,
             },
-            _ => Error::Internal(self.message),
+            _ => Diagnostic::Internal(self.message),
         }
     }
 }
 
-/// Everything that can go wrong in errmap. The CLI maps each kind to an exit code
-/// (see [`Error::exit_code`]).
+/// What went wrong, where and what would fix it: the message errmap prints, word for word.
+/// Its kind (input, usage, io, device, numeric, internal) is what `summary.json` records; the
+/// binary maps it (and each operation's typed error) to an exit code.
 #[derive(Debug, thiserror::Error)]
-pub enum Error {
+pub enum Diagnostic {
     /// Bad content in an input file (CSV, TOML, G-code …).
     #[error("{location}: {message}{}", hint_suffix(.hint))]
     Input {
@@ -199,13 +205,17 @@ fn hint_suffix(hint: &str) -> String {
     }
 }
 
-/// errmap's result: [`Error`] unless another error type is named.
-pub type Result<T, E = Error> = std::result::Result<T, E>;
+/// The name [`Diagnostic`] had while it was errmap's one error type; the crates that still
+/// return it whole (batch, live, serve) and their callers use this name.
+pub type Error = Diagnostic;
 
-impl Error {
+/// A result whose error is a [`Diagnostic`] unless another error type is named.
+pub type Result<T, E = Diagnostic> = std::result::Result<T, E>;
+
+impl Diagnostic {
     /// Bad input at a location, with what would fix it.
     pub fn input(location: Location, message: impl Into<String>, hint: impl Into<String>) -> Self {
-        Error::Input {
+        Diagnostic::Input {
             location,
             message: message.into(),
             hint: hint.into(),
@@ -213,14 +223,14 @@ impl Error {
     }
     /// A bad option or combination of options, with what would fix it.
     pub fn usage(message: impl Into<String>, hint: impl Into<String>) -> Self {
-        Error::Usage {
+        Diagnostic::Usage {
             message: message.into(),
             hint: hint.into(),
         }
     }
     /// The GPU could not be used, with what would fix it.
     pub fn device(message: impl Into<String>, hint: impl Into<String>) -> Self {
-        Error::Device {
+        Diagnostic::Device {
             message: message.into(),
             hint: hint.into(),
         }
@@ -228,14 +238,14 @@ impl Error {
     /// A numerical method failed on valid input (singular system, no convergence), with what
     /// would fix it.
     pub fn numeric(message: impl Into<String>, hint: impl Into<String>) -> Self {
-        Error::Numeric {
+        Diagnostic::Numeric {
             message: message.into(),
             hint: hint.into(),
         }
     }
     /// A file could not be read.
     pub fn read(path: impl AsRef<Path>, source: std::io::Error) -> Self {
-        Error::Io {
+        Diagnostic::Io {
             action: "read",
             path: path.as_ref().to_path_buf(),
             source,
@@ -243,7 +253,7 @@ impl Error {
     }
     /// A file could not be written.
     pub fn write(path: impl AsRef<Path>, source: std::io::Error) -> Self {
-        Error::Io {
+        Diagnostic::Io {
             action: "write",
             path: path.as_ref().to_path_buf(),
             source,
@@ -251,7 +261,7 @@ impl Error {
     }
     /// An operation other than a plain read or write ("create folder", "rename …").
     pub fn io(action: &'static str, path: impl AsRef<Path>, source: std::io::Error) -> Self {
-        Error::Io {
+        Diagnostic::Io {
             action,
             path: path.as_ref().to_path_buf(),
             source,
@@ -263,26 +273,40 @@ impl Error {
     /// `internal` (a bug in errmap).
     pub fn kind(&self) -> &'static str {
         match self {
-            Error::Input { .. } | Error::Usage { .. } | Error::Numeric { .. } => "input",
-            Error::Io { .. } => "io",
-            Error::Device { .. } => "device",
-            Error::Internal(_) => "internal",
+            Diagnostic::Input { .. } | Diagnostic::Usage { .. } | Diagnostic::Numeric { .. } => {
+                "input"
+            }
+            Diagnostic::Io { .. } => "io",
+            Diagnostic::Device { .. } => "device",
+            Diagnostic::Internal(_) => "internal",
         }
+    }
+
+    /// A file that could not be read (as opposed to written, renamed or created): the input's
+    /// fault more often than the machine's, which the binary's exit codes tell apart.
+    pub fn is_read(&self) -> bool {
+        matches!(self, Diagnostic::Io { action, .. } if *action == "read")
+    }
+
+    /// Whether the diagnostic names a line of its file (a bad value, point or block there),
+    /// as opposed to the file as a whole or no file at all.
+    pub fn at_line(&self) -> bool {
+        matches!(self, Diagnostic::Input { location, .. } if location.line.is_some())
     }
 
     /// The error as data: kind, message, location and hint (what `summary.json` records for a
     /// failed part).
     pub fn report(&self) -> ErrorReport {
         let (message, location, hint) = match self {
-            Error::Input {
+            Diagnostic::Input {
                 location,
                 message,
                 hint,
             } => (message.clone(), Some(location.clone()), hint.clone()),
-            Error::Usage { message, hint }
-            | Error::Device { message, hint }
-            | Error::Numeric { message, hint } => (message.clone(), None, hint.clone()),
-            Error::Io {
+            Diagnostic::Usage { message, hint }
+            | Diagnostic::Device { message, hint }
+            | Diagnostic::Numeric { message, hint } => (message.clone(), None, hint.clone()),
+            Diagnostic::Io {
                 action,
                 path,
                 source,
@@ -297,7 +321,7 @@ impl Error {
                     ),
                 },
             ),
-            Error::Internal(m) => (
+            Diagnostic::Internal(m) => (
                 m.clone(),
                 None,
                 "this is a bug in errmap: please report it with the input".to_string(),
@@ -312,15 +336,77 @@ impl Error {
             hint: (!hint.is_empty()).then_some(hint),
         }
     }
+}
 
-    /// CLI exit code: 2 bad input, usage, a numeric failure or a file that cannot be read;
-    /// 3 any other I/O failure, the device or an internal error.
-    /// (Exit code 1, "a batch finished but some parts failed", is decided by the batch.)
-    pub fn exit_code(&self) -> i32 {
-        match self {
-            Error::Input { .. } | Error::Usage { .. } | Error::Numeric { .. } => 2,
-            Error::Io { action, .. } if *action == "read" => 2,
-            Error::Io { .. } | Error::Device { .. } | Error::Internal(_) => 3,
-        }
+/// An error that carries a [`Diagnostic`]: every typed error of errmap's library crates, so a
+/// caller that only prints (or records a part's failure in `summary.json`) treats them alike.
+pub trait Diagnose: std::error::Error {
+    /// The located diagnostic: kind, file, line, column, message and hint.
+    fn diagnostic(&self) -> &Diagnostic;
+    /// The diagnostic, for a caller that keeps only it.
+    fn into_diagnostic(self) -> Diagnostic;
+}
+
+impl Diagnose for Diagnostic {
+    fn diagnostic(&self) -> &Diagnostic {
+        self
     }
+    fn into_diagnostic(self) -> Diagnostic {
+        self
+    }
+}
+
+/// Gives a typed error enum whose every variant carries one [`Diagnose`] value (a
+/// [`Diagnostic`] or another typed error) what every errmap error has: [`Diagnose`], `Display`
+/// and `source` exactly as the carried diagnostic's (so every message stays word for word), and
+/// `From<enum> for Diagnostic` (so a caller still on [`Diagnostic`] takes it with `?`).
+///
+/// ```
+/// use errmap_core::error::{Diagnose, Diagnostic};
+///
+/// /// Why a calibration could not be read.
+/// #[derive(Debug)]
+/// pub enum CalibrationError {
+///     /// A bad value at a line.
+///     Value(Diagnostic),
+///     /// The file cannot be read.
+///     Read(Diagnostic),
+/// }
+/// errmap_core::typed_error!(CalibrationError { Value, Read });
+///
+/// let e = CalibrationError::Value(Diagnostic::usage("offset is not a number", "give mm"));
+/// assert_eq!(e.to_string(), "offset is not a number (hint: give mm)");
+/// assert_eq!(Diagnostic::from(e).kind(), "input");
+/// ```
+#[macro_export]
+macro_rules! typed_error {
+    ($ty:ident { $($variant:ident),+ $(,)? }) => {
+        impl $crate::error::Diagnose for $ty {
+            fn diagnostic(&self) -> &$crate::error::Diagnostic {
+                match self {
+                    $( $ty::$variant(inner) => $crate::error::Diagnose::diagnostic(inner), )+
+                }
+            }
+            fn into_diagnostic(self) -> $crate::error::Diagnostic {
+                match self {
+                    $( $ty::$variant(inner) => $crate::error::Diagnose::into_diagnostic(inner), )+
+                }
+            }
+        }
+        impl ::std::fmt::Display for $ty {
+            fn fmt(&self, f: &mut ::std::fmt::Formatter<'_>) -> ::std::fmt::Result {
+                ::std::fmt::Display::fmt($crate::error::Diagnose::diagnostic(self), f)
+            }
+        }
+        impl ::std::error::Error for $ty {
+            fn source(&self) -> ::std::option::Option<&(dyn ::std::error::Error + 'static)> {
+                ::std::error::Error::source($crate::error::Diagnose::diagnostic(self))
+            }
+        }
+        impl ::std::convert::From<$ty> for $crate::error::Diagnostic {
+            fn from(e: $ty) -> Self {
+                $crate::error::Diagnose::into_diagnostic(e)
+            }
+        }
+    };
 }

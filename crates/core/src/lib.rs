@@ -13,4 +13,4 @@ pub mod io;
 pub mod numeric;
 pub mod progress;
 
-pub use error::{Error, Location, Result};
+pub use error::{Diagnose, Diagnostic, Error, Location, Result};

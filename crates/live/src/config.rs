@@ -816,7 +816,7 @@ rate_limit_um_s = 2
             "{msg}"
         );
         assert!(msg.contains("rate_limt"), "{msg}");
-        assert_eq!(e.exit_code(), 2);
+        assert_eq!(e.kind(), "input");
     }
 
     #[test]

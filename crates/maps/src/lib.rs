@@ -7,8 +7,11 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod backend;
+mod error;
 pub mod gpu;
 pub mod interp;
 pub mod map;
 pub mod nn;
 pub mod probe;
+
+pub use error::{GridError, MapError, ProbeError};

@@ -251,7 +251,7 @@ fn grid_covering_counts_nodes_and_refuses_bad_steps() {
         ..flipped
     };
     let err = Grid::covering(&flipped, 1.0).unwrap_err();
-    assert_eq!(err.exit_code(), 2, "{err}");
+    assert_eq!(err.kind(), "input", "{err}");
     assert!(
         err.to_string()
             .contains("is not a rectangle with min ≤ max"),

@@ -283,7 +283,7 @@ fn config_defaults_parse_and_validation_names_the_key() {
 
     let bad = |c: ModelConfig, key: &str| {
         let e = c.validate().unwrap_err();
-        assert_eq!(e.exit_code(), 2);
+        assert_eq!(e.kind(), "input");
         assert!(e.to_string().contains(key), "{e}");
     };
     let d = ModelConfig::default;

@@ -8,6 +8,9 @@
 
 pub mod circular;
 pub mod controller;
+mod error;
 pub mod linear;
 pub mod rotary;
 pub mod thermal;
+
+pub use error::{CircularError, LinearError, RotaryError, TableError, ThermalError};

@@ -5,7 +5,10 @@
 
 pub mod chart;
 pub mod colormap;
+mod error;
 pub mod heatmap;
 pub mod html;
 pub mod pdf;
 pub mod result;
+
+pub use error::ReportError;

@@ -1,5 +1,6 @@
 //! `--pdf`: print a report through a headless Chromium (found as `$ERRMAP_CHROMIUM`, `chromium`, `chromium-browser`, `google-chrome` or `google-chrome-stable` on the PATH).
 
+use crate::ReportError;
 use errmap_core::error::{Error, Result};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -17,16 +18,16 @@ const PRINT_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// The browser to print with: `$ERRMAP_CHROMIUM` when set, else the first of
 /// [`BROWSER_NAMES`] on the PATH.
-pub fn find_chromium() -> Result<PathBuf> {
+pub fn find_chromium() -> Result<PathBuf, ReportError> {
     if let Some(p) = std::env::var_os("ERRMAP_CHROMIUM").filter(|p| !p.is_empty()) {
         let p = PathBuf::from(p);
         if p.is_file() {
             return Ok(p);
         }
-        return Err(Error::usage(
+        return Err(ReportError::NoBrowser(Error::usage(
             format!("ERRMAP_CHROMIUM={} is not a file", p.display()),
             "set ERRMAP_CHROMIUM to the Chromium or Chrome executable, or unset it to search the PATH",
-        ));
+        )));
     }
     let path = std::env::var_os("PATH").unwrap_or_default();
     for name in BROWSER_NAMES {
@@ -37,13 +38,13 @@ pub fn find_chromium() -> Result<PathBuf> {
             }
         }
     }
-    Err(Error::usage(
+    Err(ReportError::NoBrowser(Error::usage(
         format!(
             "--pdf needs a headless Chromium and none was found ({} on the PATH, or $ERRMAP_CHROMIUM)",
             BROWSER_NAMES.join(", ")
         ),
         "install Chromium (Debian/Ubuntu: apt-get install chromium; Fedora: dnf install chromium) or set ERRMAP_CHROMIUM to a Chrome or Chromium executable; the HTML report does not need it",
-    ))
+    )))
 }
 
 /// A `file://` URL of an absolute path, bytes outside the unreserved set percent-encoded.
@@ -61,8 +62,11 @@ pub fn file_url(path: &Path) -> Result<String> {
 }
 
 /// Print the HTML file `html` to the PDF `pdf` (written atomically, never over an input).
-pub fn print_pdf(html: &Path, pdf: &Path) -> Result<()> {
-    errmap_core::io::safety::check_output(pdf)?;
+pub fn print_pdf(html: &Path, pdf: &Path) -> Result<(), ReportError> {
+    errmap_core::io::safety::check_output(pdf).map_err(|d| match d {
+        Error::Internal(_) => ReportError::Internal(d),
+        d => ReportError::Output(d),
+    })?;
     let browser = find_chromium()?;
     let scratch = tempfile::tempdir().map_err(|e| Error::write(std::env::temp_dir(), e))?;
     let out = scratch.path().join("report.pdf");
@@ -82,13 +86,13 @@ pub fn print_pdf(html: &Path, pdf: &Path) -> Result<()> {
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()
-        .map_err(|e| Error::io("start", &browser, e))?;
+        .map_err(|e| ReportError::Print(Error::io("start", &browser, e)))?;
     let start = Instant::now();
     let status =
         loop {
             if let Some(s) = child
                 .try_wait()
-                .map_err(|e| Error::io("wait for", &browser, e))?
+                .map_err(|e| ReportError::Print(Error::io("wait for", &browser, e)))?
             {
                 break s;
             }
@@ -98,7 +102,7 @@ pub fn print_pdf(html: &Path, pdf: &Path) -> Result<()> {
                 return Err(Error::device(
                 format!("{} did not print within {} s", browser.display(), PRINT_TIMEOUT.as_secs()),
                 "print the HTML report from a browser, or check that Chromium starts headless here",
-            ));
+            ).into());
             }
             std::thread::sleep(Duration::from_millis(100));
         };
@@ -113,9 +117,10 @@ pub fn print_pdf(html: &Path, pdf: &Path) -> Result<()> {
         return Err(Error::device(
             format!("{} printed no PDF ({status}): {tail}", browser.display()),
             "print the HTML report from a browser, or check that Chromium starts headless here",
-        ));
+        )
+        .into());
     }
-    errmap_core::io::write_atomic_bytes(pdf, &bytes)
+    Ok(errmap_core::io::write_atomic_bytes(pdf, &bytes)?)
 }
 
 #[cfg(test)]

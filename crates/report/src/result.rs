@@ -6,6 +6,7 @@
 
 use super::html::json_text;
 use super::html::{self, figure_cell, num, para, png_figure, pre, table, Cell, Page};
+use crate::ReportError;
 use errmap_core::error::{Error, Location, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -111,7 +112,7 @@ pub fn write_result(path: &Path, spec: &ResultSpec, result: &impl Serialize) -> 
 }
 
 /// Read a result file; `None` when the file is JSON of another kind.
-pub fn read_result(path: &Path) -> Result<Option<AnalysisResult>> {
+pub fn read_result(path: &Path) -> Result<Option<AnalysisResult>, ReportError> {
     let text = errmap_core::io::read_text(path)?;
     let Ok(v) = serde_json::from_str::<Value>(&text) else {
         return Ok(None);
@@ -119,17 +120,20 @@ pub fn read_result(path: &Path) -> Result<Option<AnalysisResult>> {
     if v.get("format").and_then(Value::as_str) != Some(RESULT_FORMAT) {
         return Ok(None);
     }
-    serde_json::from_value(v).map(Some).map_err(|e| {
-        Error::input(
-            Location::file(path),
-            format!("not an errmap result: {e}"),
-            "rerun the analysis that wrote it",
-        )
-    })
+    serde_json::from_value(v)
+        .map(Some)
+        .map_err(|e| {
+            Error::input(
+                Location::file(path),
+                format!("not an errmap result: {e}"),
+                "rerun the analysis that wrote it",
+            )
+        })
+        .map_err(Into::into)
 }
 
 /// Every result file in `dir` (by name), read.
-pub fn results_in(dir: &Path) -> Result<Vec<(PathBuf, AnalysisResult)>> {
+pub fn results_in(dir: &Path) -> Result<Vec<(PathBuf, AnalysisResult)>, ReportError> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| Error::read(dir, e))?
         .flatten()
@@ -147,7 +151,7 @@ pub fn results_in(dir: &Path) -> Result<Vec<(PathBuf, AnalysisResult)>> {
 }
 
 /// The report of analysis results (one section each, in file-name order).
-pub fn render_results(results: &[(PathBuf, AnalysisResult)]) -> Result<String> {
+pub fn render_results(results: &[(PathBuf, AnalysisResult)]) -> Result<String, ReportError> {
     let mut page = Page {
         title: "errmap report — analyses".into(),
         lead: String::new(),

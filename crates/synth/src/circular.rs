@@ -69,7 +69,7 @@ pub struct CircularSynthConfig {
 impl CircularSynthConfig {
     /// The step must divide the turn into steps of 10° or less; radius and feed positive, the
     /// noise finite and ≥ 0.
-    pub fn check(&self) -> Result<()> {
+    pub fn check(&self) -> Result<(), crate::SynthError> {
         let steps = 360.0 / self.step_deg;
         if !(self.step_deg.is_finite() && self.step_deg > 0.0 && self.step_deg <= 10.0)
             || (steps - steps.round()).abs() > 1e-9
@@ -80,7 +80,8 @@ impl CircularSynthConfig {
                     self.step_deg
                 ),
                 "choose a step that divides 360, e.g. 0.1, 0.5, 1",
-            ));
+            )
+            .into());
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let noise_ok = self.noise_um.is_finite() && self.noise_um >= 0.0;
@@ -88,7 +89,8 @@ impl CircularSynthConfig {
             return Err(Error::usage(
                 "synth circular needs a positive --radius and --feed and a finite --noise-um ≥ 0",
                 "e.g. --radius 100 --feed 1000 --noise-um 0.2",
-            ));
+            )
+            .into());
         }
         Ok(())
     }
@@ -280,7 +282,10 @@ pub fn generate(config: &CircularSynthConfig) -> Vec<SynthRow> {
 }
 
 /// Write `run.csv` and `truth.json` into `dir`.
-pub fn write_set(dir: &Path, config: &CircularSynthConfig) -> Result<Vec<PathBuf>> {
+pub fn write_set(
+    dir: &Path,
+    config: &CircularSynthConfig,
+) -> Result<Vec<PathBuf>, crate::SynthError> {
     let rows = generate(config);
     let run = dir.join("run.csv");
     let truth = dir.join("truth.json");

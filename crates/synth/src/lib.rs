@@ -4,6 +4,7 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod circular;
+mod error;
 pub mod linear;
 pub mod rotary;
 pub mod scan;
@@ -13,3 +14,5 @@ pub use errmap_maps::nn::workload as training;
 pub use errmap_metrology::thermal::sample as thermal;
 pub mod web_plate;
 pub mod web_plate_args;
+
+pub use error::SynthError;

@@ -92,7 +92,7 @@ pub struct SynthRow {
 }
 
 /// Generate the default campaign: 0…1000 mm, 21 targets, 5 runs each way, screw lead 10 mm.
-pub fn generate(seed: u64) -> Result<(LinearTruth, Vec<SynthRow>)> {
+pub fn generate(seed: u64) -> Result<(LinearTruth, Vec<SynthRow>), crate::SynthError> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let travel_mm = 1000.0;
     let steps = 20;
@@ -164,7 +164,7 @@ pub fn generate(seed: u64) -> Result<(LinearTruth, Vec<SynthRow>)> {
 }
 
 /// Write `runs.csv`, `runs_raw.csv` and `truth.json` into `dir`.
-pub fn write(dir: &Path, truth: &LinearTruth, rows: &[SynthRow]) -> Result<()> {
+pub fn write(dir: &Path, truth: &LinearTruth, rows: &[SynthRow]) -> Result<(), crate::SynthError> {
     let mut runs = String::from(
         "run,direction,target_mm,deviation_um,air_temp_c,pressure_kpa,humidity_pct,material_temp_c,time_s\n",
     );
@@ -199,5 +199,5 @@ pub fn write(dir: &Path, truth: &LinearTruth, rows: &[SynthRow]) -> Result<()> {
     }
     errmap_core::io::write_atomic_bytes(&dir.join("runs.csv"), runs.as_bytes())?;
     errmap_core::io::write_atomic_bytes(&dir.join("runs_raw.csv"), raw.as_bytes())?;
-    errmap_core::io::write_json(&dir.join("truth.json"), truth)
+    errmap_core::io::write_json(&dir.join("truth.json"), truth).map_err(Into::into)
 }

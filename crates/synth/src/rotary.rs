@@ -173,13 +173,14 @@ impl RotarySynthConfig {
     /// a step below [`MIN_STEP_DEG`] or not dividing the turn, more than [`MAX_SAMPLES`]
     /// probe points, no repeats, fewer than 4 points a sphere, or a noise that is not a
     /// finite number ≥ 0.
-    pub fn check(&self) -> Result<()> {
+    pub fn check(&self) -> Result<(), crate::SynthError> {
         // NaN passes every comparison below: refuse it by name.
         if self.step_deg.is_nan() {
             return Err(Error::usage(
                 "--step-deg NaN is not a number of degrees",
                 "choose a step that divides 360, e.g. 10, 15, 30",
-            ));
+            )
+            .into());
         }
         if self.step_deg > 0.0 && self.step_deg < MIN_STEP_DEG {
             return Err(Error::usage(
@@ -188,7 +189,8 @@ impl RotarySynthConfig {
                     self.step_deg
                 ),
                 "choose a step that divides 360, e.g. 10, 15, 30",
-            ));
+            )
+            .into());
         }
         let samples =
             360.0 / self.step_deg * self.repeats as f64 * 2.0 * self.points_per_sphere as f64;
@@ -198,14 +200,16 @@ impl RotarySynthConfig {
                     "{samples:.3e} probe points would be generated, more than {MAX_SAMPLES:.0e}"
                 ),
                 "use a larger --step-deg or fewer --repeats or --points",
-            ));
+            )
+            .into());
         }
         let turns = 360.0 / self.step_deg;
         if turns.round() < 1.0 || (turns - turns.round()).abs() > 1e-9 {
             return Err(Error::usage(
                 format!("step {}° does not divide the turn", self.step_deg),
                 "choose a step that divides 360, e.g. 10, 15, 30",
-            ));
+            )
+            .into());
         }
         if self.repeats == 0
             || self.points_per_sphere < 4
@@ -214,7 +218,8 @@ impl RotarySynthConfig {
             return Err(Error::usage(
                 "synth rotary needs --repeats ≥ 1, --points ≥ 4 and a finite --noise-um ≥ 0",
                 "e.g. --repeats 3 --points 25 --noise-um 0.5",
-            ));
+            )
+            .into());
         }
         Ok(())
     }
@@ -383,7 +388,11 @@ fn probe(config: &RotarySynthConfig, axis: &RealAxis) -> (Vec<SynthRow>, Vec<Syn
 }
 
 /// Write rows as a measurement CSV (with a `point` column when the rows are touch points).
-pub fn write_rows(path: &Path, axis: RotaryAxis, rows: &[SynthRow]) -> Result<()> {
+pub fn write_rows(
+    path: &Path,
+    axis: RotaryAxis,
+    rows: &[SynthRow],
+) -> Result<(), crate::SynthError> {
     let with_point = rows.iter().any(|r| r.point.is_some());
     write_atomic(path, |w| {
         w.write_all(b"axis,direction,repeat,angle_deg,sphere,x_mm,y_mm,z_mm")?;
@@ -401,11 +410,15 @@ pub fn write_rows(path: &Path, axis: RotaryAxis, rows: &[SynthRow]) -> Result<()
         }
         Ok(())
     })
+    .map_err(Into::into)
 }
 
 /// Check the configuration ([`RotarySynthConfig::check`]), generate and write
 /// `touch_points.csv`, `centres.csv` and `truth.json` into `dir`; returns the paths written.
-pub fn write_set(dir: &Path, config: &RotarySynthConfig) -> Result<Vec<PathBuf>> {
+pub fn write_set(
+    dir: &Path,
+    config: &RotarySynthConfig,
+) -> Result<Vec<PathBuf>, crate::SynthError> {
     config.check()?;
     let synth = generate(config);
     let touch = dir.join("touch_points.csv");

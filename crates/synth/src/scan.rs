@@ -69,12 +69,13 @@ pub struct ScanFiles {
 }
 
 /// Write `probes/scan.csv` and `job.toml` into `out`.
-pub fn write_scan(spec: &ScanSpec, out: &Path) -> Result<ScanFiles> {
+pub fn write_scan(spec: &ScanSpec, out: &Path) -> Result<ScanFiles, crate::SynthError> {
     if spec.points < 16 {
         return Err(errmap_core::Error::usage(
             format!("a scan of {} points is too small", spec.points),
             "ask for at least 16 points",
-        ));
+        )
+        .into());
     }
     let [x0, y0, x1, y1] = SCAN_RECT_MM;
     let (w, h) = (x1 - x0, y1 - y0);

@@ -197,15 +197,17 @@ pub struct Truth {
 
 impl Truth {
     /// Read a `truth.json`.
-    pub fn read(path: &Path) -> Result<Truth> {
+    pub fn read(path: &Path) -> Result<Truth, crate::SynthError> {
         let text = io::read_text(path)?;
-        serde_json::from_str(&text).map_err(|e| {
-            Error::input(
-                errmap_core::Location::line(path, e.line() as u64),
-                format!("not a web-plate truth file: {e}"),
-                "regenerate it with `errmap synth web-plate`",
-            )
-        })
+        serde_json::from_str(&text)
+            .map_err(|e| {
+                Error::input(
+                    errmap_core::Location::line(path, e.line() as u64),
+                    format!("not a web-plate truth file: {e}"),
+                    "regenerate it with `errmap synth web-plate`",
+                )
+            })
+            .map_err(Into::into)
     }
 
     /// Truth error of part `k` at (x, y), µm.
@@ -384,7 +386,11 @@ pub fn part_name(k: usize) -> String {
 /// Write the family into `out`: `probes/pNN.<ext>` (CSV unless [`WebPlateSpec::probe_format`]
 /// says otherwise), `truth.json`, `outliers.csv`, `finish.ngc`,
 /// `job.toml`, `README.md`. `command` is the command line recorded in the README.
-pub fn generate(spec: &WebPlateSpec, out: &Path, command: &str) -> Result<Generated> {
+pub fn generate(
+    spec: &WebPlateSpec,
+    out: &Path,
+    command: &str,
+) -> Result<Generated, crate::SynthError> {
     validate(spec)?;
     let layout = layout_points(spec);
     let mut parts = Vec::new();

@@ -56,11 +56,11 @@ pub fn layout(grid: Option<(usize, usize)>, irregular: Option<usize>) -> Layout 
 }
 
 /// The probe noise (1σ, µm) must be a finite number ≥ 0.
-pub fn check_noise_um(noise_um: f64) -> Result<()> {
+pub fn check_noise_um(noise_um: f64) -> Result<(), crate::SynthError> {
     if noise_um.is_finite() && noise_um >= 0.0 {
         return Ok(());
     }
-    Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1"))
+    Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1").into())
 }
 
 #[cfg(test)]
@@ -95,7 +95,7 @@ mod tests {
         assert_eq!(layout(None, None), Layout::Grid { nx: 12, ny: 12 });
         assert!(check_noise_um(0.0).is_ok());
         let err = check_noise_um(-1.0).unwrap_err();
-        assert_eq!(err.exit_code(), 2);
+        assert!(matches!(err, crate::SynthError::Options(_)), "{err}");
         assert!(err.to_string().contains("--noise-um must be ≥ 0"), "{err}");
         assert!(check_noise_um(f64::NAN).is_err());
     }

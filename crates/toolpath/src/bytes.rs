@@ -87,7 +87,11 @@ pub(crate) fn show_error(e: Error) -> Error {
 /// Refuse a mapped text whose bytes ≥ 0x80 stand anywhere but in a comment: in Klartext after
 /// `;` or in a `* - …` comment block; in G-code in the comments of its dialect's lexer
 /// (`( … )` and `;` in LinuxCNC and Fanuc, `;` in Sinumerik, `;` and after `*` in Heidenhain ISO).
-pub(crate) fn check_comments(text: &str, source: &Path, given: Option<Dialect>) -> Result<()> {
+pub(crate) fn check_comments(
+    text: &str,
+    source: &Path,
+    given: Option<Dialect>,
+) -> Result<(), crate::CompensateError> {
     if super::klartext::applies(text, source, given) {
         for (i, line) in text.split('\n').enumerate() {
             if let Some(at) = line.find(|c| byte_of(c).is_some()) {
@@ -98,14 +102,15 @@ pub(crate) fn check_comments(text: &str, source: &Path, given: Option<Dialect>) 
                         .trim_start()
                         .starts_with('*');
                 if !comment {
-                    return Err(refusal(source, i as u64 + 1, line, at));
+                    return Err(refusal(source, i as u64 + 1, line, at).into());
                 }
             }
         }
         return Ok(());
     }
-    let d = dialect::resolve(text, source, given).map_err(show_error)?;
-    lexer::for_each_line(text, d, |line| {
+    let d = dialect::resolve(text, source, given)
+        .map_err(|e| crate::CompensateError::from(e).map_diagnostic(show_error))?;
+    Ok(lexer::for_each_line(text, d, |line| {
         let content = text.get(line.span.clone()).unwrap_or("");
         for token in &line.tokens {
             if matches!(token.kind, TokenKind::Comment | TokenKind::LineComment) {
@@ -118,7 +123,7 @@ pub(crate) fn check_comments(text: &str, source: &Path, given: Option<Dialect>) 
             }
         }
         Ok(())
-    })
+    })?)
 }
 
 /// The refusal of a byte ≥ 0x80 at byte `at` of `content`, outside a comment.
@@ -179,6 +184,7 @@ mod tests {
             ] {
                 if let Err(Error::Input { location, .. }) =
                     check_comments(&text, Path::new("p.nc"), given)
+                        .map_err(errmap_core::error::Diagnose::into_diagnostic)
                 {
                     assert!(location.line.is_some() || given.is_none());
                 }

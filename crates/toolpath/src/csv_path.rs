@@ -9,6 +9,7 @@
 
 use super::gcode::{emit_points, format_coord};
 use super::{CompensationReport, CompensationSettings};
+use crate::CompensateError;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
 use errmap_core::io::{CsvRow, CsvTable};
@@ -53,7 +54,7 @@ pub fn compensate(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<(String, CompensationReport)> {
+) -> Result<(String, CompensationReport), CompensateError> {
     settings.validate()?;
     let table = CsvTable::parse(source, text)?;
     let cols = [

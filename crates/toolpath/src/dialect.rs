@@ -6,6 +6,7 @@
 //! coordinate has a decimal point (a decimal-less `X10` means 10 mm on LinuxCNC and Sinumerik but
 //! 10 µm on a Fanuc in increment input), otherwise errmap asks for `--dialect`.
 
+use crate::error::DialectError;
 use errmap_core::error::{Error, Location, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -400,7 +401,7 @@ struct Marker {
 
 /// The dialect of `text`: `given` if set, else detected. A program whose meaning depends on the
 /// dialect and that shows no construct of one is refused with a hint to pass `--dialect`.
-pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dialect> {
+pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dialect, DialectError> {
     if let Some(d) = given {
         return Ok(d);
     }
@@ -428,27 +429,27 @@ pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dial
         [one] => Ok(one.dialect),
         [] => match decimal_less {
             None => Ok(Dialect::Linuxcnc),
-            Some((line, w)) => Err(Error::input(
+            Some((line, w)) => Err(DialectError::Uncertain(Error::input(
                 Location::cell(source, line, column_of(text, line, &w)),
                 format!(
                     "cannot tell the controller dialect: `{w}` has no decimal point (whole mm or inches on LinuxCNC or Sinumerik, least input increments, e.g. 0.001 mm, on a Fanuc in increment input) and the program has nothing only one dialect has"
                 ),
                 "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
-            )),
+            ))),
         },
         many => {
             let list: Vec<String> = many
                 .iter()
                 .map(|m| format!("{} (`{}` on line {})", m.dialect.name(), m.what, m.line))
                 .collect();
-            Err(Error::input(
+            Err(DialectError::Uncertain(Error::input(
                 Location::cell(source, many[1].line, column_of(text, many[1].line, &many[1].what)),
                 format!(
                     "cannot tell the controller dialect: the program has constructs of {}",
                     list.join(" and ")
                 ),
                 "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
-            ))
+            )))
         }
     }
 }
@@ -663,7 +664,7 @@ fn decimal_less_coordinate(l: &str) -> Option<String> {
 mod tests {
     use super::*;
 
-    fn detect(text: &str) -> Result<Dialect> {
+    fn detect(text: &str) -> Result<Dialect, DialectError> {
         resolve(text, Path::new("t.nc"), None)
     }
 

@@ -12,6 +12,7 @@ mod moves;
 mod rewrite;
 mod sinumerik_cycles;
 
+use crate::CompensateError;
 pub(crate) use emit::{dist, emit_curve, emit_points, lerp, Breaks};
 use format::{coordinate_decimals, decimal_units, push_units};
 pub use format::{format_coord, format_decimals};
@@ -201,10 +202,10 @@ pub fn compensate(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<(String, CompensationReport)> {
+) -> Result<(String, CompensationReport), CompensateError> {
     let mut rw = Rewriter::start(text, source, field, settings)?;
     rw.run()?;
-    rw.finish()
+    Ok(rw.finish()?)
 }
 
 /// The moves of a G-code program as errmap's interpreter reads them (see
@@ -213,7 +214,7 @@ pub fn trace(
     text: &str,
     source: &Path,
     settings: &CompensationSettings,
-) -> Result<Vec<TracedMove>> {
+) -> Result<Vec<TracedMove>, CompensateError> {
     let settings = super::trace_settings(settings);
     let mut rw = Rewriter::start(text, source, &super::Nothing, &settings)?;
     rw.trace = Some(Vec::new());
@@ -228,7 +229,7 @@ impl<'a> Rewriter<'a> {
         source: &'a Path,
         field: &'a dyn ErrorField,
         settings: &'a CompensationSettings,
-    ) -> Result<Rewriter<'a>> {
+    ) -> Result<Rewriter<'a>, CompensateError> {
         settings.validate()?;
         let dialect = dialect::resolve(text, source, settings.dialect)?;
         refuse_klartext(text, source, dialect)?;

@@ -20,6 +20,7 @@ mod arc;
 mod bytes;
 mod csv_path;
 pub mod dialect;
+mod error;
 mod expand;
 mod expr;
 mod gcode;
@@ -32,6 +33,7 @@ pub mod zone_spec;
 
 pub use arc::{Arc, Plane};
 pub use dialect::{Dialect, FanucNumbers, PowerOnMotion, Units};
+pub use error::{CompensateError, DialectError, SettingsError};
 pub use gcode::format_coord;
 
 use errmap_core::error::{Error, Location, Result};
@@ -106,49 +108,49 @@ pub const MIN_SEGMENT_MM: f64 = 0.01;
 
 impl CompensationSettings {
     /// Reject settings that would loop forever or mean nothing.
-    pub fn validate(&self) -> Result<()> {
+    pub fn validate(&self) -> Result<(), SettingsError> {
         if !(self.max_segment.is_finite() && self.max_segment >= MIN_SEGMENT_MM) {
-            return Err(Error::usage(
+            return Err(SettingsError::Range(Error::usage(
                 format!(
                     "maximum segment length must be at least {MIN_SEGMENT_MM} mm, got {}",
                     self.max_segment
                 ),
                 "use e.g. --max-segment 5 (shorter segments only grow the program)",
-            ));
+            )));
         }
         if !(self.chord_tol.is_finite() && self.chord_tol > 0.0) {
-            return Err(Error::usage(
+            return Err(SettingsError::Range(Error::usage(
                 format!(
                     "chord tolerance must be a positive number of mm, got {}",
                     self.chord_tol
                 ),
                 "use e.g. --chord-tol 0.005",
-            ));
+            )));
         }
         if !(self.surface_tol_mm.is_finite() && self.surface_tol_mm >= 0.0) {
-            return Err(Error::usage(
+            return Err(SettingsError::Range(Error::usage(
                 format!(
                     "surface tolerance must be a non-negative number of mm, got {}",
                     self.surface_tol_mm
                 ),
                 "use e.g. --surface-tol 0.5",
-            ));
+            )));
         }
         if !(self.domain_margin_mm.is_finite() && self.domain_margin_mm >= 0.0) {
-            return Err(Error::usage(
+            return Err(SettingsError::Range(Error::usage(
                 format!(
                     "domain margin must be a non-negative number of mm, got {}",
                     self.domain_margin_mm
                 ),
                 "use e.g. domain_margin_mm = 2",
-            ));
+            )));
         }
         if let Some((lo, hi)) = self.zone {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                return Err(Error::usage(
+                return Err(SettingsError::Range(Error::usage(
                     format!("zone must be MIN,MAX with MIN ≤ MAX, got {lo},{hi}"),
                     "use e.g. --zone -5,0 (program units, along the map's normal axis)",
-                ));
+                )));
             }
         }
         Ok(())
@@ -178,13 +180,13 @@ pub(crate) fn default_zone_mm(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<Option<(f64, f64)>> {
+) -> Result<Option<(f64, f64)>, CompensateError> {
     if !settings.extrapolate && field.measured(0.0, 0.0, 0.0).is_none() {
-        return Err(Error::input(
+        return Err(CompensateError::Uncovered(Error::input(
             Location::file(source),
             "the map does not record its measured domain (a model.json from an older errmap), so errmap cannot keep compensation inside the probed area",
             "refit the map with this version of errmap, or pass --extrapolate to compensate wherever the map is defined",
-        ));
+        )));
     }
     match (settings.zone, field.surface_mm()) {
         (Some(_), _) => Ok(None),
@@ -193,11 +195,11 @@ pub(crate) fn default_zone_mm(
             lo - settings.surface_tol_mm,
             hi + settings.surface_tol_mm,
         ))),
-        (None, None) => Err(Error::input(
+        (None, None) => Err(CompensateError::Uncovered(Error::input(
             Location::file(source),
             "no compensation zone: the map does not record its probed surface and no --zone was given",
             "pass --zone MIN,MAX (program units along the map's normal axis; job key [toolpaths] zone), or --zone all (job key zone_all) to compensate at every height, or refit the map",
-        )),
+        ))),
     }
 }
 
@@ -338,7 +340,7 @@ pub fn compensate_gcode(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<(String, CompensationReport)> {
+) -> Result<(String, CompensationReport), CompensateError> {
     if klartext::applies(text, source, settings.dialect) {
         return match klartext::compensate(text, source, field, settings) {
             Err(refused) => expand_refused(text, source, field, settings, refused),
@@ -360,8 +362,8 @@ fn expand_refused(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-    refused: Error,
-) -> Result<(String, CompensationReport)> {
+    refused: CompensateError,
+) -> Result<(String, CompensationReport), CompensateError> {
     // A Klartext program is run by the Klartext reader (its dialect is Heidenhain).
     let is_klartext = klartext::applies(text, source, settings.dialect);
     let dialect = match dialect::resolve(text, source, settings.dialect) {
@@ -372,9 +374,11 @@ fn expand_refused(
     let mut flat = match expand::flatten(text, source, dialect, !settings.expand) {
         Ok(Some(flat)) => flat,
         Ok(None) => return Err(refused),
-        Err(e) if settings.expand => return Err(e),
+        Err(e) if settings.expand => return Err(e.into()),
         // A trial too long to finish here: the full run with the flag decides.
-        Err(e) if expand::is_trial_stop(&e) => return Err(expand::with_hint(refused)),
+        Err(e) if expand::is_trial_stop(&e) => {
+            return Err(refused.map_diagnostic(expand::with_hint))
+        }
         Err(_) => return Err(refused),
     };
     let flat_settings = CompensationSettings {
@@ -396,7 +400,7 @@ fn expand_refused(
         }
     });
     let result = match (result, pending) {
-        (Ok(_), Some(stop)) => Err(stop),
+        (Ok(_), Some(stop)) => Err(stop.into()),
         (result, _) => result,
     };
     match (settings.expand, result) {
@@ -414,7 +418,7 @@ fn expand_refused(
             ))
         }
         (true, result) => result,
-        (false, Ok(_)) => Err(expand::with_hint(refused)),
+        (false, Ok(_)) => Err(refused.map_diagnostic(expand::with_hint)),
         (false, Err(_)) => Err(refused),
     }
 }
@@ -443,7 +447,7 @@ pub fn trace_gcode(
     text: &str,
     source: &Path,
     settings: &CompensationSettings,
-) -> Result<Vec<TracedMove>> {
+) -> Result<Vec<TracedMove>, CompensateError> {
     if klartext::applies(text, source, settings.dialect) {
         return klartext::trace(text, source, settings);
     }
@@ -457,7 +461,7 @@ pub fn compensate_csv(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<(String, CompensationReport)> {
+) -> Result<(String, CompensationReport), CompensateError> {
     csv_path::compensate(text, source, field, settings)
 }
 
@@ -490,15 +494,15 @@ pub fn compensate_file(
     output: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<CompensationReport> {
+) -> Result<CompensationReport, CompensateError> {
     let same = input == output
         || matches!((input.canonicalize(), output.canonicalize()), (Ok(a), Ok(b)) if a == b);
     if same {
-        return Err(Error::input(
+        return Err(CompensateError::Overwrite(Error::input(
             Location::file(output),
             "the output would overwrite the input toolpath",
             "write the compensated toolpath to another file (-o)",
-        ));
+        )));
     }
     let is_csv = input
         .extension()
@@ -521,8 +525,8 @@ pub fn compensate_file(
         return Ok(report);
     }
     bytes::check_comments(&text, input, settings.dialect)?;
-    let (out, report) =
-        compensate_gcode(&text, input, field, settings).map_err(bytes::show_error)?;
+    let (out, report) = compensate_gcode(&text, input, field, settings)
+        .map_err(|e| e.map_diagnostic(bytes::show_error))?;
     errmap_core::io::write_atomic_bytes(output, &bytes::encode(&out))?;
     Ok(report)
 }

@@ -2,7 +2,10 @@
 //! (`MIN,MAX`, `all`, or the map's surface band) and the controller choices by name.
 
 use super::{CompensationSettings, Dialect, FanucNumbers, PowerOnMotion, Units};
-use errmap_core::error::{Error, Result};
+use crate::error::SettingsError;
+use errmap_core::error::Error;
+
+type Result<T, E = SettingsError> = std::result::Result<T, E>;
 
 /// Where moves are compensated, as given on the command line.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,10 +32,10 @@ impl ZoneSpec {
 /// Parse `MIN,MAX`.
 pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
     let bad = || {
-        Error::usage(
+        SettingsError::Zone(Error::usage(
             format!("--zone '{text}' is not MIN,MAX"),
             "give two numbers in program units, e.g. --zone -5,0 (or --zone all)",
-        )
+        ))
     };
     let (a, b) = text.split_once(',').ok_or_else(bad)?;
     let lo: f64 = a.trim().parse().map_err(|_| bad())?;
@@ -49,10 +52,10 @@ fn choice<T>(
 ) -> Result<Option<T>> {
     text.map(|t| {
         parse(t).ok_or_else(|| {
-            Error::usage(
+            SettingsError::Choice(Error::usage(
                 format!("--{flag} '{t}' is not one of {choices}"),
                 format!("use --{flag} with one of {choices}"),
-            )
+            ))
         })
     })
     .transpose()
@@ -148,7 +151,7 @@ mod tests {
         );
         for bad in ["5", "a,1", "1,b", ""] {
             let err = ZoneSpec::parse(Some(bad)).unwrap_err();
-            assert_eq!(err.exit_code(), 2, "{bad}");
+            assert!(matches!(err, SettingsError::Zone(_)), "{bad}");
             assert!(
                 err.to_string()
                     .contains(&format!("--zone '{bad}' is not MIN,MAX")),
@@ -167,7 +170,7 @@ mod tests {
             ..SettingsText::default()
         };
         let err = text.settings().unwrap_err();
-        assert_eq!(err.exit_code(), 2);
+        assert!(matches!(err, SettingsError::Choice(_)), "{err}");
         assert!(
             err.to_string()
                 .contains("--dialect 'mazak' is not one of linuxcnc, fanuc, sinumerik, heidenhain"),

@@ -1,6 +1,7 @@
 //! `errmap grid`: probe points interpolated onto a grid without a network, written as CSV
 //! (`<u>_mm,<v>_mm,e_um`, nodes outside the probes' convex hull left out).
 
+pub use crate::error::GridError;
 use crate::interp::{resample, Grid, Method, Surface};
 use crate::probe::{read_probe_file, ProbeSpec};
 use errmap_core::error::{Error, Location, Result};
@@ -58,7 +59,7 @@ fn rounded(x: f64, scale: f64) -> f64 {
 }
 
 /// Read the probes, interpolate them onto the grid and write the CSV to `output`.
-pub fn grid_probes(req: &GridRequest, output: &Path) -> Result<GridOutcome> {
+pub fn grid_probes(req: &GridRequest, output: &Path) -> Result<GridOutcome, GridError> {
     crate::probe::validate_max_deviation(req.max_deviation_mm, "--max-deviation-mm")?;
     let spec = ProbeSpec {
         normal: req.normal,

@@ -9,6 +9,7 @@
 pub mod grid_file;
 pub mod uncertainty;
 
+pub use crate::error::MapError;
 use crate::interp::Grid;
 use crate::nn::{Mlp, Normalisation};
 use errmap_core::error::{Error, Location, Result};
@@ -157,7 +158,7 @@ impl FittedModel {
         allow_weak: bool,
         how_to_allow: &str,
         path: &Path,
-    ) -> Result<Option<String>> {
+    ) -> Result<Option<String>, MapError> {
         let Some(b) = self.benefit else {
             return Ok(Some(format!(
                 "benefit unknown: {} was written before errmap recorded it (or has no held-out points); it is used as before",
@@ -167,7 +168,7 @@ impl FittedModel {
         if allow_weak || b.share >= MIN_BENEFIT_SHARE {
             return Ok(None);
         }
-        Err(Error::input(
+        Err(MapError::Weak(Error::input(
             Location::file(path),
             format!(
                 "the map removes {:.1} % of E at its held-out points (RMS of E {:.3} µm, after compensation {:.3} µm), below the {:.0} % a map must remove to be used",
@@ -177,7 +178,7 @@ impl FittedModel {
                 MIN_BENEFIT_SHARE * 100.0
             ),
             format!("the surface's scatter is mostly noise: compensating with it moves the tool for nothing; {how_to_allow} to use it anyway"),
-        ))
+        )))
     }
 
     /// The map with nodes whose u(E) exceeds `max_um` treated as outside its domain (left
@@ -186,7 +187,7 @@ impl FittedModel {
         &self,
         max_um: f64,
         path: &Path,
-    ) -> Result<uncertainty::Bounded<'_>> {
+    ) -> Result<uncertainty::Bounded<'_>, MapError> {
         uncertainty::validate_max_uncertainty(max_um, "--max-uncertainty-um")?;
         let u = self.uncertainty.as_ref().ok_or_else(|| {
             Error::input(
@@ -289,22 +290,22 @@ impl FittedModel {
 
     /// Refuse a map that would move a point by more than `max_mm` (a unit slip in the data it
     /// was fitted to, or a network that went wild), naming the file it came from.
-    pub fn check_plausible(&self, max_mm: f64, path: &Path) -> Result<()> {
+    pub fn check_plausible(&self, max_mm: f64, path: &Path) -> Result<(), MapError> {
         let worst_um = self.max_abs_e_um();
         if worst_um <= max_mm * 1000.0 {
             return Ok(());
         }
-        Err(Error::input(
+        Err(MapError::Implausible(Error::input(
             Location::file(path),
             format!(
                 "the map reaches |E| = {worst_um:.1} µm over its domain, beyond the plausibility bound of {max_mm} mm",
             ),
             "a compensation that large is almost always a unit slip in the probe data (µm or inches written as mm); refit the map from corrected data, or raise --max-deviation-mm if the part really is this far off",
-        ))
+        )))
     }
 
     /// Read and check a `model.json`.
-    pub fn read(path: &Path) -> Result<FittedModel> {
+    pub fn read(path: &Path) -> Result<FittedModel, MapError> {
         let text = errmap_core::io::read_text(path)?;
         let model: FittedModel = serde_json::from_str(&text).map_err(|e| {
             Error::input(
@@ -318,7 +319,8 @@ impl FittedModel {
                 Location::file(path),
                 format!("model format '{}' is not '{MODEL_FORMAT}'", model.format),
                 "refit the map with this version of errmap",
-            ));
+            )
+            .into());
         }
         let sizes = &model.network.layer_sizes;
         let expected: usize = sizes.windows(2).map(|w| w[0] * w[1] + w[1]).sum();
@@ -336,28 +338,31 @@ impl FittedModel {
                     model.network.params.len()
                 ),
                 "the file is damaged: refit the map",
-            ));
+            ).into());
         }
         if let Some(Err(m)) = model.uncertainty.as_ref().map(|u| u.validate()) {
             return Err(Error::input(
                 Location::file(path),
                 m,
                 "the file is damaged: refit the map",
-            ));
+            )
+            .into());
         }
         if let Some(Err(m)) = model.local_kriging.as_ref().map(|k| k.validate()) {
             return Err(Error::input(
                 Location::file(path),
                 m,
                 "the file is damaged: refit the map",
-            ));
+            )
+            .into());
         }
         if let Some(Err(m)) = model.kriging.as_ref().map(|k| k.validate()) {
             return Err(Error::input(
                 Location::file(path),
                 m,
                 "the file is damaged: refit the map",
-            ));
+            )
+            .into());
         }
         let n = &model.normalisation;
         let d = &model.domain;
@@ -387,7 +392,8 @@ impl FittedModel {
                 Location::file(path),
                 "the normalisation or domain holds a non-finite number or an empty range",
                 "the file is damaged: refit the map",
-            ));
+            )
+            .into());
         }
         Ok(model)
     }
@@ -417,7 +423,7 @@ impl ErrorField for FittedModel {
 }
 
 /// Load a fitted map (`model.json`) as an error field for toolpath compensation.
-pub fn load_error_field(model_json: &Path) -> Result<Box<dyn ErrorField>> {
+pub fn load_error_field(model_json: &Path) -> Result<Box<dyn ErrorField>, MapError> {
     Ok(Box::new(FittedModel::read(model_json)?))
 }
 
@@ -506,14 +512,17 @@ impl ErrorMap {
 impl ErrorMap {
     /// Read a map file written by [`ErrorMap::write_csv`] (`<u>_mm,<v>_mm,<value>`, u fastest)
     /// and recover its grid; rows that do not form a regular grid are an error naming the line.
-    pub fn read_csv(path: &Path, normal: Axis) -> Result<ErrorMap> {
+    pub fn read_csv(path: &Path, normal: Axis) -> Result<ErrorMap, MapError> {
         Ok(ErrorMap::read_csv_with_u(path, normal)?.0)
     }
 
     /// [`ErrorMap::read_csv`] and the `u_um` column when the file has one (`map.csv` since
     /// errmap wrote u(E); older three-column files give `None`). The value is the column after
     /// the coordinates (`e_um`, `std_um`, …) that is not `u_um`.
-    pub fn read_csv_with_u(path: &Path, normal: Axis) -> Result<(ErrorMap, Option<Vec<f64>>)> {
+    pub fn read_csv_with_u(
+        path: &Path,
+        normal: Axis,
+    ) -> Result<(ErrorMap, Option<Vec<f64>>), MapError> {
         let table = errmap_core::io::CsvTable::read(path)?;
         let (ua, va) = normal.plane_axes();
         let cu = table.require(&format!("{}_mm", ua.name()))?;
@@ -578,7 +587,8 @@ impl ErrorMap {
                         r.0, r.1
                     ),
                     "pass map files written by errmap",
-                ));
+                )
+                .into());
             }
         }
         let map = ErrorMap {

@@ -78,12 +78,13 @@ pub struct Cleaned {
 /// within three rings of it, and σ comes from a sorted multiset updated with them
 /// (`probe::order_stat`). Both give the same residuals wherever the Delaunay triangulation is
 /// unique, at O(n log n) for the second.
-pub fn reject_gross_errors(set: &ProbeSet, k_sigma: f64) -> Result<Cleaned> {
+pub fn reject_gross_errors(set: &ProbeSet, k_sigma: f64) -> Result<Cleaned, crate::ProbeError> {
     if !(k_sigma.is_finite() && k_sigma > 0.0) {
         return Err(Error::usage(
             format!("k·σ factor {k_sigma} is not a positive number"),
             "use k = 3 (the default) or another positive number",
-        ));
+        )
+        .into());
     }
     let points = &set.points;
     let (rejected, sigma_um) = if points.len() <= FROM_SCRATCH_MAX_POINTS {

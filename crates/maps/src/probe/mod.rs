@@ -30,6 +30,7 @@ pub use read::{
     VECTOR_NORM_TOLERANCE,
 };
 
+pub use crate::error::ProbeError;
 use errmap_core::error::{Error, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::io::write_atomic;
@@ -77,14 +78,14 @@ impl Default for ProbeSpec {
 pub const DEFAULT_MAX_DEVIATION_MM: f64 = 1.0;
 
 /// Check a plausibility bound given on the command line or in a job file.
-pub fn validate_max_deviation(max_mm: f64, flag: &str) -> Result<()> {
+pub fn validate_max_deviation(max_mm: f64, flag: &str) -> Result<(), ProbeError> {
     if max_mm.is_finite() && max_mm > 0.0 {
         Ok(())
     } else {
         Err(Error::usage(
             format!("{flag} {max_mm} must be a positive number of mm"),
             format!("the default is {DEFAULT_MAX_DEVIATION_MM} mm; raise it only for parts that really are that far off"),
-        ))
+        ).into())
     }
 }
 
@@ -180,7 +181,11 @@ pub fn bounding_box(points: &[ProbePoint]) -> Option<Domain> {
 }
 
 /// Write points as `x_mm,y_mm,z_mm,e_um` (measured coordinates), atomically.
-pub fn write_points_csv(path: &Path, normal: Axis, points: &[ProbePoint]) -> Result<()> {
+pub fn write_points_csv(
+    path: &Path,
+    normal: Axis,
+    points: &[ProbePoint],
+) -> Result<(), ProbeError> {
     let _ = normal; // The columns are the same for every normal; E is along it.
     write_atomic(path, |w| {
         writeln!(w, "x_mm,y_mm,z_mm,e_um")?;
@@ -190,10 +195,11 @@ pub fn write_points_csv(path: &Path, normal: Axis, points: &[ProbePoint]) -> Res
         }
         Ok(())
     })
+    .map_err(Into::into)
 }
 
 /// Write rejected points as `x_mm,y_mm,z_mm,residual_um` (measured coordinates), atomically.
-pub fn write_rejected_csv(path: &Path, rejected: &[Rejected]) -> Result<()> {
+pub fn write_rejected_csv(path: &Path, rejected: &[Rejected]) -> Result<(), ProbeError> {
     write_atomic(path, |w| {
         writeln!(w, "x_mm,y_mm,z_mm,residual_um")?;
         for r in rejected {
@@ -202,6 +208,7 @@ pub fn write_rejected_csv(path: &Path, rejected: &[Rejected]) -> Result<()> {
         }
         Ok(())
     })
+    .map_err(Into::into)
 }
 
 pub use errmap_core::geom::parse_domain;

@@ -7,6 +7,7 @@ use super::columns::ProbeColumns;
 use super::point::{check_plane, plane_nominal, point_row, Place, RawPoint, Row};
 pub use super::point::{MAX_VECTOR_ANGLE_DEG, VECTOR_NORM_TOLERANCE};
 use super::{ProbePoint, ProbeSet, ProbeSpec};
+use crate::ProbeError;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::Axis;
 use errmap_core::io::columns::{self as shared_columns, Conversion};
@@ -46,7 +47,7 @@ pub const COLLINEAR_RELATIVE_TOLERANCE: f64 = 1e-6;
 /// assert!(e_um.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-9), "{e_um:?}");
 /// assert_eq!(set.points[2].repeats, 2);
 /// ```
-pub fn read_probes(path: &Path, spec: &ProbeSpec) -> Result<ProbeSet> {
+pub fn read_probes(path: &Path, spec: &ProbeSpec) -> Result<ProbeSet, ProbeError> {
     read_probe_file(path, spec).map(|r| r.set)
 }
 
@@ -64,7 +65,7 @@ pub struct ProbeRead {
 }
 
 /// [`read_probes`] with what was skipped on the way.
-pub fn read_probe_file(path: &Path, spec: &ProbeSpec) -> Result<ProbeRead> {
+pub fn read_probe_file(path: &Path, spec: &ProbeSpec) -> Result<ProbeRead, ProbeError> {
     let format = detect_format(path)?;
     if format != ProbeFormat::Csv {
         let given = match (&spec.columns, spec.header_line) {
@@ -80,7 +81,8 @@ pub fn read_probe_file(path: &Path, spec: &ProbeSpec) -> Result<ProbeRead> {
                     format.name()
                 ),
                 "leave the column mapping and header line out for DMIS, XYZ and PLY files",
-            ));
+            )
+            .into());
         }
     }
     let (rows, preamble_lines, skipped_features) = match format {
@@ -131,7 +133,7 @@ impl ProbeFormat {
 /// The format of a probe file: by extension (`.dmi`, `.dms`, `.dmis`; `.ply`; `.xyz`), else by
 /// content (a PLY file starts with the line `ply`; a DMIS file's first line that is not blank
 /// or a `$$` comment starts with `DMISMN/`, `F(` or `FA(`), else CSV.
-pub fn detect_format(path: &Path) -> Result<ProbeFormat> {
+pub fn detect_format(path: &Path) -> Result<ProbeFormat, ProbeError> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -210,9 +212,9 @@ fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
 }
 
 /// [`read_probes`] on a table already read (CSV, errmap's columns or `spec.columns`).
-pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet> {
+pub fn read_table(table: &CsvTable, spec: &ProbeSpec) -> Result<ProbeSet, ProbeError> {
     let rows = csv_rows(table, spec)?;
-    finish(&table.path, &rows, spec)
+    finish(&table.path, &rows, spec).map_err(Into::into)
 }
 
 /// The checked rows of a CSV table.

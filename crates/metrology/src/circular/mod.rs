@@ -15,6 +15,7 @@ pub(crate) mod model;
 pub(crate) mod report;
 pub(crate) mod zone;
 
+pub use crate::error::CircularError;
 pub use circle::{fit_circle, CircleFit};
 pub use diagnosis::{diagnose, Diagnosis, Term, Terms};
 pub use figures::{evaluate, Centred, Figures, PerDirection};

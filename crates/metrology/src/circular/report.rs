@@ -25,7 +25,7 @@ pub struct TestRequest<'a> {
 }
 
 /// Check the request, evaluate the run, and write the chart and its result if asked.
-pub fn run_test(req: &TestRequest<'_>) -> Result<Evaluation> {
+pub fn run_test(req: &TestRequest<'_>) -> Result<Evaluation, crate::error::CircularError> {
     check_request(req)?;
     let opts = ReadOptions {
         radius_mm: req.radius_mm,

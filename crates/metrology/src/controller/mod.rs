@@ -19,6 +19,7 @@ mod heidenhain;
 mod linuxcnc;
 mod sinumerik;
 
+pub use crate::error::TableError;
 pub use fanuc::{FanucLimits, FanucSeries};
 pub use heidenhain::{heidenhain_cma_path, HEIDENHAIN_MAX_ENTRIES};
 pub use linuxcnc::LINUXCNC_MAX_LINES;

@@ -37,7 +37,7 @@ pub struct RunSource<'a> {
 
 impl RunSource<'_> {
     /// Read the runs and apply the corrections; returns the file and a note per correction.
-    pub fn load(&self) -> Result<(RunFile, Vec<String>)> {
+    pub fn load(&self) -> Result<(RunFile, Vec<String>), crate::error::LinearError> {
         let mut notes = Vec::new();
         let mut file = match self.columns {
             Some(spec) => read_runs_mapped(self.path, &ColumnMap::parse(spec)?)?,
@@ -107,7 +107,7 @@ impl Analysis {
 
 /// Evaluate laser runs by a standard, with the pitch fit, the table check and the chart (and
 /// its result file) that `req` asks for.
-pub fn analyze(req: &AnalyzeRequest<'_>) -> Result<Analysis> {
+pub fn analyze(req: &AnalyzeRequest<'_>) -> Result<Analysis, crate::error::LinearError> {
     let (file, notes) = req.runs.load()?;
     let samples = file.samples();
     let ev = evaluate(&samples, req.standard)?;
@@ -198,7 +198,10 @@ pub struct TablePlan {
 
 /// Evaluate runs by ISO 230-2:2014 and build their compensation table with points every
 /// `spacing_mm` from the first target.
-pub fn plan_table(runs: &RunSource<'_>, spacing_mm: f64) -> Result<TablePlan> {
+pub fn plan_table(
+    runs: &RunSource<'_>,
+    spacing_mm: f64,
+) -> Result<TablePlan, crate::error::LinearError> {
     let (file, mut notes) = runs.load()?;
     let ev = evaluate(&file.samples(), Standard::Iso230_2_2014)?;
     let table = CompTable::from_evaluation(&ev, spacing_mm)?;

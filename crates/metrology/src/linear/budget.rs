@@ -153,33 +153,36 @@ pub struct Budget {
 }
 
 /// Read a set-up TOML (errors name the file and line).
-pub fn read_budget_setup(path: &Path) -> Result<BudgetSetup> {
+pub fn read_budget_setup(path: &Path) -> Result<BudgetSetup, crate::error::LinearError> {
     let text = errmap_core::io::read_text(path)?;
-    toml::from_str(&text).map_err(|e| {
-        let line = e
-            .span()
-            .and_then(|s| text.get(..s.start))
-            .map(|before| 1 + before.matches('\n').count() as u64);
-        let location = match line {
-            Some(l) => Location::line(path, l),
-            None => Location::file(path),
-        };
-        Error::input(
-            location,
-            format!("bad set-up: {}", e.message()),
-            "see docs/linear.md, 'errmap linear budget', for the keys",
-        )
-    })
+    toml::from_str(&text)
+        .map_err(|e| {
+            let line = e
+                .span()
+                .and_then(|s| text.get(..s.start))
+                .map(|before| 1 + before.matches('\n').count() as u64);
+            let location = match line {
+                Some(l) => Location::line(path, l),
+                None => Location::file(path),
+            };
+            Error::input(
+                location,
+                format!("bad set-up: {}", e.message()),
+                "see docs/linear.md, 'errmap linear budget', for the keys",
+            )
+        })
+        .map_err(Into::into)
 }
 
 /// Compute every term (µm) and the RSS total.
-pub fn compute_budget(setup: &BudgetSetup) -> Result<Budget> {
+pub fn compute_budget(setup: &BudgetSetup) -> Result<Budget, crate::error::LinearError> {
     let l_mm = setup.length_mm;
     if !(l_mm.is_finite() && l_mm > 0.0) {
         return Err(Error::usage(
             format!("length_mm = {l_mm} is not a positive length"),
             "give the measured travel in mm",
-        ));
+        )
+        .into());
     }
     let l_um = l_mm * 1e3;
     // δ1: laser wavelength stability, ppm of the length.

@@ -13,6 +13,7 @@ mod runs;
 mod table;
 pub mod text;
 
+pub use crate::error::LinearError;
 pub use air::{
     refractive_index, saturation_vapour_pressure_pa, sensitivities, vapour_pressure_pa,
     AirConditions, AirFormula, DEFAULT_CO2_PPM, HENE_WAVELENGTH_NM,

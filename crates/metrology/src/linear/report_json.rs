@@ -143,7 +143,7 @@ impl AirIndexJson {
     pub fn compute(
         conditions: AirConditions,
         formula: super::air::AirFormula,
-    ) -> errmap_core::Result<AirIndexJson> {
+    ) -> errmap_core::Result<AirIndexJson, crate::error::LinearError> {
         let n = super::air::refractive_index(&conditions, formula)?;
         Ok(AirIndexJson {
             formula: formula.name(),

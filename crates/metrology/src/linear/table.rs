@@ -146,8 +146,8 @@ pub fn render_table(
     format: TableFormat,
     opts: &TableOptions,
     path: &Path,
-) -> Result<Vec<(PathBuf, String)>> {
-    controller::render(&table.to_controller(opts)?, format, opts, path)
+) -> Result<Vec<(PathBuf, String)>, crate::error::TableError> {
+    controller::render(&table.to_controller(opts)?, format, opts, path).map_err(Into::into)
 }
 
 /// Guess a table file's format from its content.
@@ -199,7 +199,7 @@ pub fn read_table(
     path: &Path,
     format: Option<TableFormat>,
     opts: &TableOptions,
-) -> Result<CompTable> {
+) -> Result<CompTable, crate::error::TableError> {
     let text = errmap_core::io::read_text(path)?;
     let format = match format.or_else(|| detect_format(&text)) {
         Some(f) => f,
@@ -208,7 +208,7 @@ pub fn read_table(
                 Location::file(path),
                 "cannot tell which controller format this table is",
                 "errmap reads the files `errmap linear table` writes (linuxcnc, sinumerik, fanuc, heidenhain, csv)",
-            ))
+            ).into())
         }
     };
     let table = match format {
@@ -223,7 +223,8 @@ pub fn read_table(
             Location::file(path),
             "the table needs at least two strictly ascending positions",
             "check the file",
-        ));
+        )
+        .into());
     }
     Ok(table)
 }

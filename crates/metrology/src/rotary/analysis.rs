@@ -253,7 +253,10 @@ fn key(angle_deg: f64) -> i64 {
 /// Analyse a measurement, stage by stage: options checked → sphere centres at every position
 /// → axis direction → reference vector a → err = α − β per position → mean per angle and
 /// direction → ISO 230-2 figures and the sphere-fit summary.
-pub fn analyze(m: &Measurement, opts: &AnalyzeOptions) -> Result<Analysis> {
+pub fn analyze(
+    m: &Measurement,
+    opts: &AnalyzeOptions,
+) -> Result<Analysis, crate::error::RotaryError> {
     opts.check()?;
     let nominal_radius = opts.nominal_radius_mm();
     let centres = sphere_centres(m, opts, nominal_radius)?;

@@ -10,7 +10,10 @@ use errmap_report::result::{beside, write_result, ResultSpec};
 use std::path::{Path, PathBuf};
 
 /// Read a measurement file and analyse it (errors in the `errmap` sign).
-pub fn analyze_file(path: &Path, opts: &AnalyzeOptions) -> Result<Analysis> {
+pub fn analyze_file(
+    path: &Path,
+    opts: &AnalyzeOptions,
+) -> Result<Analysis, crate::error::RotaryError> {
     let m = read_measurement(path)?;
     analyze(&m, opts)
 }
@@ -32,20 +35,24 @@ pub struct AnalyzeRequest<'a> {
 
 /// `rotary analyze`: analyse, write the chart and its result when asked, and return the text
 /// report or the JSON document to print.
-pub fn analyze_command(req: &AnalyzeRequest<'_>) -> Result<String> {
+pub fn analyze_command(req: &AnalyzeRequest<'_>) -> Result<String, crate::error::RotaryError> {
     let analysis = analyze_file(req.file, &req.options)?.with_sign(req.sign);
     if let Some(png) = req.chart {
         save_chart_and_result(png, &analysis, req.file)?;
     }
     if req.json {
-        json_document(&analysis)
+        json_document(&analysis).map_err(Into::into)
     } else {
         Ok(text_report(&analysis))
     }
 }
 
 /// The chart of `analysis` at `png` and, beside it, the result file for `errmap report`.
-pub fn save_chart_and_result(png: &Path, analysis: &Analysis, input: &Path) -> Result<()> {
+pub fn save_chart_and_result(
+    png: &Path,
+    analysis: &Analysis,
+    input: &Path,
+) -> Result<(), crate::error::RotaryError> {
     save_error_chart(png, analysis)?;
     write_result(
         &beside(png),
@@ -58,6 +65,7 @@ pub fn save_chart_and_result(png: &Path, analysis: &Analysis, input: &Path) -> R
         },
         analysis,
     )
+    .map_err(Into::into)
 }
 
 /// The JSON document of an analysis (pretty, with a final newline).
@@ -88,7 +96,7 @@ pub struct TableRequest<'a> {
 
 /// `rotary table`: analyse, build the table over the turn, write it in the controller's format
 /// and return the summary to print.
-pub fn table_command(req: &TableRequest<'_>) -> Result<String> {
+pub fn table_command(req: &TableRequest<'_>) -> Result<String, crate::error::RotaryError> {
     let analysis = analyze_file(req.file, &req.options)?;
     let table = build_table(&analysis, req.step_deg, req.start_deg)?;
     let files = render(&table, req.format, &req.controller, req.output)?;

@@ -16,6 +16,7 @@ pub mod sphere;
 pub(crate) mod table;
 pub(crate) mod text_report;
 
+pub use crate::error::RotaryError;
 pub use analysis::{analyze, Analysis, AnalyzeOptions, AxisReport, Observation, Sign, TableRow};
 pub use angle::{angle_error_arcsec, signed_angle_about, wrap_deg};
 pub use axis_fit::{fit_axis, AxisFit, CircleFit};

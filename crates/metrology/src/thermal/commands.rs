@@ -29,7 +29,7 @@ pub fn calibrate_table(
     to_s: Option<f64>,
     min_span_c: f64,
     output: Option<PathBuf>,
-) -> Result<(Vec<CalibrationFit>, PathBuf)> {
+) -> Result<(Vec<CalibrationFit>, PathBuf), crate::error::ThermalError> {
     let mut table = SensorTable::read(sensors)?;
     let log = TemperatureLog::read(log, &table)?;
     let from = from_s.unwrap_or(f64::NEG_INFINITY);
@@ -60,7 +60,7 @@ pub struct DifferenceRun {
 }
 
 /// `thermal difference`, first half: read the campaign and compute the difference.
-pub fn difference_run(campaign_arg: &Path) -> Result<DifferenceRun> {
+pub fn difference_run(campaign_arg: &Path) -> Result<DifferenceRun, crate::error::ThermalError> {
     let campaign = Campaign::read(campaign_arg)?;
     let d = difference(&campaign)?;
     Ok(DifferenceRun {
@@ -77,7 +77,7 @@ impl DifferenceRun {
     }
 
     /// Second half: difference.csv, lines.csv, fan.png and difference.json in `out`.
-    pub fn write_files(&self, out: &Path) -> Result<()> {
+    pub fn write_files(&self, out: &Path) -> Result<(), crate::error::ThermalError> {
         let d = &self.difference;
         outputs::write_difference_csv(&out.join("difference.csv"), d)?;
         outputs::write_lines_csv(&out.join("lines.csv"), d, &self.campaign.log.sensors)?;
@@ -93,6 +93,7 @@ impl DifferenceRun {
             },
             d,
         )
+        .map_err(Into::into)
     }
 }
 
@@ -135,7 +136,7 @@ pub fn ingest_folders(
     campaigns: &[PathBuf],
     ingest: &mut dyn FnMut(&mut Store, &Campaign) -> Result<IngestSummary>,
     each: &mut dyn FnMut(&IngestSummary) -> Result<()>,
-) -> Result<IngestReport> {
+) -> Result<IngestReport, crate::error::ThermalError> {
     let mut store = Store::open(db)?;
     let mut summaries = Vec::new();
     for path in campaigns {
@@ -182,7 +183,7 @@ pub struct FitOutcome {
 
 /// `thermal fit`: read the campaigns (from folders or the store), fit, write the model file
 /// and, when a store is in play, save the model there as a new version.
-pub fn fit_model(request: &FitRequest) -> Result<FitOutcome> {
+pub fn fit_model(request: &FitRequest) -> Result<FitOutcome, crate::error::ThermalError> {
     let db = request.db.clone().or_else(|| {
         request
             .from_store
@@ -274,13 +275,14 @@ impl ModelsReport {
 }
 
 /// `thermal models`: what the store at `db` (default: thermal.sqlite here) holds; it must exist.
-pub fn list_models(db: Option<PathBuf>) -> Result<ModelsReport> {
+pub fn list_models(db: Option<PathBuf>) -> Result<ModelsReport, crate::error::ThermalError> {
     let db = db.unwrap_or_else(|| PathBuf::from(DEFAULT_STORE));
     if !db.exists() {
         return Err(Error::usage(
             format!("no store at {}", db.display()),
             "give --db, or create one with `errmap thermal ingest`",
-        ));
+        )
+        .into());
     }
     let store = Store::open(&db)?;
     let models = store.models()?;
@@ -298,7 +300,7 @@ pub fn compensate_log(
     model: &Path,
     log: &Path,
     output: &Path,
-) -> Result<(ThermalModel, CompensateSummary)> {
+) -> Result<(ThermalModel, CompensateSummary), crate::error::ThermalError> {
     let m = ThermalModel::read(model)?;
     let s = compensate_file(&m, log, output)?;
     Ok((m, s))
@@ -317,7 +319,7 @@ pub fn evaluate_run(
     model: &Path,
     campaigns: &[PathBuf],
     standard: Standard,
-) -> Result<EvaluateRun> {
+) -> Result<EvaluateRun, crate::error::ThermalError> {
     let m = ThermalModel::read(model)?;
     let campaigns: Vec<Campaign> = campaigns
         .iter()
@@ -341,7 +343,7 @@ impl EvaluateRun {
     }
 
     /// Second half: evaluate.csv, evaluate.png and evaluate.json in `out`.
-    pub fn write_files(&self, out: &Path) -> Result<()> {
+    pub fn write_files(&self, out: &Path) -> Result<(), crate::error::ThermalError> {
         outputs::write_evaluate_csv(&out.join("evaluate.csv"), &self.report)?;
         evaluate_chart(&out.join("evaluate.png"), &self.report)?;
         write_result(
@@ -355,5 +357,6 @@ impl EvaluateRun {
             },
             &self.report,
         )
+        .map_err(Into::into)
     }
 }

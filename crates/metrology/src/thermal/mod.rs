@@ -17,5 +17,6 @@ pub mod sensors;
 pub mod store;
 pub mod text;
 
+pub use crate::error::ThermalError;
 pub use campaign::{Campaign, Direction, LaserPoint, Measurement};
 pub use model::{fit, FitOptions, ThermalModel, ThermalState};

@@ -274,9 +274,9 @@ pub(crate) fn is_trial_stop(e: &Error) -> bool {
 pub(crate) fn compensate_flat<T>(
     text: &str,
     flat: &Flat,
-    compensate: impl FnOnce(&str) -> Result<T>,
-) -> Result<T> {
-    compensate(&flat.text).map_err(|e| flat.map_error(text, e))
+    compensate: impl FnOnce(&str) -> Result<T, crate::CompensateError>,
+) -> Result<T, crate::CompensateError> {
+    compensate(&flat.text).map_err(|e| e.map_diagnostic(|d| flat.map_error(text, d)))
 }
 
 /// A plain-rewrite refusal with its hint replaced by [`HINT`] (the program would compensate

@@ -16,6 +16,7 @@ mod rewrite;
 use super::dialect::{self, Dialect};
 use super::machine::Machine;
 use super::{CompensationReport, CompensationSettings, TracedMove, Units};
+use crate::CompensateError;
 use block::Block;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
@@ -150,7 +151,7 @@ pub(crate) fn compensate(
     source: &Path,
     field: &dyn ErrorField,
     settings: &CompensationSettings,
-) -> Result<(String, CompensationReport)> {
+) -> Result<(String, CompensationReport), CompensateError> {
     let mut kt = Kt::start(text, source, field, settings)?;
     kt.run(text)?;
     Ok(kt.finish(text))
@@ -161,7 +162,7 @@ pub(crate) fn trace(
     text: &str,
     source: &Path,
     settings: &CompensationSettings,
-) -> Result<Vec<TracedMove>> {
+) -> Result<Vec<TracedMove>, CompensateError> {
     let settings = super::trace_settings(settings);
     let mut kt = Kt::start(text, source, &super::Nothing, &settings)?;
     kt.trace = Some(Vec::new());
@@ -175,7 +176,7 @@ impl<'a> Kt<'a> {
         source: &'a Path,
         field: &'a dyn ErrorField,
         settings: &'a CompensationSettings,
-    ) -> Result<Kt<'a>> {
+    ) -> Result<Kt<'a>, CompensateError> {
         settings.validate()?;
         let header = header_units(text, source)?;
         let units =
@@ -188,7 +189,8 @@ impl<'a> Kt<'a> {
                         units_word(u)
                     ),
                     "leave out --units (the BEGIN PGM block gives the units of a Klartext program)",
-                )),
+                )
+                .into()),
                 (Some((h, _)), _) => Some(h),
                 (None, u) => u,
             };

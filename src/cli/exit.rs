@@ -1,0 +1,272 @@
+//! Exit codes, in one place: each library operation's typed error (and the located diagnostic
+//! of the crates that still return one) mapped to the code a script acts on.
+//!
+//! 0 done; 1 a batch finished but some parts failed (decided by the batch's summary);
+//! 2 fix the input: bad file content, options or settings, data a method cannot use, a file
+//! that cannot be read; 3 the machine or errmap: an output that cannot be written, the GPU,
+//! an internal error.
+
+use errmap::circular::CircularError;
+use errmap::controller::TableError;
+use errmap::error::{Diagnose, Diagnostic};
+use errmap::linear::LinearError;
+use errmap::map::grid_file::GridError;
+use errmap::map::MapError;
+use errmap::probe::ProbeError;
+use errmap::report::ReportError;
+use errmap::rotary::RotaryError;
+use errmap::synth::SynthError;
+use errmap::thermal::ThermalError;
+use errmap::toolpath::{CompensateError, DialectError, SettingsError};
+
+/// Bad input: the user fixes a file, an option or a setting.
+const INPUT: i32 = 2;
+/// The machine (an output, the GPU) or errmap itself.
+const SYSTEM: i32 = 3;
+
+/// Why a command failed: the typed error of the library operation it called, or a located
+/// diagnostic (the CLI's own checks, and the crates that still return one).
+#[derive(Debug)]
+pub enum Failure {
+    /// A located diagnostic (batch, live, serve, the CLI's own checks).
+    Diagnostic(Diagnostic),
+    /// Compensation settings in words (`errmap compensate`'s flags).
+    Settings(SettingsError),
+    /// Toolpath compensation.
+    Compensate(CompensateError),
+    /// Reading a probe file.
+    Probe(ProbeError),
+    /// Reading or using a fitted map.
+    Map(MapError),
+    /// Probe points onto a grid (`errmap grid`).
+    Grid(GridError),
+    /// A linear-axis analysis.
+    Linear(LinearError),
+    /// A thermal command.
+    Thermal(ThermalError),
+    /// A rotary-axis analysis or table.
+    Rotary(RotaryError),
+    /// A circular test.
+    Circular(CircularError),
+    /// A controller compensation table.
+    Table(TableError),
+    /// A report: results read back, the PDF.
+    Report(ReportError),
+    /// Sample data (`errmap synth …`).
+    Synth(SynthError),
+}
+errmap_core::typed_error!(Failure {
+    Diagnostic,
+    Settings,
+    Compensate,
+    Probe,
+    Map,
+    Grid,
+    Linear,
+    Thermal,
+    Rotary,
+    Circular,
+    Table,
+    Report,
+    Synth,
+});
+
+/// A command's result: its exit code, or why it failed.
+pub type Result<T, E = Failure> = std::result::Result<T, E>;
+
+macro_rules! failure_from {
+    ($($variant:ident($ty:ty)),+ $(,)?) => {
+        $(impl From<$ty> for Failure {
+            fn from(e: $ty) -> Self {
+                Failure::$variant(e)
+            }
+        })+
+    };
+}
+failure_from!(
+    Diagnostic(Diagnostic),
+    Settings(SettingsError),
+    Compensate(CompensateError),
+    Probe(ProbeError),
+    Map(MapError),
+    Grid(GridError),
+    Linear(LinearError),
+    Thermal(ThermalError),
+    Rotary(RotaryError),
+    Circular(CircularError),
+    Table(TableError),
+    Report(ReportError),
+    Synth(SynthError),
+);
+
+/// An analysis' error (they share their variants): bad options, a bad line or file, a fit
+/// not possible or an unreadable input are the input's; an output, a bug the machine's or
+/// errmap's.
+macro_rules! analysis {
+    ($ty:ident, $e:expr) => {
+        match $e {
+            $ty::Options(_) | $ty::Line(_) | $ty::File(_) | $ty::Fit(_) | $ty::Read(_) => INPUT,
+            $ty::Write(_) | $ty::Internal(_) => SYSTEM,
+            other => diagnostic(other.diagnostic()),
+        }
+    };
+}
+
+/// The exit code of a failed command.
+pub fn code(failure: &Failure) -> i32 {
+    let code = match failure {
+        Failure::Diagnostic(d) => diagnostic(d),
+        Failure::Settings(_) => INPUT,
+        Failure::Compensate(e) => compensate(e),
+        Failure::Probe(e) => probe(e),
+        Failure::Map(e) => map(e),
+        Failure::Grid(e) => grid(e),
+        Failure::Linear(e) => analysis!(LinearError, e),
+        Failure::Thermal(e) => analysis!(ThermalError, e),
+        Failure::Rotary(e) => analysis!(RotaryError, e),
+        Failure::Circular(e) => analysis!(CircularError, e),
+        Failure::Table(e) => analysis!(TableError, e),
+        Failure::Report(e) => report(e),
+        Failure::Synth(e) => synth(e),
+    };
+    // Every typed variant keeps the code its diagnostic's kind had before the types existed.
+    debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
+    code
+}
+
+/// A diagnostic by its kind: bad input, usage, a numeric failure or an unreadable file are the
+/// input's; any other I/O failure, the device and internal errors are the machine's or errmap's.
+fn diagnostic(d: &Diagnostic) -> i32 {
+    match d {
+        Diagnostic::Input { .. } | Diagnostic::Usage { .. } | Diagnostic::Numeric { .. } => INPUT,
+        Diagnostic::Io { .. } if d.is_read() => INPUT,
+        Diagnostic::Io { .. } | Diagnostic::Device { .. } | Diagnostic::Internal(_) => SYSTEM,
+    }
+}
+
+fn compensate(e: &CompensateError) -> i32 {
+    use CompensateError as E;
+    match e {
+        E::Settings(_)
+        | E::Dialect(DialectError::Uncertain(_))
+        | E::Program(_)
+        | E::Uncovered(_)
+        | E::Overwrite(_)
+        | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn probe(e: &ProbeError) -> i32 {
+    use ProbeError as E;
+    match e {
+        E::Options(_) | E::Line(_) | E::File(_) | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn map(e: &MapError) -> i32 {
+    use MapError as E;
+    match e {
+        E::Options(_) | E::Line(_) | E::File(_) | E::Implausible(_) | E::Weak(_) | E::Read(_) => {
+            INPUT
+        }
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn grid(e: &GridError) -> i32 {
+    use GridError as E;
+    match e {
+        E::Probes(p) => probe(p),
+        E::Options(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn report(e: &ReportError) -> i32 {
+    use ReportError as E;
+    match e {
+        E::NoBrowser(_) | E::Output(_) | E::Result(_) | E::Read(_) => INPUT,
+        E::Print(_) | E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn synth(e: &SynthError) -> i32 {
+    use SynthError as E;
+    match e {
+        E::Options(_) | E::Input(_) | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use errmap::error::Location;
+    use std::io;
+
+    fn input() -> Diagnostic {
+        Diagnostic::input(Location::line("p.csv", 3), "bad", "fix it")
+    }
+    fn read() -> Diagnostic {
+        Diagnostic::read("p.csv", io::Error::from(io::ErrorKind::NotFound))
+    }
+    fn write() -> Diagnostic {
+        Diagnostic::write("out.csv", io::Error::from(io::ErrorKind::PermissionDenied))
+    }
+
+    /// The codes of the documented table (the module page): 2 for the input's faults, 3 for
+    /// the machine's or errmap's, whatever operation reported them.
+    #[test]
+    fn each_operation_keeps_the_documented_codes() {
+        let cases: Vec<(Failure, i32)> = vec![
+            (Failure::from(input()), 2),
+            (Failure::from(read()), 2),
+            (Failure::from(write()), 3),
+            (Failure::from(Diagnostic::Internal("x".into())), 3),
+            (Failure::from(Diagnostic::device("lost", "")), 3),
+            (CompensateError::from(input()).into(), 2),
+            (CompensateError::from(read()).into(), 2),
+            (CompensateError::from(write()).into(), 3),
+            (CompensateError::Overwrite(input()).into(), 2),
+            (ProbeError::from(read()).into(), 2),
+            (ProbeError::from(write()).into(), 3),
+            (MapError::Weak(input()).into(), 2),
+            (GridError::from(ProbeError::from(read())).into(), 2),
+            (
+                LinearError::from(Diagnostic::numeric("singular", "")).into(),
+                2,
+            ),
+            (ThermalError::from(write()).into(), 3),
+            (TableError::from(input()).into(), 2),
+            (
+                ReportError::from(Diagnostic::device("no PDF", "")).into(),
+                3,
+            ),
+            (ReportError::from(read()).into(), 2),
+            (SynthError::from(write()).into(), 3),
+            (SynthError::from(Diagnostic::usage("bad", "")).into(), 2),
+        ];
+        for (failure, expected) in cases {
+            assert_eq!(code(&failure), expected, "{failure:?}");
+        }
+    }
+
+    /// A typed error prints exactly its diagnostic, causes included.
+    #[test]
+    fn a_typed_error_prints_its_diagnostic_word_for_word() {
+        let typed = Failure::from(CompensateError::from(read()));
+        let plain = read();
+        assert_eq!(typed.to_string(), "cannot read p.csv: entity not found");
+        assert_eq!(typed.to_string(), plain.to_string());
+        let cause = std::error::Error::source(&typed).map(|c| c.to_string());
+        assert_eq!(cause.as_deref(), Some("entity not found"));
+    }
+}
