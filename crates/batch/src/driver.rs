@@ -324,7 +324,7 @@ struct Sealed<'a> {
 /// The run's last files in its staging folder: `summary.json`, the timing, `report.html` and
 /// `run.json` (last: it vouches for the rest).
 fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) -> Result<()> {
-    errmap_core::io::write_json(&dir.join("summary.json"), summary)?;
+    crate::json_out::write_json(&dir.join("summary.json"), summary)?;
     if let Some(timing) = &summary.timing {
         timing.write(dir)?;
     }
@@ -753,7 +753,7 @@ fn reduce_into(
     merged.toolpaths.extend(outcome.toolpaths);
     relocate_summary(&mut merged, &staged, &family_dir);
     staging.commit()?;
-    errmap_core::io::write_json(&batch_dir.join("summary.json"), &merged)?;
+    crate::json_out::write_json(&batch_dir.join("summary.json"), &merged)?;
     let mut m = reduce_manifest(batch_dir, folders, manifests, &merged)?;
     m.job = Some(file.path.clone());
     m.metadata = file.job.metadata_json();

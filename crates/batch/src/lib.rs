@@ -9,6 +9,7 @@ pub(crate) mod family_sums;
 pub mod folder_report;
 pub(crate) mod job;
 pub mod journal;
+pub(crate) mod json_out;
 pub mod k8s;
 pub mod manifest;
 pub mod nested;
