@@ -44,8 +44,10 @@ const PARTS_SLOT: &str = "\u{0}errmap-table-of-parts\u{0}";
 /// A run's report ready to be written: the page before and after its table of parts, which
 /// is written row by row, so a family of any size needs memory for its rows' figures only.
 pub struct RunPage {
-    head: String,
-    tail: String,
+    /// The rendered page with [`PARTS_SLOT`] where the table goes.
+    html: String,
+    /// Where the slot starts in `html`.
+    slot: usize,
     inline: bool,
 }
 
@@ -83,21 +85,17 @@ impl RunPage {
             }
         }
         let html = page.render();
-        let (head, tail) = html
-            .split_once(PARTS_SLOT)
+        let slot = html
+            .find(PARTS_SLOT)
             .ok_or_else(|| Error::Internal("the report lost its table of parts".into()))?;
-        Ok(RunPage {
-            head: head.to_string(),
-            tail: tail.to_string(),
-            inline,
-        })
+        Ok(RunPage { html, slot, inline })
     }
 
     /// Write the page to `w`, the table of parts row by row.
     pub fn write(&self, input: &RunInput, w: &mut dyn std::io::Write) -> std::io::Result<()> {
-        w.write_all(self.head.as_bytes())?;
+        w.write_all(&self.html.as_bytes()[..self.slot])?;
         parts_table(input, self.inline, w)?;
-        w.write_all(self.tail.as_bytes())
+        w.write_all(&self.html.as_bytes()[self.slot + PARTS_SLOT.len()..])
     }
 }
 
