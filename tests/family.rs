@@ -746,3 +746,153 @@ fn the_family_job_gives_the_same_maps_on_the_gpu_and_the_cpu() {
     }
     assert_eq!(compared, 3);
 }
+
+/// The elements an HTML page may leave unclosed (void elements, and SVG shapes written `/>`).
+const VOID_ELEMENTS: [&str; 7] = ["meta", "img", "br", "hr", "link", "input", "col"];
+
+/// Whether `html` is a well-formed document: a doctype, then every element closed in the order
+/// it was opened (void elements and `<…/>` excepted). A tag stack, independent of the renderer.
+#[track_caller]
+fn assert_well_formed(html: &str, what: &str) {
+    assert!(html.starts_with("<!DOCTYPE html>\n"), "{what}: no doctype");
+    let mut open: Vec<String> = Vec::new();
+    let mut rest = &html["<!DOCTYPE html>".len()..];
+    while let Some(at) = rest.find('<') {
+        rest = &rest[at + 1..];
+        let end = rest
+            .find('>')
+            .unwrap_or_else(|| panic!("{what}: unclosed tag"));
+        let tag = &rest[..end];
+        rest = &rest[end + 1..];
+        if let Some(name) = tag.strip_prefix('/') {
+            let top = open.pop();
+            assert_eq!(
+                top.as_deref(),
+                Some(name.trim()),
+                "{what}: </{name}> closes {top:?}"
+            );
+            continue;
+        }
+        let name: String = tag
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric())
+            .collect();
+        assert!(!name.is_empty(), "{what}: '<{tag}>' is not a tag");
+        if tag.ends_with('/') || VOID_ELEMENTS.contains(&name.as_str()) {
+            continue;
+        }
+        open.push(name);
+    }
+    assert!(open.is_empty(), "{what}: left open: {open:?}");
+}
+
+/// The rows of the table of parts `table` (the HTML from its `<table` on): each row's link
+/// and part name.
+fn table_rows(table: &str) -> Vec<(String, String)> {
+    let table = &table[..table.find("</table>").expect("a closed table")];
+    table
+        .split("<tr><td><a href=\"")
+        .skip(1)
+        .map(|row| {
+            let (href, rest) = row.split_once("\">").unwrap();
+            let name = &rest[..rest.find("</a>").unwrap()];
+            (href.to_string(), name.to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn a_generated_family_of_1000_parts_gets_a_sortable_overview_and_a_page_per_part() {
+    // 1000 small parts (36 probe points on a 90 mm plate, 5 training steps): the family is
+    // generated and mapped by the real binary; the report is judged on its own structure and
+    // against the parts' figures in summary.json.
+    let tmp = tempfile::tempdir().unwrap();
+    let cwd = tmp.path();
+    synth_family(
+        cwd,
+        "1000",
+        &[
+            "--grid",
+            "6x6",
+            "--size",
+            "90x90",
+            "--outliers",
+            "0",
+            "--epochs",
+            "5",
+            "--warm-epochs",
+            "1",
+        ],
+    );
+    batch(cwd, "cpu", "out", 0);
+    let out = cwd.join("out");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let parts = summary["parts"].as_array().unwrap();
+    assert_eq!(parts.len(), 1000);
+    let names: Vec<&str> = parts.iter().map(|p| p["part"].as_str().unwrap()).collect();
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_well_formed(&html, "report.html");
+    assert!(!html.contains("<script") && !html.contains("https://"));
+    // The overview embeds the family's pictures only (mean, spread, u(E)), no part's.
+    let images = html.matches("src=\"data:image/png;base64,").count();
+    assert!(
+        (2..=3).contains(&images),
+        "{images} pictures on the overview"
+    );
+    assert!(!html.contains("<section id=\"part-"));
+    // Eight tables of every part: seven sorted by a column, then the default in file order.
+    let tables: Vec<&str> = html
+        .match_indices("<table class=\"parts\">")
+        .map(|(at, _)| &html[at..])
+        .collect();
+    assert_eq!(tables.len(), 8);
+    for t in &tables {
+        assert_eq!(table_rows(t).len(), 1000);
+    }
+    let default = table_rows(tables[7]);
+    let in_order: Vec<&str> = default.iter().map(|(_, n)| n.as_str()).collect();
+    assert_eq!(
+        in_order, names,
+        "the default table is in the order of the probe files"
+    );
+    // Sorted by map RMS: the order of summary.json's rms_um, largest first, ties by file order.
+    let by_rms = &html[html.find("id=\"parts-by-rms\"").unwrap()..];
+    let mut want: Vec<(f64, usize)> = parts
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (p["rms_um"].as_f64().unwrap(), k))
+        .collect();
+    want.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let got: Vec<String> = table_rows(&by_rms[by_rms.find("<table").unwrap()..])
+        .into_iter()
+        .map(|(_, n)| n)
+        .collect();
+    let want: Vec<&str> = want.iter().map(|&(_, k)| names[k]).collect();
+    assert_eq!(got, want);
+    // Every row links to its part's own page, which exists, names its part, links back and
+    // holds that part's pictures only.
+    for (href, name) in &default {
+        assert_eq!(href, &format!("{name}/report.html"));
+        let page =
+            std::fs::read_to_string(out.join(href)).unwrap_or_else(|e| panic!("{href}: {e}"));
+        assert_well_formed(&page, href);
+        assert!(
+            page.contains(&format!("<h2>Part {name}</h2>"))
+                && page.contains(&format!(
+                    "<title>errmap report — web-plate part {name}</title>"
+                )),
+            "{href} does not name its part"
+        );
+        assert!(page.contains("href=\"../report.html#parts\""), "{href}");
+        let images = page.matches("src=\"data:image/png;base64,").count();
+        assert!((1..=2).contains(&images), "{href}: {images} pictures");
+    }
+    // `errmap report` on the folder gives the same bytes as the batch wrote.
+    run_expect(&["report", "out", "-o", "again.html", "--quiet"], cwd, 0);
+    assert_eq!(
+        std::fs::read(cwd.join("again.html")).unwrap(),
+        html.as_bytes(),
+        "errmap report differs from the batch's report.html"
+    );
+}

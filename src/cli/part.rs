@@ -173,9 +173,8 @@ pub fn run_batch(args: BatchArgs, globals: Globals) -> Result<i32> {
     for note in batch::renamed_parts(&file.probe_files()?) {
         info!("note: {note}");
     }
-    let backend = args.backend.unwrap_or(file.job.model.backend);
-    let trainer = select(backend, &file.job.model, globals)?;
-    let run = batch::run_job(&file, &opts, trainer.as_ref(), &Terminal)?;
+    let job = batch::ResolvedJob::new(&file, &opts, &|b, model| select(b, model, globals))?;
+    let run = batch::run_job(&job, &Terminal)?;
     if args.resume && !args.json {
         info!(
             "resume: kept {} part(s) of the previous run{}",
@@ -238,8 +237,9 @@ pub fn run_merge(args: MergeArgs, globals: Globals) -> Result<i32> {
         backend: args.backend,
         wait: args.wait.map(std::time::Duration::from_secs),
     };
-    let trainer_for = |b: Backend| select(b, &ModelConfig::default(), globals);
-    let run = batch::merge_job(&req, &trainer_for)?;
+    // The merge's trainer is chosen as before the job's model was at hand: with the defaults.
+    let select_for = |b: Backend, _: &ModelConfig| select(b, &ModelConfig::default(), globals);
+    let run = batch::merge_job(&req, &select_for)?;
     super::ignore_closed_pipe(report(
         &run.summary,
         &run.folder.join("summary.json"),

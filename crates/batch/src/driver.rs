@@ -1,14 +1,15 @@
 //! A job run from start to commit (`errmap batch`) and the reduce of a sharded job (`errmap merge`): staging, `--resume`, the manifest, the family rebuilt from the shards.
 
-use super::commit::{self, Staging};
-use super::journal::{self, Finished, Journal};
-use super::manifest::{self, PartRecord, RunManifest, RUN_MANIFEST};
-use super::reduce::{self, PartReduce, REDUCE_FILE};
-use super::summary::{BatchSummary, PartSummary, ToolpathSummary};
-use super::{plan_job, BatchOptions, JobFile, Shard};
+use crate::commit::{self, Staging};
+use crate::journal::{self, Finished, Journal};
+use crate::manifest::{self, PartRecord, RunManifest, RUN_MANIFEST};
+use crate::reduce::{self, PartReduce, REDUCE_FILE};
+use crate::resolve::{with_backend, ResolvedJob, SelectTrainer};
+use crate::stages::report::write_report;
+use crate::summary::{BatchSummary, PartSummary, ToolpathSummary};
+use crate::{BatchOptions, JobFile, Shard};
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::progress::Reporter;
-use errmap_maps::nn::Trainer;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -21,15 +22,6 @@ pub struct JobRun {
     pub folder: PathBuf,
     /// Parts kept from the previous run by `--resume`, by name; empty without it.
     pub reused: Vec<String>,
-}
-
-/// The job as the run sees it: `--backend` applied.
-fn effective_job(file: &JobFile, opts_backend: Option<errmap_maps::nn::Backend>) -> JobFile {
-    let mut file = file.clone();
-    if let Some(b) = opts_backend {
-        file.job.model.backend = b;
-    }
-    file
 }
 
 /// Sharding and `--resume` put parts mapped by different processes into one family: they
@@ -80,40 +72,117 @@ fn relocate_summary(summary: &mut BatchSummary, from: &Path, to: &Path) {
 
 /// Run a job (or one shard of it) into its folder and commit it: the run is written into a
 /// staging folder, `run.json` last, and the staging folder then replaces the old folder.
-pub fn run_job(
-    file: &JobFile,
-    opts: &BatchOptions,
-    trainer: &dyn Trainer,
-    reporter: &dyn Reporter,
-) -> Result<JobRun> {
-    let file = effective_job(file, opts.backend);
-    require_shared_domain(&file, opts)?;
-    let probe_files = file.probe_files()?;
-    let job_hash = manifest::job_hash(&file.job, &probe_files, &file.base_dir())?;
-    let out = opts.output.clone().unwrap_or_else(|| file.output_dir());
-    let target = match opts.shard {
-        Some(s) => out.join(s.folder_name()),
-        None => out.clone(),
+pub fn run_job(job: &ResolvedJob, reporter: &dyn Reporter) -> Result<JobRun> {
+    let file = &job.file;
+    let opened = OpenRun::begin(job)?;
+    let folders = &opened.folders;
+    let (plan, kept) = plan_resumed(job, folders, &opened.sources, &opened.input_hashes)?;
+    for dir in &opened.stale {
+        commit::remove_path(dir)?;
+    }
+    let journal = Journal::create(&folders.staging, &opened.job_hash, &opened.input_hashes)?;
+    for k in &kept {
+        journal.record(k)?;
+    }
+    let reused: Vec<String> = kept.iter().map(|k| k.part.part.clone()).collect();
+    let recorder = PartJournal {
+        folders,
+        journal: &journal,
+        input_hashes: &opened.input_hashes,
     };
-    let inputs = job_inputs(&file)?;
-    commit::check_inputs_outside(&out, &inputs)?;
-    let previous = if opts.resume {
-        RunManifest::read(&target)?.filter(|m| m.job_hash == job_hash)
+    let on_part = |p: &PartSummary, t: &[ToolpathSummary]| recorder.record(p, t);
+    let trainer = job.trainer.as_ref();
+    let mut summary = crate::execute_with(&plan, trainer, reporter, &on_part)?;
+    relocate_summary(&mut summary, &folders.staging, &folders.target);
+    if !kept.is_empty() {
+        add_reused(&mut summary, file, &folders.staging, &kept)?;
+        if job.opts.shard.is_none() {
+            reduce_resumed_family(&mut summary, job, folders)?;
+        }
+    }
+    journal.remove()?;
+    let kind = if job.opts.shard.is_some() {
+        "shard"
     } else {
-        None
+        "batch"
     };
-    let input_hashes = manifest::hash_inputs(&inputs)?;
-    let (staging, stale) = if opts.resume {
-        Staging::begin_keeping_stale(&target)?
-    } else {
-        (Staging::begin(&target)?, Vec::new())
+    let sealed = Sealed {
+        kind,
+        job_hash: opened.job_hash,
+        input_hashes: opened.input_hashes,
+        reused: &reused,
     };
-    let folders = RunFolders {
-        staging: staging.path().to_path_buf(),
-        target,
-    };
-    // Finished parts to keep: the committed run's, then those the journals of interrupted runs
-    // into the same folder record.
+    seal_run(file, &folders.staging, &summary, sealed)?;
+    let folder = folders.target.clone();
+    opened.staging.commit()?;
+    Ok(JobRun {
+        summary,
+        folder,
+        reused,
+    })
+}
+
+/// A run begun: its job hash and input hashes, its staging folder (and the stale staging
+/// folders of interrupted runs) and where `--resume` may find finished parts.
+struct OpenRun {
+    job_hash: String,
+    input_hashes: BTreeMap<PathBuf, String>,
+    staging: Staging,
+    stale: Vec<PathBuf>,
+    folders: RunFolders,
+    sources: Vec<Source>,
+}
+
+impl OpenRun {
+    /// Check the job's inputs, hash them, open the staging folder and find the finished parts
+    /// `--resume` may keep.
+    fn begin(job: &ResolvedJob) -> Result<OpenRun> {
+        let (file, opts) = (&job.file, &job.opts);
+        require_shared_domain(file, opts)?;
+        let probe_files = file.probe_files()?;
+        let job_hash = manifest::job_hash(&file.job, &probe_files, &file.base_dir())?;
+        let out = job.output();
+        let target = match opts.shard {
+            Some(s) => out.join(s.folder_name()),
+            None => out.clone(),
+        };
+        let inputs = job_inputs(file)?;
+        commit::check_inputs_outside(&out, &inputs)?;
+        let previous = if opts.resume {
+            RunManifest::read(&target)?.filter(|m| m.job_hash == job_hash)
+        } else {
+            None
+        };
+        let input_hashes = manifest::hash_inputs(&inputs)?;
+        let (staging, stale) = if opts.resume {
+            Staging::begin_keeping_stale(&target)?
+        } else {
+            (Staging::begin(&target)?, Vec::new())
+        };
+        let folders = RunFolders {
+            staging: staging.path().to_path_buf(),
+            target,
+        };
+        let sources = resume_sources(previous, &folders, &stale, &job_hash);
+        Ok(OpenRun {
+            job_hash,
+            input_hashes,
+            staging,
+            stale,
+            folders,
+            sources,
+        })
+    }
+}
+
+/// Finished parts to keep: the committed run's, then those the journals of interrupted runs
+/// into the same folder record.
+fn resume_sources(
+    previous: Option<RunManifest>,
+    folders: &RunFolders,
+    stale: &[PathBuf],
+    job_hash: &str,
+) -> Vec<Source> {
     let mut sources: Vec<Source> = Vec::new();
     if let Some(m) = previous {
         let toolpaths = BatchSummary::read(&folders.target.join("summary.json"))
@@ -125,7 +194,7 @@ pub fn run_job(
             toolpaths,
         });
     }
-    for dir in &stale {
+    for dir in stale {
         if let Some((m, toolpaths)) = journal::read(dir).filter(|(m, _)| m.job_hash == job_hash) {
             sources.push(Source {
                 manifest: m,
@@ -134,17 +203,19 @@ pub fn run_job(
             });
         }
     }
-    let (plan, kept) = plan_resumed(&file, opts, &folders, &sources, &input_hashes)?;
-    for dir in &stale {
-        commit::remove_path(dir)?;
-    }
-    let journal = Journal::create(&folders.staging, &job_hash, &input_hashes)?;
-    for k in &kept {
-        journal.record(k)?;
-    }
-    let reused: Vec<String> = kept.iter().map(|k| k.part.part.clone()).collect();
-    // Each part, once written: its summary naming its final folder, then its journal line.
-    let on_part = |p: &PartSummary, toolpaths: &[ToolpathSummary]| -> Result<()> {
+    sources
+}
+
+/// Each part, once written: its summary naming its final folder, then its journal line.
+struct PartJournal<'a> {
+    folders: &'a RunFolders,
+    journal: &'a Journal,
+    input_hashes: &'a BTreeMap<PathBuf, String>,
+}
+
+impl PartJournal<'_> {
+    fn record(&self, p: &PartSummary, toolpaths: &[ToolpathSummary]) -> Result<()> {
+        let folders = self.folders;
         let mut p = p.clone();
         if let Some(d) = &mut p.output_dir {
             relocate(d, &folders.staging, &folders.target);
@@ -159,45 +230,23 @@ pub fn run_job(
             .into_iter()
             .map(|(k, v)| (format!("{}/{k}", p.part), v))
             .collect();
-        journal.record(&Finished {
+        let input_sha256 = self
+            .input_hashes
+            .get(&p.probe_file)
+            .cloned()
+            .unwrap_or_default();
+        self.journal.record(&Finished {
             part: PartRecord {
                 part: p.part.clone(),
                 probe_file: p.probe_file.clone(),
-                input_sha256: input_hashes.get(&p.probe_file).cloned().unwrap_or_default(),
+                input_sha256,
                 ok: true,
                 reused: false,
                 outputs,
             },
             toolpaths,
         })
-    };
-    let mut summary = super::execute_with(&plan, trainer, reporter, &on_part)?;
-    relocate_summary(&mut summary, &folders.staging, &folders.target);
-    if !kept.is_empty() {
-        add_reused(&mut summary, &file, &folders.staging, &kept)?;
-        if opts.shard.is_none() {
-            reduce_resumed_family(&mut summary, &file, opts, &folders, trainer)?;
-        }
     }
-    journal.remove()?;
-    let kind = if opts.shard.is_some() {
-        "shard"
-    } else {
-        "batch"
-    };
-    let sealed = Sealed {
-        kind,
-        job_hash,
-        input_hashes,
-        reused: &reused,
-    };
-    seal_run(&file, &folders.staging, &summary, sealed)?;
-    staging.commit()?;
-    Ok(JobRun {
-        summary,
-        folder: folders.target,
-        reused,
-    })
 }
 
 /// Sharding and `--resume` put parts mapped by different processes into one family.
@@ -220,13 +269,12 @@ struct RunFolders {
 /// The plan of the parts left to map after `--resume` kept those of the previous run that
 /// still match (hard-linked into the staging folder), and the names of the kept parts.
 fn plan_resumed(
-    file: &JobFile,
-    opts: &BatchOptions,
+    job: &ResolvedJob,
     folders: &RunFolders,
     sources: &[Source],
     input_hashes: &BTreeMap<PathBuf, String>,
-) -> Result<(super::Plan, Vec<Finished>)> {
-    let mut plan = plan_job(file, opts, &folders.staging)?;
+) -> Result<(crate::Plan, Vec<Finished>)> {
+    let mut plan = job.plan(&folders.staging)?;
     let reused = reuse_parts(sources, &folders.staging, &plan, input_hashes)?;
     let all_parts = plan.parts.clone();
     plan.parts
@@ -245,21 +293,19 @@ fn plan_resumed(
 /// The family of a resumed unsharded run, rebuilt from every part's reduce inputs.
 fn reduce_resumed_family(
     summary: &mut BatchSummary,
-    file: &JobFile,
-    opts: &BatchOptions,
+    job: &ResolvedJob,
     folders: &RunFolders,
-    trainer: &dyn Trainer,
 ) -> Result<()> {
     let dir = &folders.staging;
-    let full = plan_job(file, opts, dir)?;
+    let full = job.plan(dir)?;
     let paths = reduce_paths(summary, dir, None)?;
     let outcome = reduce::reduce_family(
         &part_source(&paths),
         &full.settings,
-        &domain_of(file)?,
+        &domain_of(&job.file)?,
         &dir.join("family"),
         full.toolpaths.as_ref(),
-        trainer,
+        job.trainer.as_ref(),
     )?;
     summary.family_map = outcome.family;
     summary.toolpaths.extend(outcome.toolpaths);
@@ -278,7 +324,7 @@ struct Sealed<'a> {
 /// The run's last files in its staging folder: `summary.json`, the timing, `report.html` and
 /// `run.json` (last: it vouches for the rest).
 fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) -> Result<()> {
-    errmap_core::io::write_json(&dir.join("summary.json"), summary)?;
+    crate::json_out::write_json(&dir.join("summary.json"), summary)?;
     if let Some(timing) = &summary.timing {
         timing.write(dir)?;
     }
@@ -293,55 +339,8 @@ fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) 
     )?;
     m.metadata = file.job.metadata_json();
     m.k_sigma = Some(file.job.clean.k_sigma);
-    write_report(dir, &mut m)?;
+    write_report(dir, &mut m, summary)?;
     m.write(dir)
-}
-
-/// Write `report.html` into the run's folder and list it in the manifest (before `run.json`).
-fn write_report(dir: &Path, m: &mut RunManifest) -> Result<()> {
-    // The summary as `errmap report` will read it back (JSON parsing may round the last
-    // digit), so that both give the same bytes.
-    let summary = BatchSummary::read(&dir.join("summary.json"))?;
-    let html = super::run_page::render_run(&super::run_page::RunInput {
-        dir,
-        manifest: m,
-        summary: &summary,
-    })?;
-    let name = super::run_page::REPORT_FILE;
-    errmap_core::io::write_atomic_bytes(&dir.join(name), html.as_bytes())?;
-    m.files
-        .insert(name.to_string(), manifest::sha256_bytes(html.as_bytes()));
-    if !super::run_page::has_part_pages(summary.parts.len()) {
-        return Ok(());
-    }
-    // A large family: each part's page in its folder, listed with the part's files.
-    let mut pages = Vec::new();
-    for p in &summary.parts {
-        let input = super::run_page::RunInput {
-            dir,
-            manifest: m,
-            summary: &summary,
-        };
-        let html = super::run_page::render_part(&input, p)?;
-        let rel = format!("{}/{name}", p.part);
-        let path = dir.join(&rel);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| Error::io("create folder", parent, e))?;
-        }
-        errmap_core::io::write_atomic_bytes(&path, html.as_bytes())?;
-        pages.push((p.part.clone(), rel, manifest::sha256_bytes(html.as_bytes())));
-    }
-    for (part, rel, hash) in pages {
-        match m.parts.iter_mut().find(|r| r.part == part) {
-            Some(r) => {
-                r.outputs.insert(rel, hash);
-            }
-            None => {
-                m.files.insert(rel, hash);
-            }
-        }
-    }
-    Ok(())
 }
 
 fn domain_of(file: &JobFile) -> Result<errmap_core::geom::Domain> {
@@ -373,7 +372,7 @@ fn toolpaths_by_part(toolpaths: Vec<ToolpathSummary>) -> BTreeMap<String, Vec<To
 fn reuse_parts(
     sources: &[Source],
     staging: &Path,
-    plan: &super::Plan,
+    plan: &crate::Plan,
     input_hashes: &BTreeMap<PathBuf, String>,
 ) -> Result<Vec<Finished>> {
     let mut reused: Vec<Finished> = Vec::new();
@@ -610,14 +609,15 @@ fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize> {
 
 /// Reduce the shards of a job: check they are one job's and complete, merge their summaries,
 /// fit the family network, write the family folder, the merged `summary.json` and `run.json`.
-pub fn merge_job(
-    req: &MergeRequest,
-    trainer_for: &dyn Fn(errmap_maps::nn::Backend) -> Result<Box<dyn Trainer>>,
-) -> Result<JobRun> {
+pub fn merge_job(req: &MergeRequest, select: &SelectTrainer) -> Result<JobRun> {
     let (batch_dir, folders) = complete_shards(req)?;
     let manifests = shard_manifests(&folders)?;
     let file = merged_job(req, &manifests[0], &batch_dir)?;
-    reduce_into(&file, &batch_dir, &folders, &manifests, trainer_for)
+    let shards = Shards {
+        folders: &folders,
+        manifests: &manifests,
+    };
+    reduce_into(req, &file, &batch_dir, shards, select)
 }
 
 /// The batch folder and its shard folders once every shard has committed its run (waiting up
@@ -697,7 +697,7 @@ fn merged_job(req: &MergeRequest, first: &RunManifest, batch_dir: &Path) -> Resu
         .clone()
         .or_else(|| first.job.clone())
         .ok_or_else(|| Error::usage("the shards name no job file", "pass --job JOB.toml"))?;
-    let file = effective_job(&super::Job::read(&job_path)?, req.backend);
+    let file = with_backend(&crate::Job::read(&job_path)?, req.backend);
     require_domain(&file, "the reduce")?;
     commit::check_inputs_outside(batch_dir, &job_inputs(&file)?)?;
     let hash = manifest::job_hash(&file.job, &file.probe_files()?, &file.base_dir())?;
@@ -711,44 +711,34 @@ fn merged_job(req: &MergeRequest, first: &RunManifest, batch_dir: &Path) -> Resu
     Ok(file)
 }
 
+/// The shards of a merge: their folders and committed manifests, in shard order.
+#[derive(Clone, Copy)]
+struct Shards<'a> {
+    folders: &'a ShardFolders,
+    manifests: &'a [RunManifest],
+}
+
 /// Merge the shards' summaries and write the family, `summary.json` and `run.json` into the
 /// batch folder (the family folder is replaced as a whole; `run.json` is written last).
 fn reduce_into(
+    req: &MergeRequest,
     file: &JobFile,
     batch_dir: &Path,
-    folders: &ShardFolders,
-    manifests: &[RunManifest],
-    trainer_for: &dyn Fn(errmap_maps::nn::Backend) -> Result<Box<dyn Trainer>>,
+    shards: Shards,
+    select: &SelectTrainer,
 ) -> Result<JobRun> {
+    let Shards { folders, manifests } = shards;
     let summaries = shard_summaries(folders, manifests)?;
-    let mut merged = super::merge(&summaries)?;
+    let mut merged = crate::merge(&summaries)?;
     let paths = shard_reduce_parts(&merged, &summaries, folders, manifests)?;
-    let trainer = trainer_for(file.job.model.backend)?;
-    let opts = BatchOptions::default();
-    let plan = plan_job(file, &opts, batch_dir)?;
+    let opts = BatchOptions {
+        backend: req.backend,
+        ..BatchOptions::default()
+    };
+    let job = ResolvedJob::new(file, &opts, select)?;
+    let plan = job.plan(batch_dir)?;
+    flatten_shards(batch_dir, shards, &mut merged)?;
     let family_dir = batch_dir.join("family");
-    // A stale run.json must not vouch for a family being replaced; the parts of the run the
-    // folder held before are removed, so the folder holds one run only.
-    let manifest_path = batch_dir.join(RUN_MANIFEST);
-    if let Some(old) = RunManifest::read(batch_dir).ok().flatten() {
-        remove_part_outputs(batch_dir, &old)?;
-    }
-    if manifest_path.exists() {
-        std::fs::remove_file(&manifest_path)
-            .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
-    }
-    // Each shard's parts at `<part>/` in the batch folder, as one machine writes them: their
-    // files hard-linked out of the shard folders, which go once `run.json` is written.
-    link_parts_flat(batch_dir, folders, manifests)?;
-    for (_, dir) in folders.values() {
-        relocate_summary(&mut merged, dir, batch_dir);
-    }
-    // Each part's own summary names its new folder (a new file: the shard's stays as it was).
-    for p in merged.parts.iter().filter(|p| p.ok) {
-        let path = batch_dir.join(&p.part).join("summary.json");
-        std::fs::remove_file(&path).map_err(|e| Error::io("replace the part summary", &path, e))?;
-        errmap_core::io::write_json(&path, p)?;
-    }
     let staging = Staging::begin_owned(&family_dir)?;
     let outcome = reduce::reduce_family(
         &part_source(&paths),
@@ -756,19 +746,19 @@ fn reduce_into(
         &domain_of(file)?,
         staging.path(),
         plan.toolpaths.as_ref(),
-        trainer.as_ref(),
+        job.trainer.as_ref(),
     )?;
     let staged = staging.path().to_path_buf();
     merged.family_map = outcome.family;
     merged.toolpaths.extend(outcome.toolpaths);
     relocate_summary(&mut merged, &staged, &family_dir);
     staging.commit()?;
-    errmap_core::io::write_json(&batch_dir.join("summary.json"), &merged)?;
+    crate::json_out::write_json(&batch_dir.join("summary.json"), &merged)?;
     let mut m = reduce_manifest(batch_dir, folders, manifests, &merged)?;
     m.job = Some(file.path.clone());
     m.metadata = file.job.metadata_json();
     m.k_sigma = Some(file.job.clean.k_sigma);
-    write_report(batch_dir, &mut m)?;
+    write_report(batch_dir, &mut m, &merged)?;
     m.write(batch_dir)?;
     for (_, dir) in folders.values() {
         std::fs::remove_dir_all(dir)
@@ -779,6 +769,33 @@ fn reduce_into(
         folder: batch_dir.to_path_buf(),
         reused: Vec::new(),
     })
+}
+
+/// The batch folder laid out as one machine's run: the run it held before removed (a stale
+/// `run.json` must not vouch for a family being replaced), each shard's parts at `<part>/`,
+/// and each part's summary naming its new folder.
+fn flatten_shards(batch_dir: &Path, shards: Shards, merged: &mut BatchSummary) -> Result<()> {
+    let manifest_path = batch_dir.join(RUN_MANIFEST);
+    if let Some(old) = RunManifest::read(batch_dir).ok().flatten() {
+        remove_part_outputs(batch_dir, &old)?;
+    }
+    if manifest_path.exists() {
+        std::fs::remove_file(&manifest_path)
+            .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
+    }
+    // Each shard's parts at `<part>/` in the batch folder, as one machine writes them: their
+    // files hard-linked out of the shard folders, which go once `run.json` is written.
+    link_parts_flat(batch_dir, shards.folders, shards.manifests)?;
+    for (_, dir) in shards.folders.values() {
+        relocate_summary(merged, dir, batch_dir);
+    }
+    // Each part's own summary names its new folder (a new file: the shard's stays as it was).
+    for p in merged.parts.iter().filter(|p| p.ok) {
+        let path = batch_dir.join(&p.part).join("summary.json");
+        std::fs::remove_file(&path).map_err(|e| Error::io("replace the part summary", &path, e))?;
+        errmap_core::io::write_json(&path, p)?;
+    }
+    Ok(())
 }
 
 /// Every shard's summary, checked against its manifest, in shard order.

@@ -9,30 +9,33 @@ pub(crate) mod family_sums;
 pub mod folder_report;
 pub(crate) mod job;
 pub mod journal;
+pub(crate) mod json_out;
 pub mod k8s;
 pub mod manifest;
 pub mod nested;
 mod part_record;
+pub(crate) mod plan;
 pub(crate) mod reduce;
+pub(crate) mod resolve;
 pub(crate) mod run;
 pub mod run_page;
 pub(crate) mod single;
 pub mod slurm;
+pub(crate) mod stages;
 pub(crate) mod summary;
 pub(crate) mod timing;
 pub(crate) mod train_step;
 
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};
-pub use run::{
-    execute, execute_with, PartDone, PartInput, Plan, Settings, ToolpathPlan, CHUNK_PARTS,
-    PART_OUTPUTS,
-};
+pub use plan::{PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
+pub use resolve::{plan_job, with_backend, ResolvedJob, SelectTrainer};
+pub use run::{execute, execute_with, PartDone, CHUNK_PARTS};
 pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 
 use errmap_core::error::{Error, Result};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Which share of the parts this process maps: shard `index` of `count` (0-based) takes the
 /// parts whose position in the sorted file list is `index` modulo `count`.
@@ -194,95 +197,6 @@ impl Shard {
         let (i, n) = rest.split_once("-of-")?;
         Shard::new(i.parse().ok()?, n.parse().ok()?)
     }
-}
-
-/// Build the plan of a job file: its parts (this shard's) with their folders under `out`,
-/// the family folder and the toolpaths.
-pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan> {
-    let job = &file.job;
-    let files = file.probe_files()?;
-    let names = part_names(&files);
-    let all_parts: Vec<PartInput> = files
-        .iter()
-        .zip(&names)
-        .map(|(f, n)| PartInput {
-            name: n.clone(),
-            probe_file: f.clone(),
-            out_dir: out.join(n),
-        })
-        .collect();
-    let parts: Vec<PartInput> = all_parts
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| opts.shard.is_none_or(|s| s.takes(*i)))
-        .map(|(_, p)| p.clone())
-        .collect();
-    let mut model = job.model.clone();
-    if let Some(b) = opts.backend {
-        model.backend = b;
-    }
-    // A shard that warm-starts its parts needs the family network: it rebuilds it from every
-    // part of the job, exactly as the unsharded run does.
-    let family_parts =
-        if opts.shard.is_some() && model.warm_start == errmap_maps::nn::WarmStart::Family {
-            all_parts
-        } else {
-            Vec::new()
-        };
-    let toolpaths = (!job.toolpaths.files.is_empty()).then(|| ToolpathPlan {
-        files: file.toolpath_files(),
-        settings: errmap_toolpath::CompensationSettings {
-            zone: job.toolpaths.zone.map(|[a, b]| (a, b)),
-            everywhere: job.toolpaths.zone_all,
-            surface_tol_mm: job.toolpaths.surface_tol_mm,
-            max_segment: job.toolpaths.max_segment_mm,
-            chord_tol: job.toolpaths.chord_tol_mm,
-            dialect: job.toolpaths.dialect,
-            units: job.toolpaths.units,
-            fanuc_numbers: job.toolpaths.fanuc_numbers,
-            extrapolate: job.toolpaths.extrapolate,
-            domain_margin_mm: job.toolpaths.domain_margin_mm,
-            power_on_motion: job.toolpaths.power_on_motion,
-            expand: job.toolpaths.expand,
-            compensate_holes: job.toolpaths.compensate_holes,
-            same_part_per_offset: job.toolpaths.same_part_per_offset,
-        },
-        per_part: job.toolpaths.map == MapChoice::Part,
-        allow_weak_map: job.toolpaths.allow_weak_map,
-        max_uncertainty_um: job.max_uncertainty_um,
-    });
-    // A shard sees only some parts, so family maps (and toolpaths compensated with the family
-    // map) come from an unsharded run; each shard maps its own parts and per-part toolpaths.
-    let family_dir = opts.shard.is_none().then(|| out.join("family"));
-    let toolpaths = match (&toolpaths, opts.shard) {
-        (Some(tp), Some(_)) if !tp.per_part => None,
-        _ => toolpaths,
-    };
-    let plan = Plan {
-        settings: Settings {
-            family: job.family.clone(),
-            normal: job.normal,
-            nominal_plane_mm: job.nominal_plane_mm,
-            domain: job.domain(),
-            grid_step_mm: job.grid_step_mm,
-            k_sigma: job.clean.k_sigma,
-            method: job.interp.method,
-            spacing_mm: job.interp.spacing_mm,
-            model,
-            max_deviation_mm: job.max_deviation_mm,
-            columns: job.columns.clone(),
-            header_line: job.header_line,
-            reduce_inputs: true,
-            max_memory_mb: job.max_memory_mb,
-        },
-        parts,
-        family_parts,
-        family_dir,
-        toolpaths,
-        job: Some(file.path.clone()),
-        shard: opts.shard.map(|s| [s.index, s.count]),
-    };
-    Ok(plan)
 }
 
 #[cfg(test)]

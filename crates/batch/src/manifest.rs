@@ -176,7 +176,7 @@ impl RunManifest {
 
     /// Write the manifest into `dir` (atomically): the run's commit point.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        errmap_core::io::write_json(&dir.join(RUN_MANIFEST), self)
+        crate::json_out::write_json(&dir.join(RUN_MANIFEST), self)
     }
 
     /// The manifest of the run in `dir`, `None` when there is none.

@@ -4,17 +4,19 @@
 //! batch order, and starts from the same initial weights as in the unsharded batch, so on the
 //! CPU trainer the reduce writes the same bytes.
 
-use super::family_sums::{FamilyMaps, FamilyNodes};
+use crate::family_sums::{FamilyMaps, FamilyNodes};
 #[cfg(test)]
-use super::part_record::Marks;
-pub use super::part_record::{PartReduce, REDUCE_FILE};
-use super::run::{compensate_one, training_set, write_family, Settings, ToolpathPlan};
-use super::summary::{FamilySummary, ToolpathSummary};
-use super::train_step::train_family;
+use crate::part_record::Marks;
+pub use crate::part_record::{PartReduce, REDUCE_FILE};
+use crate::plan::{Settings, ToolpathPlan};
+use crate::stages::family::{write_family_folder, FamilyInput};
+use crate::stages::toolpaths::compensate_family;
+use crate::stages::train::training_set;
+use crate::summary::{FamilySummary, ToolpathSummary};
+use crate::train_step::train_family;
 use errmap_core::error::{Error, Result};
 use errmap_core::geom::Domain;
 use errmap_maps::interp::Grid;
-use errmap_maps::map::FittedModel;
 use errmap_maps::nn::Trainer;
 use std::path::Path;
 
@@ -49,6 +51,37 @@ pub fn reduce_family(
     if parts.count == 0 {
         return Ok(FamilyOutcome::default());
     }
+    let (nodes, maps) = family_sums(parts, &train_grid, grid, s)?;
+    let Some(mean_nodes) = nodes.mean() else {
+        return Ok(FamilyOutcome::default());
+    };
+    let (set, norm) = training_set(&train_grid, &mean_nodes, domain);
+    s.model.validate()?;
+    let net = train_family(trainer, &set, &s.model)?;
+    let input = FamilyInput {
+        dir,
+        domain: *domain,
+        network: (net, norm),
+        maps: &maps,
+        check_against: None,
+    };
+    let again = (0..parts.count).map(|k| (parts.load)(k).map(|p| p.map_e_um));
+    let Some((family, model)) = write_family_folder(input, again, s)? else {
+        return Ok(FamilyOutcome::default());
+    };
+    Ok(FamilyOutcome {
+        family: Some(family),
+        toolpaths: compensate_family(toolpaths, dir, &model),
+    })
+}
+
+/// The family's running sums from the parts' records, each checked to be of the job's grids.
+fn family_sums(
+    parts: &PartSource,
+    train_grid: &Grid,
+    grid: Grid,
+    s: &Settings,
+) -> Result<(FamilyNodes, FamilyMaps)> {
     let mut nodes = FamilyNodes::new(train_grid.len());
     let mut maps = FamilyMaps::new(grid, s.normal);
     for k in 0..parts.count {
@@ -68,30 +101,7 @@ pub fn reduce_family(
             &p.marks,
         );
     }
-    let Some(mean_nodes) = nodes.mean() else {
-        return Ok(FamilyOutcome::default());
-    };
-    let (set, norm) = training_set(&train_grid, &mean_nodes, domain);
-    s.model.validate()?;
-    let net = train_family(trainer, &set, &s.model)?;
-    let model = FittedModel::new("family", s.normal, *domain, norm, net);
-    let Some(mean) = maps.mean() else {
-        return Ok(FamilyOutcome::default());
-    };
-    let again = (0..parts.count).map(|k| (parts.load)(k).map(|p| p.map_e_um));
-    let std = maps.std_map(&mean, again)?;
-    let (family, model) = write_family(dir, &mean, &std, model, &maps, s)?;
-    let mut out = FamilyOutcome {
-        family: Some(family),
-        toolpaths: Vec::new(),
-    };
-    if let Some(tp) = toolpaths.filter(|tp| !tp.per_part) {
-        for f in &tp.files {
-            out.toolpaths
-                .push(compensate_one(f, dir, "family", &model, tp));
-        }
-    }
-    Ok(out)
+    Ok((nodes, maps))
 }
 
 #[cfg(test)]

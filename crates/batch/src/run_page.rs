@@ -30,36 +30,73 @@ pub struct RunInput<'a> {
 
 /// Render the report of a run.
 pub fn render_run(input: &RunInput) -> Result<String> {
-    let s = input.summary;
-    let mut page = Page {
-        title: format!("errmap report — {}", s.family),
-        lead: format!(
-            "Part family {}: {} part(s), {} failed. Lengths in mm, errors in µm.",
-            s.family,
-            s.parts.len(),
-            s.failed_parts
-        ),
-        sections: Vec::new(),
-    };
-    page.section("job", "Job", job_section(input));
-    if let Some(f) = &s.family_map {
-        page.section("family", "Family", family_section(input, f)?);
-    }
-    if !s.toolpaths.is_empty() {
-        page.section("toolpaths", "Compensated toolpaths", toolpath_section(s));
-    }
-    let inline = s.parts.len() <= INLINE_PARTS;
-    page.section("parts", "Parts", parts_table(input, inline));
-    if inline {
-        for p in &s.parts {
-            page.section(
-                &format!("part-{}", p.part),
-                &format!("Part {}", p.part),
-                part_section(input, p)?,
-            );
+    let page = RunPage::new(input)?;
+    let mut bytes = Vec::new();
+    page.write(input, &mut bytes)
+        .map_err(|e| Error::Internal(format!("the report in memory: {e}")))?;
+    String::from_utf8(bytes).map_err(|e| Error::Internal(format!("the report is not UTF-8: {e}")))
+}
+
+/// Where the table of parts goes in the rendered page: text no section can hold (part names
+/// are file names, which hold no NUL).
+const PARTS_SLOT: &str = "\u{0}errmap-table-of-parts\u{0}";
+
+/// A run's report ready to be written: the page before and after its table of parts, which
+/// is written row by row, so a family of any size needs memory for its rows' figures only.
+pub struct RunPage {
+    /// The rendered page with [`PARTS_SLOT`] where the table goes.
+    html: String,
+    /// Where the slot starts in `html`.
+    slot: usize,
+    inline: bool,
+}
+
+impl RunPage {
+    /// Everything of the page but the table of parts (job, family, toolpaths and, up to
+    /// [`INLINE_PARTS`] parts, each part's section).
+    pub fn new(input: &RunInput) -> Result<RunPage> {
+        let s = input.summary;
+        let mut page = Page {
+            title: format!("errmap report — {}", s.family),
+            lead: format!(
+                "Part family {}: {} part(s), {} failed. Lengths in mm, errors in µm.",
+                s.family,
+                s.parts.len(),
+                s.failed_parts
+            ),
+            sections: Vec::new(),
+        };
+        page.section("job", "Job", job_section(input));
+        if let Some(f) = &s.family_map {
+            page.section("family", "Family", family_section(input, f)?);
         }
+        if !s.toolpaths.is_empty() {
+            page.section("toolpaths", "Compensated toolpaths", toolpath_section(s));
+        }
+        let inline = s.parts.len() <= INLINE_PARTS;
+        page.section("parts", "Parts", PARTS_SLOT.to_string());
+        if inline {
+            for p in &s.parts {
+                page.section(
+                    &format!("part-{}", p.part),
+                    &format!("Part {}", p.part),
+                    part_section(input, p)?,
+                );
+            }
+        }
+        let html = page.render();
+        let slot = html
+            .find(PARTS_SLOT)
+            .ok_or_else(|| Error::Internal("the report lost its table of parts".into()))?;
+        Ok(RunPage { html, slot, inline })
     }
-    Ok(page.render())
+
+    /// Write the page to `w`, the table of parts row by row.
+    pub fn write(&self, input: &RunInput, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        w.write_all(&self.html.as_bytes()[..self.slot])?;
+        parts_table(input, self.inline, w)?;
+        w.write_all(&self.html.as_bytes()[self.slot + PARTS_SLOT.len()..])
+    }
 }
 
 /// Whether a run of `parts` parts has a page per part (`<part>/report.html`).
@@ -126,8 +163,14 @@ fn part_href(part: &str, inline: bool) -> String {
     }
 }
 
-/// One table of every part in `order`, its headings linking to the variants sorted by them.
-fn parts_variant(s: &BatchSummary, order: &[usize], inline: bool) -> String {
+/// One table of every part in `order`, its headings linking to the variants sorted by them,
+/// written row by row.
+fn parts_variant(
+    s: &BatchSummary,
+    order: &[usize],
+    inline: bool,
+    w: &mut dyn std::io::Write,
+) -> std::io::Result<()> {
     let mut t =
         String::from("<table class=\"parts\">\n<thead><tr><th><a href=\"#parts\">part</a></th>");
     for (title, id, _) in SORT_COLUMNS {
@@ -137,13 +180,14 @@ fn parts_variant(s: &BatchSummary, order: &[usize], inline: bool) -> String {
         ));
     }
     t.push_str("<th>status</th></tr></thead>\n<tbody>\n");
+    w.write_all(t.as_bytes())?;
     for &k in order {
         let p = &s.parts[k];
-        t.push_str(&format!(
+        let mut t = format!(
             "<tr><td><a href=\"{}\">{}</a></td>",
             html::escape(&part_href(&p.part, inline)),
             html::escape(&p.part)
-        ));
+        );
         for (i, (_, _, value)) in SORT_COLUMNS.iter().enumerate() {
             let digits = if i < 2 { 0 } else { 3 };
             let v = if p.ok { value(p) } else { None };
@@ -151,30 +195,33 @@ fn parts_variant(s: &BatchSummary, order: &[usize], inline: bool) -> String {
         }
         let status = if p.ok { "mapped" } else { "FAILED" };
         t.push_str(&format!("<td>{status}</td></tr>\n"));
+        w.write_all(t.as_bytes())?;
     }
-    t.push_str("</tbody></table>\n");
-    t
+    w.write_all(b"</tbody></table>\n")
 }
 
 /// The table of parts, sortable without a script (the report's policy allows none): one
 /// variant per column, pre-sorted (largest first, failed parts last), shown when its heading's
 /// link makes it the page's target; by name otherwise.
-fn parts_table(input: &RunInput, inline: bool) -> String {
+fn parts_table(input: &RunInput, inline: bool, w: &mut dyn std::io::Write) -> std::io::Result<()> {
     let s = input.summary;
-    let mut body = String::from(
-        "<style>.parts-sorted{display:none}.parts-sorted:target{display:block}\
+    w.write_all(
+        b"<style>.parts-sorted{display:none}.parts-sorted:target{display:block}\
 .parts-sorted:target~.parts-default{display:none}table.parts td a{text-decoration:none}</style>\n",
-    );
-    body.push_str(&para(
-        "note",
-        &format!(
-            "{} part(s), {} failed. Click a column's heading to sort by it (largest first), \
+    )?;
+    w.write_all(
+        para(
+            "note",
+            &format!(
+                "{} part(s), {} failed. Click a column's heading to sort by it (largest first), \
 the part heading for the order of the probe files; a part's name opens its {}.",
-            s.parts.len(),
-            s.failed_parts,
-            if inline { "section below" } else { "own page" }
-        ),
-    ));
+                s.parts.len(),
+                s.failed_parts,
+                if inline { "section below" } else { "own page" }
+            ),
+        )
+        .as_bytes(),
+    )?;
     for (title, id, value) in SORT_COLUMNS {
         let mut order: Vec<usize> = (0..s.parts.len()).collect();
         let key = |k: &usize| s.parts[*k].ok.then(|| value(&s.parts[*k])).flatten();
@@ -185,18 +232,20 @@ the part heading for the order of the probe files; a part's name opens its {}.",
             (None, Some(_)) => std::cmp::Ordering::Greater,
             (None, None) => std::cmp::Ordering::Equal,
         });
-        body.push_str(&format!(
-            "<div id=\"parts-by-{id}\" class=\"parts-sorted\">\n<p class=\"note\">sorted by {}</p>\n",
-            html::escape(title)
-        ));
-        body.push_str(&parts_variant(s, &order, inline));
-        body.push_str("</div>\n");
+        w.write_all(
+            format!(
+                "<div id=\"parts-by-{id}\" class=\"parts-sorted\">\n<p class=\"note\">sorted by {}</p>\n",
+                html::escape(title)
+            )
+            .as_bytes(),
+        )?;
+        parts_variant(s, &order, inline, w)?;
+        w.write_all(b"</div>\n")?;
     }
     let order: Vec<usize> = (0..s.parts.len()).collect();
-    body.push_str("<div class=\"parts-default\">\n");
-    body.push_str(&parts_variant(s, &order, inline));
-    body.push_str("</div>\n");
-    body
+    w.write_all(b"<div class=\"parts-default\">\n")?;
+    parts_variant(s, &order, inline, w)?;
+    w.write_all(b"</div>\n")
 }
 
 fn kv(key: &str, value: impl Into<String>) -> Vec<Cell> {

@@ -1,8 +1,8 @@
 //! One part mapped without a job file (`errmap map`): its settings checked and made a plan,
 //! and the part's failure turned into the run's error.
 
-use super::run::{PartInput, Plan, Settings};
 use super::summary::BatchSummary;
+use crate::plan::{PartInput, Plan, Settings};
 use errmap_core::error::{Error, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::progress::Reporter;
