@@ -356,6 +356,17 @@ impl Diagnose for Diagnostic {
     }
 }
 
+/// A boxed typed error (a caller that keeps a large error off its `Result`'s stack) carries
+/// the same diagnostic.
+impl<T: Diagnose> Diagnose for Box<T> {
+    fn diagnostic(&self) -> &Diagnostic {
+        (**self).diagnostic()
+    }
+    fn into_diagnostic(self) -> Diagnostic {
+        (*self).into_diagnostic()
+    }
+}
+
 /// Gives a typed error enum whose every variant carries one [`Diagnose`] value (a
 /// [`Diagnostic`] or another typed error) what every errmap error has: [`Diagnose`], `Display`
 /// and `source` exactly as the carried diagnostic's (so every message stays word for word), and
