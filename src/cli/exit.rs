@@ -16,6 +16,7 @@ use errmap::map::MapError;
 use errmap::probe::ProbeError;
 use errmap::report::ReportError;
 use errmap::rotary::RotaryError;
+use errmap::serve::{ServeError, UsersError};
 use errmap::synth::SynthError;
 use errmap::thermal::ThermalError;
 use errmap::toolpath::{CompensateError, DialectError, SettingsError};
@@ -29,7 +30,7 @@ const SYSTEM: i32 = 3;
 /// diagnostic (the CLI's own checks, and the crates that still return one).
 #[derive(Debug)]
 pub enum Failure {
-    /// A located diagnostic (batch, serve, the CLI's own checks).
+    /// A located diagnostic (the batch, the CLI's own checks).
     Diagnostic(Diagnostic),
     /// Compensation settings in words (`errmap compensate`'s flags).
     Settings(SettingsError),
@@ -59,6 +60,10 @@ pub enum Failure {
     LiveConfig(ConfigError),
     /// The live loop (boxed: its source and target errors nest one level deeper).
     Live(Box<LiveError>),
+    /// The monitor's users file (`errmap serve user …`, and at the server's start).
+    Users(UsersError),
+    /// The monitor (`errmap serve`).
+    Serve(ServeError),
 }
 errmap_core::typed_error!(Failure {
     Diagnostic,
@@ -76,6 +81,8 @@ errmap_core::typed_error!(Failure {
     Synth,
     LiveConfig,
     Live,
+    Users,
+    Serve,
 });
 
 /// A command's result: its exit code, or why it failed.
@@ -105,6 +112,8 @@ failure_from!(
     Report(ReportError),
     Synth(SynthError),
     LiveConfig(ConfigError),
+    Users(UsersError),
+    Serve(ServeError),
 );
 
 impl From<LiveError> for Failure {
@@ -144,6 +153,8 @@ pub fn code(failure: &Failure) -> i32 {
         Failure::Synth(e) => synth(e),
         Failure::LiveConfig(e) => live_config(e),
         Failure::Live(e) => live(e),
+        Failure::Users(e) => users(e),
+        Failure::Serve(e) => serve(e),
     };
     // Every typed variant keeps the code its diagnostic's kind had before the types existed.
     debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
@@ -252,6 +263,27 @@ fn live(e: &LiveError) -> i32 {
     }
 }
 
+fn users(e: &UsersError) -> i32 {
+    use UsersError as E;
+    match e {
+        E::Missing(_) | E::Read(_) | E::File(_) | E::Name(_) | E::Password(_) | E::Output(_) => {
+            INPUT
+        }
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn serve(e: &ServeError) -> i32 {
+    use ServeError as E;
+    match e {
+        E::Transport(_) | E::Runs(_) | E::Store(_) | E::Tls(_) => INPUT,
+        E::Users(u) => users(u),
+        E::Bind(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -319,6 +351,13 @@ mod tests {
             (LiveError::Target(LinkError::from(unreachable())).into(), 3),
             (LiveError::Store(input()).into(), 2),
             (LiveError::Record(write()).into(), 3),
+            (UsersError::Missing(read()).into(), 2),
+            (UsersError::Name(Diagnostic::usage("no user", "")).into(), 2),
+            (UsersError::Write(write()).into(), 3),
+            (ServeError::Tls(read()).into(), 2),
+            (ServeError::Store(input()).into(), 2),
+            (ServeError::Users(UsersError::File(input())).into(), 2),
+            (ServeError::Bind(unreachable()).into(), 3),
         ];
         for (failure, expected) in cases {
             assert_eq!(code(&failure), expected, "{failure:?}");
