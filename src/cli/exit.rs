@@ -10,11 +10,13 @@ use errmap::circular::CircularError;
 use errmap::controller::TableError;
 use errmap::error::{Diagnose, Diagnostic};
 use errmap::linear::LinearError;
+use errmap::live::{ConfigError, LinkError, LiveError};
 use errmap::map::grid_file::GridError;
 use errmap::map::MapError;
 use errmap::probe::ProbeError;
 use errmap::report::ReportError;
 use errmap::rotary::RotaryError;
+use errmap::serve::{ServeError, UsersError};
 use errmap::synth::SynthError;
 use errmap::thermal::ThermalError;
 use errmap::toolpath::{CompensateError, DialectError, SettingsError};
@@ -28,7 +30,7 @@ const SYSTEM: i32 = 3;
 /// diagnostic (the CLI's own checks, and the crates that still return one).
 #[derive(Debug)]
 pub enum Failure {
-    /// A located diagnostic (batch, live, serve, the CLI's own checks).
+    /// A located diagnostic (the batch, the CLI's own checks).
     Diagnostic(Diagnostic),
     /// Compensation settings in words (`errmap compensate`'s flags).
     Settings(SettingsError),
@@ -54,6 +56,14 @@ pub enum Failure {
     Report(ReportError),
     /// Sample data (`errmap synth …`).
     Synth(SynthError),
+    /// A live config (`errmap live CONFIG`).
+    LiveConfig(ConfigError),
+    /// The live loop (boxed: its source and target errors nest one level deeper).
+    Live(Box<LiveError>),
+    /// The monitor's users file (`errmap serve user …`, and at the server's start).
+    Users(UsersError),
+    /// The monitor (`errmap serve`).
+    Serve(ServeError),
 }
 errmap_core::typed_error!(Failure {
     Diagnostic,
@@ -69,6 +79,10 @@ errmap_core::typed_error!(Failure {
     Table,
     Report,
     Synth,
+    LiveConfig,
+    Live,
+    Users,
+    Serve,
 });
 
 /// A command's result: its exit code, or why it failed.
@@ -97,7 +111,16 @@ failure_from!(
     Table(TableError),
     Report(ReportError),
     Synth(SynthError),
+    LiveConfig(ConfigError),
+    Users(UsersError),
+    Serve(ServeError),
 );
+
+impl From<LiveError> for Failure {
+    fn from(e: LiveError) -> Self {
+        Failure::Live(Box::new(e))
+    }
+}
 
 /// An analysis' error (they share their variants): bad options, a bad line or file, a fit
 /// not possible or an unreadable input are the input's; an output, a bug the machine's or
@@ -128,6 +151,10 @@ pub fn code(failure: &Failure) -> i32 {
         Failure::Table(e) => analysis!(TableError, e),
         Failure::Report(e) => report(e),
         Failure::Synth(e) => synth(e),
+        Failure::LiveConfig(e) => live_config(e),
+        Failure::Live(e) => live(e),
+        Failure::Users(e) => users(e),
+        Failure::Serve(e) => serve(e),
     };
     // Every typed variant keeps the code its diagnostic's kind had before the types existed.
     debug_assert_eq!(code, diagnostic(failure.diagnostic()), "{failure}");
@@ -206,6 +233,57 @@ fn synth(e: &SynthError) -> i32 {
     }
 }
 
+fn live_config(e: &ConfigError) -> i32 {
+    use ConfigError as E;
+    match e {
+        E::Read(_) | E::Key(_) => INPUT,
+        E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+/// A source or target: its keys and its login are the config's to fix; a machine that cannot
+/// be reached is not the input's fault.
+fn link(e: &LinkError) -> i32 {
+    use LinkError as E;
+    match e {
+        E::Config(_) | E::Refused(_) => INPUT,
+        E::Unreachable(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn live(e: &LiveError) -> i32 {
+    use LiveError as E;
+    match e {
+        E::Config(_) | E::Model(_) | E::Store(_) => INPUT,
+        E::Source(l) | E::Target(l) => link(l),
+        E::Record(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn users(e: &UsersError) -> i32 {
+    use UsersError as E;
+    match e {
+        E::Missing(_) | E::Read(_) | E::File(_) | E::Name(_) | E::Password(_) | E::Output(_) => {
+            INPUT
+        }
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn serve(e: &ServeError) -> i32 {
+    use ServeError as E;
+    match e {
+        E::Transport(_) | E::Runs(_) | E::Store(_) | E::Tls(_) => INPUT,
+        E::Users(u) => users(u),
+        E::Bind(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -220,6 +298,13 @@ mod tests {
     }
     fn write() -> Diagnostic {
         Diagnostic::write("out.csv", io::Error::from(io::ErrorKind::PermissionDenied))
+    }
+    fn unreachable() -> Diagnostic {
+        Diagnostic::io(
+            "reach",
+            "Modbus source 'rack'",
+            io::Error::from(io::ErrorKind::ConnectionRefused),
+        )
     }
 
     /// The codes of the documented table (the module page): 2 for the input's faults, 3 for
@@ -253,6 +338,26 @@ mod tests {
             (ReportError::from(read()).into(), 2),
             (SynthError::from(write()).into(), 3),
             (SynthError::from(Diagnostic::usage("bad", "")).into(), 2),
+            (ConfigError::from(input()).into(), 2),
+            (ConfigError::from(read()).into(), 2),
+            (LiveError::from(input()).into(), 2),
+            (LiveError::Model(read()).into(), 2),
+            (LiveError::Source(LinkError::from(input())).into(), 2),
+            (LiveError::Target(LinkError::Refused(input())).into(), 2),
+            (
+                LiveError::Source(LinkError::Unreachable(unreachable())).into(),
+                3,
+            ),
+            (LiveError::Target(LinkError::from(unreachable())).into(), 3),
+            (LiveError::Store(input()).into(), 2),
+            (LiveError::Record(write()).into(), 3),
+            (UsersError::Missing(read()).into(), 2),
+            (UsersError::Name(Diagnostic::usage("no user", "")).into(), 2),
+            (UsersError::Write(write()).into(), 3),
+            (ServeError::Tls(read()).into(), 2),
+            (ServeError::Store(input()).into(), 2),
+            (ServeError::Users(UsersError::File(input())).into(), 2),
+            (ServeError::Bind(unreachable()).into(), 3),
         ];
         for (failure, expected) in cases {
             assert_eq!(code(&failure), expected, "{failure:?}");

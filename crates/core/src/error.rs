@@ -205,8 +205,8 @@ fn hint_suffix(hint: &str) -> String {
     }
 }
 
-/// The name [`Diagnostic`] had while it was errmap's one error type; the crates that still
-/// return it whole (batch, live, serve) and their callers use this name.
+/// The name [`Diagnostic`] had while it was errmap's one error type; the crate that still
+/// returns it whole (the batch), its callers and the crates' internals use this name.
 pub type Error = Diagnostic;
 
 /// A result whose error is a [`Diagnostic`] unless another error type is named.
@@ -353,6 +353,17 @@ impl Diagnose for Diagnostic {
     }
     fn into_diagnostic(self) -> Diagnostic {
         self
+    }
+}
+
+/// A boxed typed error (a caller that keeps a large error off its `Result`'s stack) carries
+/// the same diagnostic.
+impl<T: Diagnose> Diagnose for Box<T> {
+    fn diagnostic(&self) -> &Diagnostic {
+        (**self).diagnostic()
+    }
+    fn into_diagnostic(self) -> Diagnostic {
+        (*self).into_diagnostic()
     }
 }
 

@@ -21,6 +21,7 @@ use super::plausibility;
 use super::source::{csv::CsvSource, Source, Value};
 use super::state::{self, AxisState, Mode, SensorState, SourceState, State, StateWriter};
 use super::target::{Output, Present, Target};
+use super::{LinkError, LiveError};
 use errmap_core::direction::Direction;
 use errmap_core::error::{Error, Result};
 use errmap_metrology::thermal::model::{ThermalModel, ThermalState};
@@ -78,11 +79,13 @@ impl StopFlags {
     }
 
     /// Set the flags from SIGTERM and SIGINT (the default actions are replaced).
-    pub fn register_signals(&self) -> Result<()> {
+    pub fn register_signals(&self) -> Result<(), LiveError> {
         use signal_hook::consts::{SIGINT, SIGTERM};
         for (sig, flag) in [(SIGTERM, &self.term), (SIGINT, &self.int)] {
             signal_hook::flag::register(sig, flag.clone()).map_err(|e| {
-                Error::Internal(format!("cannot install the handler of signal {sig}: {e}"))
+                LiveError::Internal(Error::Internal(format!(
+                    "cannot install the handler of signal {sig}: {e}"
+                )))
             })?;
         }
         Ok(())
@@ -195,16 +198,16 @@ fn sensor_filter(def: &Sensor, cfg: &SensorConfig) -> Result<CausalFilter> {
 }
 
 /// Each axis's model file, checked to be of that axis.
-fn read_models(config: &LiveConfig) -> Result<Vec<ThermalModel>> {
+fn read_models(config: &LiveConfig) -> Result<Vec<ThermalModel>, LiveError> {
     let mut models = Vec::new();
     for (i, a) in config.axes.iter().enumerate() {
-        let model = ThermalModel::read(&config.resolve(&a.model))?;
+        let model = ThermalModel::read(&config.resolve(&a.model)).map_err(LiveError::model)?;
         if model.axis != a.name {
-            return Err(config.key_error(
+            return Err(LiveError::Config(config.key_error(
                 &format!("axes.{i}.model"),
                 format!("the model is of axis '{}', not '{}'", model.axis, a.name),
                 "give the model `errmap thermal fit` wrote for this axis",
-            ));
+            )));
         }
         models.push(model);
     }
@@ -297,22 +300,25 @@ fn check_coolant_and_once(
 }
 
 /// Open every source (one that cannot be reached is exit 3).
-fn open_sources(config: &LiveConfig) -> Result<Vec<SourceSlot>> {
+fn open_sources(config: &LiveConfig) -> Result<Vec<SourceSlot>, LiveError> {
     let replay = config.cycle.replay_speed.is_some();
     let mut sources = Vec::new();
     for (index, s) in config.sources.iter().enumerate() {
         let source: Box<dyn Source> = match s.kind {
             SourceKind::Csv => {
                 let path = config.resolve(s.path.as_deref().unwrap_or(std::path::Path::new("-")));
-                Box::new(CsvSource::open(
-                    &s.name,
-                    &path,
-                    s.follow.unwrap_or(false),
-                    replay,
-                    s.timeout_ms,
-                )?)
+                Box::new(
+                    CsvSource::open(
+                        &s.name,
+                        &path,
+                        s.follow.unwrap_or(false),
+                        replay,
+                        s.timeout_ms,
+                    )
+                    .map_err(LiveError::source)?,
+                )
             }
-            other => super::connect_source(config, index, s, other)?,
+            other => super::connect_source(config, index, s, other).map_err(LiveError::Source)?,
         };
         sources.push(SourceSlot {
             source,
@@ -490,7 +496,7 @@ fn open_record(
     sensors: &[SensorSlot],
     axes: &[AxisSlot],
     start_wall: SystemTime,
-) -> Result<(StoreLink, Option<StateWriter>)> {
+) -> Result<(StoreLink, Option<StateWriter>), LiveError> {
     let start_utc = state::utc_ms(start_wall);
     let logged: Vec<Sensor> = sensors.iter().map(|s| s.def.clone()).collect();
     let link = StoreLink::open(LinkSettings {
@@ -503,9 +509,10 @@ fn open_record(
         now_unix: start_wall
             .duration_since(SystemTime::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs() as i64),
-    })?;
+    })
+    .map_err(LiveError::record)?;
     let state_writer = match &options.state {
-        Some(p) => Some(StateWriter::new(p)?),
+        Some(p) => Some(StateWriter::new(p).map_err(LiveError::record)?),
         None => None,
     };
     Ok((link, state_writer))
@@ -518,7 +525,7 @@ impl Live {
         config: &LiveConfig,
         options: &RunOptions,
         targets: Vec<Box<dyn Target>>,
-    ) -> Result<Live> {
+    ) -> Result<Live, LiveError> {
         let models = read_models(config)?;
         let defs = model_sensors(config, &models)?;
         check_coolant_and_once(config, options, &models)?;
@@ -569,7 +576,7 @@ impl Live {
 
     /// Wait for the first reading of every source (a source that sends nothing within its
     /// timeout cannot be reached: exit 3), and read the targets' present values.
-    fn start(&mut self) -> Result<()> {
+    fn start(&mut self) -> Result<(), LiveError> {
         if self.replay_speed.is_some() {
             self.t0_s = self
                 .sources
@@ -577,11 +584,11 @@ impl Live {
                 .filter_map(|s| s.source.replay_start_s())
                 .fold(f64::NEG_INFINITY, f64::max);
             if !self.t0_s.is_finite() {
-                return Err(Error::io(
+                return Err(LiveError::Source(LinkError::Unreachable(Error::io(
                     "replay",
                     "the CSV sources",
                     std::io::Error::other("no data row to replay"),
-                ));
+                ))));
             }
             for s in &mut self.sources {
                 s.source.poll(self.t0_s);
@@ -604,7 +611,7 @@ impl Live {
                 match waiting {
                     None => break,
                     Some((name, timeout, problem)) if now > timeout => {
-                        return Err(Error::io(
+                        return Err(LiveError::Source(LinkError::Unreachable(Error::io(
                             "reach",
                             format!("source '{name}'"),
                             std::io::Error::new(
@@ -615,7 +622,7 @@ impl Live {
                                     problem.map(|p| format!(" ({p})")).unwrap_or_default()
                                 ),
                             ),
-                        ));
+                        ))));
                     }
                     Some(_) => std::thread::sleep(Duration::from_millis(5)),
                 }
@@ -629,7 +636,9 @@ impl Live {
             if self.once {
                 continue;
             }
-            let present = self.targets[t].present(&self.axes[a].model.name)?;
+            let present = self.targets[t]
+                .present(&self.axes[a].model.name)
+                .map_err(LiveError::target)?;
             self.axes[a].written = self.line_of_present(&self.axes[a], present);
         }
         Ok(())
@@ -699,7 +708,7 @@ impl Live {
     }
 
     /// Run until stopped (or one cycle with `once`).
-    pub fn run(&mut self, stop: &StopFlags, notes: &dyn Fn(&str)) -> Result<RunSummary> {
+    pub fn run(&mut self, stop: &StopFlags, notes: &dyn Fn(&str)) -> Result<RunSummary, LiveError> {
         self.start()?;
         if self.once {
             notes("--once: one cycle, written without the start ramp");
@@ -787,7 +796,8 @@ impl Live {
                 mode,
                 notes_of_cycle,
                 stopping.as_ref().filter(|_| done).map(|s| s.0.clone()),
-            )?;
+            )
+            .map_err(LiveError::record)?;
             let took_us = began.elapsed().as_secs_f64() * 1e6;
             timed.0 += took_us;
             timed.1 = timed.1.max(took_us);
@@ -797,9 +807,9 @@ impl Live {
                 break;
             }
         }
-        self.link.close()?;
+        self.link.close().map_err(LiveError::record)?;
         if let Some(w) = self.state_writer.as_mut() {
-            w.close()?;
+            w.close().map_err(LiveError::record)?;
         }
         Ok(RunSummary {
             cycles: self.cycle,
@@ -1468,11 +1478,11 @@ pub fn run(
     options: &RunOptions,
     stop: &StopFlags,
     notes: &dyn Fn(&str),
-) -> Result<RunSummary> {
+) -> Result<RunSummary, LiveError> {
     let targets = if options.dry_run {
         Vec::new()
     } else {
-        super::connect_targets(config)?
+        super::connect_targets(config).map_err(LiveError::Target)?
     };
     let mut live = Live::prepare(config, options, targets)?;
     live.run(stop, notes)

@@ -13,6 +13,7 @@ pub mod axis;
 pub mod bench;
 pub mod config;
 pub mod cycle;
+mod error;
 pub mod filter;
 pub mod hal;
 pub mod log;
@@ -26,9 +27,10 @@ pub mod target;
 
 pub use config::LiveConfig;
 pub use cycle::{run, RunOptions, RunSummary, StopFlags};
+pub use error::{ConfigError, LinkError, LiveError};
 
 use config::{SourceConfig, SourceKind};
-use errmap_core::error::{Error, Result};
+use errmap_core::error::Error;
 use source::Source;
 use target::Target;
 
@@ -38,17 +40,19 @@ fn connect_source(
     index: usize,
     s: &SourceConfig,
     kind: SourceKind,
-) -> Result<Box<dyn Source>> {
+) -> Result<Box<dyn Source>, LinkError> {
     match kind {
         SourceKind::Modbus => Ok(Box::new(source::modbus::connect(config, index, s)?)),
         SourceKind::Opcua => Ok(Box::new(source::opcua::connect(config, index, s)?)),
         SourceKind::Linuxcnc => Ok(Box::new(source::linuxcnc::connect(config, index, s)?)),
-        SourceKind::Csv => Err(Error::Internal("a csv source is opened by the loop".into())),
+        SourceKind::Csv => Err(LinkError::Internal(Error::Internal(
+            "a csv source is opened by the loop".into(),
+        ))),
     }
 }
 
 /// Connect every target an axis names (exit 3 when one cannot be reached).
-fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>> {
+fn connect_targets(config: &LiveConfig) -> Result<Vec<Box<dyn Target>>, LinkError> {
     let mut targets: Vec<Box<dyn Target>> = Vec::new();
     for (i, t) in config.targets.iter().enumerate() {
         if !config

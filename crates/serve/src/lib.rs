@@ -11,6 +11,7 @@
 
 pub mod app;
 pub mod clock;
+mod error;
 pub mod live;
 pub mod login;
 pub mod pages;
@@ -23,7 +24,9 @@ pub mod throttle;
 pub mod users;
 pub mod views;
 
-use errmap_core::error::{Error, Location, Result};
+pub use error::{ServeError, UsersError};
+
+use errmap_core::error::{Error, Location};
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, RwLock};
@@ -71,16 +74,16 @@ pub fn default_users_path(db: &Path) -> PathBuf {
 
 /// The checks before anything is opened: a non-loopback address needs TLS (or the explicit
 /// `--insecure-http`, with a warning); a certificate needs its key.
-pub fn check_transport(cfg: &Config) -> Result<Option<String>> {
+pub fn check_transport(cfg: &Config) -> Result<Option<String>, ServeError> {
     if cfg.tls.is_none() && !cfg.bind.ip().is_loopback() {
         if !cfg.insecure_http {
-            return Err(Error::usage(
+            return Err(ServeError::Transport(Error::usage(
                 format!(
                     "{} is not a loopback address and no TLS certificate was given: passwords and session cookies would cross the network in clear text",
                     cfg.bind.ip()
                 ),
                 "give --tls-cert PEM --tls-key PEM, bind to 127.0.0.1 behind a TLS reverse proxy (with --trusted-proxy), or accept the risk with --insecure-http",
-            ));
+            )));
         }
         return Ok(Some(format!(
             "warning: serving plain HTTP on {} (--insecure-http): passwords and session cookies cross the network unencrypted",
@@ -92,21 +95,19 @@ pub fn check_transport(cfg: &Config) -> Result<Option<String>> {
 
 /// Start the server and serve until SIGINT or SIGTERM. `on_listening` gets the bound
 /// address (the command prints it; port 0 asks the system for a free port).
-pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<()> {
+pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<(), ServeError> {
     if let Some(warning) = check_transport(&cfg)? {
         app::log(&warning);
     }
     let users = users::Users::load(&cfg.users, false).map_err(|e| match e {
-        Error::Io { action: "read", path, source } if source.kind() == std::io::ErrorKind::NotFound => {
-            Error::input(
-                Location::file(&path),
-                "no users file",
-                format!(
-                    "add a user first: errmap serve user add NAME --role operator --users {} --password-stdin",
-                    path.display()
-                ),
-            )
-        }
+        UsersError::Missing(_) => UsersError::Missing(Error::input(
+            Location::file(&cfg.users),
+            "no users file",
+            format!(
+                "add a user first: errmap serve user add NAME --role operator --users {} --password-stdin",
+                cfg.users.display()
+            ),
+        )),
         other => other,
     })?;
     if users.users.is_empty() {
@@ -121,48 +122,53 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<()> {
                 .ok()
                 .filter(|c| c.is_dir())
                 .ok_or_else(|| {
-                    Error::input(
+                    ServeError::Runs(Error::input(
                         Location::file(r),
                         "the runs folder does not exist or is not a folder",
                         "give the folder that holds the batch runs (e.g. out/)",
-                    )
+                    ))
                 })?,
         ),
         None => None,
     };
-    let db = Arc::new(store::Db::open(&cfg.db)?);
+    let db = Arc::new(store::Db::open(&cfg.db).map_err(ServeError::store)?);
     let tls_pem = match &cfg.tls {
         Some((cert, key)) => Some((
-            std::fs::read(cert).map_err(|e| Error::read(cert, e))?,
-            std::fs::read(key).map_err(|e| Error::read(key, e))?,
+            std::fs::read(cert).map_err(|e| ServeError::Tls(Error::read(cert, e)))?,
+            std::fs::read(key).map_err(|e| ServeError::Tls(Error::read(key, e)))?,
         )),
         None => None,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| Error::Internal(format!("cannot start the async runtime: {e}")))?;
+        .map_err(|e| {
+            ServeError::Internal(Error::Internal(format!(
+                "cannot start the async runtime: {e}"
+            )))
+        })?;
     runtime.block_on(async move {
         let tls = match (tls_pem, &cfg.tls) {
             (Some((cert, key)), Some((cert_path, _))) => Some(
                 axum_server::tls_rustls::RustlsConfig::from_pem(cert, key)
                     .await
                     .map_err(|e| {
-                        Error::input(
+                        ServeError::Tls(Error::input(
                             Location::file(cert_path),
                             format!("not a usable TLS certificate and key: {e}"),
                             "give a PEM certificate chain with --tls-cert and its PEM private key with --tls-key",
-                        )
+                        ))
                     })?,
             ),
             _ => None,
         };
         let listener = std::net::TcpListener::bind(cfg.bind)
-            .map_err(|e| Error::io("listen on", cfg.bind.to_string(), e))?;
+            .map_err(|e| ServeError::Bind(Error::io("listen on", cfg.bind.to_string(), e)))?;
         let local = listener
             .local_addr()
-            .map_err(|e| Error::io("listen on", cfg.bind.to_string(), e))?;
-        let dummy_hash = users::hash_password(&session::random_token())?;
+            .map_err(|e| ServeError::Bind(Error::io("listen on", cfg.bind.to_string(), e)))?;
+        let dummy_hash =
+            users::hash_password(&session::random_token()).map_err(ServeError::Internal)?;
         let app = Arc::new(app::App {
             db,
             runs,
@@ -193,7 +199,7 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<()> {
         let served = match tls {
             Some(tls) => {
                 axum_server::from_tcp_rustls(listener, tls)
-                    .map_err(|e| Error::io("listen on", local.to_string(), e))?
+                    .map_err(|e| ServeError::Bind(Error::io("listen on", local.to_string(), e)))?
                     .handle(handle)
                     .first_request_timeout(Duration::from_secs(10))
                     .serve(service)
@@ -201,14 +207,14 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<()> {
             }
             None => {
                 axum_server::from_tcp(listener)
-                    .map_err(|e| Error::io("listen on", local.to_string(), e))?
+                    .map_err(|e| ServeError::Bind(Error::io("listen on", local.to_string(), e)))?
                     .handle(handle)
                     .first_request_timeout(Duration::from_secs(10))
                     .serve(service)
                     .await
             }
         };
-        served.map_err(|e| Error::io("serve on", local.to_string(), e))
+        served.map_err(|e| ServeError::Bind(Error::io("serve on", local.to_string(), e)))
     })
 }
 

@@ -11,6 +11,7 @@
 //! crate's defaults (19 MiB, 2 passes, 1 lane), the OWASP Password Storage Cheat Sheet's
 //! minimum for argon2id.
 
+use crate::error::UsersError;
 use argon2::password_hash::phc::PasswordHash;
 use argon2::password_hash::{PasswordHasher, PasswordVerifier};
 use argon2::Argon2;
@@ -85,19 +86,22 @@ impl Users {
     /// file and line): TOML that is not a users file, unknown keys, a name not in stored form
     /// (lower case), a name twice, a hash that is not an argon2id PHC string. The hashes' parameters
     /// are not checked.
-    pub fn load(path: &Path, missing_ok: bool) -> Result<Users> {
+    pub fn load(path: &Path, missing_ok: bool) -> Result<Users, UsersError> {
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
             Err(e) if missing_ok && e.kind() == std::io::ErrorKind::NotFound => {
                 return Ok(Users::default())
             }
-            Err(e) => return Err(Error::read(path, e)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(UsersError::Missing(Error::read(path, e)))
+            }
+            Err(e) => return Err(UsersError::Read(Error::read(path, e))),
         };
         let users: Users = toml::from_str(&text).map_err(|e| {
             let line = e
                 .span()
                 .map(|s| text[..s.start.min(text.len())].matches('\n').count() as u64 + 1);
-            Error::input(
+            UsersError::File(Error::input(
                 Location {
                     file: path.to_path_buf(),
                     line,
@@ -105,16 +109,16 @@ impl Users {
                 },
                 format!("not a users file: {}", e.message()),
                 "write it with `errmap serve user add NAME --role viewer|operator --users FILE --password-stdin`",
-            )
+            ))
         })?;
         let mut seen = std::collections::BTreeSet::new();
         for u in &users.users {
             let at = |msg: String| {
-                Error::input(
+                UsersError::File(Error::input(
                     Location::file(path),
                     msg,
                     "remove the entry and add it again with `errmap serve user add`",
-                )
+                ))
             };
             match normalise_name(&u.name) {
                 Some(n) if n == u.name => {}
@@ -142,7 +146,11 @@ impl Users {
 
     /// Write the file atomically (a temporary file beside it, renamed), mode 0600: it holds
     /// password hashes.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    pub fn save(&self, path: &Path) -> Result<(), UsersError> {
+        self.write(path).map_err(UsersError::save)
+    }
+
+    fn write(&self, path: &Path) -> Result<()> {
         let mut text = String::from(
             "# errmap serve users: argon2id password hashes (PHC strings).\n# Edit with `errmap serve user add|remove|list`.\n\n",
         );
@@ -179,21 +187,27 @@ impl Users {
     /// Add a user (name normalised, password checked by [`check_password`] and hashed with
     /// [`hash_password`]), or replace one of that name when `replace`; an error for a bad name,
     /// a bad password, or an existing user without `replace`. The file is written by [`Users::save`].
-    pub fn add(&mut self, name: &str, role: Role, password: &str, replace: bool) -> Result<()> {
+    pub fn add(
+        &mut self,
+        name: &str,
+        role: Role,
+        password: &str,
+        replace: bool,
+    ) -> Result<(), UsersError> {
         let name = normalise_name(name).ok_or_else(|| {
-            Error::usage(
+            UsersError::Name(Error::usage(
                 format!("{name:?} is not a user name"),
                 format!("use 1 to {MAX_NAME_CHARS} letters, digits, '.', '_', '-' or '@'"),
-            )
+            ))
         })?;
-        check_password(password)?;
+        check_password(password).map_err(UsersError::Password)?;
         if self.get(&name).is_some() && !replace {
-            return Err(Error::usage(
+            return Err(UsersError::Name(Error::usage(
                 format!("user {name:?} exists already"),
                 "give --replace to set a new password or role",
-            ));
+            )));
         }
-        let password_hash = hash_password(password)?;
+        let password_hash = hash_password(password).map_err(UsersError::Internal)?;
         self.users.retain(|u| u.name != name);
         self.users.push(User {
             name,
@@ -205,15 +219,15 @@ impl Users {
     }
 
     /// Remove a user; an error when there is none of that name.
-    pub fn remove(&mut self, name: &str) -> Result<()> {
+    pub fn remove(&mut self, name: &str) -> Result<(), UsersError> {
         let key = normalise_name(name).unwrap_or_default();
         let before = self.users.len();
         self.users.retain(|u| u.name != key);
         if self.users.len() == before {
-            return Err(Error::usage(
+            return Err(UsersError::Name(Error::usage(
                 format!("no user {name:?}"),
                 "`errmap serve user list --users FILE` lists them",
-            ));
+            )));
         }
         Ok(())
     }

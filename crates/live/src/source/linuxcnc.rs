@@ -7,6 +7,7 @@ use super::poll::{Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::hal::{HalLink, HalValue};
+use crate::LinkError;
 use errmap_core::error::Result;
 use std::time::Duration;
 
@@ -39,7 +40,11 @@ impl Helper {
 
 /// Start errmap's HAL component for `sources[index]` and read every pin once (a LinuxCNC
 /// that is not running, a missing pin: exit 3), then poll.
-pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<PolledSource> {
+pub fn connect(
+    config: &LiveConfig,
+    index: usize,
+    s: &SourceConfig,
+) -> Result<PolledSource, LinkError> {
     let key = format!("sources.{index}");
     let mut pins = Vec::new();
     let mut channels = Vec::new();
@@ -53,11 +58,11 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
             )
         })?;
         if pin.is_empty() || pin.chars().any(|ch| ch.is_whitespace() || ch == '=') {
-            return Err(config.key_error(
+            return Err(LinkError::Config(config.key_error(
                 &format!("{k}.pin"),
                 format!("'{pin}' is not a HAL name"),
                 "e.g. axis.z.pos-cmd",
-            ));
+            )));
         }
         for (field, present) in [
             ("table", c.table.is_some()),
@@ -67,11 +72,11 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
             ("node", c.node.is_some()),
         ] {
             if present {
-                return Err(config.key_error(
+                return Err(LinkError::Config(config.key_error(
                     &format!("{k}.{field}"),
                     format!("a linuxcnc channel has no key '{field}'"),
                     "its keys: name, pin, scale, offset",
-                ));
+                )));
             }
         }
         pins.push(pin);
@@ -98,7 +103,9 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
     })?;
     let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
     let names = helper.channels.iter().map(|c| c.name.clone()).collect();
-    PolledSource::start("linuxcnc", &s.name, names, helper, link, first, period)
+    Ok(PolledSource::start(
+        "linuxcnc", &s.name, names, helper, link, first, period,
+    )?)
 }
 
 impl Device for Helper {

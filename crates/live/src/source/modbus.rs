@@ -6,6 +6,7 @@ use super::poll::{Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::modbus::{Client, Layout, ReadValue, Table};
+use crate::LinkError;
 use errmap_core::error::{Error, Result};
 use std::time::Duration;
 
@@ -48,7 +49,11 @@ fn value(v: ReadValue) -> Value {
 
 /// Check the channel layouts, connect, read every channel once (a device that cannot be
 /// reached or refuses a channel is exit 3), then start polling.
-pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<PolledSource> {
+pub fn connect(
+    config: &LiveConfig,
+    index: usize,
+    s: &SourceConfig,
+) -> Result<PolledSource, LinkError> {
     let key = format!("sources.{index}");
     let layouts = s
         .channels
@@ -74,5 +79,7 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
     })?;
     let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
     let names = s.channels.iter().map(|c| c.name.clone()).collect();
-    PolledSource::start("modbus", &s.name, names, rack, client, first, period)
+    Ok(PolledSource::start(
+        "modbus", &s.name, names, rack, client, first, period,
+    )?)
 }

@@ -6,6 +6,7 @@ use super::poll::{Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::opcua::{denied_error, node_id, ConnectError, NodeValue, OpcUa};
+use crate::LinkError;
 use errmap_core::error::{Error, Result};
 use opcua::types::NodeId;
 use std::time::Duration;
@@ -34,7 +35,11 @@ impl Login {
 
 /// Connect the source `sources[index]` of `config` (an error when the server cannot be
 /// reached or the config asks for what it cannot do).
-pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<PolledSource> {
+pub fn connect(
+    config: &LiveConfig,
+    index: usize,
+    s: &SourceConfig,
+) -> Result<PolledSource, LinkError> {
     let key = format!("sources.{index}");
     check_security(config, &key, s.security_policy.as_deref())?;
     let mut nodes = Vec::new();
@@ -60,15 +65,16 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
         nodes,
     };
     let client = login.connect().map_err(|e| match e {
-        ConnectError::Denied(code) => denied_error(
+        // The login refused, as the server said: the `user` key is the one to fix.
+        ConnectError::Denied(code) => LinkError::Refused(denied_error(
             config,
             &key,
             &login.what,
             &login.endpoint,
             login.user.as_deref(),
             &code,
-        ),
-        ConnectError::Failed(e) => e,
+        )),
+        ConnectError::Failed(e) => LinkError::from(e),
     })?;
     let mut client = client;
     let first = login.read(&mut client).map_err(|f| {
@@ -80,7 +86,9 @@ pub fn connect(config: &LiveConfig, index: usize, s: &SourceConfig) -> Result<Po
     })?;
     let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
     let names = s.channels.iter().map(|c| c.name.clone()).collect();
-    PolledSource::start("opcua", &s.name, names, login, client, first, period)
+    Ok(PolledSource::start(
+        "opcua", &s.name, names, login, client, first, period,
+    )?)
 }
 
 /// Only security policy None is built in.

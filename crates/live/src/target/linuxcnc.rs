@@ -15,6 +15,7 @@ use super::{Output, Present, Target};
 use crate::config::{LiveConfig, TargetAxisConfig, TargetConfig};
 use crate::hal::{HalLink, HalValue, PinSpec};
 use crate::source::linuxcnc::DEFAULT_PYTHON;
+use crate::LinkError;
 use errmap_core::error::{Error, Result};
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -61,7 +62,11 @@ impl LinuxCncTarget {
     /// Start errmap's HAL component for `targets[index]`, link its pins to every axis's
     /// `axis.L.eoffset-*` pins, set the scale and enable the offsets (exit 2 for a bad key,
     /// exit 3 when LinuxCNC or its `hal` module cannot be reached or a pin is driven already).
-    pub fn connect(config: &LiveConfig, index: usize, t: &TargetConfig) -> Result<LinuxCncTarget> {
+    pub fn connect(
+        config: &LiveConfig,
+        index: usize,
+        t: &TargetConfig,
+    ) -> Result<LinuxCncTarget, LinkError> {
         let key = format!("targets.{index}");
         check_target(config, &key, t)?;
         let component = t

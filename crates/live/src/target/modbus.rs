@@ -5,6 +5,7 @@
 use super::{Output, Present, Target};
 use crate::config::{ChannelConfig, LiveConfig, TargetConfig};
 use crate::modbus::{Client, Layout, Table};
+use crate::LinkError;
 use errmap_core::error::{Error, Result};
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -23,7 +24,11 @@ impl ModbusTarget {
     /// Connect to the gateway of `[[targets]]` entry `index` (unit id default 1, 1 s timeout),
     /// with each axis's register layout checked; exit 2 for a bad key, exit 3 when it cannot be
     /// reached.
-    pub fn connect(config: &LiveConfig, index: usize, t: &TargetConfig) -> Result<ModbusTarget> {
+    pub fn connect(
+        config: &LiveConfig,
+        index: usize,
+        t: &TargetConfig,
+    ) -> Result<ModbusTarget, LinkError> {
         let key = format!("targets.{index}");
         let address = t.address.clone().ok_or_else(|| {
             config.key_error(

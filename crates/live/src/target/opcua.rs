@@ -15,6 +15,7 @@ use super::{Output, Present, Target};
 use crate::axis::Line;
 use crate::config::{LiveConfig, TargetConfig, TargetKind};
 use crate::opcua::{denied_error, node_id, ConnectError, OpcUa};
+use crate::LinkError;
 use errmap_core::error::{Error, Result};
 use opcua::types::NodeId;
 use std::collections::BTreeMap;
@@ -57,7 +58,11 @@ pub fn line_of_k3(abs_mm: f64, slope: f64, reference_mm: f64, px_mm: f64) -> Lin
 impl OpcUaTarget {
     /// Connect the target `targets[index]` of `config` (an error when the server cannot be
     /// reached or the config asks for what it cannot do).
-    pub fn connect(config: &LiveConfig, index: usize, t: &TargetConfig) -> Result<OpcUaTarget> {
+    pub fn connect(
+        config: &LiveConfig,
+        index: usize,
+        t: &TargetConfig,
+    ) -> Result<OpcUaTarget, LinkError> {
         let key = format!("targets.{index}");
         crate::source::opcua::check_security(config, &key, t.security_policy.as_deref())?;
         let endpoint = t.endpoint.clone().ok_or_else(|| {
@@ -93,11 +98,11 @@ impl OpcUaTarget {
                         None | Some("um") => false,
                         Some("mm") => true,
                         Some(other) => {
-                            return Err(config.key_error(
+                            return Err(LinkError::Config(config.key_error(
                                 &format!("{k}.unit"),
                                 format!("'{other}' is not a unit"),
                                 "um or mm",
-                            ))
+                            )))
                         }
                     },
                 },
@@ -113,10 +118,16 @@ impl OpcUaTarget {
             Duration::from_millis(2000),
         )
         .map_err(|e| match e {
-            ConnectError::Denied(code) => {
-                denied_error(config, &key, &what, &endpoint, t.user.as_deref(), &code)
-            }
-            ConnectError::Failed(e) => e,
+            // The login refused, as the server said: the `user` key is the one to fix.
+            ConnectError::Denied(code) => LinkError::Refused(denied_error(
+                config,
+                &key,
+                &what,
+                &endpoint,
+                t.user.as_deref(),
+                &code,
+            )),
+            ConnectError::Failed(e) => LinkError::from(e),
         })?;
         Ok(OpcUaTarget {
             name: t.name.clone(),
