@@ -129,19 +129,7 @@ fn logged_period_recomputes_with_thermal_compensate() {
     let dir = scratch();
     let d = dir.path();
     // Coolant switching every 10 minutes: both gain tables are used.
-    let rows = synth_replay(
-        d,
-        &[
-            "--hours",
-            "2",
-            "--period-s",
-            "10",
-            "--coolant-every-s",
-            "600",
-            "--campaign",
-            "3",
-        ],
-    );
+    let rows = two_hours_coolant_switching(d);
     std::fs::write(d.join("log.csv"), rows.join("\n") + "\n").unwrap();
     std::fs::write(
         d.join("live.toml"),

@@ -13,19 +13,7 @@ fn csv_from_stdin_matches_thermal_compensate() {
     let dir = scratch();
     let d = dir.path();
     // 2 h of a row every 10 s, the coolant switching every 10 minutes.
-    let rows = synth_replay(
-        d,
-        &[
-            "--hours",
-            "2",
-            "--period-s",
-            "10",
-            "--coolant-every-s",
-            "600",
-            "--campaign",
-            "3",
-        ],
-    );
+    let rows = two_hours_coolant_switching(d);
     let log = rows.join("\n") + "\n";
     std::fs::write(d.join("log.csv"), &log).unwrap();
     let text = config(

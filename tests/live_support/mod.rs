@@ -74,6 +74,24 @@ pub fn run(args: &[&str], dir: &Path) -> Output {
         .unwrap()
 }
 
+/// The replay both comparisons with `errmap thermal compensate` use: 2 h of a row every 10 s,
+/// campaign 3, the coolant switching every 10 minutes (both gain tables are used).
+pub fn two_hours_coolant_switching(dir: &Path) -> Vec<String> {
+    synth_replay(
+        dir,
+        &[
+            "--hours",
+            "2",
+            "--period-s",
+            "10",
+            "--coolant-every-s",
+            "600",
+            "--campaign",
+            "3",
+        ],
+    )
+}
+
 /// Rows of a replay made by `errmap synth live-replay` (header first).
 pub fn synth_replay(dir: &Path, args: &[&str]) -> Vec<String> {
     let out = dir.join("synth.csv");
