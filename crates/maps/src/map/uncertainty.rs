@@ -401,7 +401,17 @@ mod tests {
             .collect();
         let sd = vec![1.0; n];
         let g = |x: f64| 2.0 * n as f64 - 8.0 * n as f64 * (-2.0 * x).exp() + 2.0 * x / 0.25;
-        let (mut lo, mut hi) = (0.0f64, 2.0f64);
+        let want = root_by_bisection(g, 0.0, 2.0).exp();
+        let got = likelihood_factor(&misses, &sd, 0.0).unwrap();
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+        // Without the prior it would be exactly 2; the prior pulls it a little towards 1.
+        assert!(got < 2.0 && got > 1.95, "{got}");
+        assert_eq!(likelihood_factor(&[], &[], 1.0), None);
+    }
+
+    /// The root of an increasing `g` in `[lo, hi]`, by 200 halvings (an independent solve of the
+    /// likelihood's stationarity condition).
+    fn root_by_bisection(g: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
         for _ in 0..200 {
             let mid = 0.5 * (lo + hi);
             if g(mid) > 0.0 {
@@ -410,12 +420,7 @@ mod tests {
                 lo = mid;
             }
         }
-        let want = (0.5 * (lo + hi)).exp();
-        let got = likelihood_factor(&misses, &sd, 0.0).unwrap();
-        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
-        // Without the prior it would be exactly 2; the prior pulls it a little towards 1.
-        assert!(got < 2.0 && got > 1.95, "{got}");
-        assert_eq!(likelihood_factor(&[], &[], 1.0), None);
+        0.5 * (lo + hi)
     }
 
     #[test]
@@ -431,16 +436,7 @@ mod tests {
         let sd = vec![1.0; n];
         let nf = n as f64;
         let g = |x: f64| 2.0 * nf - 18.0 * nf * (-2.0 * x).exp() / 5.0 + 2.0 * x / 0.25;
-        let (mut lo, mut hi) = (0.0f64, 2.0f64);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if g(mid) > 0.0 {
-                hi = mid;
-            } else {
-                lo = mid;
-            }
-        }
-        let want = (0.5 * (lo + hi)).exp();
+        let want = root_by_bisection(g, 0.0, 2.0).exp();
         let got = likelihood_factor(&misses, &sd, 2.0).unwrap();
         assert!((got - want).abs() < 1e-6, "{got} vs {want}");
         // Close to √(9/5) = 1.342, a little towards 1; holding s fixed instead would have
