@@ -26,10 +26,27 @@ const INPUT: i32 = 2;
 /// The machine (an output, the GPU) or errmap itself.
 const SYSTEM: i32 = 3;
 
-/// Why a command failed: the typed error of the library operation it called, or a located
-/// diagnostic (the CLI's own checks, and the crates that still return one).
-#[derive(Debug)]
-pub enum Failure {
+/// Declares [`Failure`], one variant per error type, with `From` each type (so `?` works in a
+/// command), the diagnostic it prints, and the boxed live loop's error beside them.
+macro_rules! failures {
+    ($($(#[$doc:meta])* $variant:ident($ty:ty),)+) => {
+        /// Why a command failed: the typed error of the library operation it called, or a located
+        /// diagnostic (the CLI's own checks, and the crates that still return one).
+        #[derive(Debug)]
+        pub enum Failure {
+            $($(#[$doc])* $variant($ty),)+
+            /// The live loop (boxed: its source and target errors nest one level deeper).
+            Live(Box<LiveError>),
+        }
+        errmap_core::typed_error!(Failure { $($variant,)+ Live });
+        $(impl From<$ty> for Failure {
+            fn from(e: $ty) -> Self {
+                Failure::$variant(e)
+            }
+        })+
+    };
+}
+failures!(
     /// A located diagnostic (the batch, the CLI's own checks).
     Diagnostic(Diagnostic),
     /// Compensation settings in words (`errmap compensate`'s flags).
@@ -58,61 +75,9 @@ pub enum Failure {
     Synth(SynthError),
     /// A live config (`errmap live CONFIG`).
     LiveConfig(ConfigError),
-    /// The live loop (boxed: its source and target errors nest one level deeper).
-    Live(Box<LiveError>),
     /// The monitor's users file (`errmap serve user …`, and at the server's start).
     Users(UsersError),
     /// The monitor (`errmap serve`).
-    Serve(ServeError),
-}
-errmap_core::typed_error!(Failure {
-    Diagnostic,
-    Settings,
-    Compensate,
-    Probe,
-    Map,
-    Grid,
-    Linear,
-    Thermal,
-    Rotary,
-    Circular,
-    Table,
-    Report,
-    Synth,
-    LiveConfig,
-    Live,
-    Users,
-    Serve,
-});
-
-/// A command's result: its exit code, or why it failed.
-pub type Result<T, E = Failure> = std::result::Result<T, E>;
-
-macro_rules! failure_from {
-    ($($variant:ident($ty:ty)),+ $(,)?) => {
-        $(impl From<$ty> for Failure {
-            fn from(e: $ty) -> Self {
-                Failure::$variant(e)
-            }
-        })+
-    };
-}
-failure_from!(
-    Diagnostic(Diagnostic),
-    Settings(SettingsError),
-    Compensate(CompensateError),
-    Probe(ProbeError),
-    Map(MapError),
-    Grid(GridError),
-    Linear(LinearError),
-    Thermal(ThermalError),
-    Rotary(RotaryError),
-    Circular(CircularError),
-    Table(TableError),
-    Report(ReportError),
-    Synth(SynthError),
-    LiveConfig(ConfigError),
-    Users(UsersError),
     Serve(ServeError),
 );
 
@@ -121,6 +86,9 @@ impl From<LiveError> for Failure {
         Failure::Live(Box::new(e))
     }
 }
+
+/// A command's result: its exit code, or why it failed.
+pub type Result<T, E = Failure> = std::result::Result<T, E>;
 
 /// An analysis' error (they share their variants): bad options, a bad line or file, a fit
 /// not possible or an unreadable input are the input's; an output, a bug the machine's or
