@@ -16,7 +16,7 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub use errmap_batch as batch;
-pub use errmap_core::{direction, error, geom, io, numeric, progress};
+pub use errmap_core::{direction, error, geom, io, numeric, progress, setting};
 pub use errmap_live as live;
 pub use errmap_maps::{backend, gpu, interp, map, nn, probe};
 pub use errmap_metrology::{circular, controller, linear, rotary, thermal};

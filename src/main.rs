@@ -6,6 +6,8 @@ use clap::Parser;
 use errmap::error::{Diagnose, Diagnostic};
 
 fn main() {
+    // Library hints name settings; the binary words them as its flags.
+    errmap::setting::install_wording(cli::words::flag);
     errmap::gpu::quiet_headless_vulkan();
     let args = cli::Cli::parse();
     let code = match cli::run(args) {

@@ -44,6 +44,7 @@ mod serve;
 mod synth_web_plate;
 mod terminal;
 mod thermal;
+pub mod words;
 
 use clap::{Parser, Subcommand};
 use errmap::Result;

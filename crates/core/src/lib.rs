@@ -12,5 +12,7 @@ pub mod geom;
 pub mod io;
 pub mod numeric;
 pub mod progress;
+pub mod setting;
 
 pub use error::{Diagnose, Diagnostic, Error, Location, Result};
+pub use setting::Setting;

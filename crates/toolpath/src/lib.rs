@@ -29,12 +29,14 @@ pub mod lexer;
 mod machine;
 mod point;
 mod reach;
+mod setting;
 pub mod zone_spec;
 
 pub use arc::{Arc, Plane};
 pub use dialect::{Dialect, FanucNumbers, PowerOnMotion, Units};
 pub use error::{CompensateError, DialectError, SettingsError};
 pub use gcode::format_coord;
+pub use setting::Setting;
 
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
