@@ -30,7 +30,7 @@ pub use driver::{merge_job, run_job, JobRun, MergeRequest};
 pub use job::{Job, JobFile, MapChoice};
 pub use plan::{PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use resolve::{plan_job, with_backend, ResolvedJob, SelectTrainer};
-pub use run::{execute, execute_with, PartDone, CHUNK_PARTS};
+pub use run::{execute, execute_with, parts_per_chunk, PartDone};
 pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 

@@ -8,7 +8,6 @@
 use crate::family_sums::{FamilyMaps, FamilyNodes};
 use crate::plan::PartInput;
 use crate::plan::Plan;
-use crate::plan::Settings;
 use crate::stages::evaluate::{grid_inputs, write_parts, Delivered, Fit};
 use crate::stages::family::{family_network, write_family_folder, FamilyInput};
 use crate::stages::nodes::{checked_domain, interpolate_all, member_nodes, Grids};
@@ -26,13 +25,17 @@ use errmap_maps::nn::{Mlp, Normalisation, Trainer};
 use rayon::prelude::*;
 use std::path::PathBuf;
 
-/// Parts mapped together: read, cleaned, trained in one trainer call, written, then dropped.
-/// A run holds one chunk at a time, so its memory does not grow with the family; 32 parts
-/// (64 networks) keep the CPU trainer's cores and a GPU's dispatches busy.
-pub const CHUNK_PARTS: usize = 32;
+/// Parts mapped together with `trainer`: read, cleaned, trained in one trainer call, written,
+/// then dropped. A run holds one chunk at a time, so its memory does not grow with the family;
+/// each part trains two networks (hold-out and delivered), so a chunk gives the trainer about
+/// the networks it wants per call ([`Trainer::networks_per_call`]): 8 parts on the CPU
+/// trainers, 32 on a GPU. The chunk size changes no byte of the outputs.
+pub fn parts_per_chunk(trainer: &dyn Trainer) -> usize {
+    (trainer.networks_per_call() / 2).max(1)
+}
 
 /// Run the plan with `trainer`, telling `reporter` how it goes; every part's outcome (and its
-/// error) is in the summary. The parts go through in chunks of [`CHUNK_PARTS`] (read → clean →
+/// error) is in the summary. The parts go through in chunks of [`parts_per_chunk`] (read → clean →
 /// grid → train → evaluate → write) and only their summaries and the family's running sums
 /// stay; the family (mean, spread, network, toolpaths) is written after the last chunk.
 pub fn execute(
@@ -55,7 +58,8 @@ pub fn execute_with(
     reporter: &dyn Reporter,
     on_part: &PartDone,
 ) -> Result<BatchSummary> {
-    let (domain, mut first) = match run_domain(plan, reporter) {
+    let chunk_parts = parts_per_chunk(trainer);
+    let (domain, mut first) = match run_domain(plan, chunk_parts, reporter) {
         RunDomain::Found(domain, first) => (domain, first),
         // Nothing could be fitted: every part failed before training.
         RunDomain::NoPart(failed) => {
@@ -70,6 +74,7 @@ pub fn execute_with(
         grids: Grids::new(&domain, &plan.settings)?,
         inputs: Vec::new(),
         domain,
+        chunk_parts,
     };
     let run = Run {
         inputs: grid_inputs(&run.domain, &run.grids.map),
@@ -78,7 +83,7 @@ pub fn execute_with(
     let mut family = run.family_start(&mut first)?;
     let mut acc = Accumulated::new(run.grids.map, plan.settings.normal);
     let bar = reporter.progress(plan.parts.len() as u64, "map parts");
-    for (k, chunk) in plan.parts.chunks(CHUNK_PARTS).enumerate() {
+    for (k, chunk) in plan.parts.chunks(chunk_parts).enumerate() {
         let preps = match first.take().filter(|_| k == 0) {
             Some(p) => p,
             None => prepare_chunk(chunk, &plan.settings),
@@ -99,11 +104,11 @@ enum RunDomain {
 }
 
 /// The job's domain, or the box of the parts' clean points (reading every part once).
-fn run_domain(plan: &Plan, reporter: &dyn Reporter) -> RunDomain {
+fn run_domain(plan: &Plan, chunk_parts: usize, reporter: &dyn Reporter) -> RunDomain {
     if let Some(d) = plan.settings.domain {
         return RunDomain::Found(Some(d), None);
     }
-    let survey = survey_box(plan, reporter);
+    let survey = survey_box(plan, chunk_parts, reporter);
     if survey.domain.is_none() {
         return RunDomain::NoPart(survey.failed);
     }
@@ -119,6 +124,8 @@ struct Run<'a> {
     grids: Grids,
     /// The map grid's nodes in network inputs.
     inputs: Vec<[f32; 2]>,
+    /// Parts read and mapped together ([`parts_per_chunk`] of the trainer).
+    chunk_parts: usize,
 }
 
 /// The family network as the parts need it: built before them (`warm_start = "family"`, from
@@ -149,15 +156,7 @@ impl Run<'_> {
             } else {
                 &self.plan.family_parts
             };
-            let kept = family_prepass(
-                members,
-                family.builds,
-                first,
-                &mut family.nodes,
-                &self.grids,
-                s,
-                self.reporter,
-            );
+            let kept = family_prepass(self, members, family.builds, first, &mut family.nodes);
             *first = kept;
             family.network = self.family_network(&family.nodes)?;
         }
@@ -351,14 +350,14 @@ struct Survey {
 }
 
 /// Read and clean every part once, chunk by chunk, for the box of their clean points.
-fn survey_box(plan: &Plan, reporter: &dyn Reporter) -> Survey {
+fn survey_box(plan: &Plan, chunk_parts: usize, reporter: &dyn Reporter) -> Survey {
     let bar = reporter.progress(plan.parts.len() as u64, "clean");
     let mut survey = Survey {
         domain: None,
         first: Vec::new(),
         failed: Vec::new(),
     };
-    for (k, chunk) in plan.parts.chunks(CHUNK_PARTS).enumerate() {
+    for (k, chunk) in plan.parts.chunks(chunk_parts).enumerate() {
         let preps = prepare_chunk(chunk, &plan.settings);
         for r in &preps {
             match r {
@@ -385,17 +384,16 @@ fn survey_box(plan: &Plan, reporter: &dyn Reporter) -> Survey {
 /// "family"`): every member read, cleaned and interpolated once, chunk by chunk, in batch order.
 /// Returns the first chunk of the run's own parts (`members` are they when `own`), kept.
 fn family_prepass(
+    run: &Run,
     members: &[PartInput],
     own: bool,
     first: &mut Option<Vec<Prep>>,
     nodes: &mut FamilyNodes,
-    grids: &Grids,
-    s: &Settings,
-    reporter: &dyn Reporter,
 ) -> Option<Vec<Prep>> {
-    let bar = reporter.progress(members.len() as u64, "family mean");
+    let (grids, s) = (&run.grids, &run.plan.settings);
+    let bar = run.reporter.progress(members.len() as u64, "family mean");
     let mut kept = None;
-    for (k, chunk) in members.chunks(CHUNK_PARTS).enumerate() {
+    for (k, chunk) in members.chunks(run.chunk_parts).enumerate() {
         let preps = match first.take().filter(|_| k == 0 && own) {
             Some(p) => p,
             None => prepare_chunk(chunk, s),

@@ -152,6 +152,10 @@ impl Trainer for AutoTrainer {
         self.gpu.name()
     }
 
+    fn networks_per_call(&self) -> usize {
+        self.gpu.networks_per_call()
+    }
+
     fn train_from(
         &self,
         initial: Vec<Mlp>,

@@ -187,6 +187,10 @@ impl Trainer for GpuTrainer {
         format!("gpu: {}", self.ctx.describe())
     }
 
+    fn networks_per_call(&self) -> usize {
+        64
+    }
+
     fn train_from(
         &self,
         initial: Vec<Mlp>,

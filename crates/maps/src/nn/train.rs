@@ -33,6 +33,14 @@ pub trait Trainer: Send + Sync {
     /// Backend name for notes and summaries, e.g. "cpu" or "gpu (llvmpipe, Vulkan)".
     fn name(&self) -> String;
 
+    /// About how many networks one call should get to keep this trainer's cores or device
+    /// busy. A batch maps its parts in chunks of about this many networks and holds one chunk
+    /// at a time, so it also sets a run's memory: the CPU trainers want 16 (8 parts; more
+    /// only costs memory), a GPU 64 (a dispatch of fewer leaves its units idle).
+    fn networks_per_call(&self) -> usize {
+        16
+    }
+
     /// One network per set; network k starts from [`initial_networks`] (seeded from `(config.seed, k)`).
     fn train_batch(&self, sets: &[TrainingSet], config: &ModelConfig) -> Result<Vec<Mlp>> {
         config.validate()?;
