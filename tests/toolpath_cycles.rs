@@ -85,7 +85,7 @@ fn holes_in_the_zone_are_refused_without_the_flag_and_with_g91() {
         err.contains("canned cycle G81: the hole at X10 Y5 ends at Z-1 in the compensation zone"),
         "{err}"
     );
-    assert!(err.contains("--compensate-holes"), "{err}");
+    assert!(err.contains("`compensate_holes`"), "{err}");
     // Given the flag, a G91 series in the zone is refused without suggesting it again.
     let g91 = "G21 G90 G17\nG0 X0 Y0 Z10\nG91 G99 G81 X10 Y5 Z-11 R-8 F100\n";
     let err = run(g91, true).unwrap_err();
@@ -93,7 +93,7 @@ fn holes_in_the_zone_are_refused_without_the_flag_and_with_g91() {
         err.contains("h.ngc:3") && err.contains("under G91"),
         "{err}"
     );
-    assert!(!err.contains("--compensate-holes"), "{err}");
+    assert!(!err.contains("`compensate_holes`"), "{err}");
     // A through hole: from R2 to Z−5 through the zone [−2, 0], its bottom below it.
     let through = "G21 G90 G17\nG0 X0 Y0 Z10\nG98 G81 X10 Y5 Z-5 R2 F100\n";
     let err = run(through, true).unwrap_err();
@@ -339,7 +339,7 @@ fn klartext_cycle_1_holes_in_the_zone_are_refused_without_the_flag() {
         err.contains("block 9: `M99` drills a hole of cycle 1 PECKING (block 3, line 4) whose bottom Z-10.0000 lies in the compensation zone, at X+10.0000 Y+5.0000"),
         "{err}"
     );
-    assert!(err.contains("--compensate-holes"), "{err}");
+    assert!(err.contains("`compensate_holes`"), "{err}");
     // DEPTH given by a parameter: the bottom is unknown.
     let q = PECKING.replace("DEPTH-10.000", "DEPTH Q5");
     let err = klartext(&q, &Tilted, true).unwrap_err();
@@ -491,11 +491,11 @@ fn sinumerik_cycles_in_the_zone_are_refused_where_errmap_cannot_be_exact() {
         err.contains("CYCLE81: the hole at X10 Y5 ends at Z-1 in the compensation zone"),
         "{err}"
     );
-    assert!(err.contains("--compensate-holes"), "{err}");
+    assert!(err.contains("`compensate_holes`"), "{err}");
     let refused = |text: &str, phrase: &str| {
         let err = sinumerik(text, true).unwrap_err();
         assert!(err.contains(phrase), "{phrase}: {err}");
-        assert!(!err.contains("pass --compensate-holes"), "{err}");
+        assert!(!err.contains("pass `compensate_holes`"), "{err}");
     };
     let head = "G17 G90 G71\nG0 X10 Y5 Z10\n";
     // A parameter that is not a number.
@@ -601,5 +601,5 @@ M30
     let err = compensate_gcode(text, Path::new("h.mpf"), &Tilted, &s)
         .unwrap_err()
         .to_string();
-    assert!(err.contains("--expand"), "{err}");
+    assert!(err.contains("`expand`"), "{err}");
 }

@@ -117,7 +117,7 @@ fn while_loop_with_variables_is_run_and_compensated() {
 #[test]
 fn without_expand_the_refusal_names_the_flag_and_the_original_line() {
     let msg = refuse(WHILE_LOOP, &settings(false));
-    assert_msg(&msg, &["t.nc:7", "--expand"]);
+    assert_msg(&msg, &["t.nc:7", "`expand`"]);
 }
 
 #[test]
@@ -222,7 +222,7 @@ M30
 ";
     let msg = refuse(text, &settings(true));
     assert_msg(&msg, &["t.nc:4", "#5021 is a system variable", "positions"]);
-    assert!(!msg.contains("--expand"), "{msg}");
+    assert!(!msg.contains("`expand`"), "{msg}");
 }
 
 #[test]
@@ -287,7 +287,7 @@ END1
 M30
 ";
     let msg = refuse(text, &settings(true));
-    assert_msg(&msg, &["t.nc:6", "output limit of 1 MB", "--max-output-mb"]);
+    assert_msg(&msg, &["t.nc:6", "output limit of 1 MB", "`max_output_mb`"]);
 }
 
 #[test]
@@ -335,7 +335,7 @@ fn corpus_sub_before_main_is_run() {
         ..settings(expand)
     };
     let msg = refuse(&text, &s(false));
-    assert_msg(&msg, &["--expand"]);
+    assert_msg(&msg, &["`expand`"]);
     let out = run(&text, &s(true));
     assert!(!out.contains("M98") && !out.contains("M99"), "{out}");
     // The plunge to Z-10 at X-50: −10 − E(−50) = −10 + 0.04 = −9.96.
@@ -528,7 +528,7 @@ fn linuxcnc_refusals_name_the_parameter_or_subroutine_and_the_line() {
     // Without --expand the same loop is refused with the flag in the hint.
     let fine = "G21 G90\nG0 X0 Y0 Z5\no1 repeat [2]\nG1 X1 Y0 Z-1 F100\no1 endrepeat\nM2\n";
     let msg = refuse_ngc(fine, &CompensationSettings { expand: false, ..s });
-    assert_msg(&msg, &["t.ngc:4", "--expand"]);
+    assert_msg(&msg, &["t.ngc:4", "`expand`"]);
 }
 
 fn refuse_ngc(text: &str, s: &CompensationSettings) -> String {
@@ -610,7 +610,7 @@ M30
 ";
     let started = std::time::Instant::now();
     let msg = refuse(text, &settings(false));
-    assert_msg(&msg, &["t.nc:7", "--expand"]);
+    assert_msg(&msg, &["t.nc:7", "`expand`"]);
     assert!(
         started.elapsed().as_secs_f64() < 1.0,
         "{:?}",
@@ -896,7 +896,7 @@ M30
 fn sinumerik_without_expand_the_refusal_names_the_flag() {
     let text = "G71 G90 G17\nR1=0\nG0 X0 Y0 Z5\nLAB1:\nR1=R1+1\nG1 X=R1 Z-1 F100\nIF R1<3 GOTOB LAB1\nM30\n";
     let msg = sin_refuse(text, &sin_settings(false));
-    assert_msg(&msg, &["t.mpf:", "--expand"]);
+    assert_msg(&msg, &["t.mpf:", "`expand`"]);
 }
 
 #[test]
@@ -978,7 +978,7 @@ fn sinumerik_the_flattened_program_stops_at_the_output_limit() {
     let msg = sin_refuse(text, &sin_settings(true));
     assert_msg(
         &msg,
-        &["t.mpf:5", "output limit of 1 MB", "--max-output-mb"],
+        &["t.mpf:5", "output limit of 1 MB", "`max_output_mb`"],
     );
 }
 

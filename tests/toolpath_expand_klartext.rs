@@ -157,7 +157,7 @@ fn a_section_repeat_runs_the_section_once_more_than_rep() {
 #[test]
 fn without_expand_the_refusal_offers_the_flag_and_names_the_label() {
     let msg = refuse_with(SECTION_REPEAT, &settings(false));
-    assert_msg(&msg, &["t.h:9", "LBL 1", "--expand"]);
+    assert_msg(&msg, &["t.h:9", "LBL 1", "`expand`"]);
 }
 
 const SUBPROGRAM: &str = "0 BEGIN PGM SUB MM
@@ -447,7 +447,7 @@ fn cycles_inside_labels_compensate_holes_as_outside() {
     let out = judged(text, &holes);
     assert!(out.contains("Q203=-0.02"), "{out}");
     let msg = refuse_with(text, &settings(true));
-    assert_msg(&msg, &["t.h:16", "--compensate-holes"]);
+    assert_msg(&msg, &["t.h:16", "`compensate_holes`"]);
 }
 
 #[test]
@@ -501,7 +501,7 @@ fn the_flattened_program_stops_at_the_output_limit() {
 7 END PGM BIG MM
 ";
     let msg = refuse(text);
-    assert_msg(&msg, &["t.h:", "output limit of 1 MB", "--max-output-mb"]);
+    assert_msg(&msg, &["t.h:", "output limit of 1 MB", "`max_output_mb`"]);
 }
 
 #[test]

@@ -268,7 +268,7 @@ fn begin_pgm_inch_gives_inches() {
         ..s
     };
     let msg = refuse_with(text, &s_mm);
-    assert_msg(&msg, &["k.h:1", "INCH", "--units"]);
+    assert_msg(&msg, &["k.h:1", "INCH", "`units`"]);
 }
 
 #[test]
@@ -358,7 +358,7 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
         ("2 L X+0 Y+0 Z+20 FMAX\n3 L X+10 F100\n4 CHF 2\n5 L Y+10 Z-1\n", &["k.h:5", "CHF 2", "line 6"]),
         ("2 L X+10 F100\n3 CT X+20 Y+10\n", &["k.h:4", "CT", "CC + C"]),
         ("2 L X+0 Y+0 Z+20 FMAX\n3 CT X+20 Y+10 Z-1\n", &["k.h:4", "CT"]),
-        ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "--expand"]),
+        ("2 LBL 1\n3 L X+0 Y+0 Z-1 R0 FMAX\n4 L X+10 F100\n5 LBL 0\n", &["k.h:5", "LBL 1", "`expand`"]),
         ("2 CALL LBL 1 REP 2\n3 L X+10 F100\n4 M30\n5 LBL 1\n6 L IX+1 F100\n7 LBL 0\n", &["k.h:4", "block 3:", "unknown since block 2, line 3"]),
         ("2 L X+Q1 F100\n", &["k.h:3", "X+Q1", "Q parameter Q1"]),
         ("2 CYCL DEF 7.0 DATUM SHIFT\n3 CYCL DEF 7.1 Z+Q12\n4 L X+0 Y+0 Z-1 R0 FMAX\n5 L X+10 F100\n", &["k.h:6", "Z+Q12", "Q parameter", "FN18"]),
@@ -417,7 +417,7 @@ fn every_refusal_in_the_table_is_triggered_with_its_message() {
     );
     // No BEGIN PGM and no --units: the first cut is refused, at any height.
     let msg = refuse("1 L X+0 Y+0 Z+50 R0 FMAX\n2 L X+10 F100\n");
-    assert_msg(&msg, &["k.h:2", "BEGIN PGM", "--units"]);
+    assert_msg(&msg, &["k.h:2", "BEGIN PGM", "`units`"]);
     let s = CompensationSettings {
         units: Some(Units::Mm),
         dialect: Some(Dialect::Heidenhain),
@@ -890,7 +890,7 @@ fn drilling_cycle_holes_in_the_zone_are_refused_or_drilled_from_a_surface_moved_
             "M99",
             "cycle 200",
             "Z-5.0000",
-            "--compensate-holes",
+            "`compensate_holes`",
             "Q203",
         ],
     );
@@ -1057,7 +1057,7 @@ fn the_first_preset_of_cycle_247_is_the_map_frame_and_another_is_refused() {
         "6 L X+0 Y+0 Z+50 R0 FMAX",
         "6 L X+0 Y+0 Z-1 R0 FMAX\n6 L X+5 F100",
     );
-    assert_msg(&refuse_with(&two, &s), &["--same-part-per-offset"]);
+    assert_msg(&refuse_with(&two, &s), &["`same_part_per_offset`"]);
     let same = CompensationSettings {
         same_part_per_offset: true,
         ..s

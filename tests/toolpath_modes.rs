@@ -280,7 +280,7 @@ fn axis_words_before_any_motion_word_are_refused_or_read_in_the_power_on_mode() 
             .to_string();
         assert!(err.contains(param), "{dialect:?}: {err}");
         assert!(
-            err.contains("--power-on-motion g0|g1"),
+            err.contains("`power_on_motion` g0|g1"),
             "{dialect:?}: {err}"
         );
         // As G0 the block positions the tool, and X10 is then a compensated cut.
@@ -304,7 +304,7 @@ fn axis_words_before_any_motion_word_are_refused_or_read_in_the_power_on_mode() 
             .unwrap_err()
             .to_string();
         assert!(err.contains("start point of this move is unknown"), "{err}");
-        assert!(!err.contains("--power-on-motion"), "{err}");
+        assert!(!err.contains("`power_on_motion`"), "{err}");
     }
 }
 

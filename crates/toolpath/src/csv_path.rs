@@ -9,10 +9,12 @@
 
 use super::gcode::{emit_points, format_coord};
 use super::{CompensationReport, CompensationSettings};
+use crate::setting::Setting;
 use crate::CompensateError;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
 use errmap_core::io::{CsvRow, CsvTable};
+use errmap_core::setting::words;
 use std::path::Path;
 
 const COLUMNS: [&str; 3] = ["x_mm", "y_mm", "z_mm"];
@@ -199,7 +201,10 @@ impl Rows<'_> {
                 return Err(Error::input(
                     Location::line(self.source, line),
                     format!("the move to this row ({len:.6e} mm) would need more than a million segments"),
-                    "check the coordinates and units, or raise --max-segment",
+                    format!(
+                        "check the coordinates and units, or raise {}",
+                        words(Setting::MaxSegment)
+                    ),
                 ));
             }
         }

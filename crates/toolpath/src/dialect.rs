@@ -7,7 +7,9 @@
 //! 10 µm on a Fanuc in increment input), otherwise errmap asks for `--dialect`.
 
 use crate::error::DialectError;
+use crate::setting::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -434,7 +436,7 @@ pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dial
                 format!(
                     "cannot tell the controller dialect: `{w}` has no decimal point (whole mm or inches on LinuxCNC or Sinumerik, least input increments, e.g. 0.001 mm, on a Fanuc in increment input) and the program has nothing only one dialect has"
                 ),
-                "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
+                dialect_hint(),
             ))),
         },
         many => {
@@ -448,10 +450,18 @@ pub fn resolve(text: &str, source: &Path, given: Option<Dialect>) -> Result<Dial
                     "cannot tell the controller dialect: the program has constructs of {}",
                     list.join(" and ")
                 ),
-                "pass --dialect linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
+                dialect_hint(),
             )))
         }
     }
+}
+
+/// The hint of a program whose dialect errmap cannot tell: give it.
+fn dialect_hint() -> String {
+    format!(
+        "pass {} linuxcnc|fanuc|sinumerik|heidenhain (job key [toolpaths] dialect)",
+        words(Setting::Dialect)
+    )
 }
 
 /// `"7 (X10)"`: the 1-based character column of `word` on `line` (1 if not found), and the word.
@@ -742,7 +752,7 @@ mod tests {
         );
         let e = detect("G21 G90\nG1 X1.5 Y80000\n").unwrap_err().to_string();
         assert!(
-            e.contains("t.nc:2") && e.contains("Y80000") && e.contains("--dialect"),
+            e.contains("t.nc:2") && e.contains("Y80000") && e.contains("`dialect`"),
             "{e}"
         );
         // Zero means the same everywhere.

@@ -123,7 +123,7 @@ struct Unfollowed {
     key: Holds,
     word: String,
     why: String,
-    hint: &'static str,
+    hint: std::borrow::Cow<'static, str>,
 }
 
 /// An open O-word block (`if`, `while`, `do`, `repeat`) at the top level.

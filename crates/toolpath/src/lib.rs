@@ -40,6 +40,7 @@ pub use setting::Setting;
 
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
+use errmap_core::setting::words;
 use serde::Serialize;
 use std::path::Path;
 
@@ -117,7 +118,10 @@ impl CompensationSettings {
                     "maximum segment length must be at least {MIN_SEGMENT_MM} mm, got {}",
                     self.max_segment
                 ),
-                "use e.g. --max-segment 5 (shorter segments only grow the program)",
+                format!(
+                    "use e.g. {} 5 (shorter segments only grow the program)",
+                    words(Setting::MaxSegment)
+                ),
             )));
         }
         if !(self.chord_tol.is_finite() && self.chord_tol > 0.0) {
@@ -126,7 +130,7 @@ impl CompensationSettings {
                     "chord tolerance must be a positive number of mm, got {}",
                     self.chord_tol
                 ),
-                "use e.g. --chord-tol 0.005",
+                format!("use e.g. {} 0.005", words(Setting::ChordTol)),
             )));
         }
         if !(self.surface_tol_mm.is_finite() && self.surface_tol_mm >= 0.0) {
@@ -135,7 +139,7 @@ impl CompensationSettings {
                     "surface tolerance must be a non-negative number of mm, got {}",
                     self.surface_tol_mm
                 ),
-                "use e.g. --surface-tol 0.5",
+                format!("use e.g. {} 0.5", words(Setting::SurfaceTol)),
             )));
         }
         if !(self.domain_margin_mm.is_finite() && self.domain_margin_mm >= 0.0) {
@@ -151,7 +155,10 @@ impl CompensationSettings {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
                 return Err(SettingsError::Range(Error::usage(
                     format!("zone must be MIN,MAX with MIN ≤ MAX, got {lo},{hi}"),
-                    "use e.g. --zone -5,0 (program units, along the map's normal axis)",
+                    format!(
+                        "use e.g. {} -5,0 (program units, along the map's normal axis)",
+                        words(Setting::Zone)
+                    ),
                 )));
             }
         }
@@ -187,7 +194,10 @@ pub(crate) fn default_zone_mm(
         return Err(CompensateError::Uncovered(Error::input(
             Location::file(source),
             "the map does not record its measured domain (a model.json from an older errmap), so errmap cannot keep compensation inside the probed area",
-            "refit the map with this version of errmap, or pass --extrapolate to compensate wherever the map is defined",
+            format!(
+                "refit the map with this version of errmap, or pass {} to compensate wherever the map is defined",
+                words(Setting::Extrapolate)
+            ),
         )));
     }
     match (settings.zone, field.surface_mm()) {
@@ -199,8 +209,14 @@ pub(crate) fn default_zone_mm(
         ))),
         (None, None) => Err(CompensateError::Uncovered(Error::input(
             Location::file(source),
-            "no compensation zone: the map does not record its probed surface and no --zone was given",
-            "pass --zone MIN,MAX (program units along the map's normal axis; job key [toolpaths] zone), or --zone all (job key zone_all) to compensate at every height, or refit the map",
+            format!(
+                "no compensation zone: the map does not record its probed surface and no {} was given",
+                words(Setting::Zone)
+            ),
+            format!(
+                "pass {zone} MIN,MAX (program units along the map's normal axis; job key [toolpaths] zone), or {zone} all (job key zone_all) to compensate at every height, or refit the map",
+                zone = words(Setting::Zone)
+            ),
         ))),
     }
 }
@@ -217,7 +233,12 @@ pub(crate) fn check_output_size(source: &Path, line: u64, bytes: usize) -> Resul
                 "the compensated toolpath would exceed the output limit of {} MB by this line",
                 limit / 1_000_000
             ),
-            "check arc turn counts (P) and move lengths, raise --max-segment / --chord-tol, or raise --max-output-mb",
+            format!(
+                "check arc turn counts (P) and move lengths, raise {} / {}, or raise {}",
+                words(Setting::MaxSegment),
+                words(Setting::ChordTol),
+                words(Setting::MaxOutputMb)
+            ),
         ));
     }
     Ok(())
@@ -269,13 +290,14 @@ impl CompensationReport {
     /// The one-line summary the CLI prints.
     pub fn summary_line(&self) -> String {
         format!(
-            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} moves kept nominal outside the measured domain, {} where u(E) > --max-uncertainty-um, {} lines in, {} out)",
+            "{} moves changed, {} split, max |E| applied {:.4} mm ({} points compensated, {} moves kept nominal outside the measured domain, {} where u(E) > {}, {} lines in, {} out)",
             self.moves_changed,
             self.moves_split,
             self.max_abs_error_mm,
             self.points_compensated,
             self.moves_outside_domain,
             self.moves_uncertain,
+            words(Setting::MaxUncertaintyUm),
             self.lines_in,
             self.lines_out
         )

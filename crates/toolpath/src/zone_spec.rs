@@ -3,7 +3,9 @@
 
 use super::{CompensationSettings, Dialect, FanucNumbers, PowerOnMotion, Units};
 use crate::error::SettingsError;
+use crate::setting::Setting;
 use errmap_core::error::Error;
+use errmap_core::setting::words;
 
 type Result<T, E = SettingsError> = std::result::Result<T, E>;
 
@@ -33,8 +35,11 @@ impl ZoneSpec {
 pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
     let bad = || {
         SettingsError::Zone(Error::usage(
-            format!("--zone '{text}' is not MIN,MAX"),
-            "give two numbers in program units, e.g. --zone -5,0 (or --zone all)",
+            format!("{} '{text}' is not MIN,MAX", words(Setting::Zone)),
+            format!(
+                "give two numbers in program units, e.g. {zone} -5,0 (or {zone} all)",
+                zone = words(Setting::Zone)
+            ),
         ))
     };
     let (a, b) = text.split_once(',').ok_or_else(bad)?;
@@ -45,7 +50,7 @@ pub fn parse_zone(text: &str) -> Result<(f64, f64)> {
 
 /// Parse an enumerated flag value, or a usage error listing the choices.
 fn choice<T>(
-    flag: &str,
+    setting: Setting,
     text: Option<&str>,
     parse: fn(&str) -> Option<T>,
     choices: &str,
@@ -53,8 +58,8 @@ fn choice<T>(
     text.map(|t| {
         parse(t).ok_or_else(|| {
             SettingsError::Choice(Error::usage(
-                format!("--{flag} '{t}' is not one of {choices}"),
-                format!("use --{flag} with one of {choices}"),
+                format!("{} '{t}' is not one of {choices}", words(setting)),
+                format!("use {} with one of {choices}", words(setting)),
             ))
         })
     })
@@ -108,14 +113,14 @@ impl SettingsText<'_> {
             max_segment: self.max_segment_mm,
             chord_tol: self.chord_tol_mm,
             dialect: choice(
-                "dialect",
+                Setting::Dialect,
                 self.dialect,
                 Dialect::parse,
                 "linuxcnc, fanuc, sinumerik, heidenhain",
             )?,
-            units: choice("units", self.units, Units::parse, "mm, inch")?,
+            units: choice(Setting::Units, self.units, Units::parse, "mm, inch")?,
             fanuc_numbers: choice(
-                "fanuc-numbers",
+                Setting::FanucNumbers,
                 self.fanuc_numbers,
                 FanucNumbers::parse,
                 "calculator, is-a, is-b, is-c",
@@ -123,7 +128,7 @@ impl SettingsText<'_> {
             extrapolate: self.extrapolate,
             domain_margin_mm: self.domain_margin_mm,
             power_on_motion: choice(
-                "power-on-motion",
+                Setting::PowerOnMotion,
                 self.power_on_motion,
                 PowerOnMotion::parse,
                 "g0, g1",
@@ -154,7 +159,7 @@ mod tests {
             assert!(matches!(err, SettingsError::Zone(_)), "{bad}");
             assert!(
                 err.to_string()
-                    .contains(&format!("--zone '{bad}' is not MIN,MAX")),
+                    .contains(&format!("`zone` '{bad}' is not MIN,MAX")),
                 "{err}"
             );
         }
@@ -173,7 +178,7 @@ mod tests {
         assert!(matches!(err, SettingsError::Choice(_)), "{err}");
         assert!(
             err.to_string()
-                .contains("--dialect 'mazak' is not one of linuxcnc, fanuc, sinumerik, heidenhain"),
+                .contains("`dialect` 'mazak' is not one of linuxcnc, fanuc, sinumerik, heidenhain"),
             "{err}"
         );
         let ok = SettingsText {

@@ -98,7 +98,7 @@ fn fanuc_decimal_less_numbers_are_increments_or_refused() {
     let msg = refuse(text, &f, &settings(Dialect::Fanuc));
     assert_msg(
         &msg,
-        &["t.nc:4, column 5 (Y80000)", "--fanuc-numbers", "0.001"],
+        &["t.nc:4, column 5 (Y80000)", "`fanuc_numbers`", "0.001"],
     );
     let s = CompensationSettings {
         fanuc_numbers: Some(FanucNumbers::IsB),
@@ -125,7 +125,7 @@ fn fanuc_decimal_less_numbers_are_increments_or_refused() {
             ..settings(Dialect::Fanuc)
         },
     );
-    assert_msg(&msg, &["Y80000", "--fanuc-numbers"]);
+    assert_msg(&msg, &["Y80000", "`fanuc_numbers`"]);
 }
 
 #[test]
@@ -234,7 +234,7 @@ fn a_program_without_unit_codes_is_refused_unless_units_are_given() {
     let msg = refuse(text, &f, &settings(Dialect::Linuxcnc));
     assert_msg(
         &msg,
-        &["t.nc:3, column 1 (G1)", "G20/G21", "--units mm|inch"],
+        &["t.nc:3, column 1 (G1)", "G20/G21", "`units` mm|inch"],
     );
     let s = CompensationSettings {
         units: Some(Units::Inch),
@@ -461,7 +461,7 @@ fn points_outside_the_measured_domain_keep_their_nominal_values() {
         ..field()
     };
     let msg = refuse(text, &old, &settings(Dialect::Linuxcnc));
-    assert_msg(&msg, &["measured domain", "--extrapolate"]);
+    assert_msg(&msg, &["measured domain", "`extrapolate`"]);
 }
 
 #[test]
@@ -484,7 +484,7 @@ fn without_a_zone_only_the_probed_surface_band_is_compensated() {
     let msg = refuse(text, &field(), &s);
     assert_msg(
         &msg,
-        &["no compensation zone", "--zone MIN,MAX", "--zone all"],
+        &["no compensation zone", "`zone` MIN,MAX", "`zone` all"],
     );
 }
 

@@ -80,7 +80,7 @@ fn a_second_offset_is_refused_in_the_zone_without_the_flag() {
         err.contains("`G55` (line 6) selects a work offset other than the program's first (G54)"),
         "{err}"
     );
-    assert!(err.contains("--same-part-per-offset"), "{err}");
+    assert!(err.contains("`same_part_per_offset`"), "{err}");
     // Fanuc G54.1 P1 and P2 are two offsets, not one.
     let fanuc = "O1\nG21 G90 G17\nG54.1 P1\nG0 X10. Y5. Z5.\nG54.1 P2\nG0 X10. Y5. Z5.\nG1 Z-1. F100.\nM30\n";
     let err = run(fanuc, Dialect::Fanuc, false).unwrap_err();
@@ -141,7 +141,7 @@ fn labels_variables_and_hints_read_as_a_machinist_names_them() {
     let text = "G21 G90 G17\n#<z>=-1\nG0 X10 Y5 Z5\nG1 Z#<z> F100\n";
     let err = run(text, Dialect::Linuxcnc, false).unwrap_err();
     assert!(
-        err.contains("`Z#<z>` reads the variable #<z>") && err.contains("--expand"),
+        err.contains("`Z#<z>` reads the variable #<z>") && err.contains("`expand`"),
         "{err}"
     );
     let text = "G71 G90 G17\nR1=-1\nG0 X10 Y5 Z5\nG1 Z=R1+0 F100\n";
@@ -150,7 +150,7 @@ fn labels_variables_and_hints_read_as_a_machinist_names_them() {
     // The dialect was given: the hint does not ask for it again.
     let err = run("G21 G90\nG0 X0 Y0 Z5 E1\n", Dialect::Linuxcnc, false).unwrap_err();
     assert!(
-        err.contains("E is not a LinuxCNC word") && !err.contains("--dialect"),
+        err.contains("E is not a LinuxCNC word") && !err.contains("`dialect`"),
         "{err}"
     );
 }

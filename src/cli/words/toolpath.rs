@@ -5,12 +5,40 @@ use std::any::Any;
 
 /// Every toolpath setting, for the test that each is a flag.
 #[cfg(test)]
-pub const ALL: &[Setting] = &[Setting::Units];
+pub const ALL: &[Setting] = &[
+    Setting::Units,
+    Setting::Dialect,
+    Setting::Expand,
+    Setting::PowerOnMotion,
+    Setting::SamePartPerOffset,
+    Setting::MaxSegment,
+    Setting::ChordTol,
+    Setting::SurfaceTol,
+    Setting::MaxOutputMb,
+    Setting::Zone,
+    Setting::CompensateHoles,
+    Setting::FanucNumbers,
+    Setting::Extrapolate,
+    Setting::MaxUncertaintyUm,
+];
 
 /// The flag of a toolpath setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {
         Setting::Units => "--units",
+        Setting::Dialect => "--dialect",
+        Setting::Expand => "--expand",
+        Setting::PowerOnMotion => "--power-on-motion",
+        Setting::SamePartPerOffset => "--same-part-per-offset",
+        Setting::MaxSegment => "--max-segment",
+        Setting::ChordTol => "--chord-tol",
+        Setting::SurfaceTol => "--surface-tol",
+        Setting::MaxOutputMb => "--max-output-mb",
+        Setting::Zone => "--zone",
+        Setting::CompensateHoles => "--compensate-holes",
+        Setting::FanucNumbers => "--fanuc-numbers",
+        Setting::Extrapolate => "--extrapolate",
+        Setting::MaxUncertaintyUm => "--max-uncertainty-um",
     }
 }
 

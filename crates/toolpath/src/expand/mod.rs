@@ -13,7 +13,9 @@ mod linuxcnc;
 mod sinumerik;
 
 use super::dialect::Dialect;
+use crate::setting::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use std::path::Path;
 
 /// Most backward jumps (loop turns, repeats, jumps back) one program may make; more is taken
@@ -38,8 +40,19 @@ pub(crate) const MAX_CALL_DEPTH: usize = 16;
 /// does not know the value.
 const Q_UNKNOWN: &str = "errmap does not compute Q parameters";
 
-/// The hint given where the ordinary rewrite refuses control flow that `--expand` can run.
-pub(crate) const HINT: &str = "pass --expand to run the program's subprograms, loops and parameters as the controller would and compensate the flattened program (job key [toolpaths] expand), or move the zone away";
+/// The hint given where the ordinary rewrite refuses control flow that the expanding run
+/// ([`Setting::Expand`]) can run.
+pub(crate) fn hint() -> String {
+    format!(
+        "pass {} to run the program's subprograms, loops and parameters as the controller would and compensate the flattened program (job key [toolpaths] expand), or move the zone away",
+        expand_words()
+    )
+}
+
+/// The words for the expanding run ([`Setting::Expand`]) in messages that say what it runs.
+pub(crate) fn expand_words() -> String {
+    words(Setting::Expand)
+}
 
 /// A straight-line program and, for each of its lines, where it came from.
 #[derive(Debug, Default)]
@@ -95,7 +108,7 @@ impl Flat {
                     limit / 1_000_000,
                     self.calls(chain)
                 ),
-                "check the loop counts, or raise --max-output-mb",
+                format!("check the loop counts, or raise {}", words(Setting::MaxOutputMb)),
             ));
         }
         Ok(())
@@ -279,7 +292,7 @@ pub(crate) fn compensate_flat<T>(
     compensate(&flat.text).map_err(|e| e.map_diagnostic(|d| flat.map_error(text, d)))
 }
 
-/// A plain-rewrite refusal with its hint replaced by [`HINT`] (the program would compensate
+/// A plain-rewrite refusal with its hint replaced by [`hint`] (the program would compensate
 /// with `--expand`).
 pub(crate) fn with_hint(e: Error) -> Error {
     match e {
@@ -288,7 +301,7 @@ pub(crate) fn with_hint(e: Error) -> Error {
         } => Error::Input {
             location,
             message,
-            hint: HINT.to_string(),
+            hint: hint(),
         },
         e => e,
     }

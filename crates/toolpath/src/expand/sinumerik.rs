@@ -12,7 +12,7 @@
 
 mod expr;
 
-use super::{format_value, Flat, MAX_CALL_DEPTH, MAX_ITERATIONS};
+use super::{expand_words, format_value, Flat, MAX_CALL_DEPTH, MAX_ITERATIONS};
 use errmap_core::error::{Error, Location, Result};
 use expr::{Env, X};
 use std::collections::HashMap;
@@ -399,7 +399,7 @@ fn def(rest: &str) -> std::result::Result<Stmt, Bad> {
         _ => {
             return Err(bad(
                 "DEF",
-                format!("`DEF {rest}`: variables of type {ty} are not run by errmap's --expand (REAL, INT and BOOL are)"),
+                format!("`DEF {rest}`: variables of type {ty} are not run by errmap's {expand} (REAL, INT and BOOL are)", expand = expand_words()),
                 "use REAL, INT or BOOL variables, or move the zone away",
             ))
         }
@@ -425,7 +425,10 @@ fn def(rest: &str) -> std::result::Result<Stmt, Bad> {
             };
             return Err(bad(
                 size.map_or(array, |d| d.trim()),
-                format!("`DEF {rest}`: arrays are not run by errmap's --expand{why}"),
+                format!(
+                    "`DEF {rest}`: arrays are not run by errmap's {expand}{why}",
+                    expand = expand_words()
+                ),
                 "use single variables, or move the zone away",
             ));
         }
@@ -628,7 +631,7 @@ fn compile(
         "RET" if rest_t.is_empty() => Ok(Stmt::Ret),
         "CASE" | "ENDPROC" | "EXTERN" | "GOTOS" | "ENDLABEL" | "SETDEF" | "SAVE" => Err(bad(
             &kw,
-            format!("`{body}`: errmap's --expand does not run {kw}"),
+            format!("`{body}`: errmap's {expand} does not run {kw}", expand = expand_words()),
             "write the program with IF/GOTO or loops, or move the zone away",
         )),
         // A modal call of a standard cycle (`MCALL CYCLE81(…)`) or its end (bare `MCALL`) is
@@ -643,7 +646,7 @@ fn compile(
         }
         "CALL" | "PCALL" | "EXTCALL" | "MCALL" if quoted_proc(rest_t, procs).is_some() || procs.contains_key(&upper_word(rest_t).0) => Err(bad(
             &kw,
-            format!("`{body}`: errmap's --expand does not run {kw} of a subprogram (it runs a call of a PROC of this file written `NAME(…)` or `CALL \"NAME\"` on a block of its own)"),
+            format!("`{body}`: errmap's {expand} does not run {kw} of a subprogram (it runs a call of a PROC of this file written `NAME(…)` or `CALL \"NAME\"` on a block of its own)", expand = expand_words()),
             "call the subprogram by its name on a block of its own, or move the zone away",
         )),
         "CALL" | "PCALL" | "EXTCALL" | "MCALL" => Err(bad(
@@ -750,7 +753,10 @@ fn proc_params(name: &str, rest: &str) -> std::result::Result<Vec<(String, Kind)
         if !w.is_empty() && !["DISPLOF", "DISPLON", "SBLOF"].contains(&w.as_str()) {
             return Err(bad(
                 &w,
-                format!("`{head}`: errmap's --expand does not run a PROC with {w}"),
+                format!(
+                    "`{head}`: errmap's {expand} does not run a PROC with {w}",
+                    expand = expand_words()
+                ),
                 "remove it from the PROC line, or move the zone away",
             ));
         }
@@ -767,7 +773,7 @@ fn proc_params(name: &str, rest: &str) -> std::result::Result<Vec<(String, Kind)
         if words.first().map(String::as_str) == Some("VAR") {
             return Err(bad(
                 "VAR",
-                format!("`{head}`: `{}` is a call-by-reference parameter (VAR), which errmap's --expand does not run", part.trim()),
+                format!("`{head}`: `{}` is a call-by-reference parameter (VAR), which errmap's {expand} does not run", part.trim(), expand = expand_words()),
                 "pass the value by value (without VAR) and return results in R parameters, or move the zone away",
             ));
         }
@@ -778,7 +784,7 @@ fn proc_params(name: &str, rest: &str) -> std::result::Result<Vec<(String, Kind)
             _ => {
                 return Err(bad(
                     "PROC",
-                    format!("`{head}`: the parameter `{}` is not of type REAL, INT or BOOL, which errmap's --expand runs", part.trim()),
+                    format!("`{head}`: the parameter `{}` is not of type REAL, INT or BOOL, which errmap's {expand} runs", part.trim(), expand = expand_words()),
                     "use REAL, INT or BOOL parameters, or move the zone away",
                 ))
             }
@@ -792,8 +798,9 @@ fn proc_params(name: &str, rest: &str) -> std::result::Result<Vec<(String, Kind)
             return Err(bad(
                 "PROC",
                 format!(
-                    "`{head}`: `{}` is not a parameter errmap's --expand runs (arrays are not)",
-                    part.trim()
+                    "`{head}`: `{}` is not a parameter errmap's {expand} runs (arrays are not)",
+                    part.trim(),
+                    expand = expand_words()
                 ),
                 "use single REAL, INT or BOOL parameters, or move the zone away",
             ));
@@ -866,7 +873,10 @@ fn items(
                 if index.is_some() {
                     return Err(bad(
                         name,
-                        format!("`{item_text}`: arrays are not run by errmap's --expand"),
+                        format!(
+                            "`{item_text}`: arrays are not run by errmap's {expand}",
+                            expand = expand_words()
+                        ),
                         "use single variables, or move the zone away",
                     ));
                 }
@@ -1723,7 +1733,7 @@ impl Run<'_> {
             return Err(self.err(
                 pc,
                 name,
-                format!("`{content}` calls {name} while {name} runs (a recursive call), which errmap's --expand does not run"),
+                format!("`{content}` calls {name} while {name} runs (a recursive call), which errmap's {expand} does not run", expand = expand_words()),
                 "write the repetition as a loop, or move the zone away",
             ));
         }
@@ -1742,7 +1752,7 @@ impl Run<'_> {
                 return Err(self.err(
                     pc,
                     name,
-                    format!("`{content}` calls {name} without its parameter list, which errmap's --expand does not run"),
+                    format!("`{content}` calls {name} without its parameter list, which errmap's {expand} does not run", expand = expand_words()),
                     &format!("write the arguments, e.g. {name}(…), or move the zone away"),
                 ))
             }
@@ -1816,7 +1826,7 @@ impl Run<'_> {
                 return Err(self.err(
                     pc,
                     w,
-                    format!("`{}` ends the program inside a subprogram, which errmap's --expand does not run (whether it returns or ends is not confirmed in the manual)", text.trim()),
+                    format!("`{}` ends the program inside a subprogram, which errmap's {expand} does not run (whether it returns or ends is not confirmed in the manual)", text.trim(), expand = expand_words()),
                     "end the subprogram with M17 or RET, or move the zone away",
                 ));
             }

@@ -11,6 +11,7 @@ use super::super::arc::Arc;
 use super::super::dialect::Motion;
 use super::super::lexer::{Line, TokenKind};
 use super::{lerp, MotionMode, Rewriter, AXES, W};
+use crate::setting::Setting;
 use errmap_core::error::{Error, Result};
 
 /// How a cut relates to cutter radius compensation.
@@ -104,8 +105,8 @@ impl<'a> Rewriter<'a> {
                 self.err(
                     line,
                     "X",
-                    "under cutter radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
-                    "raise --chord-tol, or post the arc as the tool-centre path (G40)",
+                    format!("under cutter radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within {} (the map bends too sharply along it)", errmap_core::setting::words(Setting::ChordTol)),
+                    &format!("raise {}, or post the arc as the tool-centre path (G40)", errmap_core::setting::words(Setting::ChordTol)),
                 )
             })?;
         }
@@ -116,7 +117,7 @@ impl<'a> Rewriter<'a> {
                     line,
                     &t,
                     format!("`{t}` changes the cutter offset on a move errmap must write as {} blocks under cutter radius compensation: the control would reach the new offset at the end of the first block, not of the move", pieces.len()),
-                    "give the D word on a block of its own before the contour, or raise --max-segment so the move stays one block",
+                    &format!("give the D word on a block of its own before the contour, or raise {} so the move stays one block", errmap_core::setting::words(Setting::MaxSegment)),
                 ));
             }
         }
@@ -206,8 +207,9 @@ impl<'a> Rewriter<'a> {
             let dev = (from + f * (to - from)) - (p[n] - e);
             if dev.abs() > tol {
                 return refuse(format!(
-                    "as one block it strays {:.4} from P − E (more than --chord-tol)",
-                    dev.abs()
+                    "as one block it strays {:.4} from P − E (more than {})",
+                    dev.abs(),
+                    errmap_core::setting::words(Setting::ChordTol)
                 ));
             }
         }

@@ -8,6 +8,7 @@
 use super::super::dialect::{Dialect, GCode};
 use super::super::lexer::{Line, TokenKind};
 use super::{Rewriter, AXES, W};
+use crate::setting::Setting;
 use errmap_core::error::Result;
 
 /// A series of canned cycles (from the first cycle block to G80 or another motion mode).
@@ -235,7 +236,7 @@ impl<'a> Rewriter<'a> {
                 line,
                 &name,
                 format!("canned cycle {name}: the hole at {}{} {}{} ends at {}{depth} in the compensation zone; errmap moves a hole's depth and R level by −E only when asked", AXES[u] as char, b[u], AXES[v] as char, b[v], AXES[n] as char),
-                "pass --compensate-holes (job key [toolpaths] compensate_holes) to move each hole's Z and R by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away",
+                &format!("pass {} (job key [toolpaths] compensate_holes) to move each hole's Z and R by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away", errmap_core::setting::words(Setting::CompensateHoles)),
             ));
         }
         Ok(match self.m.error_at(&b) {

@@ -3,6 +3,7 @@
 use super::super::dialect::{self, Dialect, Frame, GCode, G};
 use super::super::lexer::{Line, TokenKind, WordValue};
 use super::{Block, Rewriter, SubInfo, AXES, W};
+use crate::setting::Setting;
 use errmap_core::error::{Error, Location, Result};
 use std::collections::HashSet;
 use std::ops::Range;
@@ -73,12 +74,15 @@ pub(super) fn first_jump(text: &str, line: &Line, dialect: Dialect) -> Option<(u
 }
 
 impl<'a> Rewriter<'a> {
-    /// A hint, with "or pass the program's --dialect" unless the dialect was given.
+    /// A hint, with "or pass the program's" dialect setting unless the dialect was given.
     pub(super) fn or_dialect(&self, hint: &str) -> String {
         if self.m.settings.dialect.is_some() {
             hint.to_string()
         } else {
-            format!("{hint}, or pass the program's --dialect")
+            format!(
+                "{hint}, or pass the program's {}",
+                errmap_core::setting::words(Setting::Dialect)
+            )
         }
     }
 
@@ -137,7 +141,7 @@ impl<'a> Rewriter<'a> {
                 line,
                 t,
                 format!("`{t}` has no decimal point: a Fanuc reads it as {} mm with 0.001 mm increment input (parameter 3401#0 DPI = 0) but as {} mm with calculator-type input (DPI = 1)", first.value.unwrap_or(0.0) * 0.001, first.value.unwrap_or(0.0)),
-                "pass --fanuc-numbers is-b (or is-a, is-c) or --fanuc-numbers calculator as the machine is set (job key [toolpaths] fanuc_numbers)",
+                &format!("pass {numbers} is-b (or is-a, is-c) or {numbers} calculator as the machine is set (job key [toolpaths] fanuc_numbers)", numbers = errmap_core::setting::words(Setting::FanucNumbers)),
             ));
         };
         let unit = numbers.unit(self.m.inches);
@@ -735,7 +739,7 @@ impl<'a> Rewriter<'a> {
                     "comp" => "cutter compensation (G40/G41/G42)",
                     _ => "motion (G0/G1/G2/G3)",
                 }),
-                hint: "pass --expand to run the subroutine, or say the mode again after the call (e.g. G90, G21, G17, G1)",
+                hint: format!("pass {} to run the subroutine, or say the mode again after the call (e.g. G90, G21, G17, G1)", errmap_core::setting::words(Setting::Expand)).into(),
             });
         }
     }

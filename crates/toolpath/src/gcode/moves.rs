@@ -7,7 +7,9 @@ use super::super::TracedMove;
 use super::contour::CompMode;
 use super::emit::{emit_curve, Breaks};
 use super::{dist, lerp, MotionMode, Rewriter, AXES, W};
+use crate::setting::Setting;
 use errmap_core::error::{Error, Result};
+use std::borrow::Cow;
 
 /// The fewest bytes a segment line errmap writes can take: `G1 X0.0000 Y0.0000 Z0.0000` and a
 /// newline (every segment writes all three axes with at least four decimals).
@@ -18,7 +20,7 @@ type Point = [Option<f64>; 3];
 
 /// What stops a move from being compensated, when it may touch the zone: the word to point
 /// at, the message and the hint.
-type Refusal<'h> = (String, String, &'h str);
+type Refusal = (String, String, Cow<'static, str>);
 
 /// The words of a block that change its meaning beyond a plain X/Y/Z move.
 struct Move<'w> {
@@ -161,7 +163,7 @@ impl<'a> Rewriter<'a> {
                 .find(|u| u.key == super::Holds::Mode("motion"))
             {
                 let why = u.why.clone();
-                return Err(self.err(line, "X", why, u.hint));
+                return Err(self.err(line, "X", why, &u.hint));
             }
             self.motion = Some(self.power_on_motion(line, words)?);
             // The output powers on in the same mode.
@@ -189,7 +191,7 @@ impl<'a> Rewriter<'a> {
             }
         }
         if let Some((col, msg, hint)) = self.refusal(words, &mv) {
-            return Err(self.err(line, &col, msg, hint));
+            return Err(self.err(line, &col, msg, &hint));
         }
         if self.trace.is_some() {
             self.trace_move(line, words, &mv)?;
@@ -228,7 +230,7 @@ impl<'a> Rewriter<'a> {
                     key,
                     why: format!("axis {axis} stands away from 0 (`{word}`, line {}), where errmap takes the map to be measured: the part or the tool is moved, and this cut may lie in the compensation zone", line.number),
                     word,
-                    hint: "compensate the cuts of each rotary or parallel-axis position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away",
+                    hint: "compensate the cuts of each rotary or parallel-axis position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away".into(),
                 });
             }
         }
@@ -271,15 +273,15 @@ impl<'a> Rewriter<'a> {
         let t = self.wtext(l).to_string();
         // Never offer the flag the user already gave.
         let hint = if self.m.settings.expand {
-            "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file"
+            "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file".to_string()
         } else {
-            "post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file and pass --expand"
+            format!("post the program without Fadal subprograms and repeat counts (plain blocks), or rewrite them as M98 subprograms in the same file and pass {}", errmap_core::setting::words(Setting::Expand))
         };
         Err(self.err(
             line,
             &t,
             format!("`{t}`: a Fadal subprogram definition or call (L100, L101) or a repeat count on a move, which errmap does not follow"),
-            hint,
+            &hint,
         ))
     }
 
@@ -295,24 +297,24 @@ impl<'a> Rewriter<'a> {
         let (message, hint) = match (self.dialect, self.m.settings.power_on_motion) {
             (Dialect::Linuxcnc, _) => (
                 format!("`{at}`: axis words with no motion mode in force (no G0, G1, G2, G3 before them); LinuxCNC stops here: \"Cannot use axis values without a g code that uses them\""),
-                "add G0 or G1 to this block (or to one before it)",
+                "add G0 or G1 to this block (or to one before it)".to_string(),
             ),
             (_, Some(PowerOnMotion::Rapid)) => return Ok(MotionMode::RAPID),
             (_, Some(PowerOnMotion::Linear)) => return Ok(MotionMode::LINEAR),
             (Dialect::Fanuc, None) => (
                 format!("`{at}`: axis words before any motion word; a Fanuc moves them in the motion mode it powers on in (parameter 3402#0: G00 or G01), which the program does not show"),
-                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G0/G1 to this block",
+                power_on_hint("G0/G1"),
             ),
             (Dialect::Sinumerik, None) => (
                 format!("`{at}`: axis words before any motion word; a Sinumerik moves them in its reset motion mode (MD20150 $MC_GCODE_RESET_VALUES[0]), which the program does not show"),
-                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G0/G1 to this block",
+                power_on_hint("G0/G1"),
             ),
             (Dialect::Heidenhain, None) => (
                 format!("`{at}`: axis words before any motion word; the control moves them in the motion mode it starts in, which the program does not show"),
-                "pass --power-on-motion g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add G00/G01 to this block",
+                power_on_hint("G00/G01"),
             ),
         };
-        Err(self.err(line, &at, message, hint))
+        Err(self.err(line, &at, message, &hint))
     }
 
     /// Start, end and the words of a move that bear on whether it can be compensated.
@@ -365,7 +367,7 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Why this move cannot be compensated although it may touch the zone, if so.
-    fn refusal(&self, words: &[W], mv: &Move) -> Option<Refusal<'static>> {
+    fn refusal(&self, words: &[W], mv: &Move) -> Option<Refusal> {
         if !mv.cutting {
             return self.cycle_refusal(words, mv);
         }
@@ -378,7 +380,7 @@ impl<'a> Rewriter<'a> {
     }
 
     /// Canned cycles and moves errmap does not follow (splines, threads …) in the zone.
-    fn cycle_refusal(&self, words: &[W], mv: &Move) -> Option<Refusal<'static>> {
+    fn cycle_refusal(&self, words: &[W], mv: &Move) -> Option<Refusal> {
         let canned = mv.motion.kind == Motion::Canned;
         if !canned && mv.motion.kind != Motion::Special {
             return None;
@@ -416,36 +418,36 @@ impl<'a> Rewriter<'a> {
             (
                 name,
                 format!("{what} in the compensation zone cannot be compensated"),
-                "expand the cycle into G0/G1 moves with your CAM post (or move the zone away)",
+                "expand the cycle into G0/G1 moves with your CAM post (or move the zone away)"
+                    .into(),
             )
         })
     }
 
     /// A cut before the program said its units: always refused.
-    fn units_refusal(&self, words: &[W]) -> Refusal<'static> {
+    fn units_refusal(&self, words: &[W]) -> Refusal {
         let at = words
             .iter()
             .find(|w| matches!(w.letter, b'G' | b'X' | b'Y' | b'Z'))
             .map(|w| self.wtext(w).to_string())
             .unwrap_or_default();
         let (codes, hint) = match self.dialect {
-            Dialect::Linuxcnc | Dialect::Fanuc => (
-                "G20/G21",
-                "add G21 (mm) or G20 (inch) before the first cut, or pass --units mm|inch",
-            ),
+            Dialect::Linuxcnc | Dialect::Fanuc => {
+                ("G20/G21", "add G21 (mm) or G20 (inch) before the first cut")
+            }
             Dialect::Sinumerik => (
                 "G70/G71/G700/G710",
-                "add G71 (mm) or G70 (inch) before the first cut, or pass --units mm|inch",
+                "add G71 (mm) or G70 (inch) before the first cut",
             ),
             Dialect::Heidenhain => (
                 "G70/G71 in the % header",
-                "begin the program with %NAME G71 * (mm) or G70 * (inch), or pass --units mm|inch",
+                "begin the program with %NAME G71 * (mm) or G70 * (inch)",
             ),
         };
         (
             at,
             format!("cut with no unit code ({codes}) before it: errmap cannot tell millimetres from inches (a 25.4× error)"),
-            hint,
+            format!("{hint}, or pass {} mm|inch", errmap_core::setting::words(Setting::Units)).into(),
         )
     }
 
@@ -458,35 +460,35 @@ impl<'a> Rewriter<'a> {
     }
 
     /// The program's state forbids compensating (a frame, a jump, a loop, cutter compensation).
-    fn context_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
+    fn context_refusal(&self, mv: &Move) -> Option<Refusal> {
         // An axis moving on this very cut is named by the word refusal.
         let own_axis = |u: &&super::Unfollowed| {
             mv.other_axis
                 .is_some_and(|w| u.key == super::Holds::Axis(w.letter))
         };
         if let Some(u) = self.unfollowed.iter().rev().find(|u| !own_axis(u)) {
-            return Some((u.word.clone(), u.why.clone(), u.hint));
+            return Some((u.word.clone(), u.why.clone(), u.hint.clone()));
         }
         if let Some((Frame::WorkOffset, fl, fw)) = self.frames.last() {
             let first = self.first_offset.clone().unwrap_or_default();
             return Some((
                 fw.split_whitespace().next().unwrap_or("G").to_string(),
                 format!("`{fw}` (line {fl}) selects a work offset other than the program's first ({first}), whose coordinates the map is in, and this cut may lie in the compensation zone"),
-                "pass --same-part-per-offset if each offset holds an identical part (the map then applies in each offset's coordinates; job key [toolpaths] same_part_per_offset), or select the first offset again before cuts in the zone",
+                format!("pass {} if each offset holds an identical part (the map then applies in each offset's coordinates; job key [toolpaths] same_part_per_offset), or select the first offset again before cuts in the zone", errmap_core::setting::words(Setting::SamePartPerOffset)).into(),
             ));
         }
         if let Some((kind, fl, fw)) = self.frames.last() {
             return Some((
                 fw.clone(),
                 format!("`{fw}` (line {fl}) transforms the coordinates ({kind:?}), which errmap does not follow, and this cut may lie in the compensation zone"),
-                "cancel the transformation before the cuts in the zone (G69, G50, G50.1, G54 …), or post the program without it",
+                "cancel the transformation before the cuts in the zone (G69, G50, G50.1, G54 …), or post the program without it".into(),
             ));
         }
         if let Some((fl, fw)) = &self.flow {
             return Some((
                 fw.clone(),
                 format!("the program jumps (`{fw}` on line {fl}), so a cut may run any number of times from any position, and this cut may lie in the compensation zone"),
-                "expand loops and jumps into plain blocks",
+                "expand loops and jumps into plain blocks".into(),
             ));
         }
         if let Some(b) = self.blocks.last() {
@@ -494,7 +496,7 @@ impl<'a> Rewriter<'a> {
             return Some((
                 head.clone(),
                 format!("move inside the O-word block `{head}` (line {}) may lie in the compensation zone", b.line),
-                "expand O-word loops, conditions and subroutines into plain G-code (or move the zone away)",
+                "expand O-word loops, conditions and subroutines into plain G-code (or move the zone away)".into(),
             ));
         }
         let comp = self.cutter_comp.as_ref().or(self.comp_transition.as_ref());
@@ -504,14 +506,14 @@ impl<'a> Rewriter<'a> {
             return Some((
                 code.clone(),
                 format!("cutter radius compensation {code} (from line {cl}) offsets the contour in the {plane} plane, which holds the map's normal axis {n}: moving {n} by −E would change the contour the control offsets"),
-                "compensate with the tool axis along the map's normal (G17 for a Z map), or post the program as the tool-centre path (G40) for the zone, or move the zone away",
+                "compensate with the tool axis along the map's normal (G17 for a Z map), or post the program as the tool-centre path (G40) for the zone, or move the zone away".into(),
             ));
         }
         if mv.block_delete {
             return Some((
                 "/".into(),
                 "block delete `/` on a move in the compensation zone (the controller may skip the line)".into(),
-                "remove the `/` or move the zone away",
+                "remove the `/` or move the zone away".into(),
             ));
         }
         None
@@ -519,12 +521,12 @@ impl<'a> Rewriter<'a> {
 
     /// A word of the block forbids compensating (polar, expression, other axis, G53), or the
     /// start point is unknown.
-    fn word_refusal(&self, mv: &Move) -> Option<Refusal<'static>> {
+    fn word_refusal(&self, mv: &Move) -> Option<Refusal> {
         if let Some(w) = mv.polar {
             return Some((
                 self.wtext(w).to_string(),
                 "polar coordinates (@ ^) on a move in the compensation zone".into(),
-                "post the program with X/Y coordinates (or move the zone away)",
+                "post the program with X/Y coordinates (or move the zone away)".into(),
             ));
         }
         if let Some(w) = mv.expr {
@@ -537,9 +539,9 @@ impl<'a> Rewriter<'a> {
                 text,
                 format!("# parameters or [expressions] on a move in the compensation zone{reads}, whose value errmap does not carry into a rewritten move"),
                 if self.m.settings.expand {
-                    "expand the program to plain numbers (or move the zone away)"
+                    "expand the program to plain numbers (or move the zone away)".into()
                 } else {
-                    "pass --expand to run the program's own parameter values into plain numbers, or expand the program to plain numbers (or move the zone away)"
+                    format!("pass {} to run the program's own parameter values into plain numbers, or expand the program to plain numbers (or move the zone away)", errmap_core::setting::words(Setting::Expand)).into()
                 },
             ));
         }
@@ -550,7 +552,8 @@ impl<'a> Rewriter<'a> {
                     "axis {} moves together with a cut in the compensation zone",
                     w.letter as char
                 ),
-                "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move",
+                "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move"
+                    .into(),
             ));
         }
         if mv.g53 {
@@ -558,7 +561,7 @@ impl<'a> Rewriter<'a> {
             return Some((
                 word.into(),
                 format!("{word} machine-coordinate cutting move in the compensation zone"),
-                "program the cut in work coordinates",
+                "program the cut in work coordinates".into(),
             ));
         }
         if mv.start.iter().any(|c| c.is_none()) {
@@ -570,7 +573,7 @@ impl<'a> Rewriter<'a> {
             return Some((
                 "start".into(),
                 format!("the start point of this move is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"),
-                "give absolute X, Y and Z (G90) before the first cut",
+                "give absolute X, Y and Z (G90) before the first cut".into(),
             ));
         }
         None
@@ -728,7 +731,12 @@ impl<'a> Rewriter<'a> {
             format!(
                 "this move is cut into more segments than the output limit of {limit_mb} MB has room for (at least {MIN_SEGMENT_BYTES} bytes each)"
             ),
-            "check arc turn counts (P) and move lengths, raise --max-segment / --chord-tol, or raise --max-output-mb",
+            &format!(
+                "check arc turn counts (P) and move lengths, raise {} / {}, or raise {}",
+                errmap_core::setting::words(Setting::MaxSegment),
+                errmap_core::setting::words(Setting::ChordTol),
+                errmap_core::setting::words(Setting::MaxOutputMb)
+            ),
         )
     }
 
@@ -757,7 +765,11 @@ impl<'a> Rewriter<'a> {
                 line,
                 "X",
                 format!("this move ({length:.6e} program units) would need more than a million segments"),
-                "check the coordinates and units, or raise --max-segment / --chord-tol",
+                &format!(
+                    "check the coordinates and units, or raise {} / {}",
+                    errmap_core::setting::words(Setting::MaxSegment),
+                    errmap_core::setting::words(Setting::ChordTol)
+                ),
             ));
         }
         Ok(chords)
@@ -980,4 +992,13 @@ impl<'a> Rewriter<'a> {
         }
         self.m.pos = end;
     }
+}
+
+/// The hint of a block with axis words before any motion word: give the mode the controller
+/// powers on in, or add `codes` (its rapid and linear codes) to the block.
+fn power_on_hint(codes: &str) -> String {
+    format!(
+        "pass {} g0|g1 as the machine is set (job key [toolpaths] power_on_motion), or add {codes} to this block",
+        errmap_core::setting::words(Setting::PowerOnMotion)
+    )
 }

@@ -14,7 +14,9 @@
 
 use super::super::lexer::{Line, TokenKind};
 use super::{Rewriter, AXES};
+use crate::setting::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
 
 /// Parameter positions (0-based) common to CYCLE81–89 and CYCLE840.
 const RTP: usize = 0;
@@ -170,7 +172,8 @@ impl Call {
         };
         if let Some((t, _)) = self.args.iter().find(|a| a.1 == Arg::Other) {
             return Err(format!(
-                "its parameter `{t}` is not a plain number (run the program with --expand to write variables as numbers)"
+                "its parameter `{t}` is not a plain number (run the program with {} to write variables as numbers)",
+                words(Setting::Expand)
             ));
         }
         if let Some((i, (t, _))) = self
@@ -487,7 +490,7 @@ impl<'a> Rewriter<'a> {
                 line,
                 &name,
                 format!("canned cycle {name}: the hole at {}{} {}{} ends at {}{} in the compensation zone; errmap moves a hole's RFP and DP by −E only when asked", AXES[a1] as char, b[a1], AXES[a2] as char, b[a2], AXES[ax] as char, l.bottom),
-                "pass --compensate-holes (job key [toolpaths] compensate_holes) to move each hole's RFP and DP by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away",
+                &format!("pass {} (job key [toolpaths] compensate_holes) to move each hole's RFP and DP by −E at its position, or expand the cycle into G0/G1 moves, or move the zone away", words(Setting::CompensateHoles)),
             ));
         }
         Ok(match self.m.error_at(&b) {

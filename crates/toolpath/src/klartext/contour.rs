@@ -13,7 +13,9 @@ use super::super::gcode::{emit_curve, lerp, Breaks};
 use super::block::{Block, Word};
 use super::interp::{PathMove, Refusal};
 use super::Kt;
+use crate::setting::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
@@ -63,7 +65,7 @@ impl Kt<'_> {
         let word_col = |w: &str| b.word(w).map_or(col, |x| x.col);
         if let Some((l, w)) = before.as_ref().or(after.as_ref()) {
             if !matches!(w.as_str(), "RL" | "RR") {
-                return Some((col, w.clone(), format!("tool radius compensation {w} (from {}) may be active on a cut in the compensation zone", self.at(*l)), "post the program as the tool-centre path (R0) for the zone, or move the zone away"));
+                return Some((col, w.clone(), format!("tool radius compensation {w} (from {}) may be active on a cut in the compensation zone", self.at(*l)), "post the program as the tool-centre path (R0) for the zone, or move the zone away".into()));
             }
         }
         let (l, w) = before
@@ -85,14 +87,14 @@ impl Kt<'_> {
                 word_col(&shown),
                 shown.clone(),
                 format!("tool radius compensation {w} (from {at}) offsets the contour in the working plane of tool axis {}, which holds the map's normal axis {}: moving {} by −E would change the contour the TNC offsets", AXES[self.tool_axis], AXES[self.m.normal], AXES[self.m.normal]),
-                "compensate with the tool axis along the map's normal (TOOL CALL … Z for a Z map), or post the program as the tool-centre path (R0) for the zone, or move the zone away",
+                "compensate with the tool axis along the map's normal (TOOL CALL … Z for a Z map), or post the program as the tool-centre path (R0) for the zone, or move the zone away".into(),
             ));
         }
         let arc_hint = "post the arc as CC + C (the pole is then its centre), or as the tool-centre path (R0) for the zone, or move the zone away";
         match b.head.as_str() {
-            "CR" => Some((col, "CR".into(), format!("arc CR under tool radius compensation {w} (from {at}) in the compensation zone: errmap must write it as helical pieces, which a TNC programs only as CP about the pole CC, and a CR's centre is not the pole"), arc_hint)),
-            "C" | "CP" if mode == Comp::Transition => Some((word_col(&shown), shown, format!("{} block that switches tool radius compensation ({w}, {at}) in the compensation zone: the TNC switches compensation on or off only in a straight-line block, and errmap keeps that block whole", b.head), "switch RL/RR and R0 in L blocks outside the zone, or move the zone away")),
-            "C" | "CP" if self.circle_plane() != Plane::G17 || self.tool_axis != 2 => Some((col, b.head.clone(), format!("{} in another plane than the working plane under tool radius compensation {w} (from {at}) in the compensation zone", b.head), arc_hint)),
+            "CR" => Some((col, "CR".into(), format!("arc CR under tool radius compensation {w} (from {at}) in the compensation zone: errmap must write it as helical pieces, which a TNC programs only as CP about the pole CC, and a CR's centre is not the pole"), arc_hint.into())),
+            "C" | "CP" if mode == Comp::Transition => Some((word_col(&shown), shown, format!("{} block that switches tool radius compensation ({w}, {at}) in the compensation zone: the TNC switches compensation on or off only in a straight-line block, and errmap keeps that block whole", b.head), "switch RL/RR and R0 in L blocks outside the zone, or move the zone away".into())),
+            "C" | "CP" if self.circle_plane() != Plane::G17 || self.tool_axis != 2 => Some((col, b.head.clone(), format!("{} in another plane than the working plane under tool radius compensation {w} (from {at}) in the compensation zone", b.head), arc_hint.into())),
             _ => None,
         }
     }
@@ -109,13 +111,8 @@ impl Kt<'_> {
         mode: Comp,
     ) -> Result<()> {
         // Arc pieces are arcs: only length and quarter turns cut them.
-        let Some((s, e, pieces)) = self.bounded_ends(
-            n,
-            b,
-            mv,
-            f64::INFINITY,
-            "check the coordinates and units, or raise --max-segment",
-        )?
+        let Some((s, e, pieces)) =
+            self.bounded_ends(n, b, mv, f64::INFINITY, &[Setting::MaxSegment])?
         else {
             return self.unchanged(n, content, term, b, false);
         };
@@ -128,7 +125,7 @@ impl Kt<'_> {
             let angle_err =
                 a.r_start * (2.0 * 0.5 * 10f64.powi(-(ANGLE_DECIMALS as i32))).to_radians();
             if angle_err > self.m.chord_tol() {
-                return Err(self.err(n, b.head_col, &b.head, format!("under tool radius compensation this arc must be written as CP pieces, whose end the TNC takes from an angle of {ANGLE_DECIMALS} decimals: on radius {:.4} that may leave the arc's end {angle_err:.6} away, more than --chord-tol", a.r_start), "raise --chord-tol, or post the arc as the tool-centre path (R0) for the zone"));
+                return Err(self.err(n, b.head_col, &b.head, format!("under tool radius compensation this arc must be written as CP pieces, whose end the TNC takes from an angle of {ANGLE_DECIMALS} decimals: on radius {:.4} that may leave the arc's end {angle_err:.6} away, more than {chord_tol}", a.r_start, chord_tol = words(Setting::ChordTol)), &format!("raise {}, or post the arc as the tool-centre path (R0) for the zone", words(Setting::ChordTol))));
             }
         }
         let mut emitted: Vec<Emitted> = Vec::new();
@@ -154,7 +151,10 @@ impl Kt<'_> {
                     b.head_col,
                     &b.head,
                     "this move is cut into more than a million pieces".into(),
-                    "check the move's length, or raise --max-segment",
+                    &format!(
+                        "check the move's length, or raise {}",
+                        words(Setting::MaxSegment)
+                    ),
                 ));
             }
         }
@@ -195,8 +195,8 @@ impl Kt<'_> {
                     n,
                     b.head_col,
                     &b.head,
-                    "under tool radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within --chord-tol (the map bends too sharply along it)".into(),
-                    "raise --chord-tol, or post the arc as the tool-centre path (R0)",
+                    format!("under tool radius compensation this arc must stay arcs, and no helical piece short enough follows P − E within {} (the map bends too sharply along it)", words(Setting::ChordTol)),
+                    &format!("raise {}, or post the arc as the tool-centre path (R0)", words(Setting::ChordTol)),
                 )
             })?;
         }
@@ -268,8 +268,9 @@ impl Kt<'_> {
             let dev = (from + f * (to - from)) - (p[k] - e);
             if dev.abs() > self.m.chord_tol() {
                 return refuse(format!(
-                    "as one block it strays {:.4} from P − E (more than --chord-tol)",
-                    dev.abs()
+                    "as one block it strays {:.4} from P − E (more than {})",
+                    dev.abs(),
+                    words(Setting::ChordTol)
                 ));
             }
         }

@@ -2,7 +2,9 @@
 
 use super::block::Block;
 use super::{Kt, OutLine};
+use crate::setting::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
@@ -173,7 +175,7 @@ impl Kt<'_> {
                     AXES[v],
                     self.coord(y)
                 ),
-                "pass --compensate-holes to start the cycle (which drills relative to its starting position) from Z − E at each such hole, or move the zone away",
+                &format!("pass {} to start the cycle (which drills relative to its starting position) from Z − E at each such hole, or move the zone away", words(Setting::CompensateHoles)),
             ));
         }
         let z = format!("{}{}", AXES[k], self.coord(start - e));
@@ -331,7 +333,7 @@ impl Kt<'_> {
                     ["X", "Y", "Z"][v],
                     self.coord(y)
                 ),
-                "pass --compensate-holes to move the cycle's surface coordinate Q203 by −E at each such hole (its depth Q201 is relative to Q203), or move the zone away",
+                &format!("pass {} to move the cycle's surface coordinate Q203 by −E at each such hole (its depth Q201 is relative to Q203), or move the zone away", words(Setting::CompensateHoles)),
             ));
         }
         let new_surface = surface - e;

@@ -6,7 +6,10 @@ use super::super::TracedMove;
 use super::block::{Block, Value};
 use super::Comp;
 use super::{Frame, Kt, Point};
+use crate::setting::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
+use std::borrow::Cow;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
@@ -17,7 +20,7 @@ const M_START: [f64; 6] = [3.0, 4.0, 7.0, 8.0, 13.0, 14.0];
 const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
 
 /// Why a block cannot be compensated when it may touch the zone: column, word, message, hint.
-pub(super) type Refusal = (usize, String, String, &'static str);
+pub(super) type Refusal = (usize, String, String, Cow<'static, str>);
 
 /// A path block (`L`, `C`, `CR`, `CT`) read against the state.
 pub(super) struct PathMove {
@@ -205,7 +208,7 @@ impl Kt<'_> {
         self.cut_seen |= mv.cutting && touch;
         if mv.cutting && (touch || !self.m.units_known) {
             if let Some((col, word, msg, hint)) = mv.refusal.clone() {
-                return Err(self.err(n, col, &word, msg, hint));
+                return Err(self.err(n, col, &word, msg, &hint));
             }
         }
         if self.trace.is_some() {
@@ -377,7 +380,7 @@ impl Kt<'_> {
                 b.head_col,
                 b.head.clone(),
                 format!("a circle in the plane of tool axis {} (TOOL CALL): errmap follows circles in the XY plane (tool axis Z) only", AXES[self.tool_axis]),
-                "post the arc as L moves for this zone, or move the zone away",
+                "post the arc as L moves for this zone, or move the zone away".into(),
             ))));
         }
         let axis_word = b.has(AXES[ax]) || b.has(&format!("I{}", AXES[ax]));
@@ -386,7 +389,7 @@ impl Kt<'_> {
                 at(AXES[ax]),
                 format!("{} … {}", b.head, AXES[ax]),
                 format!("{} with a tool-axis coordinate (a helix) in the compensation zone: errmap does not follow it", b.head),
-                "post helices as L moves for this zone, or move the zone away",
+                "post helices as L moves for this zone, or move the zone away".into(),
             ))));
         }
         let (Some(s), Some(e)) = (known(s), known(e)) else {
@@ -398,7 +401,7 @@ impl Kt<'_> {
                     b.head_col,
                     "C".into(),
                     "circle C with an unknown circle centre CC (none since the program start, a label or a block errmap does not follow)".into(),
-                    "program CC X… Y… before the circle",
+                    "program CC X… Y… before the circle".into(),
                 ))));
             };
             return self
@@ -481,31 +484,31 @@ impl Kt<'_> {
     fn context_refusal(&self, b: &Block) -> Option<Refusal> {
         let col = b.head_col;
         if !self.m.units_known {
-            return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), "begin the program with `0 BEGIN PGM name MM` (or INCH), or pass --units mm|inch"));
+            return Some((col, b.head.clone(), "cut with no unit in a BEGIN PGM block before it: errmap cannot tell millimetres from inches (a 25.4× error)".into(), format!("begin the program with `0 BEGIN PGM name MM` (or INCH), or pass {} mm|inch", words(Setting::Units)).into()));
         }
         if let Some((l, w)) = &self.label {
-            return Some((col, w.clone(), format!("cut inside the label `{w}` ({}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone", self.at(*l)), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)"));
+            return Some((col, w.clone(), format!("cut inside the label `{w}` ({}), which runs once per call or jump, from positions and datums errmap cannot see, and may lie in the compensation zone", self.at(*l)), "expand CALL LBL calls and repeats into plain blocks (or move the zone away)".into()));
         }
         if let Some(f) = self.frames.last() {
             let at = self.at(f.line);
             let (msg, hint) = match f.cycle.as_str() {
-                "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away"),
-                "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away"),
-                "rot" => (format!("rotary axis {} ({at}) stands away from 0, where errmap takes the map to be measured: the part is turned, and this cut may lie in the compensation zone", f.what), "compensate the cuts of each rotary position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away"),
-                "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away"),
+                "?" => (format!("`{}` ({at}) is a function errmap does not follow (it may move or transform the coordinates), and this cut may lie in the compensation zone", f.what), "post the cuts in the zone without it, or move the zone away".into()),
+                "5x" => (format!("`{}` ({at}) tilts the working plane or moves the tool tip with the rotary axes (5-axis), which errmap does not follow, and this cut may lie in the compensation zone", f.what), "errmap compensates 3-axis cuts in an untilted working plane: post the cuts in the zone without PLANE/cycle 19/M128/TCPM, or move the zone away".into()),
+                "rot" => (format!("rotary axis {} ({at}) stands away from 0, where errmap takes the map to be measured: the part is turned, and this cut may lie in the compensation zone", f.what), "compensate the cuts of each rotary position with a map measured there, bring the axis back to 0 before the cuts in the zone, or move the zone away".into()),
+                "pgm" => (format!("`{}` ({at}) runs another program, which errmap cannot see (it may move the datum or the tool), and this cut may lie in the compensation zone", f.what), "paste the called program's blocks into this one, or move the zone away".into()),
                 "247" => (format!("`{}` ({at}): errmap applies the map in the coordinates of the first preset the program selects, and this cut may lie in the compensation zone", f.what), if self.m.settings.same_part_per_offset || f.what.contains("cannot read") {
-                    "select the program's first preset again (CYCL DEF 247 with its Q339 as a number) before the cuts in the zone, or compensate this part with a map measured in this preset"
+                    "select the program's first preset again (CYCL DEF 247 with its Q339 as a number) before the cuts in the zone, or compensate this part with a map measured in this preset".into()
                 } else {
-                    "select the program's first preset again (CYCL DEF 247 with its Q339) before the cuts in the zone; for identical parts, one per preset, pass --same-part-per-offset to apply the map in each preset's coordinates"
+                    format!("select the program's first preset again (CYCL DEF 247 with its Q339) before the cuts in the zone; for identical parts, one per preset, pass {} to apply the map in each preset's coordinates", words(Setting::SamePartPerOffset)).into()
                 }),
-                "param" => (format!("`{}` ({at}) shifts the datum by a Q parameter, whose value errmap does not know (read at run time, e.g. by FN18 SYSREAD, or computed), and this cut may lie in the compensation zone", f.what), "shift the datum by numbers (CYCL DEF 7.1 Z+…) for the cuts in the zone, or move the zone away"),
-                "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away"),
-                _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it"),
+                "param" => (format!("`{}` ({at}) shifts the datum by a Q parameter, whose value errmap does not know (read at run time, e.g. by FN18 SYSREAD, or computed), and this cut may lie in the compensation zone", f.what), "shift the datum by numbers (CYCL DEF 7.1 Z+…) for the cuts in the zone, or move the zone away".into()),
+                "probe" => (format!("`{}` ({at}) probes the workpiece and may set the datum or Q parameters from what it measures, which errmap cannot know, and this cut may lie in the compensation zone", f.what), "set the datum with the probe in a separate program before this one, or move the zone away".into()),
+                _ => (format!("`{}` ({at}) transforms the coordinates (cycle {}), which errmap does not follow, and this cut may lie in the compensation zone", f.what, f.cycle), "reset the cycle before the cuts in the zone (8.1 with no axes, 10.1 ROT+0, 11.1 SCL 1, 26.1 with factors 1, 19.1 with angles 0), or post the program without it".into()),
             };
             return Some((col, f.what.clone(), msg, hint));
         }
         if b.head == "CT" {
-            return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT));
+            return Some((col, "CT".into(), "tangential arc CT in the compensation zone: its arc follows the direction of the element before it, which compensation changes".into(), CT_HINT.into()));
         }
         None
     }
@@ -527,7 +530,7 @@ impl Kt<'_> {
                 w.col,
                 w.text.clone(),
                 format!("`{}` takes its value from the Q parameter {q} on a cut in the compensation zone: errmap does not compute Q parameters", w.text),
-                "post the program with numbers instead of Q parameters (or move the zone away)",
+                "post the program with numbers instead of Q parameters (or move the zone away)".into(),
             ));
         }
         if let Some(w) = b.words.iter().find(|w| {
@@ -548,7 +551,8 @@ impl Kt<'_> {
                     },
                     w.addr.trim_start_matches('I')
                 ),
-                "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move",
+                "errmap compensates 3-axis X/Y/Z moves only; move the zone away from this move"
+                    .into(),
             ));
         }
         if let Some(w) = b.words.iter().find(|w| {
@@ -557,7 +561,7 @@ impl Kt<'_> {
                     .num()
                     .is_some_and(|m| M_START.contains(&m) || M_END.contains(&m))
         }) {
-            return Some((w.col, w.text.clone(), format!("{} on a cut in the compensation zone: errmap does not follow this miscellaneous function on a cut it rewrites", w.text), "put the M function in a block of its own outside the zone (M91/M92 cuts: program them in workpiece coordinates)"));
+            return Some((w.col, w.text.clone(), format!("{} on a cut in the compensation zone: errmap does not follow this miscellaneous function on a cut it rewrites", w.text), "put the M function in a block of its own outside the zone (M91/M92 cuts: program them in workpiece coordinates)".into()));
         }
         if start.iter().any(Option::is_none) {
             let since = self
@@ -565,7 +569,7 @@ impl Kt<'_> {
                 .unknown_since
                 .map(|l| format!(" since {}", self.at(l)))
                 .unwrap_or_else(|| " (no X, Y and Z since the program start)".into());
-            return Some((b.head_col, b.head.clone(), format!("the start point of this cut is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"), "give absolute X, Y and Z (e.g. L X… Y… Z… R0 FMAX) before the cut"));
+            return Some((b.head_col, b.head.clone(), format!("the start point of this cut is unknown{since}, so errmap cannot tell whether it lies in the compensation zone"), "give absolute X, Y and Z (e.g. L X… Y… Z… R0 FMAX) before the cut".into()));
         }
         None
     }

@@ -16,10 +16,12 @@ mod rewrite;
 use super::dialect::{self, Dialect};
 use super::machine::Machine;
 use super::{CompensationReport, CompensationSettings, TracedMove, Units};
+use crate::setting::Setting;
 use crate::CompensateError;
 use block::Block;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::ErrorField;
+use errmap_core::setting::words;
 use std::path::Path;
 
 /// A point of the original program, some coordinates unknown.
@@ -179,21 +181,26 @@ impl<'a> Kt<'a> {
     ) -> Result<Kt<'a>, CompensateError> {
         settings.validate()?;
         let header = header_units(text, source)?;
-        let units =
-            match (header, settings.units) {
-                (Some((h, line)), Some(u)) if h != u => return Err(Error::input(
+        let units = match (header, settings.units) {
+            (Some((h, line)), Some(u)) if h != u => {
+                return Err(Error::input(
                     Location::line(source, line),
                     format!(
-                        "the program says {} in BEGIN PGM, but --units says {}",
+                        "the program says {} in BEGIN PGM, but {} says {}",
                         units_word(h),
+                        words(Setting::Units),
                         units_word(u)
                     ),
-                    "leave out --units (the BEGIN PGM block gives the units of a Klartext program)",
+                    format!(
+                        "leave out {} (the BEGIN PGM block gives the units of a Klartext program)",
+                        words(Setting::Units)
+                    ),
                 )
-                .into()),
-                (Some((h, _)), _) => Some(h),
-                (None, u) => u,
-            };
+                .into())
+            }
+            (Some((h, _)), _) => Some(h),
+            (None, u) => u,
+        };
         let zone_mm = super::default_zone_mm(source, field, settings)?;
         let inches = units == Some(Units::Inch);
         let mut m = Machine::new(field, settings, inches, zone_mm);

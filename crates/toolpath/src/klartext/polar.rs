@@ -50,7 +50,7 @@ impl Kt<'_> {
                 b.head_col,
                 b.head.clone(),
                 format!("{} with an unknown pole CC (none since the program start, a label or a block errmap does not follow)", b.head),
-                "program CC with the two coordinates of the plane before the polar block",
+                "program CC with the two coordinates of the plane before the polar block".into(),
             ))));
         };
         let angle = |addr: &str| b.word(addr).map(|w| (w.num(), w.col, w.text.clone()));
@@ -65,7 +65,7 @@ impl Kt<'_> {
                     w.map_or(b.head_col, |w| w.col),
                     w.map_or(b.head.clone(), |w| w.text.clone()),
                     "LP without both an absolute radius PR and angle PA: the TNC takes an omitted or incremental one from the last polar block, which errmap does not follow".into(),
-                    "give LP both PR+… and PA+… (absolute), or post the line as an L block",
+                    "give LP both PR+… and PA+… (absolute), or post the line as an L block".into(),
                 ))));
             };
             let t = pa.to_radians();
@@ -120,7 +120,7 @@ impl Kt<'_> {
                     col,
                     text,
                     format!("CP {} with DR{}: an incremental angle and the direction of rotation must have the same sign", b.word("IPA").map_or("", |w| w.text.as_str()), if ccw { "+" } else { "-" }),
-                    "give IPA the sign of DR (IPA+… with DR+, IPA-… with DR-)",
+                    "give IPA the sign of DR (IPA+… with DR+, IPA-… with DR-)".into(),
                 ))));
             }
             sweep
@@ -135,7 +135,7 @@ impl Kt<'_> {
                         col,
                         text,
                         "CP PA… at the angle of its start point: a full circle or no move".into(),
-                        "program a full circle as CP IPA+360 DR+ (or IPA-360 DR-)",
+                        "program a full circle as CP IPA+360 DR+ (or IPA-360 DR-)".into(),
                     )),
                 ));
             }

@@ -4,7 +4,9 @@ use super::super::gcode::{dist, emit_curve, lerp, Breaks};
 use super::block::{Block, Word};
 use super::interp::{known, PathMove};
 use super::{Kt, OutLine};
+use crate::setting::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
 
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
@@ -20,16 +22,16 @@ const M_END: [f64; 7] = [0.0, 1.0, 2.0, 5.0, 6.0, 9.0, 30.0];
 
 impl Kt<'_> {
     /// A cut's start, end and piece count when both ends are known (`None`: copy it unchanged), refused when it
-    /// would need a million pieces or more: lines cut every `--max-segment`, arcs also at
+    /// would need a million pieces or more: lines cut every `max_segment`, arcs also at
     /// `chord_tol` (infinite under radius compensation, where only length and quarter turns
-    /// cut them).
+    /// cut them). The refusal's hint says to raise `raise`.
     pub(super) fn bounded_ends(
         &self,
         n: u64,
         b: &Block,
         mv: &PathMove,
         chord_tol: f64,
-        hint: &str,
+        raise: &[Setting],
     ) -> Result<Option<BoundedCut>> {
         let (Some(s), Some(e)) = (known(mv.start), known(mv.end)) else {
             return Ok(None);
@@ -48,7 +50,10 @@ impl Kt<'_> {
                 b.head_col,
                 &b.head,
                 format!("this move ({length:.6e} program units) would need more than a million segments"),
-                hint,
+                &format!(
+                    "check the coordinates and units, or raise {}",
+                    raise.iter().map(|s| words(*s)).collect::<Vec<_>>().join(" / ")
+                ),
             ));
         }
         Ok(Some((s, e, pieces)))
@@ -69,7 +74,7 @@ impl Kt<'_> {
             b,
             mv,
             self.m.chord_tol(),
-            "check the coordinates and units, or raise --max-segment / --chord-tol",
+            &[Setting::MaxSegment, Setting::ChordTol],
         )?
         else {
             return self.unchanged(n, content, term, b, false);
@@ -105,7 +110,12 @@ impl Kt<'_> {
                         "this move is cut into more pieces than the output limit of {} MB has room for (at least {MIN_PIECE_BYTES} bytes each)",
                         limit / 1_000_000
                     ),
-                    "check the move's length, raise --max-segment / --chord-tol, or raise --max-output-mb",
+                    &format!(
+                        "check the move's length, raise {} / {}, or raise {}",
+                        words(Setting::MaxSegment),
+                        words(Setting::ChordTol),
+                        words(Setting::MaxOutputMb)
+                    ),
                 ));
             }
         }

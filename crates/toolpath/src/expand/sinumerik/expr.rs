@@ -333,7 +333,8 @@ impl P<'_> {
                         Ok(X::Call(name, args))
                     }
                     Some(T::Sym("[")) => Err(format!(
-                        "`{name}[…]`: arrays are not run by errmap's --expand"
+                        "`{name}[…]`: arrays are not run by errmap's {}",
+                        super::super::expand_words()
                     )),
                     _ => Ok(X::Name(name)),
                 }
