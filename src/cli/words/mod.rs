@@ -5,6 +5,7 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod live;
 mod metrology;
 mod toolpath;
 
@@ -14,6 +15,7 @@ use std::any::Any;
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
         .or_else(|| metrology::flag(setting))
+        .or_else(|| live::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -21,6 +23,7 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
 fn all_flags() -> Vec<&'static str> {
     let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
     all.extend(metrology::ALL.iter().map(|s| metrology::words(*s)));
+    all.extend(live::ALL.iter().map(|s| live::words(*s)));
     all
 }
 
