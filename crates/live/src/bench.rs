@@ -6,7 +6,9 @@
 
 use super::config::LiveConfig;
 use super::cycle::{Live, RunOptions, StopFlags};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -100,7 +102,13 @@ pub fn run(b: &LiveBench) -> Result<LiveBenchReport> {
     {
         return Err(Error::usage(
             "the bench needs ≥ 1 sensor, 1 … 9 axes, 0 < hz ≤ 1000 and seconds > 0",
-            "e.g. --sensors 16 --axes 3 --hz 100 --seconds 10",
+            format!(
+                "e.g. {} 16 {} 3 {} 100 {} 10",
+                words(Setting::Sensors),
+                words(Setting::Axes),
+                words(Setting::Hz),
+                words(Setting::Seconds)
+            ),
         ));
     }
     let dir = tempfile::tempdir()

@@ -22,8 +22,10 @@ use super::source::{csv::CsvSource, Source, Value};
 use super::state::{self, AxisState, Mode, SensorState, SourceState, State, StateWriter};
 use super::target::{Output, Present, Target};
 use super::{LinkError, LiveError};
+use crate::Setting;
 use errmap_core::direction::Direction;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use errmap_metrology::thermal::model::{ThermalModel, ThermalState};
 use errmap_metrology::thermal::sensors::Sensor;
 use serde_json::{json, Map, Value as Json};
@@ -292,8 +294,14 @@ fn check_coolant_and_once(
     }
     if options.once && config.cycle.replay_speed.is_some() {
         return Err(Error::usage(
-            "--once takes one cycle of live readings; a replay has no present value",
-            "remove loop.replay_speed, or run the replay without --once",
+            format!(
+                "{} takes one cycle of live readings; a replay has no present value",
+                words(Setting::Once)
+            ),
+            format!(
+                "remove loop.replay_speed, or run the replay without {}",
+                words(Setting::Once)
+            ),
         ));
     }
     Ok(())
@@ -415,7 +423,10 @@ fn axis_target(
         config.key_error(
             &format!("axes.{i}"),
             format!("axis {} has no target", a.name),
-            "name a [[targets]] entry with target = \"…\", or run with --dry-run",
+            format!(
+                "name a [[targets]] entry with target = \"…\", or run with {}",
+                words(Setting::DryRun)
+            ),
         )
     })?;
     let t = targets
@@ -711,7 +722,10 @@ impl Live {
     pub fn run(&mut self, stop: &StopFlags, notes: &dyn Fn(&str)) -> Result<RunSummary, LiveError> {
         self.start()?;
         if self.once {
-            notes("--once: one cycle, written without the start ramp");
+            notes(&format!(
+                "{}: one cycle, written without the start ramp",
+                words(Setting::Once)
+            ));
         }
         let wall_start = Instant::now();
         let mut stopping: Option<(String, f64)> = None;
@@ -813,7 +827,9 @@ impl Live {
         }
         Ok(RunSummary {
             cycles: self.cycle,
-            stop_reason: stopping.map(|s| s.0).unwrap_or_else(|| "--once".into()),
+            stop_reason: stopping
+                .map(|s| s.0)
+                .unwrap_or_else(|| words(Setting::Once)),
             campaign: self.link.campaign.clone(),
             missed_cycles: self.missed,
             alarms_raised: self.alarms.raised(),

@@ -21,6 +21,7 @@ pub mod modbus;
 pub mod opcua;
 pub mod plausibility;
 pub mod replay;
+mod setting;
 pub mod source;
 pub mod state;
 pub mod target;
@@ -28,6 +29,7 @@ pub mod target;
 pub use config::LiveConfig;
 pub use cycle::{run, RunOptions, RunSummary, StopFlags};
 pub use error::{ConfigError, LinkError, LiveError};
+pub use setting::Setting;
 
 use config::{SourceConfig, SourceKind};
 use errmap_core::error::Error;

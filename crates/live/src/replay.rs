@@ -4,7 +4,9 @@
 //! moving back and forth over the travel at a feed, in the format `errmap thermal compensate`
 //! reads: `time_s,position_mm,direction,nut,bearing,ambient_c,coolant`.
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use errmap_metrology::thermal::pt100;
 use errmap_metrology::thermal::sample::{truth, SynthThermalOptions};
 use rand::SeedableRng;
@@ -58,7 +60,12 @@ pub fn write_replay(out: &Path, o: &ReplayOptions) -> Result<u64> {
     if !(o.period_s > 0.0 && o.duration_s >= o.period_s && o.feed_mm_per_min > 0.0) {
         return Err(Error::usage(
             "the period, duration and feed must be positive (duration ≥ period)",
-            "e.g. --hours 4 --period-s 1 --feed-mm-min 1500",
+            format!(
+                "e.g. {} 4 {} 1 {} 1500",
+                words(Setting::Hours),
+                words(Setting::PeriodS),
+                words(Setting::FeedMmMin)
+            ),
         ));
     }
     let synth = SynthThermalOptions {
@@ -74,7 +81,7 @@ pub fn write_replay(out: &Path, o: &ReplayOptions) -> Result<u64> {
                 o.campaign,
                 t.campaigns.len()
             ),
-            "give --campaign 1 … 4",
+            format!("give {} 1 … 4", words(Setting::Campaign)),
         )
     })?;
     let noise = Normal::new(0.0, synth.sensor_noise_c)

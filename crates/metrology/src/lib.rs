@@ -11,6 +11,8 @@ pub mod controller;
 mod error;
 pub mod linear;
 pub mod rotary;
+mod setting;
 pub mod thermal;
 
 pub use error::{CircularError, LinearError, RotaryError, TableError, ThermalError};
+pub use setting::Setting;

@@ -5,6 +5,8 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod live;
+mod metrology;
 mod toolpath;
 
 use std::any::Any;
@@ -12,12 +14,17 @@ use std::any::Any;
 /// The flag for any crate's setting, or `None` for a type that is not a setting.
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
+        .or_else(|| metrology::flag(setting))
+        .or_else(|| live::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
 #[cfg(test)]
 fn all_flags() -> Vec<&'static str> {
-    toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect()
+    let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
+    all.extend(metrology::ALL.iter().map(|s| metrology::words(*s)));
+    all.extend(live::ALL.iter().map(|s| live::words(*s)));
+    all
 }
 
 /// The command line's flags, for the tests.

@@ -3,7 +3,9 @@
 use super::figures::Centred;
 use super::model::{Column, Shape};
 use super::zone::min_zone;
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -540,9 +542,10 @@ impl TermContext<'_> {
                 &[Column::Servo],
                 Some((k * 120.0 / feed, se * 120.0 / feed)),
             ),
-            (Some(_), None) => Term::missing(
-                "give --feed (mm/min) to convert the radial amplitude (model.servo_amplitude_um) to ms",
-            ),
+            (Some(_), None) => Term::missing(format!(
+                "give {} (mm/min) to convert the radial amplitude (model.servo_amplitude_um) to ms",
+                words(Setting::Feed)
+            )),
             (None, _) => Term::missing("servo mismatch needs both directions (ccw and cw)"),
         };
         let cyclic = |axis: usize, pair: [Column; 2]| match self.shape.cyclic_period_mm[axis] {

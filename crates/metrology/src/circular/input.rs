@@ -1,8 +1,10 @@
 //! Reading a circular-test run: the radial (ballbar) and two-axis (grid encoder) CSV forms, checked row by row and sorted by angle.
 
 use super::circle::fit_circle;
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::io::{CsvRow, CsvTable};
+use errmap_core::setting::words;
 use serde::Serialize;
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
@@ -157,7 +159,11 @@ fn from_table(t: &CsvTable, opts: &ReadOptions) -> Result<CircularRun> {
                 "radius {r_mm} mm or centre {:?} mm is not usable",
                 opts.centre_mm
             ),
-            "give the programmed radius with --radius (e.g. --radius 100) and a finite --centre",
+            format!(
+                "give the programmed radius with {r} (e.g. {r} 100) and a finite {}",
+                words(Setting::Centre),
+                r = words(Setting::Radius)
+            ),
         ));
     }
     let form = detect_form(t)?;
@@ -317,7 +323,10 @@ fn read_point(
                     format!(
                         "deviation {dev_um} µm is more than 10 % of the radius {r_mm} mm: the radius does not match the data"
                     ),
-                    "give the programmed radius with --radius, and deviations in µm (measured minus nominal radius)",
+                    format!(
+                        "give the programmed radius with {}, and deviations in µm (measured minus nominal radius)",
+                        words(Setting::Radius)
+                    ),
                 ));
             }
             let a = angle_deg.to_radians().rem_euclid(TAU);
@@ -340,7 +349,11 @@ fn read_point(
                         "the point is {rho:.4} mm from the nominal centre ({}, {}) but the radius is {r_mm} mm (more than 10 % apart): the radius does not match the data",
                         opts.centre_mm[0], opts.centre_mm[1]
                     ),
-                    "give the programmed radius with --radius and the circle's centre with --centre (x_mm, y_mm are positions on the plane's first and second axis)",
+                    format!(
+                        "give the programmed radius with {} and the circle's centre with {} (x_mm, y_mm are positions on the plane's first and second axis)",
+                        words(Setting::Radius),
+                        words(Setting::Centre)
+                    ),
                 ));
             }
             Ok((p[1].atan2(p[0]).rem_euclid(TAU), p))

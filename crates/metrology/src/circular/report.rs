@@ -3,7 +3,9 @@
 use super::chart::save_polar_chart;
 use super::input::{read_run, Plane, ReadOptions};
 use super::{analyze, Evaluation};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -57,7 +59,10 @@ fn check_request(req: &TestRequest<'_>) -> Result<()> {
         if !(feed.is_finite() && feed > 0.0) {
             return Err(Error::usage(
                 format!("feed {feed} mm/min is not a positive speed"),
-                "give the programmed feed, e.g. --feed 1000",
+                format!(
+                    "give the programmed feed, e.g. {} 1000",
+                    words(Setting::Feed)
+                ),
             ));
         }
     }

@@ -1,7 +1,9 @@
 //! Fanuc pitch-error compensation writer: parameters 3620-3627 and incremental compensation points on a `%` tape, checked against the value ranges of the chosen control series.
 
 use super::{fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::fmt::Write as _;
 
 /// Control series whose parameter ranges are checked.
@@ -77,7 +79,10 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
     if !(unit.is_finite() && unit > 0.0) {
         return Err(usage(
             format!("Fanuc detection unit {unit} is not positive"),
-            "use --fanuc-unit-um 1 for IS-B (0.001 mm or 0.001 deg), 0.1 for IS-C",
+            format!(
+                "use {} 1 for IS-B (0.001 mm or 0.001 deg), 0.1 for IS-C",
+                words(Setting::FanucUnitUm)
+            ),
         ));
     }
     let mag = opts.fanuc_magnification;
@@ -87,7 +92,10 @@ fn layout(t: &ControllerTable, opts: &TableOptions) -> Result<Layout> {
                 "magnification {mag} (parameter 3623) is outside 1 ... {} of series {series}",
                 lim.magnification_max
             ),
-            "give --fanuc-magnification between 1 and 100",
+            format!(
+                "give {} between 1 and 100",
+                words(Setting::FanucMagnification)
+            ),
         ));
     }
     check_point_count(t, opts.fanuc_series)?;
@@ -113,7 +121,10 @@ fn axis_number(axis: Option<&str>) -> Result<u32> {
         Some(a) => a.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
             usage(
                 format!("Fanuc axis '{a}' is not an axis number"),
-                "give the controlled-axis number, e.g. --axis 1 for X",
+                format!(
+                    "give the controlled-axis number, e.g. {} 1 for X",
+                    words(Setting::Axis)
+                ),
             )
         }),
     }
@@ -218,9 +229,16 @@ fn check_range(
                         opts.fanuc_series.name()
                     ),
                     if needed <= lim.magnification_max {
-                        format!("use --fanuc-magnification {needed} (parameter 3623: coarser steps) or a smaller --spacing")
+                        format!(
+                            "use {} {needed} (parameter 3623: coarser steps) or a smaller {}",
+                            words(Setting::FanucMagnification),
+                            words(Setting::Spacing)
+                        )
                     } else {
-                        "the error changes too fast for this spacing: choose a smaller --spacing".to_string()
+                        format!(
+                            "the error changes too fast for this spacing: choose a smaller {}",
+                            words(Setting::Spacing)
+                        )
                     },
                 ));
             }
@@ -249,7 +267,7 @@ pub(super) fn write(t: &ControllerTable, opts: &TableOptions) -> Result<String> 
                 lim.reference_value_max,
                 opts.fanuc_series.name()
             ),
-            "use a larger --fanuc-magnification",
+            format!("use a larger {}", words(Setting::FanucMagnification)),
         ));
     }
     let a = l.axis;

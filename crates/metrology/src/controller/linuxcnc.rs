@@ -1,7 +1,9 @@
 //! LinuxCNC `[JOINT_n]COMP_FILE` writer: `nominal forward reverse` triplets, ascending, nothing else in the file.
 
 use super::{fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::fmt::Write as _;
 
 /// LinuxCNC reads at most 256 triplets per joint (INI configuration, `[JOINT_n]COMP_FILE`).
@@ -40,7 +42,10 @@ pub(super) fn write(t: &ControllerTable, opts: &TableOptions) -> Result<String> 
             other => {
                 return Err(Error::usage(
                     format!("LinuxCNC COMP_FILE_TYPE {other} does not exist"),
-                    "use --linuxcnc-type 0 (positions) or 1 (trims)",
+                    format!(
+                        "use {} 0 (positions) or 1 (trims)",
+                        words(Setting::LinuxcncType)
+                    ),
                 ))
             }
         };

@@ -1,7 +1,9 @@
 //! Sinumerik writer: the leadscrew/measuring-system error compensation (LEC, `%_N_AX_EEC_INI`) zero at the reference point, and the direction-dependent part as two interpolatory (CEC, `%_N_NC_CEC_INI`) tables.
 
 use super::{check_name, fixed, min_spacing, AxisKind, ControllerTable, TableOptions};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -50,9 +52,10 @@ pub(super) fn write(t: &ControllerTable, opts: &TableOptions) -> Result<(String,
                 opts.sinumerik_max_points
             ),
             format!(
-                "choose a spacing of at least {} {}, or give --sinumerik-max-points as configured in MD38000 and MD18342",
+                "choose a spacing of at least {} {}, or give {} as configured in MD38000 and MD18342",
                 min_spacing(t.end() - t.start, opts.sinumerik_max_points),
-                t.kind.position_unit()
+                t.kind.position_unit(),
+                words(Setting::SinumerikMaxPoints)
             ),
         ));
     }

@@ -9,7 +9,9 @@
 //! %, vacuum wavelength in nm (µm inside the formulas), CO₂ in µmol/mol (Ciddor only; the
 //! Edlén equation assumes 450 µmol/mol).
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 
 /// The equation of the refractive index of air.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -174,7 +176,10 @@ fn check(c: &AirConditions, formula: AirFormula) -> Result<()> {
     if formula == AirFormula::Edlen && c.co2_ppm != DEFAULT_CO2_PPM {
         return bad(
             "the modified Edlén equation assumes 450 µmol/mol CO2".into(),
-            "use --formula ciddor for another CO2 content",
+            &format!(
+                "use {} ciddor for another CO2 content",
+                words(Setting::Formula)
+            ),
         );
     }
     Ok(())

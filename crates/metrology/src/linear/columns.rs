@@ -8,10 +8,13 @@
 //! optional `run` (else each pass is numbered in file order), `air_temp`, `pressure`,
 //! `humidity`, `material_temp`, `time`. Other columns of the export are ignored.
 
+use crate::Setting;
 use errmap_core::direction::Direction;
 use errmap_core::error::{Error, Result};
 use errmap_core::io::columns::{self as shared, Conversion, Entry, FieldTable, Units};
 use errmap_core::io::{CsvRow, CsvTable};
+use errmap_core::setting::words;
+use std::sync::LazyLock;
 
 /// One mapped field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -99,12 +102,20 @@ fn units(field: Field) -> Units {
     }
 }
 
-const TABLE: FieldTable<Field> = FieldTable {
-    fields: FIELDS,
-    units,
-    usage: "write --columns target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)",
-    flag: "--columns",
-};
+/// The field table; its usage line and flag are worded by the front end on first use (once a
+/// process, so the two strings are leaked into `'static` as the shared table wants them).
+static TABLE: LazyLock<FieldTable<Field>> = LazyLock::new(|| {
+    let flag = words(Setting::Columns);
+    let usage = format!(
+        "write {flag} target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)"
+    );
+    FieldTable {
+        fields: FIELDS,
+        units,
+        usage: Box::leak(usage.into_boxed_str()),
+        flag: Box::leak(flag.into_boxed_str()),
+    }
+});
 
 /// A parsed `--columns` mapping.
 #[derive(Debug, Clone, PartialEq)]
@@ -249,7 +260,7 @@ mod tests {
             let err = ColumnMap::parse(bad).expect_err(bad);
             assert_eq!(err.kind(), "input", "{bad}: {err}");
             assert!(
-                err.to_string().contains("--columns target=COLUMN"),
+                err.to_string().contains("`columns` target=COLUMN"),
                 "{bad}: {err}"
             );
         }

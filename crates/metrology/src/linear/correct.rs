@@ -14,7 +14,9 @@
 
 use super::air::{refractive_index, AirConditions, AirFormula};
 use super::runs::RunFile;
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 
 /// Reference temperature of dimensional measurement (ISO 1:2016), °C.
 pub const REFERENCE_TEMP_C: f64 = 20.0;
@@ -45,8 +47,8 @@ fn missing(file: &RunFile, line: u64, column: &str, why: &str) -> Error {
 pub fn correct_air(file: &RunFile, settings: &AirCorrection) -> Result<(RunFile, Vec<f64>)> {
     let mut out = file.clone();
     let mut indices = Vec::with_capacity(file.rows.len());
+    let why = &words(Setting::CorrectAir);
     for row in &mut out.rows {
-        let why = "--correct-air";
         let t = row
             .env
             .air_temp_c
@@ -92,10 +94,14 @@ pub fn normalise_material(file: &RunFile, alpha_ppm_per_k: f64, datum_mm: f64) -
     }
     let mut out = file.clone();
     for row in &mut out.rows {
-        let t = row
-            .env
-            .material_temp_c
-            .ok_or_else(|| missing(file, row.line, "material_temp_c", "--material-expansion"))?;
+        let t = row.env.material_temp_c.ok_or_else(|| {
+            missing(
+                file,
+                row.line,
+                "material_temp_c",
+                &words(Setting::MaterialExpansion),
+            )
+        })?;
         let l_mm = row.actual_mm() - datum_mm;
         let l20_mm = l_mm / (1.0 + alpha_ppm_per_k * 1e-6 * (t - REFERENCE_TEMP_C));
         row.deviation_um = (datum_mm + l20_mm - row.target_mm) * 1e3;

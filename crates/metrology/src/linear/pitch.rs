@@ -5,8 +5,10 @@
 //! d = √(c_s² + c_c²), φ = atan2(c_c, c_s). Solved by the shared QR solver (`errmap_core::numeric::lsq`), whose rank
 //! test refuses targets that cannot see the periodic term (all at multiples of the lead: sin θ, cos θ constant).
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
 use errmap_core::numeric::lsq::Refusal;
+use errmap_core::setting::words;
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -43,7 +45,10 @@ pub fn fit_pitch(x_mm: &[f64], e_um: &[f64], lead_mm: f64) -> Result<PitchFit> {
     if !(lead_mm.is_finite() && lead_mm > 0.0) {
         return Err(Error::usage(
             format!("screw lead {lead_mm} mm is not a positive length"),
-            "give the ball-screw lead in mm, e.g. --fit-pitch 10",
+            format!(
+                "give the ball-screw lead in mm, e.g. {} 10",
+                words(Setting::FitPitch)
+            ),
         ));
     }
     let n = x_mm.len();

@@ -8,7 +8,9 @@ use super::eval::Evaluation;
 use super::runs::Direction;
 use crate::controller::{self, AxisKind, ControllerTable};
 pub use crate::controller::{sinumerik_cec_path, TableFormat, TableOptions, LINUXCNC_MAX_LINES};
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use std::path::{Path, PathBuf};
 
 /// Most Fanuc compensation points any supported series reads back (30i-B: 0 ... 1535).
@@ -59,7 +61,10 @@ impl CompTable {
         if !(spacing_mm.is_finite() && spacing_mm > 0.0) {
             return Err(Error::usage(
                 format!("spacing {spacing_mm} mm is not a positive length"),
-                "give the table spacing in mm, e.g. --spacing 20",
+                format!(
+                    "give the table spacing in mm, e.g. {} 20",
+                    words(Setting::Spacing)
+                ),
             ));
         }
         let xs: Vec<f64> = ev.targets.iter().map(|t| t.target).collect();

@@ -5,7 +5,9 @@ use super::axis_fit::{fit_axis, AxisFit, CircleFit};
 use super::input::{Direction, Measurement, Position, RotaryAxis};
 use super::sphere::{fit_sphere, SphereFit};
 use crate::linear::{self, Evaluation, Sample, Standard};
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -315,7 +317,11 @@ impl AnalyzeOptions {
         if self.fix_radius && self.sphere_diameter_mm.is_none() {
             return Err(Error::usage(
                 "a fixed radius needs the sphere diameter",
-                "add --sphere-diameter MM (and --stylus-radius MM)",
+                format!(
+                    "add {} MM (and {} MM)",
+                    words(Setting::SphereDiameter),
+                    words(Setting::StylusRadius)
+                ),
             ));
         }
         Ok(())
@@ -408,7 +414,11 @@ fn fit_touch_sphere(
                     dev,
                     opts.radius_tolerance_mm
                 ),
-                "check --sphere-diameter and --stylus-radius, then the touch points of this sphere (a stray point or the wrong sphere)",
+                format!(
+                    "check {} and {}, then the touch points of this sphere (a stray point or the wrong sphere)",
+                    words(Setting::SphereDiameter),
+                    words(Setting::StylusRadius)
+                ),
             ));
         }
     }
@@ -440,10 +450,11 @@ fn axis_direction(m: &Measurement, centres: &[[[f64; 3]; 2]], fit: bool) -> Resu
         return Err(Error::input(
             Location::file(&m.path),
             format!(
-                "--fit-axis: {} distinct angles; the circles of the sphere centres need at least 3",
+                "{}: {} distinct angles; the circles of the sphere centres need at least 3",
+                words(Setting::FitAxis),
                 distinct.len()
             ),
-            "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+            drop_fit_axis(),
         ));
     }
     let t1: Vec<[f64; 3]> = centres.iter().map(|c| c[0]).collect();
@@ -451,8 +462,8 @@ fn axis_direction(m: &Measurement, centres: &[[[f64; 3]; 2]], fit: bool) -> Resu
     let fit = fit_axis([&t1, &t2], m.axis.nominal_direction()).map_err(|e| {
         Error::input(
             Location::file(&m.path),
-            format!("--fit-axis: {e}"),
-            "measure at least 3 angles spread over the turn, or drop --fit-axis to use the nominal axis",
+            format!("{}: {e}", words(Setting::FitAxis)),
+            drop_fit_axis(),
         )
     })?;
     Ok(AxisReport::fitted(m.axis, fit))
@@ -504,7 +515,10 @@ fn reference_vector(
     if ref_idx.is_empty() {
         return Err(Error::usage(
             format!("no position measured at the reference angle {reference_angle}°"),
-            "give --reference-angle one of the measured angles",
+            format!(
+                "give {} one of the measured angles",
+                words(Setting::ReferenceAngle)
+            ),
         ));
     }
     let mut a = [0.0; 3];
@@ -664,6 +678,14 @@ pub fn modulo_deg(angle_deg: f64) -> f64 {
     } else {
         w
     }
+}
+
+/// The hint when the axis cannot be fitted: more angles, or the nominal axis.
+fn drop_fit_axis() -> String {
+    format!(
+        "measure at least 3 angles spread over the turn, or drop {} to use the nominal axis",
+        words(Setting::FitAxis)
+    )
 }
 
 #[cfg(test)]

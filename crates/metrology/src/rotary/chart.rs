@@ -2,7 +2,9 @@
 
 use super::analysis::{Analysis, TableRow};
 use super::input::Direction;
+use crate::Setting;
 use errmap_core::error::Result;
+use errmap_core::setting::words;
 use errmap_report::chart::{save_png, Frame, FONT};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
@@ -150,9 +152,14 @@ fn draw_title(header: &Area<'_>, analysis: &Analysis) -> Drawn {
         format!(
             "sign: {}",
             match sign {
-                super::Sign::Errmap => "errmap, error = commanded − measured (--sign errmap)",
-                super::Sign::Calibrator =>
-                    "calibrator, error = measured − commanded as ISO 230-2's x (--sign calibrator)",
+                super::Sign::Errmap => format!(
+                    "errmap, error = commanded − measured ({} errmap)",
+                    words(Setting::Sign)
+                ),
+                super::Sign::Calibrator => format!(
+                    "calibrator, error = measured − commanded as ISO 230-2's x ({} calibrator)",
+                    words(Setting::Sign)
+                ),
             }
         ),
         sign.positive(analysis.axis),

@@ -3,7 +3,9 @@
 use super::analysis::{modulo_deg, Analysis, TableRow};
 use super::input::Direction;
 use crate::controller::{AxisKind, ControllerTable};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::path::{Path, PathBuf};
 
 pub use crate::controller::{fixed, TableFormat, TableOptions};
@@ -69,7 +71,10 @@ pub fn table_from_rows(
     if let Some(a) = start_deg.filter(|a| !a.is_finite()) {
         return Err(Error::usage(
             format!("start {a}° is not an angle"),
-            "give --start-deg as a number of degrees, e.g. 0 or 15",
+            format!(
+                "give {} as a number of degrees, e.g. 0 or 15",
+                words(Setting::StartDeg)
+            ),
         ));
     }
     let grid = choose_grid(&curves, step_deg, start_deg)?;
@@ -81,7 +86,11 @@ pub fn table_from_rows(
                 "a grid through {}° every {}° needs a {fine}° step from 0° ({n} entries per turn, at most {MAX_ENTRIES})",
                 grid.start_deg, grid.step_deg
             ),
-            "give a --start-deg that is a multiple of a coarser step (e.g. 0 or 15), or a coarser --step-deg",
+            format!(
+                "give a {} that is a multiple of a coarser step (e.g. 0 or 15), or a coarser {}",
+                words(Setting::StartDeg),
+                words(Setting::StepDeg)
+            ),
         ));
     }
     let angles_deg: Vec<f64> = (0..=n).map(|i| i as f64 * fine).collect();

@@ -2,6 +2,8 @@
 
 use super::analysis::{Analysis, Sign};
 use super::table::fixed;
+use crate::Setting;
+use errmap_core::setting::words;
 use std::fmt::Write as _;
 
 /// The whole report, section by section, each ending in a newline.
@@ -94,7 +96,8 @@ fn error_table(s: &mut String, a: &Analysis) {
         Sign::Calibrator => {
             let _ = writeln!(
                 s,
-                "\nerror = β − α = measured − commanded (arcsec, --sign calibrator: ISO 230-2's x), mean over repeats\n{}",
+                "\nerror = β − α = measured − commanded (arcsec, {} calibrator: ISO 230-2's x), mean over repeats\n{}",
+                words(Setting::Sign),
                 a.sign.positive(a.axis)
             );
         }

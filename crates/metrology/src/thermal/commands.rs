@@ -13,7 +13,9 @@ use super::outputs;
 use super::sensors::{calibrate, CalibrationFit, SensorTable, TemperatureLog};
 use super::store::{store_beside, IngestSummary, ModelEntry, Store, StoreCounts, DEFAULT_STORE};
 use crate::linear::Standard;
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use errmap_report::result::{write_result, ResultSpec};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -223,7 +225,10 @@ fn fit_campaigns(request: &FitRequest, db: Option<&Path>) -> Result<Vec<Campaign
         if request.campaigns.is_empty() {
             return Err(Error::usage(
                 "no campaigns to fit",
-                "name campaign folders, or use --from-store",
+                format!(
+                    "name campaign folders, or use {}",
+                    words(Setting::FromStore)
+                ),
             ));
         }
         request
@@ -247,7 +252,7 @@ fn parse_reference(text: &str) -> Result<Option<Reference>> {
         "cv" => Ok(None),
         other => Reference::parse(other).map(Some).ok_or_else(|| {
             Error::usage(
-                format!("--reference {other} is not a reference"),
+                format!("{} {other} is not a reference", words(Setting::Reference)),
                 "give shared, own-start, campaign-offset, room or cv",
             )
         }),
@@ -280,7 +285,10 @@ pub fn list_models(db: Option<PathBuf>) -> Result<ModelsReport, crate::error::Th
     if !db.exists() {
         return Err(Error::usage(
             format!("no store at {}", db.display()),
-            "give --db, or create one with `errmap thermal ingest`",
+            format!(
+                "give {}, or create one with `errmap thermal ingest`",
+                words(Setting::Db)
+            ),
         )
         .into());
     }

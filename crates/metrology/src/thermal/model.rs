@@ -32,7 +32,9 @@
 use super::campaign::{direction_name, Campaign, Direction, Measurement, DIRECTIONS};
 use super::lsq::{legendre_into, legendre_sum, lstsq};
 use super::sensors::{Role, Sensor};
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -297,7 +299,10 @@ fn choose_sensors(campaigns: &[Campaign], options: &FitOptions) -> Result<Vec<St
     if names.is_empty() {
         return Err(Error::usage(
             "no sensors to fit the gains on",
-            "mark sensors as nut or bearing in the sensor table, or name them with --sensors",
+            format!(
+                "mark sensors as nut or bearing in the sensor table, or name them with {}",
+                words(Setting::Sensors)
+            ),
         ));
     }
     Ok(names)
@@ -368,7 +373,10 @@ fn common_reference_point(campaigns: &[Campaign], options: &FitOptions) -> Resul
                 "campaigns '{}' and '{}' have different reference points ({} and {} mm)",
                 campaigns[0].name, c.name, p, c.reference_point_mm
             ),
-            "give one reference point with --reference-mm",
+            format!(
+                "give one reference point with {}",
+                words(Setting::ReferenceMm)
+            ),
         ));
     }
     Ok(p)
@@ -418,15 +426,20 @@ fn measurement_rises(
     ambient: Option<&str>,
     coolant: usize,
 ) -> Result<Rises> {
-    let get =
-        |name: &str| {
-            m.temperatures_c.get(name).copied().ok_or_else(|| {
-                Error::usage(
-                format!("campaign '{}' has no temperatures for sensor '{name}'", c.name),
-                "log every sensor of the model in every campaign, or choose others with --sensors",
+    let get = |name: &str| {
+        m.temperatures_c.get(name).copied().ok_or_else(|| {
+            Error::usage(
+                format!(
+                    "campaign '{}' has no temperatures for sensor '{name}'",
+                    c.name
+                ),
+                format!(
+                    "log every sensor of the model in every campaign, or choose others with {}",
+                    words(Setting::Sensors)
+                ),
             )
-            })
-        };
+        })
+    };
     let ambient_c = match ambient {
         Some(a) => Some(get(a)?),
         None => None,
@@ -633,7 +646,10 @@ pub fn fit(campaigns: &[Campaign], options: &FitOptions) -> Result<ThermalModel>
     if options.reference == Some(Reference::Room) && prep.ambient.is_none() {
         return Err(Error::usage(
             "rises from the room need an ambient sensor",
-            "give a sensor the role ambient in the sensor table, or choose another --reference",
+            format!(
+                "give a sensor the role ambient in the sensor table, or choose another {}",
+                words(Setting::Reference)
+            ),
         ));
     }
     let candidates: Vec<Reference> = match options.reference {
@@ -866,7 +882,7 @@ fn choose_order(
                     direction_name(dir),
                     targets.len()
                 ),
-                "give a lower --order",
+                format!("give a lower {}", words(Setting::Order)),
             ));
         }
         return Ok((o, "given".to_string(), Vec::new()));
@@ -882,7 +898,10 @@ fn choose_order(
                 "no polynomial order could be cross-validated for {}",
                 direction_name(dir)
             ),
-            "measure more target positions or give --order",
+            format!(
+                "measure more target positions or give {}",
+                words(Setting::Order)
+            ),
         ));
     }
     // The lowest order within 2 % of the best: extra terms must earn their place.

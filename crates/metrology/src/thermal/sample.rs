@@ -11,8 +11,10 @@
 
 use crate::thermal::lsq::legendre_sum;
 use crate::thermal::pt100;
+use crate::Setting;
 use errmap_core::error::Result;
 use errmap_core::io::{write_atomic, write_json};
+use errmap_core::setting::words;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -336,17 +338,29 @@ impl SynthThermalOptions {
             || !(self.every_s.is_finite() && self.every_s > 0.0)
         {
             return Err(errmap_core::Error::usage(
-                "campaigns, repeats and --every-s must be positive",
-                "e.g. --campaigns 4 --repeats 2 --every-s 900",
+                format!(
+                    "campaigns, repeats and {} must be positive",
+                    words(Setting::EveryS)
+                ),
+                format!(
+                    "e.g. {} 4 {} 2 {} 900",
+                    words(Setting::Campaigns),
+                    words(Setting::Repeats),
+                    words(Setting::EveryS)
+                ),
             ));
         }
         if !(self.laser_noise_um.is_finite() && self.laser_noise_um >= 0.0) {
             return Err(errmap_core::Error::usage(
                 format!(
-                    "--laser-noise-um {} is not a noise level",
+                    "{} {} is not a noise level",
+                    words(Setting::LaserNoiseUm),
                     self.laser_noise_um
                 ),
-                "give one sigma in µm, 0 or more, e.g. --laser-noise-um 0.5",
+                format!(
+                    "give one sigma in µm, 0 or more, e.g. {} 0.5",
+                    words(Setting::LaserNoiseUm)
+                ),
             ));
         }
         Ok(())

@@ -10,8 +10,10 @@
 
 use super::filter::FilterSpec;
 use super::pt100;
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::io::{write_atomic, CsvRow, CsvTable};
+use errmap_core::setting::words;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -544,7 +546,10 @@ pub fn calibrate(
     if min_span_c.is_nan() || min_span_c < 0.0 {
         return Err(Error::usage(
             format!("minimum span {min_span_c} °C is not a temperature span"),
-            "give --min-span-c as 0 or more degrees, e.g. 1",
+            format!(
+                "give {} as 0 or more degrees, e.g. 1",
+                words(Setting::MinSpanC)
+            ),
         ));
     }
     let (reference, k_ref) = reference_column(log, table)?;

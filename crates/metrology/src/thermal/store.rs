@@ -11,7 +11,9 @@ use super::filter::FilterSpec;
 use super::model::ThermalModel;
 use super::sensors::{Calibration, Role, Sensor, SensorTable, TemperatureLog, Unit};
 use crate::linear::Direction;
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -407,14 +409,14 @@ impl Store {
             Error::input(
                 Location::file(&self.path),
                 format!("stored model '{name}' is unreadable: {e}"),
-                "refit it with `errmap thermal fit --from-store`",
+                refit_from_store(),
             )
         })?;
         model.validate().map_err(|m| {
             Error::input(
                 Location::file(&self.path),
                 format!("stored model '{name}': {m}"),
-                "refit it with `errmap thermal fit --from-store`",
+                refit_from_store(),
             )
         })?;
         Ok(model)
@@ -478,7 +480,10 @@ fn remove_existing(tx: &Connection, p: &Path, name: &str, replace: bool) -> Resu
     if !replace {
         return Err(Error::usage(
             format!("campaign '{name}' is already in {}", p.display()),
-            "give the campaign another name in campaign.toml, or pass --replace",
+            format!(
+                "give the campaign another name in campaign.toml, or pass {}",
+                words(Setting::Replace)
+            ),
         ));
     }
     for table in ["temperature_samples", "laser_readings", "campaign_sensors"] {
@@ -826,7 +831,7 @@ fn stored_log(
             return Err(Error::input(
                 Location::file(p),
                 format!("campaign '{name}': sensors have different sample times in the store"),
-                "ingest the campaign again with --replace",
+                ingest_again(),
             ));
         }
         channels.push(samples.into_iter().map(|s| s.1).collect());
@@ -871,7 +876,7 @@ fn stored_readings(
             Error::input(
                 Location::file(p),
                 format!("campaign '{name}': direction '{dir}' in the store"),
-                "ingest the campaign again with --replace",
+                ingest_again(),
             )
         })?;
         timed.push((
@@ -894,6 +899,19 @@ fn read_err(path: &Path, e: rusqlite::Error) -> Error {
 
 fn write_err(path: &Path, e: rusqlite::Error) -> Error {
     Error::write(path, std::io::Error::other(format!("store: {e}")))
+}
+
+/// The hint for a stored model that cannot be used: fit it again from the store.
+fn refit_from_store() -> String {
+    format!(
+        "refit it with `errmap thermal fit {}`",
+        words(Setting::FromStore)
+    )
+}
+
+/// The hint for a stored campaign that cannot be read back: ingest it again over itself.
+fn ingest_again() -> String {
+    format!("ingest the campaign again with {}", words(Setting::Replace))
 }
 
 #[cfg(test)]
