@@ -5,6 +5,7 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod core_setting;
 mod toolpath;
 
 use std::any::Any;
@@ -12,12 +13,15 @@ use std::any::Any;
 /// The flag for any crate's setting, or `None` for a type that is not a setting.
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
+        .or_else(|| core_setting::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
 #[cfg(test)]
 fn all_flags() -> Vec<&'static str> {
-    toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect()
+    let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
+    all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
+    all
 }
 
 /// The command line's flags, for the tests.

@@ -47,8 +47,10 @@ fn units(field: Field) -> Units {
 pub(super) const TABLE: FieldTable<Field> = FieldTable {
     fields: FIELDS,
     units,
-    usage: "write --columns x=COLUMN,y=COLUMN,z=COLUMN[,nx=…,ny=…,nz=…][,i=…,j=…,k=…][,id=COLUMN] (header names or 1-based numbers, an optional unit such as z=Z[um]; see docs/probe-files.md)",
-    flag: "the column mapping (--columns, or `columns` in the job)",
+    usage: || {
+        "write --columns x=COLUMN,y=COLUMN,z=COLUMN[,nx=…,ny=…,nz=…][,i=…,j=…,k=…][,id=COLUMN] (header names or 1-based numbers, an optional unit such as z=Z[um]; see docs/probe-files.md)".to_string()
+    },
+    flag: || "the column mapping (--columns, or `columns` in the job)".to_string(),
 };
 
 /// A parsed probe column mapping: x, y, z required; nx, ny, nz all or none; i, j, k all or

@@ -102,8 +102,10 @@ fn units(field: Field) -> Units {
 const TABLE: FieldTable<Field> = FieldTable {
     fields: FIELDS,
     units,
-    usage: "write --columns target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)",
-    flag: "--columns",
+    usage: || {
+        "write --columns target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)".to_string()
+    },
+    flag: || "--columns".to_string(),
 };
 
 /// A parsed `--columns` mapping.
