@@ -6,6 +6,7 @@
 //! word here is a flag the command line has.
 
 mod core_setting;
+mod maps;
 mod toolpath;
 
 use std::any::Any;
@@ -14,6 +15,7 @@ use std::any::Any;
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
         .or_else(|| core_setting::flag(setting))
+        .or_else(|| maps::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -21,6 +23,7 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
 fn all_flags() -> Vec<&'static str> {
     let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
     all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
+    all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
     all
 }
 
