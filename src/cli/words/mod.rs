@@ -7,6 +7,7 @@
 
 mod core_setting;
 mod maps;
+mod report;
 mod toolpath;
 
 use std::any::Any;
@@ -16,6 +17,7 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
         .or_else(|| core_setting::flag(setting))
         .or_else(|| maps::flag(setting))
+        .or_else(|| report::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -24,6 +26,7 @@ fn all_flags() -> Vec<&'static str> {
     let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
     all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
     all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
+    all.extend(report::ALL.iter().map(|s| report::words(*s)));
     all
 }
 
