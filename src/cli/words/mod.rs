@@ -8,6 +8,7 @@
 mod core_setting;
 mod maps;
 mod report;
+mod synth;
 mod toolpath;
 
 use std::any::Any;
@@ -18,6 +19,7 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
         .or_else(|| core_setting::flag(setting))
         .or_else(|| maps::flag(setting))
         .or_else(|| report::flag(setting))
+        .or_else(|| synth::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -27,6 +29,7 @@ fn all_flags() -> Vec<&'static str> {
     all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
     all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
     all.extend(report::ALL.iter().map(|s| report::words(*s)));
+    all.extend(synth::ALL.iter().map(|s| synth::words(*s)));
     all
 }
 
