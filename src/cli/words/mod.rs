@@ -8,6 +8,7 @@
 mod core_setting;
 mod maps;
 mod report;
+mod serve;
 mod synth;
 mod toolpath;
 
@@ -20,6 +21,7 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
         .or_else(|| maps::flag(setting))
         .or_else(|| report::flag(setting))
         .or_else(|| synth::flag(setting))
+        .or_else(|| serve::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -30,6 +32,7 @@ fn all_flags() -> Vec<&'static str> {
     all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
     all.extend(report::ALL.iter().map(|s| report::words(*s)));
     all.extend(synth::ALL.iter().map(|s| synth::words(*s)));
+    all.extend(serve::ALL.iter().map(|s| serve::words(*s)));
     all
 }
 
