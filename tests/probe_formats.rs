@@ -91,8 +91,9 @@ fn a_cmm_export_with_a_date_line_reads_with_one_mapping() {
         e.contains("flat.csv:2: 7 fields, but the header names 1 columns"),
         "{e}"
     );
-    // … and the hint points to the mapping.
-    assert!(e.contains("--columns x=…,y=…,z=…"), "{e}");
+    // … and the hint points to the mapping (its key: the library is called without the binary's
+    // wording of flags).
+    assert!(e.contains("`columns` x=…,y=…,z=…"), "{e}");
 }
 
 #[test]
@@ -292,7 +293,7 @@ fn bad_vectors_are_refused_at_their_line() {
     assert!(
         e.contains("w.csv:2")
             && e.contains("90.0° from the normal axis z")
-            && e.contains("--normal x"),
+            && e.contains("`normal` x"),
         "{e}"
     );
     // Read with --normal x, the wall's vectors agree.
@@ -415,7 +416,7 @@ fn dmis_refusals_name_label_and_line() {
     // A mapping does not apply to DMIS.
     let e = err("d.dmi", ok.as_bytes(), &spec(Some("x=X,y=Y,z=Z"), None));
     assert!(
-        e.contains("is a DMIS file: a column mapping (--columns) applies to CSV probe files only"),
+        e.contains("is a DMIS file: a column mapping (`columns`) applies to CSV probe files only"),
         "{e}"
     );
 }

@@ -62,7 +62,10 @@ pub fn write_atomic(
                     path.display(),
                     limit / 1_000_000
                 ),
-                "choose coarser steps or spacings, or raise --max-output-mb",
+                format!(
+                    "choose coarser steps or spacings, or raise {}",
+                    crate::setting::words(crate::core_setting::Setting::MaxOutputMb)
+                ),
             ));
         }
         filled.map_err(|e| Error::write(path, e))?;

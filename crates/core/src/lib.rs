@@ -6,6 +6,7 @@
 #![warn(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
+pub mod core_setting;
 pub mod direction;
 pub mod error;
 pub mod geom;

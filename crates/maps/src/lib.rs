@@ -13,5 +13,7 @@ pub mod interp;
 pub mod map;
 pub mod nn;
 pub mod probe;
+mod setting;
 
 pub use error::{GridError, MapError, ProbeError};
+pub use setting::Setting;

@@ -223,7 +223,9 @@ fn no_nominal_at_all_is_refused() {
     let spec = ProbeSpec::default();
     let err = err_of("x_mm,y_mm,z_mm\n1,2,3\n", &spec);
     assert!(
-        err.contains("p.csv:1") && err.contains("no nominal") && err.contains("--nominal-plane"),
+        err.contains("p.csv:1")
+            && err.contains("no nominal")
+            && err.contains("`nominal_plane_mm` MM"),
         "{err}"
     );
 }

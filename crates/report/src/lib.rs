@@ -10,5 +10,7 @@ pub mod heatmap;
 pub mod html;
 pub mod pdf;
 pub mod result;
+mod setting;
 
 pub use error::ReportError;
+pub use setting::Setting;

@@ -1,7 +1,9 @@
 //! `--pdf`: print a report through a headless Chromium (found as `$ERRMAP_CHROMIUM`, `chromium`, `chromium-browser`, `google-chrome` or `google-chrome-stable` on the PATH).
 
 use crate::ReportError;
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -40,7 +42,8 @@ pub fn find_chromium() -> Result<PathBuf, ReportError> {
     }
     Err(ReportError::NoBrowser(Error::usage(
         format!(
-            "--pdf needs a headless Chromium and none was found ({} on the PATH, or $ERRMAP_CHROMIUM)",
+            "{} needs a headless Chromium and none was found ({} on the PATH, or $ERRMAP_CHROMIUM)",
+            words(Setting::Pdf),
             BROWSER_NAMES.join(", ")
         ),
         "install Chromium (Debian/Ubuntu: apt-get install chromium; Fedora: dnf install chromium) or set ERRMAP_CHROMIUM to a Chrome or Chromium executable; the HTML report does not need it",

@@ -18,6 +18,7 @@ pub mod pages;
 pub mod routes;
 pub mod runs;
 pub mod session;
+mod setting;
 pub mod store;
 pub mod svg;
 pub mod throttle;
@@ -25,8 +26,10 @@ pub mod users;
 pub mod views;
 
 pub use error::{ServeError, UsersError};
+pub use setting::Setting;
 
 use errmap_core::error::{Error, Location};
+use errmap_core::setting::words;
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, RwLock};
@@ -82,12 +85,19 @@ pub fn check_transport(cfg: &Config) -> Result<Option<String>, ServeError> {
                     "{} is not a loopback address and no TLS certificate was given: passwords and session cookies would cross the network in clear text",
                     cfg.bind.ip()
                 ),
-                "give --tls-cert PEM --tls-key PEM, bind to 127.0.0.1 behind a TLS reverse proxy (with --trusted-proxy), or accept the risk with --insecure-http",
+                format!(
+                    "give {} PEM {} PEM, bind to 127.0.0.1 behind a TLS reverse proxy (with {}), or accept the risk with {}",
+                    words(Setting::TlsCert),
+                    words(Setting::TlsKey),
+                    words(Setting::TrustedProxy),
+                    words(Setting::InsecureHttp)
+                ),
             )));
         }
         return Ok(Some(format!(
-            "warning: serving plain HTTP on {} (--insecure-http): passwords and session cookies cross the network unencrypted",
-            cfg.bind
+            "warning: serving plain HTTP on {} ({}): passwords and session cookies cross the network unencrypted",
+            cfg.bind,
+            words(Setting::InsecureHttp)
         )));
     }
     Ok(None)
@@ -104,8 +114,11 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<(), Se
             Location::file(&cfg.users),
             "no users file",
             format!(
-                "add a user first: errmap serve user add NAME --role operator --users {} --password-stdin",
-                cfg.users.display()
+                "add a user first: errmap serve user add NAME {} operator {} {} {}",
+                words(Setting::Role),
+                words(Setting::Users),
+                cfg.users.display(),
+                words(Setting::PasswordStdin)
             ),
         )),
         other => other,
@@ -156,7 +169,11 @@ pub fn run(cfg: Config, on_listening: impl FnOnce(&str) + Send) -> Result<(), Se
                         ServeError::Tls(Error::input(
                             Location::file(cert_path),
                             format!("not a usable TLS certificate and key: {e}"),
-                            "give a PEM certificate chain with --tls-cert and its PEM private key with --tls-key",
+                            format!(
+                                "give a PEM certificate chain with {} and its PEM private key with {}",
+                                words(Setting::TlsCert),
+                                words(Setting::TlsKey)
+                            ),
                         ))
                     })?,
             ),

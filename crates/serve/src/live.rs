@@ -228,9 +228,10 @@ impl Feed {
     pub fn start(path: Option<PathBuf>) -> Feed {
         let first = match &path {
             Some(_) => Snapshot::problem("the state file has not been read yet".into()),
-            None => {
-                Snapshot::problem("no live state: errmap serve was started without --live".into())
-            }
+            None => Snapshot::problem(format!(
+                "no live state: errmap serve was started without {}",
+                errmap_core::setting::words(crate::Setting::Live)
+            )),
         };
         let json = serde_json::to_string(&first).unwrap_or_default();
         let (tx, rx) = watch::channel(Arc::new(Published {

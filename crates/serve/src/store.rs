@@ -3,7 +3,9 @@
 //! Opened as the live contract says (WAL, busy timeout 2000 ms); `live_commands` is created with
 //! the contract's DDL, byte for byte the same as `errmap live`'s.
 
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use rusqlite::{params, Connection, OptionalExtension};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -66,7 +68,10 @@ fn db_err(path: &Path, e: rusqlite::Error) -> Error {
     Error::input(
         Location::file(path),
         format!("store: {e}"),
-        "check that the file is an errmap store (`errmap thermal ingest --db …` makes one) and not locked by another program",
+        format!(
+            "check that the file is an errmap store (`errmap thermal ingest {} …` makes one) and not locked by another program",
+            words(Setting::Db)
+        ),
     )
 }
 
@@ -105,7 +110,10 @@ impl Db {
             return Err(Error::input(
                 Location::file(path),
                 "no store at this path",
-                "give the store of the thermal commands (`errmap thermal ingest --db STORE.sqlite` creates one) or the one `errmap live` writes",
+                format!(
+                    "give the store of the thermal commands (`errmap thermal ingest {} STORE.sqlite` creates one) or the one `errmap live` writes",
+                    words(Setting::Db)
+                ),
             ));
         }
         let write = connect(path)?;

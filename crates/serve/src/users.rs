@@ -12,10 +12,12 @@
 //! minimum for argon2id.
 
 use crate::error::UsersError;
+use crate::Setting;
 use argon2::password_hash::phc::PasswordHash;
 use argon2::password_hash::{PasswordHasher, PasswordVerifier};
 use argon2::Argon2;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
@@ -108,7 +110,12 @@ impl Users {
                     column: None,
                 },
                 format!("not a users file: {}", e.message()),
-                "write it with `errmap serve user add NAME --role viewer|operator --users FILE --password-stdin`",
+                format!(
+                    "write it with `errmap serve user add NAME {} viewer|operator {} FILE {}`",
+                    words(Setting::Role),
+                    words(Setting::Users),
+                    words(Setting::PasswordStdin)
+                ),
             ))
         })?;
         let mut seen = std::collections::BTreeSet::new();
@@ -204,7 +211,10 @@ impl Users {
         if self.get(&name).is_some() && !replace {
             return Err(UsersError::Name(Error::usage(
                 format!("user {name:?} exists already"),
-                "give --replace to set a new password or role",
+                format!(
+                    "give {} to set a new password or role",
+                    words(Setting::Replace)
+                ),
             )));
         }
         let password_hash = hash_password(password).map_err(UsersError::Internal)?;
@@ -226,7 +236,10 @@ impl Users {
         if self.users.len() == before {
             return Err(UsersError::Name(Error::usage(
                 format!("no user {name:?}"),
-                "`errmap serve user list --users FILE` lists them",
+                format!(
+                    "`errmap serve user list {} FILE` lists them",
+                    words(Setting::Users)
+                ),
             )));
         }
         Ok(())

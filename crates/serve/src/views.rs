@@ -481,7 +481,10 @@ async fn serve_run_path(app: &App, auth: &Auth, path: String) -> Response {
         return fail(
             StatusCode::NOT_FOUND,
             false,
-            "errmap serve was started without --runs",
+            &format!(
+                "errmap serve was started without {}",
+                errmap_core::setting::words(crate::Setting::Runs)
+            ),
         );
     };
     let request = path.clone();

@@ -8,8 +8,10 @@
 //! offset; a ballbar reading is the exact distance from the set-up centre minus R, at the
 //! commanded angle; two-axis readings are the positions. Gaussian noise is added to each.
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
 use errmap_core::io::{write_atomic, write_json};
+use errmap_core::setting::words;
 use errmap_metrology::circular::input::Form;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -87,8 +89,18 @@ impl CircularSynthConfig {
         let noise_ok = self.noise_um.is_finite() && self.noise_um >= 0.0;
         if !positive(self.radius_mm) || !positive(self.feed_mm_per_min) || !noise_ok {
             return Err(Error::usage(
-                "synth circular needs a positive --radius and --feed and a finite --noise-um ≥ 0",
-                "e.g. --radius 100 --feed 1000 --noise-um 0.2",
+                format!(
+                    "synth circular needs a positive {} and {} and a finite {} ≥ 0",
+                    words(Setting::Radius),
+                    words(Setting::Feed),
+                    words(Setting::NoiseUm)
+                ),
+                format!(
+                    "e.g. {} 100 {} 1000 {} 0.2",
+                    words(Setting::Radius),
+                    words(Setting::Feed),
+                    words(Setting::NoiseUm)
+                ),
             )
             .into());
         }

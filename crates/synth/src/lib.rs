@@ -8,6 +8,7 @@ mod error;
 pub mod linear;
 pub mod rotary;
 pub mod scan;
+mod setting;
 /// The training workload of throughput measurements (kept under this name for callers).
 pub use errmap_maps::nn::workload as training;
 /// Thermal campaigns with known truth (generated beside the analysis that reads them).
@@ -16,3 +17,4 @@ pub mod web_plate;
 pub mod web_plate_args;
 
 pub use error::SynthError;
+pub use setting::Setting;

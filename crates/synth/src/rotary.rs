@@ -6,8 +6,10 @@
 //! the + direction, the reference). Touch points are stylus-centre positions on a sphere of
 //! radius sphere + stylus, spread over the upper cap, with Gaussian noise along the normal.
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
 use errmap_core::io::{write_atomic, write_json};
+use errmap_core::setting::words;
 use errmap_metrology::rotary::input::{Direction, RotaryAxis};
 use errmap_metrology::rotary::sphere::cap_directions;
 use nalgebra::{Rotation3, Unit, Vector3};
@@ -177,7 +179,7 @@ impl RotarySynthConfig {
         // NaN passes every comparison below: refuse it by name.
         if self.step_deg.is_nan() {
             return Err(Error::usage(
-                "--step-deg NaN is not a number of degrees",
+                format!("{} NaN is not a number of degrees", words(Setting::StepDeg)),
                 "choose a step that divides 360, e.g. 10, 15, 30",
             )
             .into());
@@ -185,7 +187,8 @@ impl RotarySynthConfig {
         if self.step_deg > 0.0 && self.step_deg < MIN_STEP_DEG {
             return Err(Error::usage(
                 format!(
-                    "--step-deg {:?} is below the smallest step of {MIN_STEP_DEG}°",
+                    "{} {:?} is below the smallest step of {MIN_STEP_DEG}°",
+                    words(Setting::StepDeg),
                     self.step_deg
                 ),
                 "choose a step that divides 360, e.g. 10, 15, 30",
@@ -199,7 +202,12 @@ impl RotarySynthConfig {
                 format!(
                     "{samples:.3e} probe points would be generated, more than {MAX_SAMPLES:.0e}"
                 ),
-                "use a larger --step-deg or fewer --repeats or --points",
+                format!(
+                    "use a larger {} or fewer {} or {}",
+                    words(Setting::StepDeg),
+                    words(Setting::Repeats),
+                    words(Setting::Points)
+                ),
             )
             .into());
         }
@@ -216,8 +224,18 @@ impl RotarySynthConfig {
             || !(self.probe_noise_um.is_finite() && self.probe_noise_um >= 0.0)
         {
             return Err(Error::usage(
-                "synth rotary needs --repeats ≥ 1, --points ≥ 4 and a finite --noise-um ≥ 0",
-                "e.g. --repeats 3 --points 25 --noise-um 0.5",
+                format!(
+                    "synth rotary needs {} ≥ 1, {} ≥ 4 and a finite {} ≥ 0",
+                    words(Setting::Repeats),
+                    words(Setting::Points),
+                    words(Setting::NoiseUm)
+                ),
+                format!(
+                    "e.g. {} 3 {} 25 {} 0.5",
+                    words(Setting::Repeats),
+                    words(Setting::Points),
+                    words(Setting::NoiseUm)
+                ),
             )
             .into());
         }

@@ -16,8 +16,10 @@
 //! reads `z = floor_z + E/1000 + noise` (noise N(0, σ)); a few chips under the probe add +40 µm at
 //! known points ([`PlantedOutlier`]); two points per part are measured twice (same `id`).
 
+use crate::Setting;
 use errmap_core::error::{Error, Result};
 use errmap_core::io;
+use errmap_core::setting::words;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -277,20 +279,23 @@ fn validate(spec: &WebPlateSpec) -> Result<()> {
                 "plate size {}x{} mm is too small",
                 spec.size_x_mm, spec.size_y_mm
             ),
-            format!("give --size of at least {min}x{min} mm"),
+            format!("give {} of at least {min}x{min} mm", words(Setting::Size)),
         ));
     }
     if spec.parts == 0 || spec.parts > 9999 {
-        return Err(Error::usage("--parts must be 1…9999", "e.g. --parts 8"));
+        return Err(Error::usage(
+            format!("{} must be 1…9999", words(Setting::Parts)),
+            format!("e.g. {} 8", words(Setting::Parts)),
+        ));
     }
     match spec.layout {
         Layout::Grid { nx, ny } if nx < 3 || ny < 3 || nx * ny > 100_000 => Err(Error::usage(
             format!("probe grid {nx}x{ny} is too small or too large"),
-            "use at least 3x3, e.g. --grid 12x12",
+            format!("use at least 3x3, e.g. {} 12x12", words(Setting::Grid)),
         )),
         Layout::Irregular { n } if !(8..=100_000).contains(&n) => Err(Error::usage(
-            format!("--irregular {n}: need at least 8 points"),
-            "e.g. --irregular 150",
+            format!("{} {n}: need at least 8 points", words(Setting::Irregular)),
+            format!("e.g. {} 150", words(Setting::Irregular)),
         )),
         _ => Ok(()),
     }?;

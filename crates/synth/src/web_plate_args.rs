@@ -2,7 +2,9 @@
 //! size `XxY`, origin `X,Y`, probe grid `NXxNY`, and the layout and noise checks.
 
 use super::web_plate::Layout;
+use crate::Setting;
 use errmap_core::error::{Error, Result};
+use errmap_core::setting::words;
 
 fn parse_two(text: &str, sep: char) -> std::result::Result<(f64, f64), String> {
     let (a, b) = text
@@ -60,7 +62,11 @@ pub fn check_noise_um(noise_um: f64) -> Result<(), crate::SynthError> {
     if noise_um.is_finite() && noise_um >= 0.0 {
         return Ok(());
     }
-    Err(Error::usage("--noise-um must be ≥ 0", "e.g. --noise-um 1").into())
+    Err(Error::usage(
+        format!("{} must be ≥ 0", words(Setting::NoiseUm)),
+        format!("e.g. {} 1", words(Setting::NoiseUm)),
+    )
+    .into())
 }
 
 #[cfg(test)]
@@ -96,7 +102,7 @@ mod tests {
         assert!(check_noise_um(0.0).is_ok());
         let err = check_noise_um(-1.0).unwrap_err();
         assert!(matches!(err, crate::SynthError::Options(_)), "{err}");
-        assert!(err.to_string().contains("--noise-um must be ≥ 0"), "{err}");
+        assert!(err.to_string().contains("`noise_um` must be ≥ 0"), "{err}");
         assert!(check_noise_um(f64::NAN).is_err());
     }
 }

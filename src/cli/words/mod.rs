@@ -5,8 +5,13 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod core_setting;
 mod live;
+mod maps;
 mod metrology;
+mod report;
+mod serve;
+mod synth;
 mod toolpath;
 
 use std::any::Any;
@@ -16,6 +21,11 @@ pub fn flag(setting: &dyn Any) -> Option<&'static str> {
     toolpath::flag(setting)
         .or_else(|| metrology::flag(setting))
         .or_else(|| live::flag(setting))
+        .or_else(|| core_setting::flag(setting))
+        .or_else(|| maps::flag(setting))
+        .or_else(|| report::flag(setting))
+        .or_else(|| synth::flag(setting))
+        .or_else(|| serve::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
@@ -24,6 +34,11 @@ fn all_flags() -> Vec<&'static str> {
     let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
     all.extend(metrology::ALL.iter().map(|s| metrology::words(*s)));
     all.extend(live::ALL.iter().map(|s| live::words(*s)));
+    all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
+    all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
+    all.extend(report::ALL.iter().map(|s| report::words(*s)));
+    all.extend(synth::ALL.iter().map(|s| synth::words(*s)));
+    all.extend(serve::ALL.iter().map(|s| serve::words(*s)));
     all
 }
 

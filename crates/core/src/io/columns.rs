@@ -42,10 +42,12 @@ pub struct FieldTable<F: 'static> {
     pub fields: &'static [(&'static str, F)],
     /// The units each field accepts in brackets (empty for a field without a unit).
     pub units: fn(F) -> Units,
-    /// The hint of every error in the mapping text (how to write `--columns` for this reader).
-    pub usage: &'static str,
-    /// The flag or key the user wrote the mapping with, for "fix …" hints (`--columns`).
-    pub flag: &'static str,
+    /// The hint of every error in the mapping text (how to write the mapping for this reader),
+    /// formed when needed so that it names the setting as the front end words it.
+    pub usage: fn() -> String,
+    /// The setting the user wrote the mapping with, for "fix …" hints, as the front end words
+    /// it.
+    pub flag: fn() -> String,
 }
 
 impl<F: Copy + PartialEq> FieldTable<F> {
@@ -59,7 +61,7 @@ impl<F: Copy + PartialEq> FieldTable<F> {
 
     /// An error in the mapping text.
     pub fn spec_error(&self, message: String) -> Error {
-        Error::usage(message, self.usage)
+        Error::usage(message, (self.usage)())
     }
 }
 
@@ -201,7 +203,7 @@ pub fn resolve<F: Copy + PartialEq>(
             ),
             format!(
                 "fix {}: name a header exactly as written, or give its 1-based number",
-                fields.flag
+                (fields.flag)()
             ),
         )
     })

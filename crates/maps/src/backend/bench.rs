@@ -6,6 +6,8 @@ use serde::Serialize;
 
 use super::{probe, select_trainer, silent};
 use crate::nn::{Backend, ModelConfig};
+use crate::Setting;
+use errmap_core::setting::words;
 use errmap_core::{Error, Result};
 
 /// What `errmap bench training` trains.
@@ -66,10 +68,17 @@ pub fn run(bench: &TrainingBench) -> Result<TrainingBenchReport> {
     if !(1..=MAX_PARTS).contains(&bench.parts) || !(8..=MAX_SAMPLES).contains(&bench.samples) {
         return Err(Error::usage(
             format!(
-                "--parts {} --samples {}: parts must be 1..={MAX_PARTS}, samples 8..={MAX_SAMPLES}",
-                bench.parts, bench.samples
+                "{} {} {} {}: parts must be 1..={MAX_PARTS}, samples 8..={MAX_SAMPLES}",
+                words(Setting::BenchParts),
+                bench.parts,
+                words(Setting::BenchSamples),
+                bench.samples
             ),
-            "e.g. --parts 8 --samples 1536",
+            format!(
+                "e.g. {} 8 {} 1536",
+                words(Setting::BenchParts),
+                words(Setting::BenchSamples)
+            ),
         ));
     }
     let config = ModelConfig {

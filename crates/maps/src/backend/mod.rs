@@ -15,6 +15,8 @@ use std::sync::Arc;
 
 use crate::gpu::GpuTrainer;
 use crate::nn::{Backend, CpuTrainer, FastCpuTrainer, Mlp, ModelConfig, Trainer, TrainingSet};
+use crate::Setting;
+use errmap_core::setting::words;
 use errmap_core::{Error, Result};
 
 pub use errmap_core::progress::{silent, Notes};
@@ -47,16 +49,19 @@ pub fn select_trainer_cached_in(
         Backend::Cpu => Ok(Selection {
             trainer: Box::new(FastCpuTrainer),
             backend,
-            reason: format!("--backend cpu: {}", FastCpuTrainer.name()),
+            reason: format!("{} cpu: {}", words(Setting::Backend), FastCpuTrainer.name()),
         }),
         Backend::CpuReference => Ok(Selection {
             trainer: Box::new(CpuTrainer::reference()),
             backend,
-            reason: "--backend cpu-reference: the reference trainer".into(),
+            reason: format!(
+                "{} cpu-reference: the reference trainer",
+                words(Setting::Backend)
+            ),
         }),
         Backend::Gpu => {
             let gpu = GpuTrainer::new()?.with_notes(notes);
-            let reason = format!("--backend gpu: {}", gpu.name());
+            let reason = format!("{} gpu: {}", words(Setting::Backend), gpu.name());
             Ok(Selection {
                 trainer: Box::new(gpu),
                 backend,

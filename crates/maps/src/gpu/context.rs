@@ -142,14 +142,17 @@ impl GpuContext {
                         "only a software adapter ({}), and a hardware GPU was asked for",
                         software.join(", ")
                     ),
-                    "use --backend gpu or auto to train on it",
+                    format!(
+                        "use {} gpu or auto to train on it",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    ),
                 ));
             }
         }
         if candidates.is_empty() {
             return Err(Error::device(
                 "no GPU adapter found (no Vulkan, Metal or DX12 device)",
-                "install a GPU driver, or Mesa's software Vulkan driver (Debian/Ubuntu: apt-get install mesa-vulkan-drivers), or use --backend cpu",
+                format!("install a GPU driver, or Mesa's software Vulkan driver (Debian/Ubuntu: apt-get install mesa-vulkan-drivers), or use {} cpu", errmap_core::setting::words(crate::Setting::Backend)),
             ));
         }
         let mut failures = Vec::new();
@@ -171,7 +174,10 @@ impl GpuContext {
         }
         Err(Error::device(
             format!("no adapter could open a device ({})", failures.join("; ")),
-            "update the GPU driver or use --backend cpu",
+            format!(
+                "update the GPU driver or use {} cpu",
+                errmap_core::setting::words(crate::Setting::Backend)
+            ),
         ))
     }
 
@@ -231,7 +237,10 @@ impl GpuContext {
         if let Some(reason) = self.lost.lock().ok().and_then(|slot| slot.clone()) {
             return Err(Error::device(
                 format!("the device was lost while {during} ({reason})"),
-                "retry; if it repeats, update the GPU driver or use --backend cpu",
+                format!(
+                    "retry; if it repeats, update the GPU driver or use {} cpu",
+                    errmap_core::setting::words(crate::Setting::Backend)
+                ),
             ));
         }
         let errors: Vec<String> = self
@@ -244,9 +253,12 @@ impl GpuContext {
             return Err(Error::device(
                 format!("{during} failed: {first}"),
                 if oom {
-                    "the batch does not fit in GPU memory: train fewer parts at once, use a coarser training grid, or use --backend cpu"
+                    format!("the batch does not fit in GPU memory: train fewer parts at once, use a coarser training grid, or use {} cpu", errmap_core::setting::words(crate::Setting::Backend))
                 } else {
-                    "this is a bug in errmap's GPU path; use --backend cpu and report it"
+                    format!(
+                        "this is a bug in errmap's GPU path; use {} cpu and report it",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    )
                 },
             ));
         }
@@ -260,7 +272,10 @@ impl GpuContext {
             .map_err(|e| {
                 Error::device(
                     format!("waiting for the GPU while {during} failed: {e}"),
-                    "retry; if it repeats, use --backend cpu",
+                    format!(
+                        "retry; if it repeats, use {} cpu",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    ),
                 )
             })?;
         self.check(during)
@@ -292,13 +307,19 @@ impl GpuContext {
             Ok(Err(e)) => {
                 return Err(Error::device(
                     format!("reading results back while {during} failed: {e}"),
-                    "retry, or use --backend cpu",
+                    format!(
+                        "retry, or use {} cpu",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    ),
                 ))
             }
             Err(_) => {
                 return Err(Error::device(
                     format!("the GPU never answered while {during}"),
-                    "retry, or use --backend cpu",
+                    format!(
+                        "retry, or use {} cpu",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    ),
                 ))
             }
         }
@@ -307,7 +328,10 @@ impl GpuContext {
             .map_err(|e| {
                 Error::device(
                     format!("mapping results while {during}: {e}"),
-                    "retry, or use --backend cpu",
+                    format!(
+                        "retry, or use {} cpu",
+                        errmap_core::setting::words(crate::Setting::Backend)
+                    ),
                 )
             })?
             .to_vec();

@@ -162,7 +162,7 @@ fn check_gpu_shape(nets: &[Mlp]) -> Result<()> {
                     net.layer_sizes,
                     layout::MAX_LAYERS - 1
                 ),
-                "use a smaller network or --backend cpu",
+                format!("use a smaller network or {} cpu", errmap_core::setting::words(crate::Setting::Backend)),
             ));
         }
     }

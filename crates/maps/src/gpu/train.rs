@@ -199,7 +199,10 @@ pub fn plan_groups(
                     alone >> 20,
                     limit >> 20
                 ),
-                "use a coarser training-set spacing, a smaller network, or --backend cpu",
+                format!(
+                    "use a coarser training-set spacing, a smaller network, or {} cpu",
+                    errmap_core::setting::words(crate::Setting::Backend)
+                ),
             ));
         }
         let count = (k - start + 1) as u64;

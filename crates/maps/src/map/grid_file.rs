@@ -60,7 +60,10 @@ fn rounded(x: f64, scale: f64) -> f64 {
 
 /// Read the probes, interpolate them onto the grid and write the CSV to `output`.
 pub fn grid_probes(req: &GridRequest, output: &Path) -> Result<GridOutcome, GridError> {
-    crate::probe::validate_max_deviation(req.max_deviation_mm, "--max-deviation-mm")?;
+    crate::probe::validate_max_deviation(
+        req.max_deviation_mm,
+        &errmap_core::setting::words(crate::Setting::MaxDeviation),
+    )?;
     let spec = ProbeSpec {
         normal: req.normal,
         nominal_plane_mm: req.nominal_plane_mm,

@@ -12,8 +12,10 @@ pub mod uncertainty;
 pub use crate::error::MapError;
 use crate::interp::Grid;
 use crate::nn::{Mlp, Normalisation};
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::{Axis, Domain, ErrorField};
+use errmap_core::setting::words;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -188,12 +190,18 @@ impl FittedModel {
         max_um: f64,
         path: &Path,
     ) -> Result<uncertainty::Bounded<'_>, MapError> {
-        uncertainty::validate_max_uncertainty(max_um, "--max-uncertainty-um")?;
+        uncertainty::validate_max_uncertainty(max_um, &words(Setting::MaxUncertainty))?;
         let u = self.uncertainty.as_ref().ok_or_else(|| {
             Error::input(
                 Location::file(path),
-                "the map records no u(E) (written before errmap computed it, or its probe points could not be kriged), so --max-uncertainty-um cannot be applied",
-                "refit the map with this version of errmap, or leave out --max-uncertainty-um (job key max_uncertainty_um)",
+                format!(
+                    "the map records no u(E) (written before errmap computed it, or its probe points could not be kriged), so {} cannot be applied",
+                    words(Setting::MaxUncertainty)
+                ),
+                format!(
+                    "refit the map with this version of errmap, or leave out {} (job key max_uncertainty_um)",
+                    words(Setting::MaxUncertainty)
+                ),
             )
         })?;
         Ok(uncertainty::Bounded {
@@ -300,7 +308,10 @@ impl FittedModel {
             format!(
                 "the map reaches |E| = {worst_um:.1} µm over its domain, beyond the plausibility bound of {max_mm} mm",
             ),
-            "a compensation that large is almost always a unit slip in the probe data (µm or inches written as mm); refit the map from corrected data, or raise --max-deviation-mm if the part really is this far off",
+            format!(
+                "a compensation that large is almost always a unit slip in the probe data (µm or inches written as mm); refit the map from corrected data, or raise {} if the part really is this far off",
+                words(Setting::MaxDeviation)
+            ),
         )))
     }
 

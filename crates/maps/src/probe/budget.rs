@@ -7,7 +7,9 @@
 //! file's lines (a text format holds at most one point per line) or from a binary PLY header,
 //! in one pass that keeps nothing, so a scan too large is refused before it is read.
 
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
+use errmap_core::setting::words;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -106,7 +108,8 @@ pub fn check(path: &Path, max_mb: u64) -> Result<()> {
             "up to {points} points: mapping them needs about {need} MB, more than the memory bound of {max_mb} MB"
         ),
         format!(
-            "raise the bound with --max-memory-mb (job key max_memory_mb) to {need} or more if the machine has the memory, or thin the scan"
+            "raise the bound with {} (job key max_memory_mb) to {need} or more if the machine has the memory, or thin the scan",
+            words(Setting::MaxMemory)
         ),
     ))
 }
@@ -145,7 +148,7 @@ mod tests {
             "{text}"
         );
         assert!(
-            text.contains("--max-memory-mb") && text.contains("max_memory_mb"),
+            text.contains("`max_memory_mb` (job key max_memory_mb)"),
             "{text}"
         );
     }

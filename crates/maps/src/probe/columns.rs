@@ -1,7 +1,9 @@
 //! Column mapping of probe files (`--columns x=X,y=Y,z=Z[um],i=I,j=J,k=K,id=POINT`): the probe fields, their units, and the rule that finds the header of an export.
 
+use crate::Setting;
 use errmap_core::error::Result;
 use errmap_core::io::columns::{self as shared, Entry, FieldTable, Units};
+use errmap_core::setting::words;
 
 /// One mapped probe field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,8 +49,18 @@ fn units(field: Field) -> Units {
 pub(super) const TABLE: FieldTable<Field> = FieldTable {
     fields: FIELDS,
     units,
-    usage: "write --columns x=COLUMN,y=COLUMN,z=COLUMN[,nx=…,ny=…,nz=…][,i=…,j=…,k=…][,id=COLUMN] (header names or 1-based numbers, an optional unit such as z=Z[um]; see docs/probe-files.md)",
-    flag: "the column mapping (--columns, or `columns` in the job)",
+    usage: || {
+        format!(
+            "write {} x=COLUMN,y=COLUMN,z=COLUMN[,nx=…,ny=…,nz=…][,i=…,j=…,k=…][,id=COLUMN] (header names or 1-based numbers, an optional unit such as z=Z[um]; see docs/probe-files.md)",
+            words(Setting::Columns)
+        )
+    },
+    flag: || {
+        format!(
+            "the column mapping ({}, or `columns` in the job)",
+            words(Setting::Columns)
+        )
+    },
 };
 
 /// A parsed probe column mapping: x, y, z required; nx, ny, nz all or none; i, j, k all or
@@ -118,7 +130,7 @@ mod tests {
         ] {
             let err = ProbeColumns::parse(bad).expect_err(bad);
             assert!(
-                err.to_string().contains("--columns x=COLUMN"),
+                err.to_string().contains("`columns` x=COLUMN"),
                 "{bad}: {err}"
             );
         }

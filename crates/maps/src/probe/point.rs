@@ -3,8 +3,10 @@
 use std::path::Path;
 
 use super::{unit_slip_hint, ProbeSpec};
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::{Axis, Domain};
+use errmap_core::setting::words;
 
 /// A point may sit this far outside the domain (rounding in the file) and still count as inside.
 const DOMAIN_TOLERANCE_MM: f64 = 1e-9;
@@ -64,8 +66,9 @@ pub(super) fn check_plane(path: &Path, line: u64, spec: &ProbeSpec, what: &str) 
             Location::line(path, line),
             format!("no nominal: {what} and no nominal plane was given"),
             format!(
-                "give the nominal {} of the surface (--nominal-plane MM, or `nominal_plane_mm` in the job)",
-                spec.normal.name()
+                "give the nominal {} of the surface ({} MM, or `nominal_plane_mm` in the job)",
+                spec.normal.name(),
+                words(Setting::NominalPlane)
             ),
         )),
         Some(plane) if !plane.is_finite() => Err(Error::usage(
@@ -138,8 +141,9 @@ fn check_vector(place: &Place, v: [f64; 3], normal: Axis) -> Result<[f64; 3]> {
                 normal.name()
             ),
             format!(
-                "the map's normal axis must be the surface normal: the vector is nearest to {} (--normal {}), or the point is not on this surface",
+                "the map's normal axis must be the surface normal: the vector is nearest to {} ({} {}), or the point is not on this surface",
                 nearest.name(),
+                words(Setting::Normal),
                 nearest.name()
             ),
         ));
@@ -186,7 +190,10 @@ fn check_deviation(
                 measured_mm[n],
                 nominal_mm[n],
                 spec.max_deviation_mm,
-                "--max-deviation-mm, or max_deviation_mm in the job",
+                &format!(
+                    "{}, or max_deviation_mm in the job",
+                    words(Setting::MaxDeviation)
+                ),
             ),
         ));
     }
@@ -225,7 +232,10 @@ fn check_deviation_along(
                 measured_mm[n],
                 nominal_mm[n],
                 spec.max_deviation_mm,
-                "--max-deviation-mm, or max_deviation_mm in the job",
+                &format!(
+                    "{}, or max_deviation_mm in the job",
+                    words(Setting::MaxDeviation)
+                ),
             ),
         ));
     }

@@ -8,10 +8,12 @@ use super::point::{check_plane, plane_nominal, point_row, Place, RawPoint, Row};
 pub use super::point::{MAX_VECTOR_ANGLE_DEG, VECTOR_NORM_TOLERANCE};
 use super::{ProbePoint, ProbeSet, ProbeSpec};
 use crate::ProbeError;
+use crate::Setting;
 use errmap_core::error::{Error, Location, Result};
 use errmap_core::geom::Axis;
 use errmap_core::io::columns::{self as shared_columns, Conversion};
 use errmap_core::io::{CsvRow, CsvTable, HeaderAt};
+use errmap_core::setting::words;
 
 /// Columns a probe file may have.
 pub const PROBE_COLUMNS: [&str; 7] = ["id", "x_mm", "y_mm", "z_mm", "nx_mm", "ny_mm", "nz_mm"];
@@ -69,8 +71,8 @@ pub fn read_probe_file(path: &Path, spec: &ProbeSpec) -> Result<ProbeRead, Probe
     let format = detect_format(path)?;
     if format != ProbeFormat::Csv {
         let given = match (&spec.columns, spec.header_line) {
-            (Some(_), _) => Some("a column mapping (--columns)"),
-            (None, Some(_)) => Some("a header line (--header-line)"),
+            (Some(_), _) => Some(format!("a column mapping ({})", words(Setting::Columns))),
+            (None, Some(_)) => Some(format!("a header line ({})", words(Setting::HeaderLine))),
             (None, None) => None,
         };
         if let Some(given) = given {
@@ -178,20 +180,27 @@ fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
         .transpose()?;
     match (spec.header_line, &columns) {
         (Some(0), _) => Err(Error::usage(
-            "--header-line 0: lines are numbered from 1",
+            format!(
+                "{} 0: lines are numbered from 1",
+                words(Setting::HeaderLine)
+            ),
             "give the 1-based line of the header, as an editor shows it",
         )),
         (Some(n), _) => CsvTable::read_with_header(
             path,
             HeaderAt::Line(n),
-            "give the 1-based line of the header (--header-line, or header_line in the job)",
+            &format!(
+                "give the 1-based line of the header ({}, or header_line in the job)",
+                words(Setting::HeaderLine)
+            ),
         ),
         (None, Some(map)) => CsvTable::read_with_header(
             path,
             HeaderAt::First(&|cells: &[String]| map.is_header(cells)),
             &format!(
-                "no line names all of the mapped columns ({}): check each name against the export's header as written, or give the header's line with --header-line N (header_line in the job) to see which is missing",
-                map.columns_named()
+                "no line names all of the mapped columns ({}): check each name against the export's header as written, or give the header's line with {} N (header_line in the job) to see which is missing",
+                map.columns_named(),
+                words(Setting::HeaderLine)
             ),
         ),
         (None, None) => CsvTable::read(path).map_err(|e| match e {
@@ -204,7 +213,11 @@ fn read_csv(path: &Path, spec: &ProbeSpec) -> Result<CsvTable> {
             } if message.contains("but the header names") => Error::Input {
                 location,
                 message,
-                hint: format!("{hint}; if the file is an instrument export with lines before its header, name its columns with --columns x=…,y=…,z=… (the header is then found), or give its line with --header-line N"),
+                hint: format!(
+                    "{hint}; if the file is an instrument export with lines before its header, name its columns with {} x=…,y=…,z=… (the header is then found), or give its line with {} N",
+                    words(Setting::Columns),
+                    words(Setting::HeaderLine)
+                ),
             },
             e => e,
         }),
@@ -353,8 +366,9 @@ fn nominal_columns(table: &CsvTable, spec: &ProbeSpec) -> Result<Option<[usize; 
             Location::line(path, table.header_line),
             "no nominal: the file has no nx_mm,ny_mm,nz_mm columns and no nominal plane was given",
             format!(
-                "add nominal columns, or give the nominal {} of the surface (--nominal-plane MM, or `nominal_plane_mm` in the job)",
-                spec.normal.name()
+                "add nominal columns, or give the nominal {} of the surface ({} MM, or `nominal_plane_mm` in the job)",
+                spec.normal.name(),
+                words(Setting::NominalPlane)
             ),
         )),
         Some(plane) if !plane.is_finite() => Err(Error::usage(
@@ -584,7 +598,10 @@ fn check_not_collinear(path: &Path, points: &[ProbePoint], ua: Axis, va: Axis) -
                 points[ia].line.min(points[ib].line),
                 points[ia].line.max(points[ib].line)
             ),
-            "probe points off that line, or check that --normal names the error direction",
+            format!(
+                "probe points off that line, or check that {} names the error direction",
+                words(Setting::Normal)
+            ),
         ));
     }
     Ok(())

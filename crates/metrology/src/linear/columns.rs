@@ -14,7 +14,6 @@ use errmap_core::error::{Error, Result};
 use errmap_core::io::columns::{self as shared, Conversion, Entry, FieldTable, Units};
 use errmap_core::io::{CsvRow, CsvTable};
 use errmap_core::setting::words;
-use std::sync::LazyLock;
 
 /// One mapped field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -102,20 +101,17 @@ fn units(field: Field) -> Units {
     }
 }
 
-/// The field table; its usage line and flag are worded by the front end on first use (once a
-/// process, so the two strings are leaked into `'static` as the shared table wants them).
-static TABLE: LazyLock<FieldTable<Field>> = LazyLock::new(|| {
-    let flag = words(Setting::Columns);
-    let usage = format!(
-        "write {flag} target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)"
-    );
-    FieldTable {
-        fields: FIELDS,
-        units,
-        usage: Box::leak(usage.into_boxed_str()),
-        flag: Box::leak(flag.into_boxed_str()),
-    }
-});
+const TABLE: FieldTable<Field> = FieldTable {
+    fields: FIELDS,
+    units,
+    usage: || {
+        format!(
+            "write {} target=COLUMN,deviation=COLUMN[um|mm|nm],direction=COLUMN (names or 1-based numbers; see docs/linear.md)",
+            words(Setting::Columns)
+        )
+    },
+    flag: || words(Setting::Columns),
+};
 
 /// A parsed `--columns` mapping.
 #[derive(Debug, Clone, PartialEq)]
