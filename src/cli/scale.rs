@@ -6,7 +6,7 @@ use errmap::batch::k8s::{self, K8sPlan};
 use errmap::batch::slurm::{self, SlurmPlan};
 use errmap::batch::{self, Job};
 use errmap::nn::Backend;
-use errmap::Error;
+use errmap::Diagnostic;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
@@ -109,7 +109,7 @@ fn backend_name(b: Option<Backend>) -> Option<String> {
 }
 
 fn absolute(p: &Path) -> errmap::Result<PathBuf> {
-    std::path::absolute(p).map_err(|e| Error::io("resolve", p, e))
+    std::path::absolute(p).map_err(|e| Diagnostic::io("resolve", p, e))
 }
 
 pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
@@ -121,7 +121,9 @@ pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
     }
     let errmap = match args.errmap {
         Some(p) => p,
-        None => std::env::current_exe().map_err(|e| Error::io("find the running", "errmap", e))?,
+        None => {
+            std::env::current_exe().map_err(|e| Diagnostic::io("find the running", "errmap", e))?
+        }
     };
     let out = super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
         .unwrap_or_else(|| file.output_dir());
@@ -130,7 +132,7 @@ pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
         job: args
             .job
             .canonicalize()
-            .map_err(|e| Error::read(&args.job, e))?,
+            .map_err(|e| Diagnostic::read(&args.job, e))?,
         out: absolute(&out)?,
         family: file.job.family.clone(),
         shards: args.shards,

@@ -3,7 +3,8 @@
 //! Both are `batch/v1` Jobs in JSON (which `kubectl apply -f` reads like YAML); the tests
 //! check them against the `k8s-openapi` types.
 
-use errmap_core::error::{Error, Result};
+use crate::ClusterError;
+use errmap_core::error::{Diagnostic, Result};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -145,9 +146,11 @@ impl K8sPlan {
 }
 
 /// The manifests as files: `(file name, pretty JSON)` of the shards' Job and the merge Job.
-pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2]> {
-    let text =
-        |v: &Value| serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()));
+pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2], ClusterError> {
+    let text = |v: &Value| {
+        serde_json::to_string_pretty(v)
+            .map_err(|e| ClusterError::Internal(Diagnostic::Internal(e.to_string())))
+    };
     Ok([
         ("shards-job.json", text(&plan.shards_job())?),
         ("merge-job.json", text(&plan.merge_job())?),
@@ -155,7 +158,7 @@ pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2]> {
 }
 
 /// Write the manifests into `dir` (each ends with a newline); their paths, shards' first.
-pub fn write_manifests(plan: &K8sPlan, dir: &Path) -> Result<Vec<PathBuf>> {
+pub fn write_manifests(plan: &K8sPlan, dir: &Path) -> Result<Vec<PathBuf>, ClusterError> {
     let mut paths = Vec::new();
     for (name, text) in manifest_files(plan)? {
         let path = dir.join(name);

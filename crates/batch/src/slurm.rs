@@ -1,6 +1,7 @@
 //! Slurm batch scripts for a sharded job: an array job with one task per shard and a merge job that runs after it (`--dependency=afterok`).
 
-use errmap_core::error::{Error, Result};
+use crate::ClusterError;
+use errmap_core::error::{Diagnostic, Result};
 use std::path::{Path, PathBuf};
 
 /// What the scripts run and where.
@@ -152,18 +153,18 @@ pub fn valid_array_ids(ids: &str, count: usize) -> bool {
 }
 
 /// `--array IDS` checked against the shard count.
-pub fn check_array_ids(ids: &str, count: usize) -> Result<()> {
+pub fn check_array_ids(ids: &str, count: usize) -> Result<(), ClusterError> {
     if valid_array_ids(ids, count) {
         return Ok(());
     }
-    Err(Error::usage(
+    Err(ClusterError::Array(Diagnostic::usage(
         format!("--array '{ids}' is not a list of task ids below {count}"),
         "e.g. --array 1,3 or --array 0-2",
-    ))
+    )))
 }
 
 /// The scripts of `plan` written into its Slurm folder: `[shards.sbatch, merge.sbatch]`.
-pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2]> {
+pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2], ClusterError> {
     let dir = plan.slurm_dir();
     let paths = [dir.join("shards.sbatch"), dir.join("merge.sbatch")];
     errmap_core::io::write_atomic_bytes(&paths[0], plan.shards_script().as_bytes())?;
@@ -172,20 +173,20 @@ pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2]> {
 }
 
 /// Run `sbatch --parsable …` and return the job id.
-pub fn sbatch(args: &[String]) -> Result<String> {
+pub fn sbatch(args: &[String]) -> Result<String, ClusterError> {
     let out = std::process::Command::new("sbatch")
         .args(args)
         .output()
         .map_err(|e| {
-            Error::usage(
+            ClusterError::NoScheduler(Diagnostic::usage(
                 format!("cannot run sbatch: {e}"),
                 "run on a Slurm login node, or use --dry-run and submit the scripts yourself",
-            )
+            ))
         })?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     match (out.status.success(), parse_job_id(&stdout)) {
         (true, Some(id)) => Ok(id),
-        _ => Err(Error::device(
+        _ => Err(ClusterError::Submit(Diagnostic::device(
             format!(
                 "sbatch {} failed: {}{}",
                 args.join(" "),
@@ -193,13 +194,13 @@ pub fn sbatch(args: &[String]) -> Result<String> {
                 String::from_utf8_lossy(&out.stderr).trim()
             ),
             "check the partition and time limit with sinfo, or submit the scripts in OUT/slurm/ by hand",
-        )),
+        ))),
     }
 }
 
 /// Submit the array job (only task ids `array` when given), then the merge job after it:
 /// `(array job id, merge job id)`.
-pub fn submit(plan: &SlurmPlan, array: Option<&str>) -> Result<(String, String)> {
+pub fn submit(plan: &SlurmPlan, array: Option<&str>) -> Result<(String, String), ClusterError> {
     let array_id = sbatch(&plan.sbatch_shards_args(array))?;
     let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
     Ok((array_id, merge_id))
