@@ -206,7 +206,10 @@ fn check_replaceable(target: &Path) -> Result<()> {
     if !target.is_dir() {
         return Err(Diagnostic::usage(
             format!("output folder {} is a file", target.display()),
-            "pass --out-dir a folder name",
+            format!(
+                "pass {} a folder name",
+                errmap_core::setting::words(crate::Setting::OutDir)
+            ),
         ));
     }
     if target.join(RUN_MANIFEST).is_file() {
@@ -222,7 +225,7 @@ fn check_replaceable(target: &Path) -> Result<()> {
                 "output folder {} is not empty and holds no errmap run ({RUN_MANIFEST})",
                 target.display()
             ),
-            "a run replaces its output folder as a whole: pass --out-dir a new or empty folder, or remove this one",
+            format!("a run replaces its output folder as a whole: pass {} a new or empty folder, or remove this one", errmap_core::setting::words(crate::Setting::OutDir)),
         ));
     }
     Ok(())
@@ -264,7 +267,7 @@ pub fn check_inputs_outside(target: &Path, inputs: &[PathBuf]) -> Result<()> {
                     input.display(),
                     target.display()
                 ),
-                "a run replaces its output folder as a whole: pass --out-dir a folder that holds no input",
+                format!("a run replaces its output folder as a whole: pass {} a folder that holds no input", errmap_core::setting::words(crate::Setting::OutDir)),
             ));
         }
     }

@@ -255,10 +255,18 @@ impl PartJournal<'_> {
 /// Sharding and `--resume` put parts mapped by different processes into one family.
 fn require_shared_domain(file: &JobFile, opts: &BatchOptions) -> Result<()> {
     if let Some(s) = opts.shard {
-        require_domain(file, &format!("--shard {}/{}", s.index, s.count))?;
+        require_domain(
+            file,
+            &format!(
+                "{} {}/{}",
+                errmap_core::setting::words(crate::Setting::Shard),
+                s.index,
+                s.count
+            ),
+        )?;
     }
     if opts.resume {
-        require_domain(file, "--resume")?;
+        require_domain(file, &errmap_core::setting::words(crate::Setting::Resume))?;
     }
     Ok(())
 }
@@ -436,7 +444,10 @@ fn add_reused(
             Diagnostic::input(
                 Location::file(&path),
                 format!("not a part summary: {e}"),
-                "rerun without --resume",
+                format!(
+                    "rerun without {}",
+                    errmap_core::setting::words(crate::Setting::Resume)
+                ),
             )
         })?;
         summary.parts.push(p);
@@ -549,13 +560,13 @@ fn shard_folders(
                     "{} is a merged run already: its shards' parts are in it and their folders are gone",
                     dir.display()
                 ),
-                "to merge anew, run the shards again (errmap batch JOB --shard I/N), then merge",
+                format!("to merge anew, run the shards again (errmap batch JOB {} I/N), then merge", errmap_core::setting::words(crate::Setting::Shard)),
             )));
         }
         if !found.iter().any(|(_, p)| p.starts_with(&dir)) && only_count.is_none() {
             return Err(MergeError::Missing(Diagnostic::usage(
                 format!("{} holds no shard folder (shard-I-of-N)", dir.display()),
-                "pass the batch's output folder, or run the shards first with errmap batch --shard I/N",
+                format!("pass the batch's output folder, or run the shards first with errmap batch {} I/N", errmap_core::setting::words(crate::Setting::Shard)),
             )));
         }
     }
@@ -572,7 +583,10 @@ fn shard_folders(
     if counts.len() > 1 {
         return Err(MergeError::Split(Diagnostic::usage(
             format!("the shard folders are of different splits (of {counts:?})"),
-            "remove the folders of an earlier split, or pass --shards N to merge the split of N",
+            format!(
+                "remove the folders of an earlier split, or pass {} N to merge the split of N",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
         )));
     }
     for (s, p) in found {
@@ -609,7 +623,10 @@ fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize, Merg
         .ok_or_else(|| {
             MergeError::Missing(Diagnostic::usage(
                 "no shard folder found",
-                "pass --shards N or the shards' folder",
+                format!(
+                    "pass {} N or the shards' folder",
+                    errmap_core::setting::words(crate::Setting::Shards)
+                ),
             ))
         })
 }
@@ -652,7 +669,7 @@ fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders), MergeE
                 "shards [{ids}] of {count} have no complete run in {} (Slurm array task ids {ids}; Kubernetes completion indexes {ids})",
                 batch_dir.display()
             ),
-            format!("rerun only those: errmap slurm JOB --shards {count} --array {ids} --submit, or errmap batch JOB --shard I/{count} for each; then merge again"),
+            format!("rerun only those: errmap slurm JOB {shards} {count} {array} {ids} {submit}, or errmap batch JOB {shard} I/{count} for each; then merge again", submit = errmap_core::setting::words(crate::Setting::Submit), shards = errmap_core::setting::words(crate::Setting::Shards), array = errmap_core::setting::words(crate::Setting::Array), shard = errmap_core::setting::words(crate::Setting::Shard)),
         )));
     }
 }
@@ -676,7 +693,10 @@ fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>, MergeErro
                     s.index,
                     s.count
                 ),
-                "let errmap batch --shard name the folders",
+                format!(
+                    "let errmap batch {} name the folders",
+                    errmap_core::setting::words(crate::Setting::Shard)
+                ),
             )));
         }
         manifests.push(m);
@@ -714,7 +734,10 @@ fn merged_job(
         .ok_or_else(|| {
             MergeError::Missing(Diagnostic::usage(
                 "the shards name no job file",
-                "pass --job JOB.toml",
+                format!(
+                    "pass {} JOB.toml",
+                    errmap_core::setting::words(crate::Setting::Job)
+                ),
             ))
         })?;
     let file = with_backend(&crate::Job::read(&job_path)?, req.backend);
@@ -726,7 +749,10 @@ fn merged_job(
         return Err(MergeError::Mismatch(Diagnostic::input(
             Location::file(&job_path),
             "this job (with these options) is not the one the shards ran",
-            "pass the shards' job file unchanged and the same --backend as the shards",
+            format!(
+                "pass the shards' job file unchanged and the same {} as the shards",
+                errmap_core::setting::words(crate::Setting::Backend)
+            ),
         )));
     }
     Ok(file)

@@ -48,6 +48,6 @@ fn not_a_source(source: &Path) -> Diagnostic {
             "{} holds no errmap run ({RUN_MANIFEST}) and no analysis result",
             source.display()
         ),
-        "pass a batch's output folder, or the folder where linear analyze --chart, thermal difference/evaluate, rotary analyze --chart or circular -o wrote",
+        format!("pass a batch's output folder, or the folder where linear analyze {chart}, thermal difference/evaluate, rotary analyze {chart} or circular -o wrote", chart = errmap_core::setting::words(crate::Setting::Chart)),
     )
 }

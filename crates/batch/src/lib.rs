@@ -20,6 +20,7 @@ pub(crate) mod reduce;
 pub(crate) mod resolve;
 pub(crate) mod run;
 pub mod run_page;
+mod setting;
 pub(crate) mod single;
 pub mod slurm;
 pub(crate) mod stages;
@@ -33,6 +34,7 @@ pub use job::{Job, JobFile, MapChoice};
 pub use plan::{PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use resolve::{plan_job, with_backend, ResolvedJob, SelectTrainer};
 pub use run::{execute, execute_with, PartDone, CHUNK_PARTS};
+pub use setting::Setting;
 pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 
@@ -52,28 +54,29 @@ pub struct Shard {
 impl Shard {
     /// Parse `i/n` (0-based i < n).
     pub fn parse(text: &str) -> Result<Shard, ShardError> {
-        let hint = "write --shard INDEX/COUNT with 0 ≤ INDEX < COUNT, e.g. --shard 0/4";
+        let shard = errmap_core::setting::words(crate::Setting::Shard);
+        let hint = &format!("write {shard} INDEX/COUNT with 0 ≤ INDEX < COUNT, e.g. {shard} 0/4");
         let (a, b) = text.split_once('/').ok_or_else(|| {
             ShardError::Spec(Diagnostic::usage(
-                format!("--shard '{text}' is not INDEX/COUNT"),
+                format!("{shard} '{text}' is not INDEX/COUNT"),
                 hint,
             ))
         })?;
         let index: usize = a.trim().parse().map_err(|_| {
             ShardError::Spec(Diagnostic::usage(
-                format!("--shard index '{a}' is not a number"),
+                format!("{shard} index '{a}' is not a number"),
                 hint,
             ))
         })?;
         let count: usize = b.trim().parse().map_err(|_| {
             ShardError::Spec(Diagnostic::usage(
-                format!("--shard count '{b}' is not a number"),
+                format!("{shard} count '{b}' is not a number"),
                 hint,
             ))
         })?;
         Shard::new(index, count).ok_or_else(|| {
             ShardError::Spec(Diagnostic::usage(
-                format!("--shard {index}/{count} is out of range"),
+                format!("{shard} {index}/{count} is out of range"),
                 hint,
             ))
         })
@@ -91,7 +94,10 @@ impl Shard {
         count: Option<usize>,
         env: impl Fn(&str) -> Option<String>,
     ) -> Result<Option<Shard>, ShardError> {
-        let hint = "pass --shards COUNT (the number of array tasks / completions)";
+        let hint = &format!(
+            "pass {} COUNT (the number of array tasks / completions)",
+            errmap_core::setting::words(crate::Setting::Shards)
+        );
         for (var, count_var) in [
             ("SLURM_ARRAY_TASK_ID", Some("SLURM_ARRAY_TASK_COUNT")),
             ("JOB_COMPLETION_INDEX", None),
@@ -179,8 +185,14 @@ pub struct BatchOptions {
 pub fn check_shard_count(shards: usize) -> Result<(), ShardError> {
     if !(1..=10_000).contains(&shards) {
         return Err(ShardError::Spec(Diagnostic::usage(
-            format!("--shards {shards} is not between 1 and 10000"),
-            "one shard per array task / completion, e.g. --shards 4",
+            format!(
+                "{} {shards} is not between 1 and 10000",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
+            format!(
+                "one shard per array task / completion, e.g. {} 4",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
         )));
     }
     Ok(())
@@ -225,8 +237,8 @@ mod tests {
         let taken: Vec<usize> = (0..8).filter(|&i| s.takes(i)).collect();
         assert_eq!(taken, vec![1, 4, 7]);
         for (bad, words) in [
-            ("3/3", "--shard 3/3 is out of range"),
-            ("a/3", "--shard index 'a' is not a number"),
+            ("3/3", "`shard` 3/3 is out of range"),
+            ("a/3", "`shard` index 'a' is not a number"),
         ] {
             let err = Shard::parse(bad).unwrap_err();
             assert_eq!(err.diagnostic().kind(), "input", "{err}");

@@ -73,8 +73,14 @@ impl MapRequest {
         if let Some(z) = self.nominal_plane_mm {
             if !z.is_finite() {
                 return Err(RunError::Options(Diagnostic::usage(
-                    "--nominal-plane must be a finite number",
-                    "e.g. --nominal-plane 5.0",
+                    format!(
+                        "{} must be a finite number",
+                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                    ),
+                    format!(
+                        "e.g. {} 5.0",
+                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                    ),
                 )));
             }
         }
@@ -84,23 +90,32 @@ impl MapRequest {
         }
         if self.header_line == Some(0) {
             return Err(RunError::Options(Diagnostic::usage(
-                "--header-line 0: lines are numbered from 1",
+                format!(
+                    "{} 0: lines are numbered from 1",
+                    errmap_core::setting::words(crate::Setting::HeaderLine)
+                ),
                 "give the 1-based line of the header, as an editor shows it",
             )));
         }
-        errmap_maps::probe::validate_max_deviation(self.max_deviation_mm, "--max-deviation-mm")
-            .map_err(Diagnostic::from)?;
+        errmap_maps::probe::validate_max_deviation(
+            self.max_deviation_mm,
+            &errmap_core::setting::words(crate::Setting::MaxDeviation),
+        )
+        .map_err(Diagnostic::from)?;
         // One scan: too large for the memory bound is a refusal (exit 2) before it is read.
         let bound_mb = errmap_maps::probe::budget::max_memory_mb(None);
         errmap_maps::probe::budget::check(&self.probes, bound_mb)?;
         for (flag, v) in [
-            ("--grid-step", self.grid_step_mm),
-            ("--spacing", self.spacing_mm),
-            ("--k-sigma", self.k_sigma),
+            (crate::Setting::GridStep, self.grid_step_mm),
+            (crate::Setting::Spacing, self.spacing_mm),
+            (crate::Setting::KSigma, self.k_sigma),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(RunError::Options(Diagnostic::usage(
-                    format!("{flag} {v} must be a positive number"),
+                    format!(
+                        "{} {v} must be a positive number",
+                        errmap_core::setting::words(flag)
+                    ),
                     "see errmap map --help",
                 )));
             }

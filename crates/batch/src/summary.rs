@@ -213,7 +213,10 @@ impl BatchSummary {
             FolderError::File(Diagnostic::input(
                 Location::cell(path, e.line() as u64, e.column().to_string()),
                 format!("not an errmap batch summary: {e}"),
-                "pass the summary*.json files written by `errmap batch --shard`",
+                format!(
+                    "pass the summary*.json files written by `errmap batch {}`",
+                    errmap_core::setting::words(crate::Setting::Shard)
+                ),
             ))
         })
     }

@@ -5,19 +5,23 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod batch;
 mod toolpath;
 
 use std::any::Any;
 
 /// The flag for any crate's setting, or `None` for a type that is not a setting.
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
-    toolpath::flag(setting)
+    toolpath::flag(setting).or_else(|| batch::flag(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
 #[cfg(test)]
 fn all_flags() -> Vec<&'static str> {
-    toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect()
+    let toolpath = toolpath::ALL.iter().map(|s| toolpath::words(*s));
+    toolpath
+        .chain(batch::ALL.iter().map(|s| batch::words(*s)))
+        .collect()
 }
 
 /// The command line's flags, for the tests.
