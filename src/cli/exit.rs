@@ -56,8 +56,9 @@ failures!(
     Shard(ShardError),
     /// A batch run or one part's map (`errmap batch`, `errmap map`).
     Run(RunError),
-    /// The merge of a sharded job (`errmap merge`).
-    Merge(MergeError),
+    /// The merge of a sharded job (`errmap merge`), boxed: its run and job errors nest two
+    /// levels deeper.
+    Merge(Box<MergeError>),
     /// Slurm scripts or Kubernetes manifests (`errmap slurm`, `errmap k8s`).
     Cluster(ClusterError),
     /// A run folder's report (`errmap report`).
@@ -93,6 +94,12 @@ failures!(
     /// The monitor (`errmap serve`).
     Serve(ServeError),
 );
+
+impl From<MergeError> for Failure {
+    fn from(e: MergeError) -> Self {
+        Failure::Merge(Box::new(e))
+    }
+}
 
 impl From<LiveError> for Failure {
     fn from(e: LiveError) -> Self {
