@@ -6,6 +6,7 @@
 //! that cannot be read; 3 the machine or errmap: an output that cannot be written, the GPU,
 //! an internal error.
 
+use errmap::batch::{ClusterError, FolderError, JobError, MergeError, RunError, ShardError};
 use errmap::circular::CircularError;
 use errmap::controller::TableError;
 use errmap::error::{Diagnose, Diagnostic};
@@ -47,8 +48,21 @@ macro_rules! failures {
     };
 }
 failures!(
-    /// A located diagnostic (the batch, the CLI's own checks).
+    /// A located diagnostic (the CLI's own checks).
     Diagnostic(Diagnostic),
+    /// A job file (`errmap batch`, `slurm`, `k8s`, `merge --job`).
+    Job(JobError),
+    /// A shard named on the command line or by the scheduler.
+    Shard(ShardError),
+    /// A batch run or one part's map (`errmap batch`, `errmap map`).
+    Run(RunError),
+    /// The merge of a sharded job (`errmap merge`), boxed: its run and job errors nest two
+    /// levels deeper.
+    Merge(Box<MergeError>),
+    /// Slurm scripts or Kubernetes manifests (`errmap slurm`, `errmap k8s`).
+    Cluster(ClusterError),
+    /// A run folder's report (`errmap report`).
+    Folder(FolderError),
     /// Compensation settings in words (`errmap compensate`'s flags).
     Settings(SettingsError),
     /// Toolpath compensation.
@@ -81,6 +95,12 @@ failures!(
     Serve(ServeError),
 );
 
+impl From<MergeError> for Failure {
+    fn from(e: MergeError) -> Self {
+        Failure::Merge(Box::new(e))
+    }
+}
+
 impl From<LiveError> for Failure {
     fn from(e: LiveError) -> Self {
         Failure::Live(Box::new(e))
@@ -107,6 +127,12 @@ macro_rules! analysis {
 pub fn code(failure: &Failure) -> i32 {
     let code = match failure {
         Failure::Diagnostic(d) => diagnostic(d),
+        Failure::Job(e) => job(e),
+        Failure::Shard(_) => INPUT,
+        Failure::Run(e) => run(e),
+        Failure::Merge(e) => merge(e),
+        Failure::Cluster(e) => cluster(e),
+        Failure::Folder(e) => folder(e),
         Failure::Settings(_) => INPUT,
         Failure::Compensate(e) => compensate(e),
         Failure::Probe(e) => probe(e),
@@ -136,6 +162,59 @@ fn diagnostic(d: &Diagnostic) -> i32 {
         Diagnostic::Input { .. } | Diagnostic::Usage { .. } | Diagnostic::Numeric { .. } => INPUT,
         Diagnostic::Io { .. } if d.is_read() => INPUT,
         Diagnostic::Io { .. } | Diagnostic::Device { .. } | Diagnostic::Internal(_) => SYSTEM,
+    }
+}
+
+fn job(e: &JobError) -> i32 {
+    use JobError as E;
+    match e {
+        E::Toml(_) | E::Value(_) | E::Probes(_) | E::Read(_) => INPUT,
+        E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+/// A run: its job, options, inputs and output folder are the user's to fix; an output that
+/// cannot be written, the device and a bug are not.
+fn run(e: &RunError) -> i32 {
+    use RunError as E;
+    match e {
+        E::Job(j) => job(j),
+        E::Options(_) | E::Input(_) | E::Output(_) | E::Read(_) => INPUT,
+        E::Write(_) | E::Device(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn merge(e: &MergeError) -> i32 {
+    use MergeError as E;
+    match e {
+        E::Job(j) => job(j),
+        E::Run(r) => run(r),
+        E::Missing(_) | E::Split(_) | E::Mismatch(_) | E::Read(_) => INPUT,
+        E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+/// No Slurm here is the user's to fix (submit elsewhere); a refused submission is the
+/// cluster's.
+fn cluster(e: &ClusterError) -> i32 {
+    use ClusterError as E;
+    match e {
+        E::Array(_) | E::NoScheduler(_) => INPUT,
+        E::Submit(_) | E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
+    }
+}
+
+fn folder(e: &FolderError) -> i32 {
+    use FolderError as E;
+    match e {
+        E::Result(r) => report(r),
+        E::NotARun(_) | E::File(_) | E::Read(_) => INPUT,
+        E::Write(_) | E::Internal(_) => SYSTEM,
+        _ => diagnostic(e.diagnostic()),
     }
 }
 
@@ -326,6 +405,37 @@ mod tests {
             (ServeError::Store(input()).into(), 2),
             (ServeError::Users(UsersError::File(input())).into(), 2),
             (ServeError::Bind(unreachable()).into(), 3),
+            (JobError::Toml(input()).into(), 2),
+            (JobError::from(read()).into(), 2),
+            (
+                ShardError::Spec(Diagnostic::usage("--shard 3/3", "")).into(),
+                2,
+            ),
+            (RunError::from(JobError::Probes(input())).into(), 2),
+            (RunError::Output(Diagnostic::usage("taken", "")).into(), 2),
+            (RunError::from(read()).into(), 2),
+            (RunError::from(write()).into(), 3),
+            (RunError::from(Diagnostic::device("lost", "")).into(), 3),
+            (
+                MergeError::Missing(Diagnostic::usage("shards [1] of 2", "")).into(),
+                2,
+            ),
+            (MergeError::from(input()).into(), 2),
+            (MergeError::from(write()).into(), 3),
+            (
+                ClusterError::NoScheduler(Diagnostic::usage("no sbatch", "")).into(),
+                2,
+            ),
+            (
+                ClusterError::Submit(Diagnostic::device("sbatch failed", "")).into(),
+                3,
+            ),
+            (ClusterError::from(write()).into(), 3),
+            (
+                FolderError::NotARun(Diagnostic::usage("no run", "")).into(),
+                2,
+            ),
+            (FolderError::from(ReportError::from(read())).into(), 2),
         ];
         for (failure, expected) in cases {
             assert_eq!(code(&failure), expected, "{failure:?}");

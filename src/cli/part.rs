@@ -7,7 +7,7 @@ use errmap::batch::{self, BatchOptions, BatchSummary, Job, MapRequest, MergeRequ
 use errmap::geom::{Axis, Domain};
 use errmap::interp::Method;
 use errmap::nn::{Backend, ModelConfig};
-use errmap::Error;
+use errmap::Diagnostic;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -135,8 +135,8 @@ fn report(
     quiet: bool,
 ) -> errmap::Result<()> {
     if json {
-        let text =
-            serde_json::to_string_pretty(summary).map_err(|e| Error::Internal(e.to_string()))?;
+        let text = serde_json::to_string_pretty(summary)
+            .map_err(|e| Diagnostic::Internal(e.to_string()))?;
         outln!("{text}");
     } else {
         out!("{}", summary.table());

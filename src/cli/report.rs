@@ -5,7 +5,7 @@ use super::Globals;
 use errmap::batch::manifest::{sha256_bytes, RunManifest};
 use errmap::batch::{folder_report::render_path, run_page::REPORT_FILE};
 use errmap::report::pdf::print_pdf;
-use errmap::Error;
+use errmap::Diagnostic;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
@@ -47,7 +47,7 @@ fn check_listed_report(dir: &Path, html: &str) -> errmap::Result<()> {
         return Ok(());
     };
     match m.files.get(REPORT_FILE) {
-        Some(h) if *h != sha256_bytes(html.as_bytes()) => Err(Error::usage(
+        Some(h) if *h != sha256_bytes(html.as_bytes()) => Err(Diagnostic::usage(
             format!(
                 "{} is part of the run (listed in run.json) and this errmap renders it differently",
                 dir.join(REPORT_FILE).display()

@@ -3,10 +3,10 @@
 use super::exit::Result;
 use super::Globals;
 use errmap::batch::k8s::{self, K8sPlan};
-use errmap::batch::slurm::{self, SlurmPlan};
+use errmap::batch::slurm::{self, SlurmPlan, Word};
 use errmap::batch::{self, Job};
 use errmap::nn::Backend;
-use errmap::Error;
+use errmap::Diagnostic;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
@@ -104,12 +104,51 @@ pub struct K8sArgs {
     pub dry_run: bool,
 }
 
-fn backend_name(b: Option<Backend>) -> Option<String> {
-    b.map(|b| b.name().to_string())
+/// `--backend NAME` when a backend is given, for the nodes' command lines.
+fn backend_args(b: Option<Backend>) -> Vec<String> {
+    b.iter()
+        .flat_map(|b| ["--backend".to_string(), b.name().to_string()])
+        .collect()
+}
+
+/// The array task's command line: `batch JOB --shard "$TASK/N" --out-dir OUT [--backend B] --quiet`.
+fn slurm_shard_args(job: &Path, out: &Path, backend: Option<Backend>) -> Vec<Word> {
+    let text = |w: &str| Word::Text(w.to_string());
+    let mut args = vec![
+        text("batch"),
+        text(&job.to_string_lossy()),
+        text("--shard"),
+        Word::TaskShard,
+        text("--out-dir"),
+        text(&out.to_string_lossy()),
+    ];
+    args.extend(backend_args(backend).into_iter().map(Word::Text));
+    args.push(text("--quiet"));
+    args
+}
+
+/// The merge job's command line: `merge OUT --shards N --job JOB [--backend B] --quiet`.
+fn slurm_merge_args(
+    job: &Path,
+    out: &Path,
+    shards: usize,
+    backend: Option<Backend>,
+) -> Vec<String> {
+    let mut args = vec![
+        "merge".to_string(),
+        out.to_string_lossy().into(),
+        "--shards".to_string(),
+        shards.to_string(),
+        "--job".to_string(),
+        job.to_string_lossy().into(),
+    ];
+    args.extend(backend_args(backend));
+    args.push("--quiet".to_string());
+    args
 }
 
 fn absolute(p: &Path) -> errmap::Result<PathBuf> {
-    std::path::absolute(p).map_err(|e| Error::io("resolve", p, e))
+    std::path::absolute(p).map_err(|e| Diagnostic::io("resolve", p, e))
 }
 
 pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
@@ -121,22 +160,26 @@ pub fn run_slurm(args: SlurmArgs, _globals: Globals) -> Result<i32> {
     }
     let errmap = match args.errmap {
         Some(p) => p,
-        None => std::env::current_exe().map_err(|e| Error::io("find the running", "errmap", e))?,
+        None => {
+            std::env::current_exe().map_err(|e| Diagnostic::io("find the running", "errmap", e))?
+        }
     };
     let out = super::deprecated::renamed(args.out_dir, args.old_out, "--out", "--out-dir")
         .unwrap_or_else(|| file.output_dir());
+    let job = args
+        .job
+        .canonicalize()
+        .map_err(|e| Diagnostic::read(&args.job, e))?;
+    let out = absolute(&out)?;
     let plan = SlurmPlan {
         errmap,
-        job: args
-            .job
-            .canonicalize()
-            .map_err(|e| Error::read(&args.job, e))?,
-        out: absolute(&out)?,
+        shard_args: slurm_shard_args(&job, &out, args.backend),
+        merge_args: slurm_merge_args(&job, &out, args.shards, args.backend),
+        out,
         family: file.job.family.clone(),
         shards: args.shards,
         partition: args.partition,
         time: args.time,
-        backend: backend_name(args.backend),
     };
     let array = args.array.as_deref();
     let shards_cmd = format!("sbatch {}", plan.sbatch_shards_args(array).join(" "));
@@ -190,16 +233,41 @@ pub fn run_k8s(args: K8sArgs, _globals: Globals) -> Result<i32> {
         "--manifest-dir",
         "shards-job.json and merge-job.json",
     )?;
+    let (job, out_text): (String, String) = (
+        args.job.to_string_lossy().into(),
+        out.to_string_lossy().into(),
+    );
+    // Each completion's index comes from JOB_COMPLETION_INDEX; the merge waits on the volume.
+    let mut shard_args = vec![
+        "batch".to_string(),
+        job.clone(),
+        "--shards".to_string(),
+        args.shards.to_string(),
+        "--out-dir".to_string(),
+        out_text.clone(),
+        "--quiet".to_string(),
+    ];
+    shard_args.extend(backend_args(args.backend));
+    let mut merge_args = vec![
+        "merge".to_string(),
+        out_text,
+        "--shards".to_string(),
+        args.shards.to_string(),
+        "--job".to_string(),
+        job,
+        "--wait".to_string(),
+        args.wait.to_string(),
+        "--quiet".to_string(),
+    ];
+    merge_args.extend(backend_args(args.backend));
     let plan = K8sPlan {
         family: file.job.family.clone(),
         shards: args.shards,
         image: args.image,
         pvc: args.pvc,
         mount: args.mount,
-        job: args.job.to_string_lossy().into(),
-        out: out.to_string_lossy().into(),
-        backend: backend_name(args.backend),
-        wait_s: args.wait,
+        shard_args,
+        merge_args,
         retries: args.retries,
     };
     if args.dry_run {

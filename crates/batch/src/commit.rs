@@ -5,7 +5,7 @@
 //! stale and removed when the next run into that folder starts.
 
 use super::manifest::RUN_MANIFEST;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use std::path::{Path, PathBuf};
 
 /// The staging folder of one run and the folder it will replace.
@@ -44,12 +44,13 @@ impl Staging {
     /// A new staging folder beside `target`.
     fn create(target: &Path) -> Result<Staging> {
         let parent = parent_of(target);
-        std::fs::create_dir_all(&parent).map_err(|e| Error::io("create folder", &parent, e))?;
+        std::fs::create_dir_all(&parent)
+            .map_err(|e| Diagnostic::io("create folder", &parent, e))?;
         let dir = tempfile::Builder::new()
             .prefix(&staging_prefix(target))
             .suffix(".tmp")
             .tempdir_in(&parent)
-            .map_err(|e| Error::io("create a staging folder in", &parent, e))?;
+            .map_err(|e| Diagnostic::io("create a staging folder in", &parent, e))?;
         Ok(Staging {
             target: target.to_path_buf(),
             dir: Some(dir),
@@ -70,7 +71,7 @@ impl Staging {
         let staged = dir.keep();
         if !self.target.exists() {
             return std::fs::rename(&staged, &self.target)
-                .map_err(|e| Error::io("rename the finished run to", &self.target, e));
+                .map_err(|e| Diagnostic::io("rename the finished run to", &self.target, e));
         }
         if !exchange(&staged, &self.target)? {
             // No atomic exchange here: move the old run aside, then the new one in.
@@ -78,19 +79,19 @@ impl Staging {
                 .prefix(&staging_prefix(&self.target))
                 .suffix(".tmp")
                 .tempdir_in(parent_of(&self.target))
-                .map_err(|e| Error::io("create a folder beside", &self.target, e))?
+                .map_err(|e| Diagnostic::io("create a folder beside", &self.target, e))?
                 .keep();
             std::fs::rename(&self.target, &aside)
-                .map_err(|e| Error::io("move aside", &self.target, e))?;
+                .map_err(|e| Diagnostic::io("move aside", &self.target, e))?;
             std::fs::rename(&staged, &self.target)
-                .map_err(|e| Error::io("rename the finished run to", &self.target, e))?;
+                .map_err(|e| Diagnostic::io("rename the finished run to", &self.target, e))?;
             std::fs::remove_dir_all(&aside)
-                .map_err(|e| Error::io("remove the earlier run", &aside, e))?;
+                .map_err(|e| Diagnostic::io("remove the earlier run", &aside, e))?;
             return Ok(());
         }
         // `staged` now holds the old run.
         std::fs::remove_dir_all(&staged)
-            .map_err(|e| Error::io("remove the earlier run", &staged, e))
+            .map_err(|e| Diagnostic::io("remove the earlier run", &staged, e))
     }
 }
 
@@ -100,7 +101,11 @@ fn exchange(a: &Path, b: &Path) -> Result<bool> {
     match renameat_with(CWD, a, CWD, b, RenameFlags::EXCHANGE) {
         Ok(()) => Ok(true),
         Err(e) if e == rustix::io::Errno::INVAL || e == rustix::io::Errno::NOSYS => Ok(false),
-        Err(e) => Err(Error::io("exchange the finished run with", b, e.into())),
+        Err(e) => Err(Diagnostic::io(
+            "exchange the finished run with",
+            b,
+            e.into(),
+        )),
     }
 }
 
@@ -188,7 +193,7 @@ pub fn remove_path(path: &Path) -> Result<()> {
     match r {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(Error::io("remove the stale temporary", path, e)),
+        Err(e) => Err(Diagnostic::io("remove the stale temporary", path, e)),
     }
 }
 
@@ -199,25 +204,28 @@ fn check_replaceable(target: &Path) -> Result<()> {
         return Ok(());
     }
     if !target.is_dir() {
-        return Err(Error::usage(
+        return Err(Diagnostic::usage(
             format!("output folder {} is a file", target.display()),
-            "pass --out-dir a folder name",
+            format!(
+                "pass {} a folder name",
+                errmap_core::setting::words(crate::Setting::OutDir)
+            ),
         ));
     }
     if target.join(RUN_MANIFEST).is_file() {
         return Ok(());
     }
     let has_content = std::fs::read_dir(target)
-        .map_err(|e| Error::read(target, e))?
+        .map_err(|e| Diagnostic::read(target, e))?
         .flatten()
         .any(|e| !is_temporary(&e.file_name().to_string_lossy()));
     if has_content {
-        return Err(Error::usage(
+        return Err(Diagnostic::usage(
             format!(
                 "output folder {} is not empty and holds no errmap run ({RUN_MANIFEST})",
                 target.display()
             ),
-            "a run replaces its output folder as a whole: pass --out-dir a new or empty folder, or remove this one",
+            format!("a run replaces its output folder as a whole: pass {} a new or empty folder, or remove this one", errmap_core::setting::words(crate::Setting::OutDir)),
         ));
     }
     Ok(())
@@ -253,13 +261,13 @@ pub fn check_inputs_outside(target: &Path, inputs: &[PathBuf]) -> Result<()> {
             .or_else(|_| std::path::absolute(input))
             .unwrap_or_else(|_| input.clone());
         if abs.starts_with(&target_abs) {
-            return Err(Error::usage(
+            return Err(Diagnostic::usage(
                 format!(
                     "input {} lies inside the output folder {}",
                     input.display(),
                     target.display()
                 ),
-                "a run replaces its output folder as a whole: pass --out-dir a folder that holds no input",
+                format!("a run replaces its output folder as a whole: pass {} a folder that holds no input", errmap_core::setting::words(crate::Setting::OutDir)),
             ));
         }
     }

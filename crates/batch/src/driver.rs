@@ -7,8 +7,8 @@ use crate::reduce::{self, PartReduce, REDUCE_FILE};
 use crate::resolve::{with_backend, ResolvedJob, SelectTrainer};
 use crate::stages::report::write_report;
 use crate::summary::{BatchSummary, PartSummary, ToolpathSummary};
-use crate::{BatchOptions, JobFile, Shard};
-use errmap_core::error::{Error, Location, Result};
+use crate::{BatchOptions, JobError, JobFile, MergeError, RunError, Shard};
+use errmap_core::error::{Diagnostic, Location, Result};
 use errmap_core::progress::Reporter;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,7 +28,7 @@ pub struct JobRun {
 /// must share one domain, which only the job can fix.
 fn require_domain(file: &JobFile, what: &str) -> Result<()> {
     if file.job.domain.is_none() {
-        return Err(Error::input(
+        return Err(Diagnostic::input(
             Location::cell(&file.path, 1, "domain"),
             format!("{what} needs a fixed map domain, and the job has no `domain`"),
             "add domain = [u_min, v_min, u_max, v_max] (mm) to the job; an unsharded run prints the probes' box as domain_mm in summary.json",
@@ -72,7 +72,7 @@ fn relocate_summary(summary: &mut BatchSummary, from: &Path, to: &Path) {
 
 /// Run a job (or one shard of it) into its folder and commit it: the run is written into a
 /// staging folder, `run.json` last, and the staging folder then replaces the old folder.
-pub fn run_job(job: &ResolvedJob, reporter: &dyn Reporter) -> Result<JobRun> {
+pub fn run_job(job: &ResolvedJob, reporter: &dyn Reporter) -> Result<JobRun, RunError> {
     let file = &job.file;
     let opened = OpenRun::begin(job)?;
     let folders = &opened.folders;
@@ -136,7 +136,7 @@ struct OpenRun {
 impl OpenRun {
     /// Check the job's inputs, hash them, open the staging folder and find the finished parts
     /// `--resume` may keep.
-    fn begin(job: &ResolvedJob) -> Result<OpenRun> {
+    fn begin(job: &ResolvedJob) -> Result<OpenRun, RunError> {
         let (file, opts) = (&job.file, &job.opts);
         require_shared_domain(file, opts)?;
         let probe_files = file.probe_files()?;
@@ -147,7 +147,7 @@ impl OpenRun {
             None => out.clone(),
         };
         let inputs = job_inputs(file)?;
-        commit::check_inputs_outside(&out, &inputs)?;
+        commit::check_inputs_outside(&out, &inputs).map_err(RunError::output)?;
         let previous = if opts.resume {
             RunManifest::read(&target)?.filter(|m| m.job_hash == job_hash)
         } else {
@@ -155,9 +155,12 @@ impl OpenRun {
         };
         let input_hashes = manifest::hash_inputs(&inputs)?;
         let (staging, stale) = if opts.resume {
-            Staging::begin_keeping_stale(&target)?
+            Staging::begin_keeping_stale(&target).map_err(RunError::output)?
         } else {
-            (Staging::begin(&target)?, Vec::new())
+            (
+                Staging::begin(&target).map_err(RunError::output)?,
+                Vec::new(),
+            )
         };
         let folders = RunFolders {
             staging: staging.path().to_path_buf(),
@@ -252,10 +255,18 @@ impl PartJournal<'_> {
 /// Sharding and `--resume` put parts mapped by different processes into one family.
 fn require_shared_domain(file: &JobFile, opts: &BatchOptions) -> Result<()> {
     if let Some(s) = opts.shard {
-        require_domain(file, &format!("--shard {}/{}", s.index, s.count))?;
+        require_domain(
+            file,
+            &format!(
+                "{} {}/{}",
+                errmap_core::setting::words(crate::Setting::Shard),
+                s.index,
+                s.count
+            ),
+        )?;
     }
     if opts.resume {
-        require_domain(file, "--resume")?;
+        require_domain(file, &errmap_core::setting::words(crate::Setting::Resume))?;
     }
     Ok(())
 }
@@ -346,7 +357,7 @@ fn seal_run(file: &JobFile, dir: &Path, summary: &BatchSummary, sealed: Sealed) 
 fn domain_of(file: &JobFile) -> Result<errmap_core::geom::Domain> {
     file.job
         .domain()
-        .ok_or_else(|| Error::Internal("the job's domain was checked above".into()))
+        .ok_or_else(|| Diagnostic::Internal("the job's domain was checked above".into()))
 }
 
 /// Where `--resume` may find finished parts: a committed run (its manifest) or an interrupted
@@ -399,11 +410,11 @@ fn reuse_parts(
                     let (from, to) = (src.folder.join(rel), staging.join(rel));
                     if let Some(parent) = to.parent() {
                         std::fs::create_dir_all(parent)
-                            .map_err(|e| Error::io("create folder", parent, e))?;
+                            .map_err(|e| Diagnostic::io("create folder", parent, e))?;
                     }
                     if std::fs::hard_link(&from, &to).is_err() {
                         std::fs::copy(&from, &to)
-                            .map_err(|e| Error::io("copy the earlier output to", &to, e))?;
+                            .map_err(|e| Diagnostic::io("copy the earlier output to", &to, e))?;
                     }
                 }
                 reused.push(Finished {
@@ -430,10 +441,13 @@ fn add_reused(
         let path = staging.join(&k.part.part).join("summary.json");
         let text = errmap_core::io::read_text(&path)?;
         let p: PartSummary = serde_json::from_str(&text).map_err(|e| {
-            Error::input(
+            Diagnostic::input(
                 Location::file(&path),
                 format!("not a part summary: {e}"),
-                "rerun without --resume",
+                format!(
+                    "rerun without {}",
+                    errmap_core::setting::words(crate::Setting::Resume)
+                ),
             )
         })?;
         summary.parts.push(p);
@@ -476,7 +490,7 @@ fn reduce_paths(
                 .find(|r| r.part == p.part)
                 .and_then(|r| r.outputs.get(&rel));
             if want != Some(&manifest::sha256_file(&path)?) {
-                return Err(Error::input(
+                return Err(Diagnostic::input(
                     Location::file(&path),
                     "the file differs from the one its shard's run.json lists",
                     "rerun that shard",
@@ -510,7 +524,10 @@ type ShardFolders = BTreeMap<usize, (Shard, PathBuf)>;
 
 /// The batch folder and its shard folders (`shard-I-of-N` → Shard) named by the inputs.
 /// With `only_count`, folders of another split are left out.
-fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathBuf, ShardFolders)> {
+fn shard_folders(
+    inputs: &[PathBuf],
+    only_count: Option<usize>,
+) -> Result<(PathBuf, ShardFolders), MergeError> {
     let mut found: Vec<(Shard, PathBuf)> = Vec::new();
     for input in inputs {
         let dir = if input.is_file() {
@@ -523,7 +540,8 @@ fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathB
             found.push((s, dir));
             continue;
         }
-        let entries = std::fs::read_dir(&dir).map_err(|e| Error::read(&dir, e))?;
+        let entries =
+            std::fs::read_dir(&dir).map_err(|e| MergeError::Read(Diagnostic::read(&dir, e)))?;
         for entry in entries.flatten() {
             let n = entry.file_name().to_string_lossy().to_string();
             if let Some(s) = Shard::from_folder_name(&n) {
@@ -537,19 +555,19 @@ fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathB
             .flatten()
             .is_some_and(|m| m.kind == "reduce");
         if !found.iter().any(|(_, p)| p.starts_with(&dir)) && merged_already {
-            return Err(Error::usage(
+            return Err(MergeError::Split(Diagnostic::usage(
                 format!(
                     "{} is a merged run already: its shards' parts are in it and their folders are gone",
                     dir.display()
                 ),
-                "to merge anew, run the shards again (errmap batch JOB --shard I/N), then merge",
-            ));
+                format!("to merge anew, run the shards again (errmap batch JOB {} I/N), then merge", errmap_core::setting::words(crate::Setting::Shard)),
+            )));
         }
         if !found.iter().any(|(_, p)| p.starts_with(&dir)) && only_count.is_none() {
-            return Err(Error::usage(
+            return Err(MergeError::Missing(Diagnostic::usage(
                 format!("{} holds no shard folder (shard-I-of-N)", dir.display()),
-                "pass the batch's output folder, or run the shards first with errmap batch --shard I/N",
-            ));
+                format!("pass the batch's output folder, or run the shards first with errmap batch {} I/N", errmap_core::setting::words(crate::Setting::Shard)),
+            )));
         }
     }
     if let Some(n) = only_count {
@@ -563,21 +581,24 @@ fn shard_folders(inputs: &[PathBuf], only_count: Option<usize>) -> Result<(PathB
     let mut by_index = BTreeMap::new();
     let counts: std::collections::BTreeSet<usize> = found.iter().map(|(s, _)| s.count).collect();
     if counts.len() > 1 {
-        return Err(Error::usage(
+        return Err(MergeError::Split(Diagnostic::usage(
             format!("the shard folders are of different splits (of {counts:?})"),
-            "remove the folders of an earlier split, or pass --shards N to merge the split of N",
-        ));
+            format!(
+                "remove the folders of an earlier split, or pass {} N to merge the split of N",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
+        )));
     }
     for (s, p) in found {
         if p.parent() != Some(batch_dir.as_path()) {
-            return Err(Error::usage(
+            return Err(MergeError::Split(Diagnostic::usage(
                 format!(
                     "shard folder {} is not in {}",
                     p.display(),
                     batch_dir.display()
                 ),
                 "merge the shards of one output folder",
-            ));
+            )));
         }
         by_index.insert(s.index, (s, p));
     }
@@ -596,20 +617,23 @@ fn missing_shards(folders: &ShardFolders, count: usize) -> Vec<usize> {
 }
 
 /// The shard count: `--shards`, or the count every shard folder names.
-fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize> {
+fn shard_count(req: &MergeRequest, folders: &ShardFolders) -> Result<usize, MergeError> {
     req.shards
         .or(folders.values().next().map(|(s, _)| s.count))
         .ok_or_else(|| {
-            Error::usage(
+            MergeError::Missing(Diagnostic::usage(
                 "no shard folder found",
-                "pass --shards N or the shards' folder",
-            )
+                format!(
+                    "pass {} N or the shards' folder",
+                    errmap_core::setting::words(crate::Setting::Shards)
+                ),
+            ))
         })
 }
 
 /// Reduce the shards of a job: check they are one job's and complete, merge their summaries,
 /// fit the family network, write the family folder, the merged `summary.json` and `run.json`.
-pub fn merge_job(req: &MergeRequest, select: &SelectTrainer) -> Result<JobRun> {
+pub fn merge_job(req: &MergeRequest, select: &SelectTrainer) -> Result<JobRun, MergeError> {
     let (batch_dir, folders) = complete_shards(req)?;
     let manifests = shard_manifests(&folders)?;
     let file = merged_job(req, &manifests[0], &batch_dir)?;
@@ -622,7 +646,7 @@ pub fn merge_job(req: &MergeRequest, select: &SelectTrainer) -> Result<JobRun> {
 
 /// The batch folder and its shard folders once every shard has committed its run (waiting up
 /// to `req.wait` for them); the missing shards are an error naming how to rerun them.
-fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders)> {
+fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders), MergeError> {
     let start = std::time::Instant::now();
     loop {
         let (batch_dir, folders) = shard_folders(&req.inputs, req.shards)?;
@@ -640,24 +664,28 @@ fn complete_shards(req: &MergeRequest) -> Result<(PathBuf, ShardFolders)> {
             .map(|i| i.to_string())
             .collect::<Vec<_>>()
             .join(",");
-        return Err(Error::usage(
+        return Err(MergeError::Missing(Diagnostic::usage(
             format!(
                 "shards [{ids}] of {count} have no complete run in {} (Slurm array task ids {ids}; Kubernetes completion indexes {ids})",
                 batch_dir.display()
             ),
-            format!("rerun only those: errmap slurm JOB --shards {count} --array {ids} --submit, or errmap batch JOB --shard I/{count} for each; then merge again"),
-        ));
+            format!("rerun only those: errmap slurm JOB {shards} {count} {array} {ids} {submit}, or errmap batch JOB {shard} I/{count} for each; then merge again", submit = errmap_core::setting::words(crate::Setting::Submit), shards = errmap_core::setting::words(crate::Setting::Shards), array = errmap_core::setting::words(crate::Setting::Array), shard = errmap_core::setting::words(crate::Setting::Shard)),
+        )));
     }
 }
 
 /// Every shard's manifest, checked to be that shard's run and of one job.
-fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
+fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>, MergeError> {
     let mut manifests = Vec::new();
     for (s, dir) in folders.values() {
-        let m = RunManifest::read(dir)?
-            .ok_or_else(|| Error::Internal(format!("{} lost its run.json", dir.display())))?;
+        let m = RunManifest::read(dir)?.ok_or_else(|| {
+            MergeError::Internal(Diagnostic::Internal(format!(
+                "{} lost its run.json",
+                dir.display()
+            )))
+        })?;
         if m.shard != Some([s.index, s.count]) {
-            return Err(Error::input(
+            return Err(MergeError::Mismatch(Diagnostic::input(
                 Location::file(dir.join(RUN_MANIFEST)),
                 format!(
                     "the run in {} is not shard {}/{}",
@@ -665,15 +693,18 @@ fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
                     s.index,
                     s.count
                 ),
-                "let errmap batch --shard name the folders",
-            ));
+                format!(
+                    "let errmap batch {} name the folders",
+                    errmap_core::setting::words(crate::Setting::Shard)
+                ),
+            )));
         }
         manifests.push(m);
     }
     let first = &manifests[0];
     for (m, (_, dir)) in manifests.iter().zip(folders.values()) {
         if m.job_hash != first.job_hash {
-            return Err(Error::input(
+            return Err(MergeError::Mismatch(Diagnostic::input(
                 Location::file(dir.join(RUN_MANIFEST)),
                 format!(
                     "shard {} belongs to another job (job hash {}…, not {}… of {})",
@@ -683,7 +714,7 @@ fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
                     folders[&0].1.display()
                 ),
                 "rerun that shard with the same job file and options, then merge again",
-            ));
+            )));
         }
     }
     Ok(manifests)
@@ -691,22 +722,38 @@ fn shard_manifests(folders: &ShardFolders) -> Result<Vec<RunManifest>> {
 
 /// The job the shards ran (`--job` or the one their manifests name), checked against their
 /// job hash, with a fixed domain and its inputs outside the batch folder.
-fn merged_job(req: &MergeRequest, first: &RunManifest, batch_dir: &Path) -> Result<JobFile> {
+fn merged_job(
+    req: &MergeRequest,
+    first: &RunManifest,
+    batch_dir: &Path,
+) -> Result<JobFile, MergeError> {
     let job_path = req
         .job
         .clone()
         .or_else(|| first.job.clone())
-        .ok_or_else(|| Error::usage("the shards name no job file", "pass --job JOB.toml"))?;
+        .ok_or_else(|| {
+            MergeError::Missing(Diagnostic::usage(
+                "the shards name no job file",
+                format!(
+                    "pass {} JOB.toml",
+                    errmap_core::setting::words(crate::Setting::Job)
+                ),
+            ))
+        })?;
     let file = with_backend(&crate::Job::read(&job_path)?, req.backend);
-    require_domain(&file, "the reduce")?;
-    commit::check_inputs_outside(batch_dir, &job_inputs(&file)?)?;
+    require_domain(&file, "the reduce").map_err(|d| MergeError::Job(JobError::Value(d)))?;
+    commit::check_inputs_outside(batch_dir, &job_inputs(&file)?)
+        .map_err(|d| MergeError::Run(RunError::output(d)))?;
     let hash = manifest::job_hash(&file.job, &file.probe_files()?, &file.base_dir())?;
     if hash != first.job_hash {
-        return Err(Error::input(
+        return Err(MergeError::Mismatch(Diagnostic::input(
             Location::file(&job_path),
             "this job (with these options) is not the one the shards ran",
-            "pass the shards' job file unchanged and the same --backend as the shards",
-        ));
+            format!(
+                "pass the shards' job file unchanged and the same {} as the shards",
+                errmap_core::setting::words(crate::Setting::Backend)
+            ),
+        )));
     }
     Ok(file)
 }
@@ -726,7 +773,7 @@ fn reduce_into(
     batch_dir: &Path,
     shards: Shards,
     select: &SelectTrainer,
-) -> Result<JobRun> {
+) -> Result<JobRun, MergeError> {
     let Shards { folders, manifests } = shards;
     let summaries = shard_summaries(folders, manifests)?;
     let mut merged = crate::merge(&summaries)?;
@@ -762,7 +809,7 @@ fn reduce_into(
     m.write(batch_dir)?;
     for (_, dir) in folders.values() {
         std::fs::remove_dir_all(dir)
-            .map_err(|e| Error::io("remove the merged shard folder", dir, e))?;
+            .map_err(|e| Diagnostic::io("remove the merged shard folder", dir, e))?;
     }
     Ok(JobRun {
         summary: merged,
@@ -781,7 +828,7 @@ fn flatten_shards(batch_dir: &Path, shards: Shards, merged: &mut BatchSummary) -
     }
     if manifest_path.exists() {
         std::fs::remove_file(&manifest_path)
-            .map_err(|e| Error::io("remove the earlier manifest", &manifest_path, e))?;
+            .map_err(|e| Diagnostic::io("remove the earlier manifest", &manifest_path, e))?;
     }
     // Each shard's parts at `<part>/` in the batch folder, as one machine writes them: their
     // files hard-linked out of the shard folders, which go once `run.json` is written.
@@ -792,7 +839,8 @@ fn flatten_shards(batch_dir: &Path, shards: Shards, merged: &mut BatchSummary) -
     // Each part's own summary names its new folder (a new file: the shard's stays as it was).
     for p in merged.parts.iter().filter(|p| p.ok) {
         let path = batch_dir.join(&p.part).join("summary.json");
-        std::fs::remove_file(&path).map_err(|e| Error::io("replace the part summary", &path, e))?;
+        std::fs::remove_file(&path)
+            .map_err(|e| Diagnostic::io("replace the part summary", &path, e))?;
         errmap_core::io::write_json(&path, p)?;
     }
     Ok(())
@@ -807,7 +855,7 @@ fn shard_summaries(
     for ((_, dir), m) in folders.values().zip(manifests) {
         let path = dir.join("summary.json");
         if m.files.get("summary.json") != Some(&manifest::sha256_file(&path)?) {
-            return Err(Error::input(
+            return Err(Diagnostic::input(
                 Location::file(&path),
                 "the summary differs from the one the shard's run.json lists",
                 "rerun that shard",
@@ -832,7 +880,7 @@ fn shard_reduce_parts(
             .iter()
             .enumerate()
             .find(|(_, (_, s))| s.parts.iter().any(|q| q.part == p.part))
-            .ok_or_else(|| Error::Internal(format!("part {} has no shard", p.part)))?;
+            .ok_or_else(|| Diagnostic::Internal(format!("part {} has no shard", p.part)))?;
         let one = BatchSummary {
             parts: vec![p.clone()],
             ..summaries[k].1.clone()
@@ -855,18 +903,18 @@ fn link_parts_flat(
             let (from, to) = (dir.join(rel), batch_dir.join(rel));
             if let Some(parent) = to.parent() {
                 std::fs::create_dir_all(parent)
-                    .map_err(|e| Error::io("create folder", parent, e))?;
+                    .map_err(|e| Diagnostic::io("create folder", parent, e))?;
             }
             match std::fs::remove_file(&to) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(Error::io("replace the earlier output", &to, e))
+                    return Err(Diagnostic::io("replace the earlier output", &to, e))
                 }
                 _ => {}
             }
             if std::fs::hard_link(&from, &to).is_err() {
                 errmap_core::io::write_atomic_bytes(
                     &to,
-                    &std::fs::read(&from).map_err(|e| Error::read(&from, e))?,
+                    &std::fs::read(&from).map_err(|e| Diagnostic::read(&from, e))?,
                 )?;
             }
         }
@@ -881,7 +929,7 @@ fn remove_part_outputs(batch_dir: &Path, old: &RunManifest) -> Result<()> {
             let path = batch_dir.join(rel);
             match std::fs::remove_file(&path) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(Error::io("remove the earlier output", &path, e))
+                    return Err(Diagnostic::io("remove the earlier output", &path, e))
                 }
                 _ => {}
             }

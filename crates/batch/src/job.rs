@@ -3,7 +3,8 @@
 //! Every key is documented in `docs/job.md`. Relative paths in the file (probe glob, toolpaths)
 //! are taken from the job file's folder; the output folder is taken from the current directory.
 
-use errmap_core::error::{Error, Location, Result};
+use crate::JobError;
+use errmap_core::error::{Diagnose, Diagnostic, Location, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::io::line_col;
 use errmap_maps::interp::Method;
@@ -234,17 +235,17 @@ fn key_of_message(message: &str) -> Option<&str> {
 impl Job {
     /// Parse job TOML; `path` is only used in messages. Errors (syntax, types, unknown keys and
     /// values out of range) name the line and column of the offending value.
-    pub fn parse(path: &Path, text: &str) -> Result<Job> {
+    pub fn parse(path: &Path, text: &str) -> Result<Job, JobError> {
         let job: Job = toml::from_str(text).map_err(|e| {
             let (line, col) = e.span().map_or((1, 1), |s| line_col(text, s.start));
-            Error::input(
+            JobError::Toml(Diagnostic::input(
                 Location::cell(path, line, col.to_string()),
                 e.message().trim().to_string(),
                 "see docs/job.md for every key and its type",
-            )
+            ))
         })?;
-        job.validate(path).map_err(|e| match e {
-            Error::Input {
+        job.validate(path).map_err(|e| match e.into_diagnostic() {
+            Diagnostic::Input {
                 location,
                 message,
                 hint,
@@ -255,19 +256,19 @@ impl Job {
                     Some((line, col)) => Location::cell(path, line, col.to_string()),
                     None => location,
                 };
-                Error::Input {
+                JobError::Value(Diagnostic::Input {
                     location,
                     message,
                     hint,
-                }
+                })
             }
-            other => other,
+            other => JobError::from(other),
         })?;
         Ok(job)
     }
 
     /// Read and validate a job file.
-    pub fn read(path: &Path) -> Result<JobFile> {
+    pub fn read(path: &Path) -> Result<JobFile, JobError> {
         let text = errmap_core::io::read_text(path)?;
         let job = Job::parse(path, &text)?;
         Ok(JobFile {
@@ -287,10 +288,10 @@ impl Job {
     }
 
     /// Check values serde cannot: positive steps, ordered ranges, a usable family name.
-    pub fn validate(&self, path: &Path) -> Result<()> {
+    pub fn validate(&self, path: &Path) -> Result<(), JobError> {
         // The key travels in the column; `parse` replaces it with the value's line and column.
         let bad = |key: &str, msg: String, hint: &str| {
-            Error::input(
+            Diagnostic::input(
                 Location {
                     file: path.to_path_buf(),
                     line: None,
@@ -304,12 +305,13 @@ impl Job {
         self.validate_metadata(&bad)?;
         self.validate_geometry(&bad)?;
         self.validate_numbers(&bad)?;
-        self.validate_model(path)
+        self.validate_model(path)?;
+        Ok(())
     }
 }
 
 /// A validation error at a key: `(key, message, hint)`.
-type Bad<'a> = &'a dyn Fn(&str, String, &str) -> Error;
+type Bad<'a> = &'a dyn Fn(&str, String, &str) -> Diagnostic;
 
 impl Job {
     /// The family names the output folder.
@@ -344,7 +346,7 @@ impl Job {
         if let Some(text) = &self.columns {
             match errmap_maps::probe::ProbeColumns::parse(text) {
                 Ok(_) => {}
-                Err(Error::Usage { message, .. }) => {
+                Err(Diagnostic::Usage { message, .. }) => {
                     return Err(bad(
                         "columns",
                         message,
@@ -443,11 +445,11 @@ impl Job {
     fn validate_model(&self, path: &Path) -> Result<()> {
         self.model.validate().map_err(|e| {
             let (message, hint) = match &e {
-                Error::Usage { message, hint } => (message.clone(), hint.clone()),
+                Diagnostic::Usage { message, hint } => (message.clone(), hint.clone()),
                 other => (other.to_string(), "see docs/job.md".to_string()),
             };
             let key = key_of_message(&message).unwrap_or("model").to_string();
-            Error::input(
+            Diagnostic::input(
                 Location {
                     file: path.to_path_buf(),
                     line: None,
@@ -514,15 +516,15 @@ impl JobFile {
     }
 
     /// Probe files matching the glob, sorted by path; an error when none match.
-    pub fn probe_files(&self) -> Result<Vec<PathBuf>> {
+    pub fn probe_files(&self) -> Result<Vec<PathBuf>, JobError> {
         let pattern = self.base_dir().join(&self.job.probes);
         let pattern_text = pattern.to_string_lossy().to_string();
         let paths = glob::glob(&pattern_text).map_err(|e| {
-            Error::input(
+            JobError::Probes(Diagnostic::input(
                 Location::cell(&self.path, 1, "probes"),
                 format!("probes: bad glob '{}': {e}", self.job.probes),
                 "write a glob such as \"probes/*.csv\"",
-            )
+            ))
         })?;
         // Folders that match are skipped; a match that cannot be read (a broken link, no
         // permission) stays, so that the run stops naming it instead of leaving its part out.
@@ -530,7 +532,7 @@ impl JobFile {
         for entry in paths {
             let path = entry.map_err(|e| {
                 let path = e.path().to_path_buf();
-                Error::read(path, std::io::Error::from(e))
+                JobError::Read(Diagnostic::read(path, std::io::Error::from(e)))
             })?;
             if !path.is_dir() {
                 files.push(path);
@@ -538,11 +540,11 @@ impl JobFile {
         }
         files.sort();
         if files.is_empty() {
-            return Err(Error::input(
+            return Err(JobError::Probes(Diagnostic::input(
                 Location::cell(&self.path, 1, "probes"),
                 format!("probes: no file matches '{pattern_text}'"),
                 "the glob is relative to the job file's folder",
-            ));
+            )));
         }
         Ok(files)
     }
@@ -661,7 +663,7 @@ map = "part"
         assert!(err.contains("metadata.axes"), "{err}");
         let text = "[metadata]\nwhen = 2026-01-01\n";
         let err = Job::parse(Path::new("j.toml"), text).unwrap_err();
-        assert_eq!(err.kind(), "input", "{err}");
+        assert_eq!(err.diagnostic().kind(), "input", "{err}");
         assert!(err.to_string().starts_with("j.toml:2"), "{err}");
     }
 

@@ -6,7 +6,7 @@
 
 use super::manifest::{PartRecord, RunManifest, RUN_FORMAT};
 use super::summary::ToolpathSummary;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -51,7 +51,7 @@ impl Journal {
         inputs: &BTreeMap<PathBuf, String>,
     ) -> Result<Journal> {
         let path = dir.join(JOURNAL_FILE);
-        let file = std::fs::File::create(&path).map_err(|e| Error::io("create", &path, e))?;
+        let file = std::fs::File::create(&path).map_err(|e| Diagnostic::io("create", &path, e))?;
         let journal = Journal {
             path,
             file: Mutex::new(file),
@@ -71,22 +71,22 @@ impl Journal {
 
     fn append(&self, value: &impl Serialize) -> Result<()> {
         let mut line = serde_json::to_string(value)
-            .map_err(|e| Error::Internal(format!("journal line: {e}")))?;
+            .map_err(|e| Diagnostic::Internal(format!("journal line: {e}")))?;
         line.push('\n');
         let mut file = self
             .file
             .lock()
-            .map_err(|_| Error::Internal("the journal's lock is poisoned".into()))?;
+            .map_err(|_| Diagnostic::Internal("the journal's lock is poisoned".into()))?;
         file.write_all(line.as_bytes())
             .and_then(|_| file.sync_data())
-            .map_err(|e| Error::io("append to", &self.path, e))
+            .map_err(|e| Diagnostic::io("append to", &self.path, e))
     }
 
     /// Close and remove the journal (the run is about to commit).
     pub fn remove(self) -> Result<()> {
         let path = self.path.clone();
         drop(self);
-        std::fs::remove_file(&path).map_err(|e| Error::io("remove", &path, e))
+        std::fs::remove_file(&path).map_err(|e| Diagnostic::io("remove", &path, e))
     }
 }
 

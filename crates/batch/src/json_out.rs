@@ -1,6 +1,6 @@
 //! Large JSON documents of a run (`summary.json`, `run.json`) written straight into their file, pretty as `errmap_core::io::write_json` writes them, without the whole text in memory.
 
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use serde::Serialize;
 use std::path::Path;
 
@@ -10,7 +10,7 @@ pub(crate) fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     // A value that cannot be JSON (a path that is not UTF-8) fails before the file is begun,
     // with the message the in-memory writer gives.
     serde_json::to_writer(std::io::sink(), value)
-        .map_err(|e| Error::Internal(format!("JSON for {}: {e}", path.display())))?;
+        .map_err(|e| Diagnostic::Internal(format!("JSON for {}: {e}", path.display())))?;
     errmap_core::io::write_atomic(path, |w| {
         serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
         w.write_all(b"\n")

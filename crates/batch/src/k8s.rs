@@ -3,11 +3,13 @@
 //! Both are `batch/v1` Jobs in JSON (which `kubectl apply -f` reads like YAML); the tests
 //! check them against the `k8s-openapi` types.
 
-use errmap_core::error::{Error, Result};
+use crate::ClusterError;
+use errmap_core::error::{Diagnostic, Result};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
-/// What the manifests run and where.
+/// What the manifests run and where. The errmap command lines are the caller's: the batch
+/// knows Kubernetes, the front end knows its own command line.
 #[derive(Debug, Clone)]
 pub struct K8sPlan {
     /// The job's family; names the Jobs (`errmap-<family>-shards`, `-merge`) and labels them.
@@ -20,14 +22,10 @@ pub struct K8sPlan {
     pub pvc: String,
     /// Where the claim is mounted in the containers; also their working directory.
     pub mount: String,
-    /// The job file, relative to the mount (or absolute in the container).
-    pub job: String,
-    /// The batch's output folder, relative to the mount (or absolute in the container).
-    pub out: String,
-    /// `--backend` passed to every shard and to the merge; `None` = the job's.
-    pub backend: Option<String>,
-    /// How long the merge waits for the shards, s.
-    pub wait_s: u64,
+    /// The arguments of each shard's errmap (its index comes from `JOB_COMPLETION_INDEX`).
+    pub shard_args: Vec<String>,
+    /// The arguments of the merge's errmap (it waits on the volume for the shards).
+    pub merge_args: Vec<String>,
     /// Retries of a failed shard (per index).
     pub retries: u32,
 }
@@ -77,25 +75,9 @@ impl K8sPlan {
         })
     }
 
-    fn backend_args(&self) -> Vec<String> {
-        self.backend
-            .iter()
-            .flat_map(|b| ["--backend".to_string(), b.clone()])
-            .collect()
-    }
-
     /// The Indexed Job: completion I (`JOB_COMPLETION_INDEX`) maps shard I of N.
     pub fn shards_job(&self) -> Value {
-        let mut args = vec![
-            "batch".to_string(),
-            self.job.clone(),
-            "--shards".to_string(),
-            self.shards.to_string(),
-            "--out-dir".to_string(),
-            self.out.clone(),
-            "--quiet".to_string(),
-        ];
-        args.extend(self.backend_args());
+        let args = self.shard_args.clone();
         json!({
             "apiVersion": "batch/v1",
             "kind": "Job",
@@ -116,18 +98,7 @@ impl K8sPlan {
 
     /// The merge Job: waits on the volume until every shard has committed, then reduces.
     pub fn merge_job(&self) -> Value {
-        let mut args = vec![
-            "merge".to_string(),
-            self.out.clone(),
-            "--shards".to_string(),
-            self.shards.to_string(),
-            "--job".to_string(),
-            self.job.clone(),
-            "--wait".to_string(),
-            self.wait_s.to_string(),
-            "--quiet".to_string(),
-        ];
-        args.extend(self.backend_args());
+        let args = self.merge_args.clone();
         json!({
             "apiVersion": "batch/v1",
             "kind": "Job",
@@ -145,9 +116,11 @@ impl K8sPlan {
 }
 
 /// The manifests as files: `(file name, pretty JSON)` of the shards' Job and the merge Job.
-pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2]> {
-    let text =
-        |v: &Value| serde_json::to_string_pretty(v).map_err(|e| Error::Internal(e.to_string()));
+pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2], ClusterError> {
+    let text = |v: &Value| {
+        serde_json::to_string_pretty(v)
+            .map_err(|e| ClusterError::Internal(Diagnostic::Internal(e.to_string())))
+    };
     Ok([
         ("shards-job.json", text(&plan.shards_job())?),
         ("merge-job.json", text(&plan.merge_job())?),
@@ -155,7 +128,7 @@ pub fn manifest_files(plan: &K8sPlan) -> Result<[(&'static str, String); 2]> {
 }
 
 /// Write the manifests into `dir` (each ends with a newline); their paths, shards' first.
-pub fn write_manifests(plan: &K8sPlan, dir: &Path) -> Result<Vec<PathBuf>> {
+pub fn write_manifests(plan: &K8sPlan, dir: &Path) -> Result<Vec<PathBuf>, ClusterError> {
     let mut paths = Vec::new();
     for (name, text) in manifest_files(plan)? {
         let path = dir.join(name);

@@ -5,6 +5,7 @@
 
 pub(crate) mod commit;
 pub(crate) mod driver;
+mod error;
 pub(crate) mod family_sums;
 pub mod folder_report;
 pub(crate) mod job;
@@ -19,6 +20,7 @@ pub(crate) mod reduce;
 pub(crate) mod resolve;
 pub(crate) mod run;
 pub mod run_page;
+mod setting;
 pub(crate) mod single;
 pub mod slurm;
 pub(crate) mod stages;
@@ -27,14 +29,16 @@ pub(crate) mod timing;
 pub(crate) mod train_step;
 
 pub use driver::{merge_job, run_job, JobRun, MergeRequest};
+pub use error::{ClusterError, FolderError, JobError, MergeError, RunError, ShardError};
 pub use job::{Job, JobFile, MapChoice};
 pub use plan::{PartInput, Plan, Settings, ToolpathPlan, PART_OUTPUTS};
 pub use resolve::{plan_job, with_backend, ResolvedJob, SelectTrainer};
 pub use run::{execute, execute_with, parts_per_chunk, PartDone};
+pub use setting::Setting;
 pub use single::{map_part, MapRequest};
 pub use summary::{merge, BatchSummary, PartSummary};
 
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use std::path::PathBuf;
 
 /// Which share of the parts this process maps: shard `index` of `count` (0-based) takes the
@@ -49,21 +53,33 @@ pub struct Shard {
 
 impl Shard {
     /// Parse `i/n` (0-based i < n).
-    pub fn parse(text: &str) -> Result<Shard> {
-        let hint = "write --shard INDEX/COUNT with 0 ≤ INDEX < COUNT, e.g. --shard 0/4";
-        let (a, b) = text
-            .split_once('/')
-            .ok_or_else(|| Error::usage(format!("--shard '{text}' is not INDEX/COUNT"), hint))?;
-        let index: usize = a
-            .trim()
-            .parse()
-            .map_err(|_| Error::usage(format!("--shard index '{a}' is not a number"), hint))?;
-        let count: usize = b
-            .trim()
-            .parse()
-            .map_err(|_| Error::usage(format!("--shard count '{b}' is not a number"), hint))?;
-        Shard::new(index, count)
-            .ok_or_else(|| Error::usage(format!("--shard {index}/{count} is out of range"), hint))
+    pub fn parse(text: &str) -> Result<Shard, ShardError> {
+        let shard = errmap_core::setting::words(crate::Setting::Shard);
+        let hint = &format!("write {shard} INDEX/COUNT with 0 ≤ INDEX < COUNT, e.g. {shard} 0/4");
+        let (a, b) = text.split_once('/').ok_or_else(|| {
+            ShardError::Spec(Diagnostic::usage(
+                format!("{shard} '{text}' is not INDEX/COUNT"),
+                hint,
+            ))
+        })?;
+        let index: usize = a.trim().parse().map_err(|_| {
+            ShardError::Spec(Diagnostic::usage(
+                format!("{shard} index '{a}' is not a number"),
+                hint,
+            ))
+        })?;
+        let count: usize = b.trim().parse().map_err(|_| {
+            ShardError::Spec(Diagnostic::usage(
+                format!("{shard} count '{b}' is not a number"),
+                hint,
+            ))
+        })?;
+        Shard::new(index, count).ok_or_else(|| {
+            ShardError::Spec(Diagnostic::usage(
+                format!("{shard} {index}/{count} is out of range"),
+                hint,
+            ))
+        })
     }
 
     /// Shard `index` of `count`; `None` unless 0 ≤ `index` < `count`.
@@ -77,27 +93,32 @@ impl Shard {
     pub fn from_env(
         count: Option<usize>,
         env: impl Fn(&str) -> Option<String>,
-    ) -> Result<Option<Shard>> {
-        let hint = "pass --shards COUNT (the number of array tasks / completions)";
+    ) -> Result<Option<Shard>, ShardError> {
+        let hint = &format!(
+            "pass {} COUNT (the number of array tasks / completions)",
+            errmap_core::setting::words(crate::Setting::Shards)
+        );
         for (var, count_var) in [
             ("SLURM_ARRAY_TASK_ID", Some("SLURM_ARRAY_TASK_COUNT")),
             ("JOB_COMPLETION_INDEX", None),
         ] {
             let Some(value) = env(var) else { continue };
-            let index: usize = value
-                .trim()
-                .parse()
-                .map_err(|_| Error::usage(format!("{var}='{value}' is not an index"), hint))?;
+            let index: usize = value.trim().parse().map_err(|_| {
+                ShardError::Env(Diagnostic::usage(
+                    format!("{var}='{value}' is not an index"),
+                    hint,
+                ))
+            })?;
             let count = match count {
                 Some(c) => c,
                 None => count_var
                     .and_then(&env)
                     .and_then(|v| v.trim().parse().ok())
                     .ok_or_else(|| {
-                        Error::usage(
+                        ShardError::Env(Diagnostic::usage(
                             format!("{var} is set but the number of shards is not known"),
                             hint,
-                        )
+                        ))
                     })?,
             };
             // Slurm arrays often start at 1 (--array=1-N); accept index == count as the last shard.
@@ -107,10 +128,10 @@ impl Shard {
                 index
             };
             return Shard::new(index, count).map(Some).ok_or_else(|| {
-                Error::usage(
+                ShardError::Env(Diagnostic::usage(
                     format!("{var}={index} is not below the shard count {count}"),
                     hint,
-                )
+                ))
             });
         }
         Ok(None)
@@ -161,26 +182,32 @@ pub struct BatchOptions {
 }
 
 /// The number of shards of a scale-out run (`--shards`): 1 to 10000.
-pub fn check_shard_count(shards: usize) -> Result<()> {
+pub fn check_shard_count(shards: usize) -> Result<(), ShardError> {
     if !(1..=10_000).contains(&shards) {
-        return Err(Error::usage(
-            format!("--shards {shards} is not between 1 and 10000"),
-            "one shard per array task / completion, e.g. --shards 4",
-        ));
+        return Err(ShardError::Spec(Diagnostic::usage(
+            format!(
+                "{} {shards} is not between 1 and 10000",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
+            format!(
+                "one shard per array task / completion, e.g. {} 4",
+                errmap_core::setting::words(crate::Setting::Shards)
+            ),
+        )));
     }
     Ok(())
 }
 
 /// Shards of a scale-out run share one map domain, which only the job can fix.
-pub fn require_shard_domain(file: &JobFile) -> Result<()> {
+pub fn require_shard_domain(file: &JobFile) -> Result<(), ShardError> {
     if file.job.domain.is_none() {
-        return Err(Error::usage(
+        return Err(ShardError::Domain(Diagnostic::usage(
             format!(
                 "{} has no `domain`, and shards need one",
                 file.path.display()
             ),
             "add domain = [u_min, v_min, u_max, v_max] (mm) to the job",
-        ));
+        )));
     }
     Ok(())
 }
@@ -202,6 +229,7 @@ impl Shard {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use errmap_core::error::Diagnose;
 
     #[test]
     fn shards_split_parts_round_robin_and_read_the_scheduler_env() {
@@ -209,11 +237,11 @@ mod tests {
         let taken: Vec<usize> = (0..8).filter(|&i| s.takes(i)).collect();
         assert_eq!(taken, vec![1, 4, 7]);
         for (bad, words) in [
-            ("3/3", "--shard 3/3 is out of range"),
-            ("a/3", "--shard index 'a' is not a number"),
+            ("3/3", "`shard` 3/3 is out of range"),
+            ("a/3", "`shard` index 'a' is not a number"),
         ] {
             let err = Shard::parse(bad).unwrap_err();
-            assert_eq!(err.kind(), "input", "{err}");
+            assert_eq!(err.diagnostic().kind(), "input", "{err}");
             assert!(err.to_string().contains(words), "{err}");
         }
         let env = |k: &str| match k {
@@ -225,7 +253,7 @@ mod tests {
         let k8s = |k: &str| (k == "JOB_COMPLETION_INDEX").then(|| "5".to_string());
         assert_eq!(Shard::from_env(Some(6), k8s).unwrap(), Shard::new(5, 6));
         let err = Shard::from_env(None, k8s).unwrap_err();
-        assert_eq!(err.kind(), "input", "{err}");
+        assert_eq!(err.diagnostic().kind(), "input", "{err}");
         assert!(
             err.to_string()
                 .contains("JOB_COMPLETION_INDEX is set but the number of shards is not known"),

@@ -4,7 +4,7 @@
 //! has the listed SHA-256. `--resume` keeps a part whose input and outputs still match.
 
 use super::summary::BatchSummary;
-use errmap_core::error::{Error, Location, Result};
+use errmap_core::error::{Diagnostic, Location, Result};
 pub use errmap_core::io::stamp::{sha256_bytes, sha256_file, utc_now, utc_rfc3339};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -89,7 +89,7 @@ pub fn job_hash(job: &super::Job, probe_files: &[PathBuf], base: &Path) -> Resul
         })
         .collect();
     let text = serde_json::to_string(&(&job, names))
-        .map_err(|e| Error::Internal(format!("job hash: {e}")))?;
+        .map_err(|e| Diagnostic::Internal(format!("job hash: {e}")))?;
     Ok(sha256_bytes(text.as_bytes()))
 }
 
@@ -98,8 +98,8 @@ pub fn hash_tree(dir: &Path) -> Result<BTreeMap<String, String>> {
     let mut out = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).map_err(|e| Error::read(&d, e))? {
-            let entry = entry.map_err(|e| Error::read(&d, e))?;
+        for entry in std::fs::read_dir(&d).map_err(|e| Diagnostic::read(&d, e))? {
+            let entry = entry.map_err(|e| Diagnostic::read(&d, e))?;
             let path = entry.path();
             let name = entry.file_name().to_string_lossy().to_string();
             if name.starts_with(".errmap-") {
@@ -180,27 +180,27 @@ impl RunManifest {
     }
 
     /// The manifest of the run in `dir`, `None` when there is none.
-    pub fn read(dir: &Path) -> Result<Option<RunManifest>> {
+    pub fn read(dir: &Path) -> Result<Option<RunManifest>, crate::FolderError> {
         let path = dir.join(RUN_MANIFEST);
         if !path.is_file() {
             return Ok(None);
         }
         // Not a protected input: a run's manifest is errmap's own record, replaced by design
         // when the next run commits.
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::read(&path, e))?;
+        let text = std::fs::read_to_string(&path).map_err(|e| Diagnostic::read(&path, e))?;
         let m: RunManifest = serde_json::from_str(&text).map_err(|e| {
-            Error::input(
+            Diagnostic::input(
                 Location::cell(&path, e.line() as u64, e.column().to_string()),
                 format!("not an errmap run manifest: {e}"),
                 "run.json is written by errmap batch and errmap merge; rerun the batch",
             )
         })?;
         if m.format != RUN_FORMAT {
-            return Err(Error::input(
+            return Err(crate::FolderError::File(Diagnostic::input(
                 Location::file(&path),
                 format!("run manifest format '{}' is not {RUN_FORMAT}", m.format),
                 "rerun the batch with this errmap",
-            ));
+            )));
         }
         Ok(Some(m))
     }

@@ -1,6 +1,6 @@
 //! A part's reduce record, `reduce.json`: its training-set nodes, map values and measured points, bit-exact, written by its shard and read by the reduce step.
 
-use errmap_core::error::{Error, Location, Result};
+use errmap_core::error::{Diagnostic, Location, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -87,7 +87,7 @@ impl PartReduce {
     pub fn read(path: &Path) -> Result<PartReduce> {
         let text = errmap_core::io::read_text(path)?;
         let bad = |msg: String| {
-            Error::input(
+            Diagnostic::input(
                 Location::file(path),
                 msg,
                 "reduce.json is written by errmap batch; rerun the part's shard",

@@ -95,7 +95,7 @@ pub struct Plan {
 impl Plan {
     /// Every file the plan reads is an input no output may replace: protect them all, then
     /// check every part's outputs before the first is written, so a refused plan writes nothing.
-    pub fn protect_files(&self) -> Result<()> {
+    pub fn protect_files(&self) -> Result<(), crate::RunError> {
         use errmap_core::io::safety::{check_output, protect};
         for part in &self.parts {
             protect(&part.probe_file);

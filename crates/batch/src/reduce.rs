@@ -14,7 +14,7 @@ use crate::stages::toolpaths::compensate_family;
 use crate::stages::train::training_set;
 use crate::summary::{FamilySummary, ToolpathSummary};
 use crate::train_step::train_family;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use errmap_core::geom::Domain;
 use errmap_maps::interp::Grid;
 use errmap_maps::nn::Trainer;
@@ -88,7 +88,7 @@ fn family_sums(
         let p = (parts.load)(k)?;
         let u_len_ok = p.map_u_um.as_ref().is_none_or(|u| u.len() == grid.len());
         if p.train_nodes.len() != train_grid.len() || p.map_e_um.len() != grid.len() || !u_len_ok {
-            return Err(Error::usage(
+            return Err(Diagnostic::usage(
                 format!("part '{}' was mapped on another grid", p.part),
                 "merge the shards of one job (same domain, spacing and grid step)",
             ));

@@ -5,6 +5,7 @@
 
 use crate::job::{JobFile, MapChoice};
 use crate::plan::{PartInput, Plan, Settings, ToolpathPlan};
+use crate::RunError;
 use crate::{part_names, BatchOptions, Shard};
 use errmap_core::error::Result;
 use errmap_maps::nn::{Backend, ModelConfig, Trainer, WarmStart};
@@ -36,7 +37,11 @@ impl std::fmt::Debug for ResolvedJob {
 
 impl ResolvedJob {
     /// Apply `opts` to `file` and select the trainer of the resulting backend with `select`.
-    pub fn new(file: &JobFile, opts: &BatchOptions, select: &SelectTrainer) -> Result<ResolvedJob> {
+    pub fn new(
+        file: &JobFile,
+        opts: &BatchOptions,
+        select: &SelectTrainer,
+    ) -> Result<ResolvedJob, RunError> {
         let file = with_backend(file, opts.backend);
         let trainer = select(file.job.model.backend, &file.job.model)?;
         Ok(ResolvedJob {
@@ -55,8 +60,8 @@ impl ResolvedJob {
     }
 
     /// The plan of this run's parts (this shard's) with their folders under `out`.
-    pub fn plan(&self, out: &Path) -> Result<Plan> {
-        plan_resolved(&self.file, self.opts.shard, out)
+    pub fn plan(&self, out: &Path) -> Result<Plan, RunError> {
+        Ok(plan_resolved(&self.file, self.opts.shard, out)?)
     }
 }
 
@@ -71,8 +76,12 @@ pub fn with_backend(file: &JobFile, backend: Option<Backend>) -> JobFile {
 
 /// Build the plan of a job file: its parts (this shard's) with their folders under `out`,
 /// the family folder and the toolpaths (`opts.backend` applied).
-pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan> {
-    plan_resolved(&with_backend(file, opts.backend), opts.shard, out)
+pub fn plan_job(file: &JobFile, opts: &BatchOptions, out: &Path) -> Result<Plan, RunError> {
+    Ok(plan_resolved(
+        &with_backend(file, opts.backend),
+        opts.shard,
+        out,
+    )?)
 }
 
 /// The plan of a resolved job file.

@@ -17,6 +17,7 @@ use crate::stages::toolpaths::{compensate_family, compensate_one};
 use crate::stages::train::{train, training_sets};
 use crate::summary::{BatchSummary, PartSummary, ToolpathSummary};
 use crate::timing::{PartTiming, Timing};
+use crate::RunError;
 use errmap_core::error::Result;
 use errmap_core::geom::Domain;
 use errmap_core::progress::Reporter;
@@ -42,7 +43,7 @@ pub fn execute(
     plan: &Plan,
     trainer: &dyn Trainer,
     reporter: &dyn Reporter,
-) -> Result<BatchSummary> {
+) -> Result<BatchSummary, RunError> {
     execute_with(plan, trainer, reporter, &|_, _| Ok(()))
 }
 
@@ -57,7 +58,7 @@ pub fn execute_with(
     trainer: &dyn Trainer,
     reporter: &dyn Reporter,
     on_part: &PartDone,
-) -> Result<BatchSummary> {
+) -> Result<BatchSummary, RunError> {
     let chunk_parts = parts_per_chunk(trainer);
     let (domain, mut first) = match run_domain(plan, chunk_parts, reporter) {
         RunDomain::Found(domain, first) => (domain, first),
@@ -91,7 +92,7 @@ pub fn execute_with(
         run.map_chunk(preps, &mut family, &mut acc, &*bar, on_part)?;
     }
     bar.finish();
-    run.conclude(family, acc)
+    Ok(run.conclude(family, acc)?)
 }
 
 /// The map domain of a run before it is checked.

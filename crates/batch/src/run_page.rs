@@ -5,7 +5,7 @@
 
 use super::manifest::RunManifest;
 use super::summary::{BatchSummary, PartSummary};
-use errmap_core::error::{Error, Location, Result};
+use errmap_core::error::{Diagnostic, Location, Result};
 use errmap_report::html::{self, figure_cell, json_text, num, para, png_figure, table, Cell, Page};
 use std::path::Path;
 
@@ -33,8 +33,9 @@ pub fn render_run(input: &RunInput) -> Result<String> {
     let page = RunPage::new(input)?;
     let mut bytes = Vec::new();
     page.write(input, &mut bytes)
-        .map_err(|e| Error::Internal(format!("the report in memory: {e}")))?;
-    String::from_utf8(bytes).map_err(|e| Error::Internal(format!("the report is not UTF-8: {e}")))
+        .map_err(|e| Diagnostic::Internal(format!("the report in memory: {e}")))?;
+    String::from_utf8(bytes)
+        .map_err(|e| Diagnostic::Internal(format!("the report is not UTF-8: {e}")))
 }
 
 /// Where the table of parts goes in the rendered page: text no section can hold (part names
@@ -87,7 +88,7 @@ impl RunPage {
         let html = page.render();
         let slot = html
             .find(PARTS_SLOT)
-            .ok_or_else(|| Error::Internal("the report lost its table of parts".into()))?;
+            .ok_or_else(|| Diagnostic::Internal("the report lost its table of parts".into()))?;
         Ok(RunPage { html, slot, inline })
     }
 
@@ -326,7 +327,7 @@ fn picture(dir: &Path, rel: &str, caption: &str) -> Result<String> {
         return Ok(para("note", &format!("{rel}: not written")));
     }
     errmap_core::io::safety::protect(&path);
-    let bytes = std::fs::read(&path).map_err(|e| Error::read(&path, e))?;
+    let bytes = std::fs::read(&path).map_err(|e| Diagnostic::read(&path, e))?;
     Ok(png_figure(&bytes, rel, caption))
 }
 
@@ -400,7 +401,7 @@ fn hull_block(dir: &Path, domain: Option<[f64; 4]>) -> Result<String> {
     }
     let text = errmap_core::io::read_text(&path)?;
     let doc: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
-        Error::input(
+        Diagnostic::input(
             Location::file(&path),
             format!("not an errmap model: {e}"),
             "rerun the batch",

@@ -3,7 +3,8 @@
 
 use super::summary::BatchSummary;
 use crate::plan::{PartInput, Plan, Settings};
-use errmap_core::error::{Error, Result};
+use crate::RunError;
+use errmap_core::error::{Diagnostic, Result};
 use errmap_core::geom::{Axis, Domain};
 use errmap_core::progress::Reporter;
 use errmap_maps::interp::Method;
@@ -52,7 +53,7 @@ pub struct MapRequest {
 impl MapRequest {
     /// The model configuration: the job file's defaults with this request's backend, epochs
     /// and seed, checked.
-    pub fn model(&self) -> Result<ModelConfig> {
+    pub fn model(&self) -> Result<ModelConfig, RunError> {
         let mut model = ModelConfig {
             backend: self.backend,
             ..ModelConfig::default()
@@ -68,13 +69,19 @@ impl MapRequest {
     }
 
     /// The checked plan of one part named after its probe file, written into `out_dir`.
-    pub fn plan(&self) -> Result<Plan> {
+    pub fn plan(&self) -> Result<Plan, RunError> {
         if let Some(z) = self.nominal_plane_mm {
             if !z.is_finite() {
-                return Err(Error::usage(
-                    "--nominal-plane must be a finite number",
-                    "e.g. --nominal-plane 5.0",
-                ));
+                return Err(RunError::Options(Diagnostic::usage(
+                    format!(
+                        "{} must be a finite number",
+                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                    ),
+                    format!(
+                        "e.g. {} 5.0",
+                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                    ),
+                )));
             }
         }
         let model = self.model()?;
@@ -82,25 +89,35 @@ impl MapRequest {
             errmap_maps::probe::ProbeColumns::parse(text)?;
         }
         if self.header_line == Some(0) {
-            return Err(Error::usage(
-                "--header-line 0: lines are numbered from 1",
+            return Err(RunError::Options(Diagnostic::usage(
+                format!(
+                    "{} 0: lines are numbered from 1",
+                    errmap_core::setting::words(crate::Setting::HeaderLine)
+                ),
                 "give the 1-based line of the header, as an editor shows it",
-            ));
+            )));
         }
-        errmap_maps::probe::validate_max_deviation(self.max_deviation_mm, "--max-deviation-mm")?;
+        errmap_maps::probe::validate_max_deviation(
+            self.max_deviation_mm,
+            &errmap_core::setting::words(crate::Setting::MaxDeviation),
+        )
+        .map_err(Diagnostic::from)?;
         // One scan: too large for the memory bound is a refusal (exit 2) before it is read.
         let bound_mb = errmap_maps::probe::budget::max_memory_mb(None);
         errmap_maps::probe::budget::check(&self.probes, bound_mb)?;
         for (flag, v) in [
-            ("--grid-step", self.grid_step_mm),
-            ("--spacing", self.spacing_mm),
-            ("--k-sigma", self.k_sigma),
+            (crate::Setting::GridStep, self.grid_step_mm),
+            (crate::Setting::Spacing, self.spacing_mm),
+            (crate::Setting::KSigma, self.k_sigma),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(Error::usage(
-                    format!("{flag} {v} must be a positive number"),
+                return Err(RunError::Options(Diagnostic::usage(
+                    format!(
+                        "{} {v} must be a positive number",
+                        errmap_core::setting::words(flag)
+                    ),
                     "see errmap map --help",
-                ));
+                )));
             }
         }
         let name = self
@@ -144,10 +161,10 @@ pub fn map_part(
     plan: &Plan,
     trainer: &dyn Trainer,
     reporter: &dyn Reporter,
-) -> Result<BatchSummary> {
+) -> Result<BatchSummary, RunError> {
     let summary = super::execute(plan, trainer, reporter)?;
     if let Some(err) = summary.parts.first().and_then(|p| p.error.clone()) {
-        return Err(err.into_error());
+        return Err(RunError::from(err.into_error()));
     }
     Ok(summary)
 }

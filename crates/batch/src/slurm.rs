@@ -1,15 +1,29 @@
 //! Slurm batch scripts for a sharded job: an array job with one task per shard and a merge job that runs after it (`--dependency=afterok`).
 
-use errmap_core::error::{Error, Result};
+use crate::ClusterError;
+use errmap_core::error::{Diagnostic, Result};
 use std::path::{Path, PathBuf};
 
-/// What the scripts run and where.
+/// One word of the command line an array task runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Word {
+    /// A word as it is (quoted for the shell where it needs to be).
+    Text(String),
+    /// The task's shard, `"${SLURM_ARRAY_TASK_ID}/N"` with N the plan's shards: the shell
+    /// gives each array task its own.
+    TaskShard,
+}
+
+/// What the scripts run and where. The errmap command lines are the caller's: the batch
+/// knows Slurm, the front end knows its own command line.
 #[derive(Debug, Clone)]
 pub struct SlurmPlan {
     /// The errmap binary the nodes run (absolute, or a name on the nodes' PATH).
     pub errmap: PathBuf,
-    /// The job file (absolute).
-    pub job: PathBuf,
+    /// The arguments of each array task's errmap, [`Word::TaskShard`] where its shard goes.
+    pub shard_args: Vec<Word>,
+    /// The arguments of the merge job's errmap.
+    pub merge_args: Vec<String>,
     /// The batch's output folder (absolute): shard folders, family, summary, logs.
     pub out: PathBuf,
     /// The job's family; names the Slurm jobs (`errmap-<family>`, `errmap-<family>-merge`).
@@ -21,8 +35,6 @@ pub struct SlurmPlan {
     /// `#SBATCH --time` limit of each task and of the merge, in Slurm's format (`02:00:00`);
     /// `None` = the partition's default.
     pub time: Option<String>,
-    /// `--backend` passed to every task and to the merge.
-    pub backend: Option<String>,
 }
 
 /// Quote for a POSIX shell: one word whatever it holds.
@@ -64,10 +76,15 @@ impl SlurmPlan {
         s
     }
 
-    fn backend_flag(&self) -> String {
-        self.backend
-            .as_ref()
-            .map_or(String::new(), |b| format!(" --backend {}", shell_quote(b)))
+    /// The exec line of a task: the binary and `args`, each one word for the shell.
+    fn exec_line<'a>(&self, args: impl Iterator<Item = std::borrow::Cow<'a, str>>) -> String {
+        let mut line = format!("exec {}", q(&self.errmap));
+        for word in args {
+            line.push(' ');
+            line.push_str(&word);
+        }
+        line.push('\n');
+        line
     }
 
     /// The array job: task I maps shard I of N into `OUT/shard-I-of-N/`.
@@ -76,14 +93,11 @@ impl SlurmPlan {
         s.push_str(&format!("#SBATCH --array=0-{}\n", self.shards - 1));
         s.push_str("# One shard of the batch per array task; the task id is the shard index.\n");
         s.push_str("set -euo pipefail\n");
-        s.push_str(&format!(
-            "exec {} batch {} --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\" --out-dir {}{} --quiet\n",
-            q(&self.errmap),
-            q(&self.job),
-            self.shards,
-            q(&self.out),
-            self.backend_flag()
-        ));
+        let words = self.shard_args.iter().map(|w| match w {
+            Word::Text(t) => shell_quote(t).into(),
+            Word::TaskShard => format!("\"${{SLURM_ARRAY_TASK_ID}}/{}\"", self.shards).into(),
+        });
+        s.push_str(&self.exec_line(words));
         s
     }
 
@@ -92,14 +106,8 @@ impl SlurmPlan {
         let mut s = self.header(&format!("errmap-{}-merge", self.family), "merge.log");
         s.push_str("# Submitted with --dependency=afterok:<array job id>: runs once every shard succeeded.\n");
         s.push_str("set -euo pipefail\n");
-        s.push_str(&format!(
-            "exec {} merge {} --shards {} --job {}{} --quiet\n",
-            q(&self.errmap),
-            q(&self.out),
-            self.shards,
-            q(&self.job),
-            self.backend_flag()
-        ));
+        let words = self.merge_args.iter().map(|w| shell_quote(w).into());
+        s.push_str(&self.exec_line(words));
         s
     }
 
@@ -107,7 +115,7 @@ impl SlurmPlan {
     pub fn sbatch_shards_args(&self, array: Option<&str>) -> Vec<String> {
         let mut a = vec!["--parsable".to_string()];
         if let Some(ids) = array {
-            a.push(format!("--array={ids}"));
+            a.push(sbatch_option("array", ids));
         }
         a.push(
             self.slurm_dir()
@@ -122,7 +130,7 @@ impl SlurmPlan {
     pub fn sbatch_merge_args(&self, array_job_id: &str) -> Vec<String> {
         vec![
             "--parsable".to_string(),
-            format!("--dependency=afterok:{array_job_id}"),
+            sbatch_option("dependency", &format!("afterok:{array_job_id}")),
             "--kill-on-invalid-dep=yes".to_string(),
             self.slurm_dir()
                 .join("merge.sbatch")
@@ -130,6 +138,11 @@ impl SlurmPlan {
                 .into(),
         ]
     }
+}
+
+/// An option of `sbatch` (not of errmap): `--NAME=VALUE`.
+fn sbatch_option(name: &str, value: &str) -> String {
+    format!("--{name}={value}")
 }
 
 /// The job id in `sbatch --parsable` output (`ID` or `ID;CLUSTER`).
@@ -152,18 +165,24 @@ pub fn valid_array_ids(ids: &str, count: usize) -> bool {
 }
 
 /// `--array IDS` checked against the shard count.
-pub fn check_array_ids(ids: &str, count: usize) -> Result<()> {
+pub fn check_array_ids(ids: &str, count: usize) -> Result<(), ClusterError> {
     if valid_array_ids(ids, count) {
         return Ok(());
     }
-    Err(Error::usage(
-        format!("--array '{ids}' is not a list of task ids below {count}"),
-        "e.g. --array 1,3 or --array 0-2",
-    ))
+    Err(ClusterError::Array(Diagnostic::usage(
+        format!(
+            "{} '{ids}' is not a list of task ids below {count}",
+            errmap_core::setting::words(crate::Setting::Array)
+        ),
+        format!(
+            "e.g. {array} 1,3 or {array} 0-2",
+            array = errmap_core::setting::words(crate::Setting::Array)
+        ),
+    )))
 }
 
 /// The scripts of `plan` written into its Slurm folder: `[shards.sbatch, merge.sbatch]`.
-pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2]> {
+pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2], ClusterError> {
     let dir = plan.slurm_dir();
     let paths = [dir.join("shards.sbatch"), dir.join("merge.sbatch")];
     errmap_core::io::write_atomic_bytes(&paths[0], plan.shards_script().as_bytes())?;
@@ -172,20 +191,23 @@ pub fn write_scripts(plan: &SlurmPlan) -> Result<[PathBuf; 2]> {
 }
 
 /// Run `sbatch --parsable …` and return the job id.
-pub fn sbatch(args: &[String]) -> Result<String> {
+pub fn sbatch(args: &[String]) -> Result<String, ClusterError> {
     let out = std::process::Command::new("sbatch")
         .args(args)
         .output()
         .map_err(|e| {
-            Error::usage(
+            ClusterError::NoScheduler(Diagnostic::usage(
                 format!("cannot run sbatch: {e}"),
-                "run on a Slurm login node, or use --dry-run and submit the scripts yourself",
-            )
+                format!(
+                    "run on a Slurm login node, or use {} and submit the scripts yourself",
+                    errmap_core::setting::words(crate::Setting::DryRun)
+                ),
+            ))
         })?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     match (out.status.success(), parse_job_id(&stdout)) {
         (true, Some(id)) => Ok(id),
-        _ => Err(Error::device(
+        _ => Err(ClusterError::Submit(Diagnostic::device(
             format!(
                 "sbatch {} failed: {}{}",
                 args.join(" "),
@@ -193,13 +215,13 @@ pub fn sbatch(args: &[String]) -> Result<String> {
                 String::from_utf8_lossy(&out.stderr).trim()
             ),
             "check the partition and time limit with sinfo, or submit the scripts in OUT/slurm/ by hand",
-        )),
+        ))),
     }
 }
 
 /// Submit the array job (only task ids `array` when given), then the merge job after it:
 /// `(array job id, merge job id)`.
-pub fn submit(plan: &SlurmPlan, array: Option<&str>) -> Result<(String, String)> {
+pub fn submit(plan: &SlurmPlan, array: Option<&str>) -> Result<(String, String), ClusterError> {
     let array_id = sbatch(&plan.sbatch_shards_args(array))?;
     let merge_id = sbatch(&plan.sbatch_merge_args(&array_id))?;
     Ok((array_id, merge_id))
@@ -210,15 +232,37 @@ mod tests {
     use super::*;
 
     fn plan() -> SlurmPlan {
+        let text = |w: &str| Word::Text(w.to_string());
+        let job = "/data/web plate/job.toml";
         SlurmPlan {
             errmap: PathBuf::from("/opt/errmap/bin/errmap"),
-            job: PathBuf::from("/data/web plate/job.toml"),
+            shard_args: vec![
+                text("batch"),
+                text(job),
+                text("--shard"),
+                Word::TaskShard,
+                text("--out-dir"),
+                text("/scratch/out"),
+                text("--backend"),
+                text("cpu"),
+                text("--quiet"),
+            ],
+            merge_args: [
+                "merge",
+                "/scratch/out",
+                "--shards",
+                "4",
+                "--job",
+                job,
+                "--quiet",
+            ]
+            .map(String::from)
+            .to_vec(),
             out: PathBuf::from("/scratch/out"),
             family: "web-plate".into(),
             shards: 4,
             partition: Some("cpu".into()),
             time: Some("00:30:00".into()),
-            backend: Some("cpu".into()),
         }
     }
 

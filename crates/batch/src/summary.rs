@@ -1,6 +1,7 @@
 //! `summary.json` of a batch (and of one part), the printed table, and `merge` of shard summaries.
 
-use errmap_core::error::{Error, ErrorReport, Location, Result};
+use crate::{FolderError, MergeError};
+use errmap_core::error::{Diagnostic, ErrorReport, Location, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -89,7 +90,7 @@ pub struct PartSummary {
 
 impl PartSummary {
     /// The summary of a part that failed: no figures, `ok` false and the error as a record.
-    pub fn failed(part: &str, probe_file: &Path, error: &Error) -> PartSummary {
+    pub fn failed(part: &str, probe_file: &Path, error: &Diagnostic) -> PartSummary {
         PartSummary {
             part: part.into(),
             probe_file: probe_file.to_path_buf(),
@@ -206,14 +207,17 @@ impl BatchSummary {
 
     /// Read a `summary.json` written by a batch or a shard; an error names the line and column
     /// where it is not one.
-    pub fn read(path: &Path) -> Result<BatchSummary> {
+    pub fn read(path: &Path) -> Result<BatchSummary, FolderError> {
         let text = errmap_core::io::read_text(path)?;
         serde_json::from_str(&text).map_err(|e| {
-            Error::input(
+            FolderError::File(Diagnostic::input(
                 Location::cell(path, e.line() as u64, e.column().to_string()),
                 format!("not an errmap batch summary: {e}"),
-                "pass the summary*.json files written by `errmap batch --shard`",
-            )
+                format!(
+                    "pass the summary*.json files written by `errmap batch {}`",
+                    errmap_core::setting::words(crate::Setting::Shard)
+                ),
+            ))
         })
     }
 
@@ -282,12 +286,12 @@ impl BatchSummary {
 }
 
 /// Join shard summaries of one family into one: parts of every shard in part order.
-pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
+pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary, MergeError> {
     let Some((first_path, first)) = summaries.first() else {
-        return Err(Error::usage(
+        return Err(MergeError::Missing(Diagnostic::usage(
             "no summaries to merge",
             "pass the shards' summary files",
-        ));
+        )));
     };
     let mut merged = first.clone();
     merged.shard = None;
@@ -297,7 +301,7 @@ pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
     let mut seen_shards = Vec::new();
     for (path, s) in summaries {
         if s.family != first.family {
-            return Err(Error::input(
+            return Err(MergeError::Mismatch(Diagnostic::input(
                 Location::file(path),
                 format!(
                     "family '{}' differs from '{}' in {}",
@@ -306,25 +310,25 @@ pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
                     first_path.display()
                 ),
                 "merge the shards of one batch only",
-            ));
+            )));
         }
         if let Some(shard) = s.shard {
             if seen_shards.contains(&shard) {
-                return Err(Error::input(
+                return Err(MergeError::Mismatch(Diagnostic::input(
                     Location::file(path),
                     format!("shard {}/{} is given twice", shard[0], shard[1]),
                     "pass each shard's summary once",
-                ));
+                )));
             }
             seen_shards.push(shard);
         }
         for p in &s.parts {
             if merged.parts.iter().any(|q| q.part == p.part) {
-                return Err(Error::input(
+                return Err(MergeError::Mismatch(Diagnostic::input(
                     Location::file(path),
                     format!("part '{}' appears in two summaries", p.part),
                     "pass each shard's summary once",
-                ));
+                )));
             }
             merged.parts.push(p.clone());
         }
@@ -336,10 +340,10 @@ pub fn merge(summaries: &[(PathBuf, BatchSummary)]) -> Result<BatchSummary> {
             .collect();
         missing.sort_unstable();
         if !missing.is_empty() {
-            return Err(Error::usage(
+            return Err(MergeError::Missing(Diagnostic::usage(
                 format!("shards {missing:?} of {count} are missing"),
                 "pass every shard's summary (or run the missing shards first)",
-            ));
+            )));
         }
     }
     merged

@@ -1,6 +1,6 @@
 //! The batch's training step: every network's starting weights (seeded from the job seed and the network's name, never its position), the optional warm start of each part from the family network, and the hold-out stopping groups (a part's hold-out and delivered networks).
 
-use errmap_core::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use errmap_maps::nn::stop::{train_until_holdout_stops, GroupOutcome, Holdout, StopGroup};
 use errmap_maps::nn::{
     network_seed, Mlp, ModelConfig, Normalisation, Stop, Trainer, TrainingSet, WarmStart,
@@ -119,7 +119,7 @@ pub fn train_family(trainer: &dyn Trainer, set: &TrainingSet, config: &ModelConf
     trainer
         .train_from(vec![initial], std::slice::from_ref(set), config)?
         .pop()
-        .ok_or_else(|| Error::Internal("trainer returned no family network".into()))
+        .ok_or_else(|| Diagnostic::Internal("trainer returned no family network".into()))
 }
 
 /// The networks of some parts (`sets`, `norms`, `roles`, `holdouts` one per network) in one

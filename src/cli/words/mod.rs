@@ -5,6 +5,7 @@
 //! flags. `main` installs [`flag`] before anything else runs, and a test checks that every
 //! word here is a flag the command line has.
 
+mod batch;
 mod core_setting;
 mod live;
 mod maps;
@@ -16,30 +17,42 @@ mod toolpath;
 
 use std::any::Any;
 
+/// Each crate's wording: the flag of a setting given as `&dyn Any`, `None` if not its type.
+const CRATES: &[fn(&dyn Any) -> Option<&'static str>] = &[
+    core_setting::flag,
+    maps::flag,
+    toolpath::flag,
+    metrology::flag,
+    report::flag,
+    synth::flag,
+    batch::flag,
+    live::flag,
+    serve::flag,
+];
+
 /// The flag for any crate's setting, or `None` for a type that is not a setting.
 pub fn flag(setting: &dyn Any) -> Option<&'static str> {
-    toolpath::flag(setting)
-        .or_else(|| metrology::flag(setting))
-        .or_else(|| live::flag(setting))
-        .or_else(|| core_setting::flag(setting))
-        .or_else(|| maps::flag(setting))
-        .or_else(|| report::flag(setting))
-        .or_else(|| synth::flag(setting))
-        .or_else(|| serve::flag(setting))
+    CRATES.iter().find_map(|words| words(setting))
 }
 
 /// Every flag this module words settings with, for the test against the command line.
 #[cfg(test)]
 fn all_flags() -> Vec<&'static str> {
-    let mut all: Vec<&'static str> = toolpath::ALL.iter().map(|s| toolpath::words(*s)).collect();
-    all.extend(metrology::ALL.iter().map(|s| metrology::words(*s)));
-    all.extend(live::ALL.iter().map(|s| live::words(*s)));
-    all.extend(core_setting::ALL.iter().map(|s| core_setting::words(*s)));
-    all.extend(maps::ALL.iter().map(|s| maps::words(*s)));
-    all.extend(report::ALL.iter().map(|s| report::words(*s)));
-    all.extend(synth::ALL.iter().map(|s| synth::words(*s)));
-    all.extend(serve::ALL.iter().map(|s| serve::words(*s)));
-    all
+    fn of<S: Copy>(all: &[S], words: fn(S) -> &'static str) -> Vec<&'static str> {
+        all.iter().map(|s| words(*s)).collect()
+    }
+    [
+        of(core_setting::ALL, core_setting::words),
+        of(maps::ALL, maps::words),
+        of(toolpath::ALL, toolpath::words),
+        of(metrology::ALL, metrology::words),
+        of(report::ALL, report::words),
+        of(synth::ALL, synth::words),
+        of(batch::ALL, batch::words),
+        of(live::ALL, live::words),
+        of(serve::ALL, serve::words),
+    ]
+    .concat()
 }
 
 /// The command line's flags, for the tests.

@@ -3,7 +3,7 @@
 use super::read::{failed_part, Prepared};
 use crate::plan::{PartInput, Settings};
 use crate::summary::PartSummary;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use errmap_core::geom::Domain;
 use errmap_maps::interp::{self, Grid, Method, Surface};
 use errmap_maps::probe::{self, ProbePoint};
@@ -39,7 +39,7 @@ impl Grids {
 pub(crate) fn checked_domain(domain: Option<Domain>) -> Result<Domain> {
     match domain {
         Some(d) if d.width_mm() > 0.0 && d.height_mm() > 0.0 => Ok(d),
-        _ => Err(Error::usage(
+        _ => Err(Diagnostic::usage(
             "the probe points span no area (zero width or height)",
             "give a map domain",
         )),
@@ -71,7 +71,7 @@ pub(crate) fn interpolate(
     prep: Prepared,
     s: &Settings,
     train_grid: &Grid,
-) -> std::result::Result<Interpolated, Box<(PartInput, Error)>> {
+) -> std::result::Result<Interpolated, Box<(PartInput, Diagnostic)>> {
     let full = match full_nodes(&prep, s, train_grid) {
         Ok(nodes) => nodes,
         Err(e) => return Err(Box::new((prep.input, e))),
@@ -87,7 +87,7 @@ pub(crate) fn interpolate(
         }
     };
     if full.iter().flatten().count() < 3 {
-        let e = Error::input(
+        let e = Diagnostic::input(
             errmap_core::Location::file(&prep.input.probe_file),
             format!(
                 "the probes' convex hull holds fewer than 3 nodes of the {} mm training grid",

@@ -6,7 +6,7 @@ use crate::part_record::Marks;
 use crate::plan::Settings;
 use crate::summary::PartSummary;
 use crate::timing::Stopping;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use errmap_core::geom::Axis;
 use errmap_maps::map::uncertainty;
 use errmap_maps::map::{Benefit, ErrorMap, FittedModel};
@@ -100,12 +100,12 @@ pub(crate) fn check_map_plausible(
     if worst_um.is_finite() && worst_um <= max_deviation_mm * 1000.0 {
         return Ok(());
     }
-    Err(Error::input(
+    Err(Diagnostic::input(
         errmap_core::Location::file(probe_file),
         format!(
             "the fitted map reaches |E| = {worst_um:.1} µm, beyond the plausibility bound of {max_deviation_mm} mm",
         ),
-        "check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm (--max-deviation-mm)",
+        format!("check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm ({})", errmap_core::setting::words(crate::Setting::MaxDeviation)),
     ))
 }
 

@@ -2,7 +2,7 @@
 
 use crate::plan::{PartInput, Settings};
 use crate::summary::PartSummary;
-use errmap_core::error::Error;
+use errmap_core::error::Diagnostic;
 use errmap_core::geom::Domain;
 use errmap_maps::probe::{self, ProbePoint, ProbeSpec, Rejected};
 use rand::seq::SliceRandom;
@@ -24,7 +24,7 @@ pub(crate) struct Prepared {
 }
 
 /// A part read and cleaned, or why not.
-pub(crate) type Prep = std::result::Result<Prepared, Box<(PartInput, Error)>>;
+pub(crate) type Prep = std::result::Result<Prepared, Box<(PartInput, Diagnostic)>>;
 
 /// Read and clean the parts of one chunk (rayon).
 pub(crate) fn prepare_chunk(chunk: &[PartInput], s: &Settings) -> Vec<Prep> {
@@ -34,7 +34,7 @@ pub(crate) fn prepare_chunk(chunk: &[PartInput], s: &Settings) -> Vec<Prep> {
 pub(crate) fn prepare(
     input: PartInput,
     s: &Settings,
-) -> std::result::Result<Prepared, Box<(PartInput, Error)>> {
+) -> std::result::Result<Prepared, Box<(PartInput, Diagnostic)>> {
     let spec = ProbeSpec {
         normal: s.normal,
         nominal_plane_mm: s.nominal_plane_mm,
@@ -157,7 +157,7 @@ pub(crate) fn union_box_of(a: Domain, b: Domain) -> Option<Domain> {
 }
 
 /// The summary of a part that failed.
-pub(crate) fn failed_part(input: &PartInput, e: &Error) -> PartSummary {
+pub(crate) fn failed_part(input: &PartInput, e: &Diagnostic) -> PartSummary {
     PartSummary::failed(&input.name, &input.probe_file, e)
 }
 

@@ -7,7 +7,7 @@
 use crate::manifest::{self, RunManifest};
 use crate::run_page::{self, RunInput, RunPage, REPORT_FILE};
 use crate::summary::BatchSummary;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use std::path::Path;
 
 /// Write `report.html` into the run's folder `dir` and list it in the manifest `m`; in a
@@ -41,7 +41,8 @@ pub(crate) fn write_report(dir: &Path, m: &mut RunManifest, summary: &BatchSumma
         let rel = format!("{}/{REPORT_FILE}", p.part);
         let path = dir.join(&rel);
         if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| Error::io("create folder", parent, e))?;
+            std::fs::create_dir_all(parent)
+                .map_err(|e| Diagnostic::io("create folder", parent, e))?;
         }
         errmap_core::io::write_atomic_bytes(&path, html.as_bytes())?;
         pages.push((p.part.clone(), rel, manifest::sha256_bytes(html.as_bytes())));

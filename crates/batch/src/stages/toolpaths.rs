@@ -2,7 +2,7 @@
 
 use crate::plan::ToolpathPlan;
 use crate::summary::ToolpathSummary;
-use errmap_core::error::Error;
+use errmap_core::error::Diagnostic;
 use errmap_maps::map::FittedModel;
 use std::path::{Path, PathBuf};
 
@@ -22,7 +22,7 @@ pub(crate) fn compensate_one(
             "set [toolpaths] allow_weak_map = true in the job",
             &model_file,
         )
-        .map_err(Error::from)
+        .map_err(Diagnostic::from)
         .and_then(|_| match tp.max_uncertainty_um {
             None => errmap_toolpath::compensate_file(input, &output, model, &tp.settings)
                 .map_err(Into::into),

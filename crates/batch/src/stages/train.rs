@@ -4,7 +4,7 @@ use super::nodes::Interpolated;
 use crate::plan::Settings;
 use crate::timing::PartTiming;
 use crate::train_step::{train_parts, Role};
-use errmap_core::error::{Error, Result};
+use errmap_core::error::{Diagnostic, Result};
 use errmap_core::geom::Domain;
 use errmap_core::progress::Reporter;
 use errmap_maps::interp::Grid;
@@ -136,7 +136,7 @@ pub(crate) fn train(
         })
         .collect();
     if trained.nets.len() != t.sets.len() {
-        return Err(Error::Internal(format!(
+        return Err(Diagnostic::Internal(format!(
             "trainer returned {} networks for {} training sets",
             trained.nets.len(),
             t.sets.len()

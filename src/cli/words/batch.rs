@@ -1,0 +1,52 @@
+//! The flags of `errmap_batch`'s settings.
+
+use errmap::batch::Setting;
+use std::any::Any;
+
+/// Every batch setting, for the test that each is a flag.
+#[cfg(test)]
+pub const ALL: &[Setting] = &[
+    Setting::Shard,
+    Setting::Shards,
+    Setting::Resume,
+    Setting::OutDir,
+    Setting::Job,
+    Setting::Backend,
+    Setting::Array,
+    Setting::DryRun,
+    Setting::Submit,
+    Setting::NominalPlane,
+    Setting::HeaderLine,
+    Setting::MaxDeviation,
+    Setting::GridStep,
+    Setting::Spacing,
+    Setting::KSigma,
+    Setting::Chart,
+];
+
+/// The flag of a batch setting.
+pub fn words(setting: Setting) -> &'static str {
+    match setting {
+        Setting::Shard => "--shard",
+        Setting::Shards => "--shards",
+        Setting::Resume => "--resume",
+        Setting::OutDir => "--out-dir",
+        Setting::Job => "--job",
+        Setting::Backend => "--backend",
+        Setting::Array => "--array",
+        Setting::DryRun => "--dry-run",
+        Setting::Submit => "--submit",
+        Setting::NominalPlane => "--nominal-plane",
+        Setting::HeaderLine => "--header-line",
+        Setting::MaxDeviation => "--max-deviation-mm",
+        Setting::GridStep => "--grid-step",
+        Setting::Spacing => "--spacing",
+        Setting::KSigma => "--k-sigma",
+        Setting::Chart => "--chart",
+    }
+}
+
+/// [`words`] for a setting given as `&dyn Any`; `None` when it is not a batch setting.
+pub fn flag(setting: &dyn Any) -> Option<&'static str> {
+    setting.downcast_ref::<Setting>().map(|s| words(*s))
+}
