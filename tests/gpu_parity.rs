@@ -601,15 +601,21 @@ fn cpu_adapter_family_falls_back_to_the_hardware_kernels() {
     assert_eq!(bits(&a), bits(&b));
 }
 
-/// The host mirrors of the CPU-adapter kernel's own structs against its generated WGSL.
+/// The host mirrors of the CPU-adapter kernels' own structs against their generated WGSL
+/// (the one-epoch kernel with and without subgroups, and the many-epoch kernel).
 #[test]
 fn cpu_adapter_structs_match_the_generated_wgsl() {
+    use errmap::gpu::lavapipe::many_epochs::{epochs_source, RunInfo};
     use errmap::gpu::lavapipe::{epoch_source, AdamConstants, BatchInfo};
     use std::mem::size_of;
     use wgpu::naga;
-    for subgroups in [false, true] {
-        let source = epoch_source(&[2, 3, 1], Activation::Tanh, 16, 2, subgroups).unwrap();
-        let module = naga::front::wgsl::parse_str(&source).expect("generated WGSL parses");
+    let sources = [
+        epoch_source(&[2, 3, 1], Activation::Tanh, 16, 2, false).unwrap(),
+        epoch_source(&[2, 3, 1], Activation::Tanh, 16, 2, true).unwrap(),
+        epochs_source(&[2, 3, 1], Activation::Tanh).unwrap(),
+    ];
+    for (i, source) in sources.iter().enumerate() {
+        let module = naga::front::wgsl::parse_str(source).expect("generated WGSL parses");
         let mut seen = 0;
         for (_, ty) in module.types.iter() {
             let naga::TypeInner::Struct { members, span } = &ty.inner else {
@@ -619,6 +625,7 @@ fn cpu_adapter_structs_match_the_generated_wgsl() {
             let (size, count) = match ty.name.as_deref() {
                 Some("AdamConstants") => (size_of::<AdamConstants>(), 8),
                 Some("BatchInfo") => (size_of::<BatchInfo>(), 4),
+                Some("RunInfo") => (size_of::<RunInfo>(), 4),
                 Some("NetInfo") => (size_of::<NetInfo>(), 4),
                 Some("Sample") => (size_of::<Sample>(), 4),
                 Some("Step") => (size_of::<Step>(), 4),
@@ -629,7 +636,7 @@ fn cpu_adapter_structs_match_the_generated_wgsl() {
             assert_eq!(offsets, (0..count).map(|i| 4 * i).collect::<Vec<u32>>());
             seen += 1;
         }
-        assert_eq!(seen, 5);
+        assert_eq!(seen, 5, "kernel {i}");
     }
 }
 

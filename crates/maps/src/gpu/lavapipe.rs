@@ -20,6 +20,9 @@
 //! - One dispatch per epoch does forward, backward, reduction and Adam for every network of
 //!   a binding (one workgroup each); a batch larger than one uniform binding holds takes one
 //!   dispatch per binding.
+//! - Where the device has 8-wide subgroups (lavapipe on AVX2) training uses the many-epoch
+//!   kernel of [`many_epochs`] instead, which shares this module's sample loop;
+//!   this kernel trains where there are none (its subgroup variant stays for comparison).
 
 use std::collections::HashMap;
 use std::fmt::Write;
@@ -38,8 +41,10 @@ use bytemuck::{Pod, Zeroable};
 use errmap_core::progress::Notes;
 use errmap_core::{Error, Result};
 
+pub mod many_epochs;
+
 /// Declarations shared with the other kernels (`tanh_f32`).
-const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
+pub(super) const COMMON_WGSL: &str = include_str!("../../../../shaders/common.wgsl");
 
 /// Invocations per workgroup = gradient lanes = llvmpipe's SIMD width on AVX2.
 pub const LANES: usize = 8;
@@ -117,6 +122,25 @@ pub fn epoch_source(
     for c in 0..params {
         line(&format!("    let {} = {};", param(c), uniform_param(c)));
     }
+    sample_loop(&mut line, &spans, activation, params);
+    if subgroups {
+        subgroup_reduce_and_adam(&mut line, params, stride_floats);
+    } else {
+        reduce_and_adam(&mut line, params, stride_floats);
+    }
+    line("}");
+    Some(w)
+}
+
+/// The sample loop of lane t: every sample of the set goes forward and backward and adds
+/// its gradient terms to the lane's sums `g0 …` (declared before it, with the parameters
+/// `p0 …`); the squared errors go to `g{params}`.
+pub(super) fn sample_loop(
+    line: &mut dyn FnMut(&str),
+    spans: &[LayerSpan],
+    activation: Activation,
+    params: usize,
+) {
     // SAMPLES_PER_PASS samples of this lane per iteration, s0, s0 + 8, …: all go forward and
     // backward, then their gradient terms are added in one pass,
     // g = ((g + term(s0)) + term(s0 + 8)) + …, so each accumulator (they live on the stack)
@@ -132,14 +156,14 @@ pub fn epoch_source(
         .collect();
     for (k, suffix) in suffixes.iter().enumerate() {
         if k == 0 {
-            sample_pass(&mut line, &spans, activation, params, suffix, "s0", None);
+            sample_pass(line, spans, activation, params, suffix, "s0", None);
             continue;
         }
         let offset = k * LANES;
         line(&format!("        let has_{suffix} = s0 + {offset}u < n;"));
         sample_pass(
-            &mut line,
-            &spans,
+            line,
+            spans,
             activation,
             params,
             suffix,
@@ -148,15 +172,8 @@ pub fn epoch_source(
         );
     }
     let names: Vec<&str> = suffixes.iter().map(|s| s.as_str()).collect();
-    gradient_terms(&mut line, &spans, params, &names);
+    gradient_terms(line, spans, params, &names);
     line("    }");
-    if subgroups {
-        subgroup_reduce_and_adam(&mut line, params, stride_floats);
-    } else {
-        reduce_and_adam(&mut line, params, stride_floats);
-    }
-    line("}");
-    Some(w)
 }
 
 /// Forward and backward pass of the sample at index `index`, its values named with
@@ -227,7 +244,7 @@ var<workgroup> red: array<f32, {}>;
 }
 
 /// The accumulator of parameter `c` (`c` = parameter count: the squared error).
-fn acc(c: usize) -> String {
+pub(super) fn acc(c: usize) -> String {
     format!("g{c}")
 }
 
@@ -238,7 +255,7 @@ fn uniform_param(c: usize) -> String {
 }
 
 /// The value parameter `c` was loaded into before the sample loop.
-fn param(c: usize) -> String {
+pub(super) fn param(c: usize) -> String {
     format!("p{c}")
 }
 
@@ -503,6 +520,9 @@ type ArchitectureKey = (Vec<usize>, u32);
 pub struct EpochPipeline {
     pipeline: wgpu::ComputePipeline,
     plan: ParamPlan,
+    /// `Some(most epochs per dispatch)` for the many-epoch kernel of
+    /// [`many_epochs`], `None` for the one-epoch kernel of this module.
+    per_dispatch: Option<u32>,
     /// Seconds spent creating the pipeline and running its first (tiny) dispatch, which is
     /// when llvmpipe compiles it.
     pub build_s: f64,
@@ -519,6 +539,7 @@ impl EpochPipeline {
 
 /// Bind group layouts of the family and its kernels, compiled per architecture on first use.
 pub struct CpuKernels {
+    epochs_layouts: many_epochs::Layouts,
     data_layout: wgpu::BindGroupLayout,
     step_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
@@ -576,6 +597,7 @@ impl CpuKernels {
             immediate_size: 0,
         });
         CpuKernels {
+            epochs_layouts: many_epochs::Layouts::new(device),
             data_layout,
             step_layout,
             layout,
@@ -596,18 +618,40 @@ impl CpuKernels {
         if let Some(found) = built.get(&key) {
             return Ok(found.clone());
         }
-        let pipeline = match param_plan(&ctx.limits, net.params.len()) {
-            None => None,
-            Some(plan) => {
-                match epoch_source(
-                    &net.layer_sizes,
-                    net.activation,
-                    plan.stride_floats,
-                    plan.nets_per_binding,
-                    ctx.subgroup_size == Some(LANES as u32),
-                ) {
-                    None => None,
-                    Some(source) => Some(Arc::new(self.build(ctx, net, &source, plan)?)),
+        let subgroups = ctx.subgroup_size == Some(LANES as u32);
+        // With 8-wide subgroups the many-epoch kernel; without them the one-epoch kernel.
+        let per_dispatch = many_epochs::EPOCHS_PER_DISPATCH;
+        let many = if subgroups {
+            many_epochs::epochs_source(&net.layer_sizes, net.activation)
+        } else {
+            None
+        };
+        let pipeline = if let Some(source) = many {
+            let plan = ParamPlan {
+                stride_floats: many_epochs::stride_floats(net.params.len()),
+                nets_per_binding: ctx.limits.max_compute_workgroups_per_dimension.max(1) as usize,
+            };
+            Some(Arc::new(self.build(
+                ctx,
+                net,
+                &source,
+                plan,
+                Some(per_dispatch),
+            )?))
+        } else {
+            match param_plan(&ctx.limits, net.params.len()) {
+                None => None,
+                Some(plan) => {
+                    match epoch_source(
+                        &net.layer_sizes,
+                        net.activation,
+                        plan.stride_floats,
+                        plan.nets_per_binding,
+                        subgroups,
+                    ) {
+                        None => None,
+                        Some(source) => Some(Arc::new(self.build(ctx, net, &source, plan, None)?)),
+                    }
                 }
             }
         };
@@ -627,6 +671,7 @@ impl CpuKernels {
         net: &Mlp,
         source: &str,
         plan: ParamPlan,
+        per_dispatch: Option<u32>,
     ) -> Result<EpochPipeline> {
         let started = Instant::now();
         let device = &ctx.device;
@@ -639,15 +684,19 @@ impl CpuKernels {
         );
         let (cache, mut cache_use) =
             pipeline_cache::open(ctx, self.cache_dir.as_deref(), &architecture);
+        let (layout, entry_point) = match per_dispatch {
+            Some(_) => (&self.epochs_layouts.pipeline, "train_epochs"),
+            None => (&self.layout, "train_epoch"),
+        };
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("cpu-adapter train_epoch"),
+            label: Some(entry_point),
             source: wgpu::ShaderSource::Wgsl(source.to_string().into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("train_epoch"),
-            layout: Some(&self.layout),
+            label: Some(entry_point),
+            layout: Some(layout),
             module: &module,
-            entry_point: Some("train_epoch"),
+            entry_point: Some(entry_point),
             compilation_options: Default::default(),
             cache: cache.as_ref(),
         });
@@ -655,6 +704,7 @@ impl CpuKernels {
         let mut built = EpochPipeline {
             pipeline,
             plan,
+            per_dispatch,
             build_s: 0.0,
             cache: CacheUse::default(),
         };
@@ -713,6 +763,18 @@ pub fn train_group(
 ) -> Result<Vec<Mlp>> {
     if initial.is_empty() {
         return Ok(Vec::new());
+    }
+    if let Some(per_dispatch) = pipe.per_dispatch {
+        return many_epochs::train_group(
+            ctx,
+            &kernels.epochs_layouts,
+            &pipe.pipeline,
+            per_dispatch,
+            initial,
+            sets,
+            config,
+            first_index,
+        );
     }
     let net_count = initial.len();
     let plan = pipe.plan;
