@@ -29,7 +29,7 @@ use super::super::epochs::{
     init_buffer, sized, slot_offset, step_buffer, EpochLoop, EPOCHS_PER_SUBMISSION,
 };
 use super::super::layout::{pack_samples, Step};
-use super::{acc, param, sample_loop, AdamConstants, COMMON_WGSL, LANES, MAX_CPU_PARAMS};
+use super::{acc, entry, param, sample_loop, AdamConstants, COMMON_WGSL, LANES, MAX_CPU_PARAMS};
 use crate::nn::{layer_spans, Activation, Mlp, ModelConfig, TrainingSet};
 use bytemuck::{Pod, Zeroable};
 use errmap_core::Result;
@@ -227,19 +227,6 @@ pub struct Layouts {
     step: wgpu::BindGroupLayout,
     /// The pipeline layout the kernel is built with.
     pub pipeline: wgpu::PipelineLayout,
-}
-
-fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: dynamic,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 impl Layouts {
