@@ -655,9 +655,10 @@ fn the_cli_reads_an_export_with_columns_and_a_batch_job_with_the_key() {
 
 #[test]
 fn the_shared_mapping_keeps_linear_messages() {
-    // errmap linear's mapping goes through the same parser; its usage line is its own.
+    // errmap linear's mapping goes through the same parser; its usage line is its own (the
+    // setting in its key form: no binary words it here).
     let e = errmap::linear::ColumnMap::parse("target=P,direction=D").unwrap_err();
-    assert!(e.to_string().contains("--columns target=COLUMN"), "{e}");
+    assert!(e.to_string().contains("`columns` target=COLUMN"), "{e}");
     let _ = Path::new("");
 }
 
