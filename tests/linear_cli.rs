@@ -267,6 +267,34 @@ fn air_index_command_prints_nist_values() {
     )
     .stdout;
     assert!(text.contains("n = 1.000271799"), "{text}");
+    // The Edlén equation with another CO2 content is refused, and the hint names the flag
+    // that `air-index` and `analyze` both take for the equation.
+    let out = errmap(
+        dir.path(),
+        &[
+            "linear",
+            "air-index",
+            "--temp-c",
+            "20",
+            "--pressure-kpa",
+            "101.325",
+            "--humidity-pct",
+            "0",
+            "--wavelength-nm",
+            "633",
+            "--air-formula",
+            "edlen",
+            "--co2-ppm",
+            "600",
+        ],
+    );
+    out.expect_code(2);
+    assert!(
+        out.stderr
+            .contains("use --air-formula ciddor for another CO2 content"),
+        "{}",
+        out.stderr
+    );
     let out = errmap(
         dir.path(),
         &[

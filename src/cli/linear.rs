@@ -125,8 +125,8 @@ pub struct AirIndexArgs {
     /// CO2 content (µmol/mol); Ciddor only.
     #[arg(long, default_value_t = DEFAULT_CO2_PPM)]
     pub co2_ppm: f64,
-    /// Equation.
-    #[arg(long, value_parser = super::choices::AirFormula::parser(), default_value = "ciddor")]
+    /// Equation (the same flag as `linear analyze --air-formula`; `--formula` is still read).
+    #[arg(long = "air-formula", alias = "formula", value_parser = super::choices::AirFormula::parser(), default_value = "ciddor")]
     pub formula: AirFormula,
     /// Print one JSON document on stdout.
     #[arg(long)]

@@ -88,7 +88,7 @@ impl errmap_core::Setting for Setting {
             Setting::Columns => "columns",
             Setting::CorrectAir => "correct_air",
             Setting::FitPitch => "fit_pitch",
-            Setting::Formula => "formula",
+            Setting::Formula => "air_formula",
             Setting::MaterialExpansion => "material_expansion",
             Setting::FitAxis => "fit_axis",
             Setting::ReferenceAngle => "reference_angle",

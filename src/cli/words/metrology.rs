@@ -56,7 +56,7 @@ pub fn words(setting: Setting) -> &'static str {
         Setting::Columns => "--columns",
         Setting::CorrectAir => "--correct-air",
         Setting::FitPitch => "--fit-pitch",
-        Setting::Formula => "--formula",
+        Setting::Formula => "--air-formula",
         Setting::MaterialExpansion => "--material-expansion",
         Setting::FitAxis => "--fit-axis",
         Setting::ReferenceAngle => "--reference-angle",
