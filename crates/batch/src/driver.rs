@@ -751,7 +751,7 @@ fn merged_job(
             "this job (with these options) is not the one the shards ran",
             format!(
                 "pass the shards' job file unchanged and the same {} as the shards",
-                errmap_core::setting::words(crate::Setting::Backend)
+                errmap_core::setting::words(errmap_maps::Setting::Backend)
             ),
         )));
     }

@@ -14,20 +14,12 @@ pub enum Setting {
     OutDir,
     /// The job file a merge reduces with.
     Job,
-    /// The trainer backend, replacing the job's `[model] backend`.
-    Backend,
     /// The Slurm array task ids to submit.
     Array,
     /// Print the scripts instead of writing or submitting them.
     DryRun,
     /// Submit the scripts to Slurm.
     Submit,
-    /// The nominal coordinate along the normal of every point of one part.
-    NominalPlane,
-    /// The 1-based line of a CSV export's header.
-    HeaderLine,
-    /// The plausibility bound of a probe deviation or map value, mm.
-    MaxDeviation,
     /// The step of the output grid of one part, mm.
     GridStep,
     /// The spacing of the training set of one part, mm.
@@ -46,13 +38,9 @@ impl errmap_core::Setting for Setting {
             Setting::Resume => "resume",
             Setting::OutDir => "output",
             Setting::Job => "job",
-            Setting::Backend => "backend",
             Setting::Array => "array",
             Setting::DryRun => "dry_run",
             Setting::Submit => "submit",
-            Setting::NominalPlane => "nominal_plane_mm",
-            Setting::HeaderLine => "header_line",
-            Setting::MaxDeviation => "max_deviation_mm",
             Setting::GridStep => "grid_step_mm",
             Setting::Spacing => "spacing_mm",
             Setting::KSigma => "k_sigma",

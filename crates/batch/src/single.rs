@@ -75,11 +75,11 @@ impl MapRequest {
                 return Err(RunError::Options(Diagnostic::usage(
                     format!(
                         "{} must be a finite number",
-                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                        errmap_core::setting::words(errmap_maps::Setting::NominalPlane)
                     ),
                     format!(
                         "e.g. {} 5.0",
-                        errmap_core::setting::words(crate::Setting::NominalPlane)
+                        errmap_core::setting::words(errmap_maps::Setting::NominalPlane)
                     ),
                 )));
             }
@@ -92,14 +92,14 @@ impl MapRequest {
             return Err(RunError::Options(Diagnostic::usage(
                 format!(
                     "{} 0: lines are numbered from 1",
-                    errmap_core::setting::words(crate::Setting::HeaderLine)
+                    errmap_core::setting::words(errmap_maps::Setting::HeaderLine)
                 ),
                 "give the 1-based line of the header, as an editor shows it",
             )));
         }
         errmap_maps::probe::validate_max_deviation(
             self.max_deviation_mm,
-            &errmap_core::setting::words(crate::Setting::MaxDeviation),
+            &errmap_core::setting::words(errmap_maps::Setting::MaxDeviation),
         )
         .map_err(Diagnostic::from)?;
         // One scan: too large for the memory bound is a refusal (exit 2) before it is read.

@@ -237,7 +237,7 @@ pub(crate) fn check_output_size(source: &Path, line: u64, bytes: usize) -> Resul
                 "check arc turn counts (P) and move lengths, raise {} / {}, or raise {}",
                 words(Setting::MaxSegment),
                 words(Setting::ChordTol),
-                words(Setting::MaxOutputMb)
+                words(errmap_core::core_setting::Setting::MaxOutputMb)
             ),
         ));
     }

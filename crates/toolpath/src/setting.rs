@@ -19,8 +19,6 @@ pub enum Setting {
     ChordTol,
     /// Half-width of the default zone around the map's probed surface, mm.
     SurfaceTol,
-    /// The largest file one output may grow to, MB.
-    MaxOutputMb,
     /// The band along the map's normal axis where moves are compensated (`MIN,MAX` or `all`).
     Zone,
     /// Move a canned cycle's holes whose bottom lies in the zone by −E.
@@ -44,7 +42,6 @@ impl errmap_core::Setting for Setting {
             Setting::MaxSegment => "max_segment_mm",
             Setting::ChordTol => "chord_tol_mm",
             Setting::SurfaceTol => "surface_tol_mm",
-            Setting::MaxOutputMb => "max_output_mb",
             Setting::Zone => "zone",
             Setting::CompensateHoles => "compensate_holes",
             Setting::FanucNumbers => "fanuc_numbers",

@@ -105,7 +105,7 @@ pub(crate) fn check_map_plausible(
         format!(
             "the fitted map reaches |E| = {worst_um:.1} µm, beyond the plausibility bound of {max_deviation_mm} mm",
         ),
-        format!("check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm ({})", errmap_core::setting::words(crate::Setting::MaxDeviation)),
+        format!("check the probe file's units and nominal; if the part really is this far off, raise max_deviation_mm ({})", errmap_core::setting::words(errmap_maps::Setting::MaxDeviation)),
     ))
 }
 

@@ -108,7 +108,7 @@ impl Flat {
                     limit / 1_000_000,
                     self.calls(chain)
                 ),
-                format!("check the loop counts, or raise {}", words(Setting::MaxOutputMb)),
+                format!("check the loop counts, or raise {}", words(errmap_core::core_setting::Setting::MaxOutputMb)),
             ));
         }
         Ok(())

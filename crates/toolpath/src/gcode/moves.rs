@@ -735,7 +735,7 @@ impl<'a> Rewriter<'a> {
                 "check arc turn counts (P) and move lengths, raise {} / {}, or raise {}",
                 errmap_core::setting::words(Setting::MaxSegment),
                 errmap_core::setting::words(Setting::ChordTol),
-                errmap_core::setting::words(Setting::MaxOutputMb)
+                errmap_core::setting::words(errmap_core::core_setting::Setting::MaxOutputMb)
             ),
         )
     }

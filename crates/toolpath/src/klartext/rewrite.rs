@@ -114,7 +114,7 @@ impl Kt<'_> {
                         "check the move's length, raise {} / {}, or raise {}",
                         words(Setting::MaxSegment),
                         words(Setting::ChordTol),
-                        words(Setting::MaxOutputMb)
+                        words(errmap_core::core_setting::Setting::MaxOutputMb)
                     ),
                 ));
             }
