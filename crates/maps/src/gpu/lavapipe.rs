@@ -539,10 +539,8 @@ impl EpochPipeline {
 
 /// Bind group layouts of the family and its kernels, compiled per architecture on first use.
 pub struct CpuKernels {
-    epochs_layouts: many_epochs::Layouts,
-    data_layout: wgpu::BindGroupLayout,
-    step_layout: wgpu::BindGroupLayout,
-    layout: wgpu::PipelineLayout,
+    epochs_layouts: Layouts,
+    epoch_layouts: Layouts,
     built: Mutex<HashMap<ArchitectureKey, Option<Arc<EpochPipeline>>>>,
     /// errmap's cache folder, where pipeline caches are kept (`None`: none kept).
     pub cache_dir: Option<std::path::PathBuf>,
@@ -550,16 +548,51 @@ pub struct CpuKernels {
     pub notes: Notes,
 }
 
-fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: dynamic,
-            min_binding_size: None,
-        },
-        count: None,
+/// A kernel's two bind group layouts (0: data, 1: step) and its pipeline layout.
+pub struct Layouts {
+    data: wgpu::BindGroupLayout,
+    step: wgpu::BindGroupLayout,
+    /// The pipeline layout the kernel is built with.
+    pub pipeline: wgpu::PipelineLayout,
+}
+
+/// One buffer binding of a layout: its type and whether it takes a dynamic offset.
+type Binding = (wgpu::BufferBindingType, bool);
+
+impl Layouts {
+    /// Group 0 from `data`, group 1 from `step`, bindings numbered in order; `name` labels them.
+    fn new(device: &wgpu::Device, name: &str, data: &[Binding], step: &[Binding]) -> Layouts {
+        let group = |part: &str, bindings: &[Binding]| {
+            let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+                .iter()
+                .enumerate()
+                .map(|(k, &(ty, dynamic))| wgpu::BindGroupLayoutEntry {
+                    binding: k as u32,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty,
+                        has_dynamic_offset: dynamic,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                })
+                .collect();
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(&format!("{name} {part}")),
+                entries: &entries,
+            })
+        };
+        let (data, step) = (group("data", data), group("step", step));
+        let pipeline = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(name),
+            bind_group_layouts: &[Some(&data), Some(&step)],
+            immediate_size: 0,
+        });
+        Layouts {
+            data,
+            step,
+            pipeline,
+        }
     }
 }
 
@@ -569,38 +602,26 @@ impl CpuKernels {
         let device = &ctx.device;
         let uniform = wgpu::BufferBindingType::Uniform;
         let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        // Group 0: w (this epoch's parameters, uniform), p_in, p_out, moments, nets, samples, losses.
-        let data_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cpu-adapter train data"),
-            entries: &[
-                entry(0, uniform, true),
-                entry(1, storage(true), false),
-                entry(2, storage(false), false),
-                entry(3, storage(false), false),
-                entry(4, storage(true), false),
-                entry(5, storage(true), false),
-                entry(6, storage(false), false),
+        let epoch_layouts = Layouts::new(
+            device,
+            "cpu-adapter train",
+            // Group 0: w (this epoch's parameters, uniform), p_in, p_out, moments, nets,
+            // samples, losses.
+            &[
+                (uniform, true),
+                (storage(true), false),
+                (storage(false), false),
+                (storage(false), false),
+                (storage(true), false),
+                (storage(true), false),
+                (storage(false), false),
             ],
-        });
-        // Group 1: this epoch's Step and this dispatch's BatchInfo (dynamic), Adam constants.
-        let step_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cpu-adapter train step"),
-            entries: &[
-                entry(0, uniform, true),
-                entry(1, uniform, true),
-                entry(2, uniform, false),
-            ],
-        });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("cpu-adapter train"),
-            bind_group_layouts: &[Some(&data_layout), Some(&step_layout)],
-            immediate_size: 0,
-        });
+            // Group 1: this epoch's Step and this dispatch's BatchInfo (dynamic), Adam constants.
+            &[(uniform, true), (uniform, true), (uniform, false)],
+        );
         CpuKernels {
-            epochs_layouts: many_epochs::Layouts::new(device),
-            data_layout,
-            step_layout,
-            layout,
+            epochs_layouts: many_epochs::layouts(device),
+            epoch_layouts,
             built: Mutex::new(HashMap::new()),
             cache_dir,
             notes: errmap_core::progress::silent(),
@@ -686,7 +707,7 @@ impl CpuKernels {
             pipeline_cache::open(ctx, self.cache_dir.as_deref(), &architecture);
         let (layout, entry_point) = match per_dispatch {
             Some(_) => (&self.epochs_layouts.pipeline, "train_epochs"),
-            None => (&self.layout, "train_epoch"),
+            None => (&self.epoch_layouts.pipeline, "train_epoch"),
         };
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(entry_point),
@@ -906,7 +927,7 @@ impl GroupBuffers {
                 let (read, write) = (&self.ping[i], &self.ping[1 - i]);
                 device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("cpu-adapter train data"),
-                    layout: &kernels.data_layout,
+                    layout: &kernels.epoch_layouts.data,
                     entries: &[
                         (0, sized(read, binding_bytes)),
                         (1, read.as_entire_binding()),
@@ -922,7 +943,7 @@ impl GroupBuffers {
             .collect();
         let step_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("cpu-adapter train step"),
-            layout: &kernels.step_layout,
+            layout: &kernels.epoch_layouts.step,
             entries: &[
                 (0, sized(&self.steps, std::mem::size_of::<Step>() as u64)),
                 (

@@ -29,7 +29,7 @@ use super::super::epochs::{
     init_buffer, sized, slot_offset, step_buffer, EpochLoop, EPOCHS_PER_SUBMISSION,
 };
 use super::super::layout::{pack_samples, Step};
-use super::{acc, entry, param, sample_loop, AdamConstants, COMMON_WGSL, LANES, MAX_CPU_PARAMS};
+use super::{acc, param, sample_loop, AdamConstants, Layouts, COMMON_WGSL, LANES, MAX_CPU_PARAMS};
 use crate::nn::{layer_spans, Activation, Mlp, ModelConfig, TrainingSet};
 use bytemuck::{Pod, Zeroable};
 use errmap_core::Result;
@@ -221,48 +221,24 @@ pub struct RunInfo {
     pub _pad0: u32,
 }
 
-/// Bind group layouts of the kernel.
-pub struct Layouts {
-    data: wgpu::BindGroupLayout,
-    step: wgpu::BindGroupLayout,
-    /// The pipeline layout the kernel is built with.
-    pub pipeline: wgpu::PipelineLayout,
-}
-
-impl Layouts {
-    /// The layouts; no shader is compiled here.
-    pub fn new(device: &wgpu::Device) -> Layouts {
-        let uniform = wgpu::BufferBindingType::Uniform;
-        let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-        let data = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cpu-adapter epochs data"),
-            entries: &[
-                entry(0, storage(false), false),
-                entry(1, storage(false), false),
-                entry(2, storage(true), false),
-                entry(3, storage(true), false),
-                entry(4, storage(false), false),
-            ],
-        });
-        let step = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cpu-adapter epochs step"),
-            entries: &[
-                entry(0, uniform, false),
-                entry(1, uniform, true),
-                entry(2, uniform, false),
-            ],
-        });
-        let pipeline = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("cpu-adapter epochs"),
-            bind_group_layouts: &[Some(&data), Some(&step)],
-            immediate_size: 0,
-        });
-        Layouts {
-            data,
-            step,
-            pipeline,
-        }
-    }
+/// The bind group and pipeline layouts of this kernel.
+pub fn layouts(device: &wgpu::Device) -> Layouts {
+    let uniform = wgpu::BufferBindingType::Uniform;
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    Layouts::new(
+        device,
+        "cpu-adapter epochs",
+        // Group 0: parameters, moments, networks, samples, losses.
+        &[
+            (storage(false), false),
+            (storage(false), false),
+            (storage(true), false),
+            (storage(true), false),
+            (storage(false), false),
+        ],
+        // Group 1: the submission's Steps, this dispatch's RunInfo (dynamic), Adam constants.
+        &[(uniform, false), (uniform, true), (uniform, false)],
+    )
 }
 
 /// Trains one group (its samples fit a storage binding; `initial` and `sets` are checked)
