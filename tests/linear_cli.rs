@@ -248,46 +248,30 @@ fn air_index_command_prints_nist_values() {
         (doc["n"].as_f64().unwrap() - 1.000_271_373).abs() < 1e-9,
         "{doc}"
     );
-    let text = ok(
-        dir.path(),
-        &[
+    // `errmap linear air-index` in dry air at `temp_c`, with `extra` flags.
+    let dry_air = |temp_c: &str, extra: &[&str]| {
+        let mut args = vec![
             "linear",
             "air-index",
             "--temp-c",
-            "20",
+            temp_c,
             "--pressure-kpa",
             "101.325",
             "--humidity-pct",
             "0",
             "--wavelength-nm",
             "633",
-            "--formula",
-            "edlen",
-        ],
-    )
-    .stdout;
+        ];
+        args.extend_from_slice(extra);
+        errmap(dir.path(), &args)
+    };
+    let out = dry_air("20", &["--formula", "edlen"]);
+    out.expect_code(0);
+    let text = out.stdout;
     assert!(text.contains("n = 1.000271799"), "{text}");
     // The Edlén equation with another CO2 content is refused, and the hint names the flag
     // that `air-index` and `analyze` both take for the equation.
-    let out = errmap(
-        dir.path(),
-        &[
-            "linear",
-            "air-index",
-            "--temp-c",
-            "20",
-            "--pressure-kpa",
-            "101.325",
-            "--humidity-pct",
-            "0",
-            "--wavelength-nm",
-            "633",
-            "--air-formula",
-            "edlen",
-            "--co2-ppm",
-            "600",
-        ],
-    );
+    let out = dry_air("20", &["--air-formula", "edlen", "--co2-ppm", "600"]);
     out.expect_code(2);
     assert!(
         out.stderr
@@ -295,21 +279,7 @@ fn air_index_command_prints_nist_values() {
         "{}",
         out.stderr
     );
-    let out = errmap(
-        dir.path(),
-        &[
-            "linear",
-            "air-index",
-            "--temp-c",
-            "-60",
-            "--pressure-kpa",
-            "101.325",
-            "--humidity-pct",
-            "0",
-            "--wavelength-nm",
-            "633",
-        ],
-    );
+    let out = dry_air("-60", &[]);
     out.expect_code(2);
     assert!(
         out.stderr.contains("air temperature -60 °C is outside"),
