@@ -3,7 +3,7 @@
 //! `period_ms`; value = `scale`·pin + `offset` for numbers, bits as bits. A failed read is the
 //! source's problem (the watchdog sees its age grow) and the thread starts the helper again.
 
-use super::poll::{Device, Failure, PolledSource};
+use super::poll::{poll_period, Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::hal::{HalLink, HalValue};
@@ -97,14 +97,12 @@ pub fn connect(
         pins,
         channels,
     };
-    let mut link = helper.start()?;
-    let first = helper.read(&mut link).map_err(|f| {
-        errmap_core::error::Error::io("read from", &helper.what, std::io::Error::other(f.message))
-    })?;
-    let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
+    let link = helper.start()?;
+    let place = helper.what.clone();
     let names = helper.channels.iter().map(|c| c.name.clone()).collect();
+    let period = poll_period(config, s);
     Ok(PolledSource::start(
-        "linuxcnc", &s.name, names, helper, link, first, period,
+        "linuxcnc", &s.name, &place, names, helper, link, period,
     )?)
 }
 

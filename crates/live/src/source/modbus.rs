@@ -2,12 +2,12 @@
 //! values to the loop; a failed poll is the source's problem (the watchdog sees its age grow)
 //! and the thread reconnects on the next poll.
 
-use super::poll::{Device, Failure, PolledSource};
+use super::poll::{poll_period, Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::modbus::{Client, Layout, ReadValue, Table};
 use crate::LinkError;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::Result;
 use std::time::Duration;
 
 /// The device behind the source: how to connect again and the channels' layouts.
@@ -68,18 +68,11 @@ pub fn connect(
         timeout: Duration::from_millis(s.timeout_ms),
         layouts,
     };
-    let mut client = Client::connect(&rack.what, &rack.address, rack.unit, rack.timeout)?;
-    // A refused read at start: the source cannot be used (exit 3).
-    let first = rack.read(&mut client).map_err(|f| {
-        Error::io(
-            "read from",
-            format!("{} at {}", rack.what, rack.address),
-            std::io::Error::other(f.message),
-        )
-    })?;
-    let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
+    let client = Client::connect(&rack.what, &rack.address, rack.unit, rack.timeout)?;
+    let place = format!("{} at {}", rack.what, rack.address);
     let names = s.channels.iter().map(|c| c.name.clone()).collect();
+    let period = poll_period(config, s);
     Ok(PolledSource::start(
-        "modbus", &s.name, names, rack, client, first, period,
+        "modbus", &s.name, &place, names, rack, client, period,
     )?)
 }

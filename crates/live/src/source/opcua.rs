@@ -2,12 +2,12 @@
 //! and hands the values to the loop; a node with a bad status, or a failed request, is the
 //! source's problem (no update: the watchdog sees the age grow), and the thread reconnects.
 
-use super::poll::{Device, Failure, PolledSource};
+use super::poll::{poll_period, Device, Failure, PolledSource};
 use super::Value;
 use crate::config::{LiveConfig, SourceConfig};
 use crate::opcua::{denied_error, node_id, ConnectError, NodeValue, OpcUa};
 use crate::LinkError;
-use errmap_core::error::{Error, Result};
+use errmap_core::error::Result;
 use opcua::types::NodeId;
 use std::time::Duration;
 
@@ -76,18 +76,11 @@ pub fn connect(
         )),
         ConnectError::Failed(e) => LinkError::from(e),
     })?;
-    let mut client = client;
-    let first = login.read(&mut client).map_err(|f| {
-        Error::io(
-            "read from",
-            format!("{} at {}", login.what, login.endpoint),
-            std::io::Error::other(f.message),
-        )
-    })?;
-    let period = Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1));
+    let place = format!("{} at {}", login.what, login.endpoint);
     let names = s.channels.iter().map(|c| c.name.clone()).collect();
+    let period = poll_period(config, s);
     Ok(PolledSource::start(
-        "opcua", &s.name, names, login, client, first, period,
+        "opcua", &s.name, &place, names, login, client, period,
     )?)
 }
 

@@ -49,19 +49,31 @@ pub struct PolledSource {
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
+/// A source's poll period: its own `period_ms`, else the cycle's (at least 1 ms).
+pub fn poll_period(
+    config: &crate::config::LiveConfig,
+    s: &crate::config::SourceConfig,
+) -> Duration {
+    Duration::from_millis(s.period_ms.unwrap_or(config.cycle.period_ms).max(1))
+}
+
 impl PolledSource {
-    /// Poll `device`, the source `name` of `kind` with `channels` (in the device's order), each
-    /// `period` on a thread of its own, over `link` (already open) and from the `first` values
-    /// read at start.
+    /// Read every channel of `device` once over `link` (already open; a read refused at start
+    /// means the source cannot be used: an io error naming `place`), then poll it each
+    /// `period` on a thread of its own: the source `name` of `kind` with `channels` (in the
+    /// device's order).
     pub fn start<D: Device>(
         kind: &'static str,
         name: &str,
+        place: &str,
         channels: Vec<String>,
         device: D,
-        link: D::Link,
-        first: Vec<Value>,
+        mut link: D::Link,
         period: Duration,
     ) -> Result<PolledSource> {
+        let first = device
+            .read(&mut link)
+            .map_err(|f| Error::io("read from", place, std::io::Error::other(f.message)))?;
         let shared = Arc::new(Mutex::new(Shared {
             values: first,
             at: Some(Instant::now()),
