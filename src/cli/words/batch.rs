@@ -3,23 +3,6 @@
 use errmap::batch::Setting;
 use std::any::Any;
 
-/// Every batch setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::Shard,
-    Setting::Shards,
-    Setting::Resume,
-    Setting::OutDir,
-    Setting::Job,
-    Setting::Array,
-    Setting::DryRun,
-    Setting::Submit,
-    Setting::GridStep,
-    Setting::Spacing,
-    Setting::KSigma,
-    Setting::Chart,
-];
-
 /// The flag of a batch setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

@@ -3,10 +3,6 @@
 use errmap_core::core_setting::Setting;
 use std::any::Any;
 
-/// Every the ground floor's (output safety) setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[Setting::MaxOutputMb];
-
 /// The flag of a the ground floor's (output safety) setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

@@ -3,21 +3,6 @@
 use errmap::live::Setting;
 use std::any::Any;
 
-/// Every live setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::Once,
-    Setting::DryRun,
-    Setting::Sensors,
-    Setting::Axes,
-    Setting::Hz,
-    Setting::Seconds,
-    Setting::Hours,
-    Setting::PeriodS,
-    Setting::FeedMmMin,
-    Setting::Campaign,
-];
-
 /// The flag of a live setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

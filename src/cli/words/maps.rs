@@ -3,21 +3,6 @@
 use errmap_maps::Setting;
 use std::any::Any;
 
-/// Every map setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::Backend,
-    Setting::Columns,
-    Setting::HeaderLine,
-    Setting::NominalPlane,
-    Setting::Normal,
-    Setting::MaxDeviation,
-    Setting::MaxUncertainty,
-    Setting::MaxMemory,
-    Setting::BenchParts,
-    Setting::BenchSamples,
-];
-
 /// The flag of a map setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

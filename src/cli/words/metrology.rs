@@ -3,44 +3,6 @@
 use errmap_metrology::Setting;
 use std::any::Any;
 
-/// Every analysis setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::Feed,
-    Setting::Radius,
-    Setting::Centre,
-    Setting::Axis,
-    Setting::FanucMagnification,
-    Setting::FanucUnitUm,
-    Setting::LinuxcncType,
-    Setting::SinumerikMaxPoints,
-    Setting::Spacing,
-    Setting::Columns,
-    Setting::CorrectAir,
-    Setting::FitPitch,
-    Setting::Formula,
-    Setting::MaterialExpansion,
-    Setting::FitAxis,
-    Setting::ReferenceAngle,
-    Setting::Sign,
-    Setting::SphereDiameter,
-    Setting::StartDeg,
-    Setting::StepDeg,
-    Setting::StylusRadius,
-    Setting::Campaigns,
-    Setting::Db,
-    Setting::EveryS,
-    Setting::FromStore,
-    Setting::LaserNoiseUm,
-    Setting::MinSpanC,
-    Setting::Order,
-    Setting::Reference,
-    Setting::ReferenceMm,
-    Setting::Repeats,
-    Setting::Replace,
-    Setting::Sensors,
-];
-
 /// The flag of a analysis setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

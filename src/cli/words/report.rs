@@ -3,10 +3,6 @@
 use errmap_report::Setting;
 use std::any::Any;
 
-/// Every report setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[Setting::Pdf];
-
 /// The flag of a report setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

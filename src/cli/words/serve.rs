@@ -3,22 +3,6 @@
 use errmap_serve::Setting;
 use std::any::Any;
 
-/// Every server setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::TlsCert,
-    Setting::TlsKey,
-    Setting::TrustedProxy,
-    Setting::InsecureHttp,
-    Setting::Role,
-    Setting::Users,
-    Setting::PasswordStdin,
-    Setting::Replace,
-    Setting::Live,
-    Setting::Runs,
-    Setting::Db,
-];
-
 /// The flag of a server setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

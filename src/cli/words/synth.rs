@@ -3,21 +3,6 @@
 use errmap_synth::Setting;
 use std::any::Any;
 
-/// Every synthetic-data setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::NoiseUm,
-    Setting::Radius,
-    Setting::Feed,
-    Setting::StepDeg,
-    Setting::Repeats,
-    Setting::Points,
-    Setting::Size,
-    Setting::Parts,
-    Setting::Grid,
-    Setting::Irregular,
-];
-
 /// The flag of a synthetic-data setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {

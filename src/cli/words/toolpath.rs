@@ -3,24 +3,6 @@
 use errmap::toolpath::Setting;
 use std::any::Any;
 
-/// Every toolpath setting, for the test that each is a flag.
-#[cfg(test)]
-pub const ALL: &[Setting] = &[
-    Setting::Units,
-    Setting::Dialect,
-    Setting::Expand,
-    Setting::PowerOnMotion,
-    Setting::SamePartPerOffset,
-    Setting::MaxSegment,
-    Setting::ChordTol,
-    Setting::SurfaceTol,
-    Setting::Zone,
-    Setting::CompensateHoles,
-    Setting::FanucNumbers,
-    Setting::Extrapolate,
-    Setting::MaxUncertaintyUm,
-];
-
 /// The flag of a toolpath setting.
 pub fn words(setting: Setting) -> &'static str {
     match setting {
